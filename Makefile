@@ -1,0 +1,53 @@
+# Two commands do everything on a fresh machine (see README.md):
+#   make demo   -- virtual environment, install, run the main job end to end
+#   make test   -- virtual environment with dev extras, lint, type check, tests
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+PIP    := $(BIN)/python -m pip
+DEMO   ?= build/demo
+
+.PHONY: demo test lint typecheck pytest venv clean recordings
+
+$(BIN)/python:
+	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required, found " + sys.version'
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install --quiet --upgrade pip
+
+# torch comes from constraints.txt (2.13.0, local CPU build) *before* anything
+# that depends on it is resolved, so no CUDA build is ever pulled.
+$(VENV)/.installed: $(BIN)/python pyproject.toml constraints.txt
+	$(PIP) install --quiet -c constraints.txt torch
+	$(PIP) install --quiet -c constraints.txt -e .
+	touch $@
+
+$(VENV)/.installed-dev: $(VENV)/.installed
+	$(PIP) install --quiet -c constraints.txt -e '.[dev]'
+	touch $@
+
+venv: $(VENV)/.installed
+
+demo: $(VENV)/.installed
+	@mkdir -p $(DEMO)
+	$(BIN)/rocketroll tunnel --seed 0 --out $(DEMO)/tunnel-seed0.csv
+	$(BIN)/rocketroll info $(DEMO)/tunnel-seed0.csv --plot $(DEMO)/tunnel-seed0.png
+	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv and $(DEMO)/tunnel-seed0.png"
+
+lint: $(VENV)/.installed-dev
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: $(VENV)/.installed-dev
+	$(BIN)/mypy
+
+pytest: $(VENV)/.installed-dev
+	$(BIN)/pytest
+
+test: lint typecheck pytest
+
+# Regenerate the bundled synthetic recordings from their recorded commands.
+recordings: $(VENV)/.installed
+	$(BIN)/python -m identification.bundled --regenerate
+
+clean:
+	rm -rf $(VENV) build .mypy_cache .pytest_cache .ruff_cache

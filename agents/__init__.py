@@ -1,0 +1,1 @@
+"""Control baselines and evaluation (see the baselines issue)."""

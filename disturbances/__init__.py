@@ -1,0 +1,1 @@
+"""Disturbance database (see the disturbance-database issue)."""

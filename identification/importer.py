@@ -1,0 +1,229 @@
+"""Bring foreign roll data (a user's wind-tunnel log, a flight log) into format v1.
+
+Example: a headerless file in radians, sampled at 100 Hz, whose two columns
+are the measured fin angle and the encoder roll angle::
+
+    rocketroll import-csv run.txt --out run.csv --columns fin,roll \\
+        --no-header --units rad --rate 100
+
+Errors name the *input* file and its line.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from identification.recording import (
+    SOURCES,
+    FloatArray,
+    Recording,
+    RecordingError,
+    validate_samples,
+)
+
+__all__ = ["ROLES", "import_csv"]
+
+#: Role of an input column -> the format-v1 column it becomes (None: ignored).
+ROLES: dict[str, str | None] = {
+    "time": "time_s",
+    "fin_cmd": "fin_cmd_deg",
+    "fin": "fin_deg",
+    "roll": "roll_deg",
+    "roll_rate": "roll_rate_dps",
+    "skip": None,
+}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / np.pi}
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        delimiter = next((d for d in (",", ";", "\t") if d in line), None)
+    cells = line.split(delimiter) if delimiter is not None else line.split()
+    return [c.strip() for c in cells]
+
+
+def import_csv(
+    path: str | os.PathLike[str],
+    columns: Sequence[str],
+    *,
+    header: bool = True,
+    units: str = "deg",
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    time_unit: str = "s",
+    delimiter: str | None = None,
+    unwrap: bool = False,
+    name: str | None = None,
+    source: str = "wind-tunnel",
+    notes: str | None = None,
+) -> Recording:
+    """Read a foreign delimited text file into a validated :class:`Recording`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Input file.  Blank lines and lines starting with ``#`` are skipped.
+    columns : sequence of str
+        One role per input column, from :data:`ROLES`: ``time``, ``fin_cmd``,
+        ``fin``, ``roll``, ``roll_rate`` or ``skip``.
+    header : bool
+        Whether the first non-comment line is a header row (skipped, but its
+        names can be used by ``time_column``).
+    units : {"deg", "rad"}
+        Unit of the angle columns (and rad/s or °/s for ``roll_rate``).
+    rate_hz : float, optional
+        Sampling rate when no column holds time; time starts at 0.
+    time_column : str, optional
+        The input column holding time: its header name, or its 1-based
+        position in a headerless file.  Its ``columns`` entry must be
+        ``time`` or ``skip``.
+    time_unit : {"s", "ms", "us"}
+        Unit of the time column.
+    delimiter : str, optional
+        Cell separator; default: ``,`` ``;`` or tab if the line has one, else
+        whitespace.
+    unwrap : bool
+        Unwrap a roll angle that wraps around (e.g. at ±180° or 0/360°).
+    name, source, notes : str, optional
+        Metadata of the new recording; ``name`` defaults to the file stem.
+
+    Returns
+    -------
+    Recording
+
+    Raises
+    ------
+    RecordingError
+        Naming the input file, the line and the problem.
+    """
+    where = os.fspath(path)
+    roles = [c.strip() for c in columns]
+    for role in roles:
+        if role not in ROLES:
+            raise RecordingError(
+                where, None, f"unknown column role {role!r} in --columns; use {', '.join(ROLES)}"
+            )
+    for role in set(roles) - {"skip"}:
+        if roles.count(role) > 1:
+            raise RecordingError(where, None, f"column role {role!r} appears more than once")
+    if units not in ANGLE_UNITS:
+        raise RecordingError(where, None, f"units must be deg or rad, not {units!r}")
+    if time_unit not in TIME_UNITS:
+        raise RecordingError(where, None, f"time unit must be s, ms or us, not {time_unit!r}")
+    if source not in SOURCES:
+        raise RecordingError(where, None, f"source must be one of {', '.join(SOURCES)}")
+    time_sources = ("time" in roles) + (rate_hz is not None) + (time_column is not None)
+    if time_sources != 1:
+        raise RecordingError(
+            where,
+            None,
+            "give time exactly one way: a 'time' entry in --columns, --rate HZ, "
+            "or --time-column NAME",
+        )
+    if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise RecordingError(where, None, f"--rate must be a positive number, got {rate_hz}")
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordingError(where, None, f"cannot read: {exc}") from exc
+
+    names: list[str] | None = None
+    header_line: int | None = None
+    rows: list[list[float]] = []
+    lines: list[int] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        cells = _split(line, delimiter)
+        if len(cells) != len(roles):
+            raise RecordingError(
+                where,
+                lineno,
+                f"{len(cells)} cells but --columns names {len(roles)} ({','.join(roles)})",
+            )
+        if header and names is None:
+            names, header_line = cells, lineno
+            continue
+        row: list[float] = []
+        for role, cell in zip(roles, cells, strict=True):
+            if role == "skip" and time_column is None:
+                row.append(0.0)
+                continue
+            try:
+                row.append(float(cell))
+            except ValueError:
+                if role == "skip":  # a skipped column need not be numeric
+                    row.append(np.nan)
+                    continue
+                raise RecordingError(where, lineno, f"{role} is {cell!r}, not a number") from None
+        rows.append(row)
+        lines.append(lineno)
+    if not rows:
+        raise RecordingError(where, None, "no data rows")
+
+    data = np.array(rows, dtype=float)
+    out: dict[str, FloatArray] = {}
+    if time_column is not None:
+        index = _time_index(where, time_column, names, roles, header_line)
+        out["time_s"] = data[:, index] * TIME_UNITS[time_unit]
+    elif rate_hz is not None:
+        out["time_s"] = np.arange(len(rows)) / rate_hz
+    scale = ANGLE_UNITS[units]
+    for j, role in enumerate(roles):
+        target = ROLES[role]
+        if target is None:
+            continue
+        values = data[:, j]
+        if target == "time_s":
+            out[target] = values * TIME_UNITS[time_unit]
+        else:
+            out[target] = values * scale
+    if unwrap and "roll_deg" in out:
+        out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
+
+    ordered = {c: out[c] for c in ("time_s", *[ROLES[r] for r in roles if ROLES[r]]) if c in out}
+    validate_samples(
+        ordered, path=where, lines=np.array(lines, dtype=np.int64), header_line=header_line
+    )
+    meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
+    meta["import.units"] = units
+    if notes:
+        meta["notes"] = notes
+    return Recording(name=name or Path(where).stem, source=source, metadata=meta, **ordered)
+
+
+def _time_index(
+    where: str, time_column: str, names: list[str] | None, roles: list[str], header_line: int | None
+) -> int:
+    if names is not None:
+        if time_column not in names:
+            raise RecordingError(
+                where, header_line,
+                f"--time-column {time_column!r} is not in the header ({', '.join(names)})",
+            )
+        index = names.index(time_column)
+    else:
+        try:
+            index = int(time_column) - 1
+        except ValueError:
+            raise RecordingError(
+                where, None,
+                f"--time-column {time_column!r}: without a header, give the 1-based column number",
+            ) from None
+        if not 0 <= index < len(roles):
+            raise RecordingError(
+                where, None, f"--time-column {time_column} is outside columns 1..{len(roles)}"
+            )
+    if roles[index] not in ("time", "skip"):
+        raise RecordingError(
+            where, None,
+            f"--time-column {time_column!r} is also given the role {roles[index]!r} in --columns",
+        )
+    return index

@@ -1,0 +1,475 @@
+"""The one roll model: eq. 36/49 of the paper with the servo of eq. 23.
+
+Everything that moves the rocket in this project -- the virtual wind tunnel,
+the re-simulation of identified models and the Gymnasium environment -- calls
+the functions in this module, so the physics exists exactly once.
+
+Model (paper eq. 36 with eq. 48/49)::
+
+    dv/dt = -a(θ) · (v - α·(θ + θ̄ + u_d))
+    a(θ)  = ᾱ·|θ + θ̄| + β̄            (constant damping, eq. 29: ᾱ = 0, β̄ = a)
+    dφ/dt = v
+
+with roll rate ``v`` in °/s, roll angle ``φ`` in °, fin angle ``θ`` in °, the
+turbulence ``u_d`` as an equivalent fin angle in °, the steady-state gain ``α``
+in (°/s)/°, the asymmetry ``θ̄ = β/α`` in ° and the damping ``a`` in 1/s.
+
+Servo (eq. 23): a fin moves ``|Δθ| · 0.4/60`` seconds for a step ``Δθ``, i.e.
+at a rate limit of 150 °/s, and is limited to the ±40° range of the experiment.
+
+Integration is exact, not Euler.  Over a substep of length ``h`` the fin moves
+linearly from ``θ0`` to ``θ1`` (the servo's rate-limited path sampled at the
+substep boundaries) and ``u_d`` is held.  With ``a`` evaluated at the mean fin
+angle of the substep the ODE is linear with constant coefficients and a ramp
+input, whose closed-form solution is (``z = -a·h``, ``s = α·(θ1 - θ0)/h``)::
+
+    v1 = e^z·v0 + (1 - e^z)·g0 + s·a·h²·φ2(z)
+    φ1 = φ0 + g0·h + s·h²/2 + (v0 - g0)·h·φ1(z) - s·h²·φ2(z)
+
+where ``g0 = α·(θ0 + θ̄ + u_d)`` and ``φ1(z) = (e^z - 1)/z``,
+``φ2(z) = (e^z - 1 - z)/z²`` are the usual exponential-integrator functions.
+This is exact for constant damping; with θ-dependent damping the only
+approximation is ``a`` frozen at the substep's mean fin angle while the fin
+ramps (second order in ``h``), which ``tests/identification/test_model.py``
+bounds against ``scipy.integrate.solve_ivp``.
+
+Because ``a`` depends on the fin angle and not on ``v``, a whole trajectory is
+a linear recurrence ``v[k+1] = E[k]·v[k] + c[k]`` whose coefficients are
+computed for all substeps at once; :func:`simulate` exploits this.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "PAPER_CONSTANT",
+    "PAPER_THETA",
+    "RollParams",
+    "Servo",
+    "SimResult",
+    "damping",
+    "roll_coefficients",
+    "roll_step",
+    "servo_path",
+    "servo_step",
+    "simulate",
+]
+
+
+@dataclass(frozen=True)
+class RollParams:
+    """Intrinsic roll parameters of the rocket (paper eq. 16-17, 29-30, 48).
+
+    Attributes
+    ----------
+    alpha : float
+        Steady-state gain α, (°/s) of roll rate per ° of fin angle (eq. 16).
+    theta_bar_deg : float
+        Asymmetry θ̄ = β/α as an equivalent fin angle, ° (eq. 30).
+    beta_bar_per_s : float
+        Damping offset β̄, 1/s (eq. 48).  With ``alpha_bar_per_deg_s = 0`` this
+        is the constant damping ``a`` of eq. 29.
+    alpha_bar_per_deg_s : float
+        Slope ᾱ of the damping versus ``|θ + θ̄|``, 1/(s·°) (eq. 48).
+        Zero gives the constant-damping model.
+    """
+
+    alpha: float
+    theta_bar_deg: float
+    beta_bar_per_s: float
+    alpha_bar_per_deg_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "theta_bar_deg", "beta_bar_per_s", "alpha_bar_per_deg_s"):
+            value = getattr(self, name)
+            if not np.isfinite(value):
+                raise ValueError(f"RollParams.{name} must be finite, got {value!r}")
+        if self.alpha == 0.0:
+            raise ValueError("RollParams.alpha must be non-zero (the fins must act on roll)")
+
+    @classmethod
+    def from_steady_state(
+        cls, alpha: float, beta: float, beta_bar: float, alpha_bar: float = 0.0
+    ) -> RollParams:
+        """Build from the paper's steady-state fit ``v_ss = α·θ + β`` (eq. 16).
+
+        Parameters
+        ----------
+        alpha : float
+            α, (°/s)/°.
+        beta : float
+            β, °/s; the asymmetry is θ̄ = β/α (eq. 30).
+        beta_bar : float
+            β̄ (or the constant ``a``), 1/s.
+        alpha_bar : float, optional
+            ᾱ, 1/(s·°).
+        """
+        return cls(
+            alpha=alpha,
+            theta_bar_deg=beta / alpha,
+            beta_bar_per_s=beta_bar,
+            alpha_bar_per_deg_s=alpha_bar,
+        )
+
+    @property
+    def beta_dps(self) -> float:
+        """β = α·θ̄, the steady roll rate at zero fin angle, °/s (eq. 16)."""
+        return self.alpha * self.theta_bar_deg
+
+    @property
+    def is_constant_damping(self) -> bool:
+        """True for the constant-damping model of eq. 29 (ᾱ = 0)."""
+        return self.alpha_bar_per_deg_s == 0.0
+
+    def damping(self, theta_deg: ArrayLike) -> FloatArray:
+        """Damping a(θ), 1/s (eq. 48).  See :func:`damping`."""
+        return damping(self, theta_deg)
+
+    def steady_rate(self, theta_deg: ArrayLike, u_d_deg: ArrayLike = 0.0) -> FloatArray:
+        """Steady roll rate α·(θ + θ̄ + u_d), °/s, for a held fin angle (eq. 16, 36)."""
+        return self.alpha * (np.asarray(theta_deg, float) + self.theta_bar_deg + u_d_deg)
+
+    def with_constant_damping(self, a_per_s: float) -> RollParams:
+        """The same α and θ̄ with constant damping ``a`` (eq. 29)."""
+        return RollParams(self.alpha, self.theta_bar_deg, a_per_s, 0.0)
+
+
+# Paper values: α, β from eq. 17 and ᾱ, β̄ from eq. 48 (θ-dependent model, eq. 49);
+# the constant-damping model uses a = 1.314 1/s from eq. 46.
+PAPER_THETA = RollParams.from_steady_state(
+    alpha=0.6590, beta=2.8856, beta_bar=2.4075, alpha_bar=-0.0289
+)
+PAPER_CONSTANT = RollParams.from_steady_state(alpha=0.6590, beta=2.8856, beta_bar=1.314)
+
+
+@dataclass(frozen=True)
+class Servo:
+    """Fin servo: rate limit (eq. 23) and mechanical range.
+
+    Attributes
+    ----------
+    rate_limit_dps : float
+        Maximum fin slew rate, °/s.  Eq. 23: 0.4 s per 60° gives 150 °/s.
+    range_deg : float
+        Fin deflection limit, °; commands are saturated to ±range.
+        The experiment used ±40°.
+    """
+
+    rate_limit_dps: float = 60.0 / 0.4
+    range_deg: float = 40.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.rate_limit_dps) and self.rate_limit_dps > 0):
+            raise ValueError(f"Servo.rate_limit_dps must be > 0, got {self.rate_limit_dps!r}")
+        if not (np.isfinite(self.range_deg) and self.range_deg > 0):
+            raise ValueError(f"Servo.range_deg must be > 0, got {self.range_deg!r}")
+
+    def lag_s(self, step_deg: ArrayLike) -> FloatArray:
+        """Time for a fin step of ``step_deg`` degrees, s (eq. 23)."""
+        return np.abs(np.asarray(step_deg, float)) / self.rate_limit_dps
+
+
+def damping(params: RollParams, theta_deg: ArrayLike) -> FloatArray:
+    """Fin-angle-dependent damping ``a(θ) = ᾱ·|θ + θ̄| + β̄`` (paper eq. 48).
+
+    Parameters
+    ----------
+    params : RollParams
+        Model parameters.
+    theta_deg : array_like
+        Actual fin angle θ, °, any shape.
+
+    Returns
+    -------
+    ndarray
+        a(θ) in 1/s, same shape as ``theta_deg``.
+    """
+    theta = np.asarray(theta_deg, dtype=float)
+    return params.alpha_bar_per_deg_s * np.abs(theta + params.theta_bar_deg) + params.beta_bar_per_s
+
+
+def servo_step(
+    theta_deg: ArrayLike, command_deg: ArrayLike, dt_s: float, servo: Servo
+) -> FloatArray:
+    """Advance the fin angle toward the command by one step (eq. 23).
+
+    The command is saturated to ``±servo.range_deg`` and the fin moves towards
+    it at no more than ``servo.rate_limit_dps``.  The result is the exact fin
+    angle at the end of the step for a command held over it.
+
+    Parameters
+    ----------
+    theta_deg, command_deg : array_like
+        Current fin angle and commanded fin angle, °, broadcastable.
+    dt_s : float
+        Step length, s.
+    servo : Servo
+        Rate and range limits.
+
+    Returns
+    -------
+    ndarray
+        Fin angle after ``dt_s``, °.
+    """
+    theta = np.asarray(theta_deg, dtype=float)
+    target = np.clip(np.asarray(command_deg, dtype=float), -servo.range_deg, servo.range_deg)
+    max_move = servo.rate_limit_dps * dt_s
+    return theta + np.clip(target - theta, -max_move, max_move)
+
+
+def servo_path(
+    command_deg: ArrayLike, theta0_deg: float, dt_s: float, servo: Servo
+) -> FloatArray:
+    """Fin angle at the boundaries of consecutive steps with held commands.
+
+    Parameters
+    ----------
+    command_deg : array_like, shape (n,)
+        Command held over each step, °.
+    theta0_deg : float
+        Fin angle at the start, °.
+    dt_s : float
+        Step length, s.
+    servo : Servo
+        Rate and range limits.
+
+    Returns
+    -------
+    ndarray, shape (n + 1,)
+        Fin angle at times ``0, dt, ..., n·dt``.
+    """
+    cmd = np.clip(np.asarray(command_deg, dtype=float), -servo.range_deg, servo.range_deg)
+    out = np.empty(cmd.size + 1)
+    max_move = servo.rate_limit_dps * dt_s
+    theta = float(theta0_deg)
+    out[0] = theta
+    # The rate limit makes this a sequential recurrence; plain floats keep it fast.
+    for k, target in enumerate(cmd.tolist()):
+        delta = target - theta
+        theta += max(-max_move, min(max_move, delta))
+        out[k + 1] = theta
+    return out
+
+
+def _phi_functions(z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``e^z``, ``φ1(z) = (e^z-1)/z`` and ``φ2(z) = (e^z-1-z)/z²``, stable near 0."""
+    small = np.abs(z) < 1e-4
+    zs = np.where(small, 1.0, z)  # avoid 0/0 in the branch that is not used
+    em1 = np.expm1(zs)
+    phi1 = np.where(small, 1.0 + z / 2.0 + z * z / 6.0, em1 / zs)
+    phi2 = np.where(small, 0.5 + z / 6.0 + z * z / 24.0, (em1 - zs) / (zs * zs))
+    return np.exp(z), phi1, phi2
+
+
+def roll_coefficients(
+    params: RollParams,
+    theta0_deg: ArrayLike,
+    theta1_deg: ArrayLike,
+    u_d_deg: ArrayLike,
+    h_s: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Coefficients of the exact substep update, linear in the rate.
+
+    Over a substep of length ``h_s`` with the fin moving linearly from
+    ``theta0_deg`` to ``theta1_deg`` and ``u_d_deg`` held::
+
+        v1 = E·v0 + c
+        φ1 = φ0 + A·v0 + B
+
+    See the module docstring for the closed form.  All inputs broadcast;
+    ``h_s`` is a scalar.
+
+    Returns
+    -------
+    E, c, A, B : ndarray
+        ``E`` and ``A`` (s) are dimensionless/seconds multipliers of ``v0``;
+        ``c`` in °/s and ``B`` in °.
+    """
+    theta0 = np.asarray(theta0_deg, dtype=float)
+    theta1 = np.asarray(theta1_deg, dtype=float)
+    a = damping(params, 0.5 * (theta0 + theta1))
+    z = -a * h_s
+    e, phi1, phi2 = _phi_functions(z)
+    g0 = params.alpha * (theta0 + params.theta_bar_deg + np.asarray(u_d_deg, dtype=float))
+    s = params.alpha * (theta1 - theta0) / h_s  # slope of the equilibrium rate, °/s²
+    h2 = h_s * h_s
+    c = (1.0 - e) * g0 + s * a * h2 * phi2
+    big_a = h_s * phi1
+    big_b = g0 * h_s + 0.5 * s * h2 - g0 * h_s * phi1 - s * h2 * phi2
+    return e, c, big_a, big_b
+
+
+def roll_step(
+    params: RollParams,
+    rate_dps: ArrayLike,
+    angle_deg: ArrayLike,
+    theta0_deg: ArrayLike,
+    theta1_deg: ArrayLike,
+    u_d_deg: ArrayLike,
+    h_s: float,
+) -> tuple[FloatArray, FloatArray]:
+    """One exact substep of eq. 36/49 for arrays of any (broadcastable) shape.
+
+    Parameters
+    ----------
+    params : RollParams
+        Model parameters.
+    rate_dps, angle_deg : array_like
+        Roll rate v (°/s) and roll angle φ (°) at the start of the substep.
+    theta0_deg, theta1_deg : array_like
+        Fin angle at the start and end of the substep, °; the fin moves
+        linearly in between (use :func:`servo_step` to get ``theta1_deg``).
+    u_d_deg : array_like
+        Disturbance as an equivalent fin angle, held over the substep, °.
+    h_s : float
+        Substep length, s.
+
+    Returns
+    -------
+    rate_dps, angle_deg : ndarray
+        Roll rate and angle at the end of the substep.
+
+    Examples
+    --------
+    >>> from identification.model import PAPER_THETA, roll_step
+    >>> v, phi = roll_step(PAPER_THETA, 0.0, 0.0, 10.0, 10.0, 0.0, 100.0)
+    >>> round(float(v), 6) == round(float(PAPER_THETA.steady_rate(10.0)), 6)
+    True
+    """
+    e, c, big_a, big_b = roll_coefficients(params, theta0_deg, theta1_deg, u_d_deg, h_s)
+    v0 = np.asarray(rate_dps, dtype=float)
+    return e * v0 + c, np.asarray(angle_deg, dtype=float) + big_a * v0 + big_b
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Trajectory of :func:`simulate`, sampled at the input grid.
+
+    Attributes
+    ----------
+    time_s : ndarray, shape (n + 1,)
+        Sample times, s.
+    fin_deg : ndarray, shape (n + 1,)
+        Actual fin angle θ, °.
+    rate_dps : ndarray, shape (n + 1,)
+        Roll rate v, °/s.
+    angle_deg : ndarray, shape (n + 1,)
+        Roll angle φ, °.
+    """
+
+    time_s: FloatArray
+    fin_deg: FloatArray
+    rate_dps: FloatArray
+    angle_deg: FloatArray
+
+    def __repr__(self) -> str:
+        n = self.time_s.size
+        return (
+            f"SimResult(n={n}, t=[{self.time_s[0]:g}, {self.time_s[-1]:g}] s, "
+            f"mean|v|={np.mean(np.abs(self.rate_dps)):.3g} °/s)"
+        )
+
+
+def simulate(
+    params: RollParams,
+    dt_s: float,
+    fin_deg: ArrayLike,
+    u_d_deg: ArrayLike = 0.0,
+    *,
+    rate0_dps: float | None = None,
+    angle0_deg: float = 0.0,
+    servo: Servo | None = Servo(),  # noqa: B008 - frozen, immutable default
+    theta0_deg: float | None = None,
+    substeps: int = 10,
+    t0_s: float = 0.0,
+) -> SimResult:
+    """Simulate eq. 36/49 over a uniform input grid.
+
+    Parameters
+    ----------
+    params : RollParams
+        Model parameters.
+    dt_s : float
+        Input grid step, s (0.1 s in the paper).
+    fin_deg : array_like, shape (n,) or (n + 1,)
+        With a ``servo`` (default): the fin *command* held over each of the
+        ``n`` intervals, shape (n,); the servo of eq. 23 turns it into the
+        actual fin angle.  With ``servo=None``: the *actual* fin angle at the
+        ``n + 1`` grid points, shape (n + 1,), linear in between (e.g. a
+        measured fin angle).
+    u_d_deg : array_like, shape (n,) or scalar
+        Disturbance held over each interval, ° of equivalent fin angle.
+    rate0_dps : float, optional
+        Initial roll rate, °/s.  Default: the steady rate for the initial
+        fin angle and disturbance, ``α·(θ0 + θ̄ + u_d[0])``.
+    angle0_deg : float
+        Initial roll angle, °.
+    servo : Servo or None
+        Servo model applied to commands; ``None`` if ``fin_deg`` is actual.
+    theta0_deg : float, optional
+        Initial fin angle with a servo; default: the first command (saturated).
+    substeps : int
+        Exact-update substeps per interval (10 gives the paper's δt = 0.01 s
+        for Δt = 0.1 s).  The servo is resolved on the substep grid.
+    t0_s : float
+        Time of the first grid point, s.
+
+    Returns
+    -------
+    SimResult
+        Trajectory at the ``n + 1`` grid points.
+    """
+    if not (np.isfinite(dt_s) and dt_s > 0):
+        raise ValueError(f"dt_s must be a positive number, got {dt_s!r}")
+    if int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
+    fin = np.asarray(fin_deg, dtype=float)
+    if fin.ndim != 1:
+        raise ValueError(f"fin_deg must be one-dimensional, got shape {fin.shape}")
+    n = fin.size if servo is not None else fin.size - 1
+    if n < 1:
+        raise ValueError("fin_deg must describe at least one interval")
+    u_d = np.broadcast_to(np.asarray(u_d_deg, dtype=float), (n,))
+    if not (np.all(np.isfinite(fin)) and np.all(np.isfinite(u_d))):
+        raise ValueError("fin_deg and u_d_deg must be finite")
+    h = dt_s / substeps
+
+    # Fin angle at every substep boundary, shape (n*substeps + 1,).
+    if servo is not None:
+        start = fin[0] if theta0_deg is None else float(theta0_deg)
+        start = float(np.clip(start, -servo.range_deg, servo.range_deg))
+        theta = servo_path(np.repeat(fin, substeps), start, h, servo)
+    else:
+        frac = np.arange(n * substeps + 1) / substeps
+        theta = np.interp(frac, np.arange(n + 1), fin)
+    u_fine = np.repeat(u_d, substeps)
+
+    e, c, big_a, big_b = roll_coefficients(params, theta[:-1], theta[1:], u_fine, h)
+    v0 = float(params.steady_rate(theta[0], u_d[0])) if rate0_dps is None else float(rate0_dps)
+    rate = _linear_recurrence(e, c, v0)
+    angle = np.empty_like(rate)
+    angle[0] = angle0_deg
+    np.cumsum(big_a * rate[:-1] + big_b, out=angle[1:])
+    angle[1:] += angle0_deg
+
+    grid = slice(None, None, substeps)
+    time = t0_s + dt_s * np.arange(n + 1)
+    return SimResult(time_s=time, fin_deg=theta[grid], rate_dps=rate[grid], angle_deg=angle[grid])
+
+
+def _linear_recurrence(e: FloatArray, c: FloatArray, x0: float) -> FloatArray:
+    """``x[k+1] = e[k]·x[k] + c[k]`` from ``x[0] = x0``; returns all n+1 values."""
+    out = np.empty(e.size + 1)
+    x = x0
+    out[0] = x
+    # Sequential by nature; plain Python floats cost ~0.1 µs per step here,
+    # far less than a numpy call per step.
+    for k, (ek, ck) in enumerate(zip(e.tolist(), c.tolist(), strict=True)):
+        x = ek * x + ck
+        out[k + 1] = x
+    return out

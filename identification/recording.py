@@ -1,0 +1,494 @@
+"""Roll recording format v1: load, validate, save.
+
+A recording is a UTF-8 CSV file::
+
+    # format: rocketroll-recording/1
+    # name: tunnel-paper-seed0
+    # source: synthetic
+    # notes: anything
+    # truth.alpha: 0.659
+    time_s,fin_cmd_deg,roll_deg
+    0,0,0
+    0.1,0,0
+    ...
+
+* Leading ``# key: value`` lines carry metadata.  ``source`` is required and is
+  one of ``synthetic``, ``wind-tunnel``, ``flight``; ``name`` defaults to the
+  file's stem; any other key (``notes``, ``seed``, ``truth.*``, ...) is kept
+  verbatim.  Keys use letters, digits and ``_ . -``.
+* One header row, then one row per sample, comma separated, every cell a
+  finite number.
+* Columns (see :data:`COLUMNS`): ``time_s`` and at least one fin column and
+  one roll column.  ``ud_true_deg`` (the tunnel's ground-truth disturbance)
+  is only allowed in synthetic recordings.
+* Time strictly increasing and uniformly sampled within
+  :data:`SAMPLING_RTOL` of the median interval; at least :data:`MIN_SAMPLES`
+  samples; a fin angle that changes by at least :data:`MIN_FIN_CHANGE_DEG`.
+
+Every problem raises :class:`RecordingError`, whose message names the file,
+the line and the problem.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from identification.errors import RocketrollError
+from identification.model import RollParams
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "COLUMNS",
+    "FORMAT",
+    "MIN_FIN_CHANGE_DEG",
+    "MIN_SAMPLES",
+    "SAMPLING_RTOL",
+    "SOURCES",
+    "Recording",
+    "RecordingError",
+    "load_recording",
+    "save_recording",
+    "validate_samples",
+]
+
+FORMAT = "rocketroll-recording/1"
+SOURCES = ("synthetic", "wind-tunnel", "flight")
+
+#: Column name -> meaning.  Order here is the order in which files are written.
+COLUMNS: Mapping[str, str] = MappingProxyType(
+    {
+        "time_s": "sample time, s",
+        "fin_cmd_deg": "commanded fin angle, ° (the servo lag of eq. 23 applies)",
+        "fin_deg": "measured actual fin angle, °",
+        "roll_deg": "roll angle from the encoder, °",
+        "roll_rate_dps": "roll rate from a rate gyro, °/s",
+        "ud_true_deg": "ground-truth disturbance u_d, ° (synthetic recordings only)",
+    }
+)
+FIN_COLUMNS = ("fin_cmd_deg", "fin_deg")
+ROLL_COLUMNS = ("roll_deg", "roll_rate_dps")
+
+#: Largest allowed relative deviation of a sampling interval from the median.
+SAMPLING_RTOL = 0.01
+#: Fewest samples a recording may have.
+MIN_SAMPLES = 50
+#: Smallest fin-angle range (max - min) that gives something to identify, °.
+MIN_FIN_CHANGE_DEG = 0.1
+
+_KEY = re.compile(r"^[A-Za-z0-9_.\-]+$")
+_RESERVED = ("format", "name", "source")
+
+
+class RecordingError(RocketrollError, ValueError):
+    """A recording (or the data for one) is invalid.
+
+    Attributes
+    ----------
+    path : str
+        The file, or a description such as ``"<recording>"``.
+    line : int or None
+        1-based line number in ``path`` where the problem is, if it has one.
+    problem : str
+        What is wrong.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], line: int | None, problem: str) -> None:
+        self.path = os.fspath(path)
+        self.line = line
+        self.problem = problem
+        where = f"{self.path}:{line}" if line is not None else self.path
+        super().__init__(f"{where}: {problem}")
+
+
+def _where(lines: NDArray[np.int64] | None, index: int) -> int | None:
+    return None if lines is None else int(lines[index])
+
+
+def _sample(lines: NDArray[np.int64] | None, index: int) -> str:
+    return "" if lines is not None else f"sample {index}: "
+
+
+def validate_samples(
+    columns: Mapping[str, FloatArray],
+    *,
+    path: str = "<recording>",
+    lines: NDArray[np.int64] | None = None,
+    header_line: int | None = None,
+    source: str | None = None,
+) -> None:
+    """Check the sample columns of a recording; raise :class:`RecordingError`.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray
+        Column name (from :data:`COLUMNS`) to 1-D float array, all one length.
+    path : str
+        File named in error messages.
+    lines : ndarray of int, optional
+        1-based file line of each sample, for error messages.  Without it,
+        messages name the sample index.
+    header_line : int, optional
+        Line of the header, for column-level problems.
+    source : str, optional
+        The recording's source; ``ud_true_deg`` needs ``"synthetic"``.
+    """
+    unknown = [c for c in columns if c not in COLUMNS]
+    if unknown:
+        raise RecordingError(
+            path,
+            header_line,
+            f"unknown column {unknown[0]!r}; allowed columns: {', '.join(COLUMNS)}",
+        )
+    missing = []
+    if "time_s" not in columns:
+        missing.append("time_s")
+    if not any(c in columns for c in FIN_COLUMNS):
+        missing.append(" or ".join(FIN_COLUMNS))
+    if not any(c in columns for c in ROLL_COLUMNS):
+        missing.append(" or ".join(ROLL_COLUMNS))
+    if missing:
+        raise RecordingError(path, header_line, f"missing column {'; missing column '.join(missing)}")
+    if "ud_true_deg" in columns and source is not None and source != "synthetic":
+        raise RecordingError(
+            path, header_line, f"column 'ud_true_deg' is only allowed when source is synthetic, "
+            f"not {source!r}"
+        )
+
+    n = len(columns["time_s"])
+    for name, values in columns.items():
+        if values.ndim != 1 or len(values) != n:
+            raise RecordingError(path, header_line, f"column {name!r} has {len(values)} samples, "
+                                 f"time_s has {n}")
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            i = int(bad[0])
+            raise RecordingError(
+                path, _where(lines, i), f"{_sample(lines, i)}{name} is {values[i]} (not finite)"
+            )
+    if n < MIN_SAMPLES:
+        raise RecordingError(
+            path, None, f"too few samples: {n} (at least {MIN_SAMPLES} are needed)"
+        )
+
+    time = columns["time_s"]
+    dt = np.diff(time)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise RecordingError(
+            path,
+            _where(lines, i),
+            f"{_sample(lines, i)}time_s is not strictly increasing: "
+            f"{time[i]:g} s follows {time[i - 1]:g} s",
+        )
+    median = float(np.median(dt))
+    deviation = np.abs(dt - median) / median
+    bad = np.flatnonzero(deviation > SAMPLING_RTOL)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise RecordingError(
+            path,
+            _where(lines, i),
+            f"{_sample(lines, i)}irregular sampling: interval {dt[i - 1]:g} s "
+            f"(from {time[i - 1]:g} s to {time[i]:g} s) differs from the median interval "
+            f"{median:g} s by more than {SAMPLING_RTOL:.0%}",
+        )
+
+    fins = [c for c in FIN_COLUMNS if c in columns]
+    if all(np.ptp(columns[c]) < MIN_FIN_CHANGE_DEG for c in fins):
+        raise RecordingError(
+            path,
+            None,
+            f"the fin angle ({', '.join(fins)}) never changes by {MIN_FIN_CHANGE_DEG}° or more: "
+            "nothing to identify",
+        )
+
+
+def _readonly(values: ArrayLike | None) -> FloatArray | None:
+    if values is None:
+        return None
+    arr = np.array(values, dtype=float)  # a private copy
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A validated roll recording (format v1).
+
+    Attributes
+    ----------
+    name : str
+        Short identifier.
+    source : str
+        ``synthetic`` (virtual tunnel), ``wind-tunnel`` or ``flight``.
+    time_s : ndarray, shape (n,)
+        Sample times, s, uniform.
+    fin_cmd_deg, fin_deg : ndarray or None
+        Commanded / measured fin angle, °.
+    roll_deg, roll_rate_dps : ndarray or None
+        Encoder roll angle, ° / gyro roll rate, °/s.
+    ud_true_deg : ndarray or None
+        Ground-truth disturbance of a synthetic recording, ° (held over each
+        sample interval).  Never an input to identification.
+    metadata : mapping of str to str
+        Every other ``# key: value`` line, in file order.
+
+    Arrays are read-only.  Construction validates (:func:`validate_samples`).
+    """
+
+    name: str
+    source: str
+    time_s: FloatArray
+    fin_cmd_deg: FloatArray | None = None
+    fin_deg: FloatArray | None = None
+    roll_deg: FloatArray | None = None
+    roll_rate_dps: FloatArray | None = None
+    ud_true_deg: FloatArray | None = None
+    metadata: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.name or "\n" in self.name:
+            raise RecordingError("<recording>", None, f"invalid name {self.name!r}")
+        if self.source not in SOURCES:
+            raise RecordingError(
+                "<recording>", None,
+                f"source must be one of {', '.join(SOURCES)}, not {self.source!r}",
+            )
+        meta = dict(self.metadata)
+        for key, value in meta.items():
+            if not _KEY.match(key) or key in _RESERVED:
+                raise RecordingError("<recording>", None, f"invalid metadata key {key!r}")
+            if "\n" in str(value):
+                raise RecordingError("<recording>", None, f"metadata {key!r} spans lines")
+        object.__setattr__(self, "metadata", MappingProxyType({k: str(v) for k, v in meta.items()}))
+        for column in COLUMNS:
+            object.__setattr__(self, column, _readonly(getattr(self, column)))
+        validate_samples(self.columns(), source=self.source)
+
+    def columns(self) -> dict[str, FloatArray]:
+        """The present sample columns, in :data:`COLUMNS` order."""
+        out: dict[str, FloatArray] = {}
+        for column in COLUMNS:
+            values = getattr(self, column)
+            if values is not None:
+                out[column] = values
+        return out
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples."""
+        return int(self.time_s.size)
+
+    @property
+    def dt_s(self) -> float:
+        """Sampling interval (median), s."""
+        return float(np.median(np.diff(self.time_s)))
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample, s."""
+        return float(self.time_s[-1] - self.time_s[0])
+
+    @property
+    def seed(self) -> int | None:
+        """The tunnel seed of a synthetic recording, if recorded."""
+        value = self.metadata.get("seed")
+        return None if value is None else int(value)
+
+    def truth(self) -> RollParams | None:
+        """Ground-truth roll parameters recorded by the virtual tunnel, if any."""
+        keys = ("truth.alpha", "truth.theta_bar_deg", "truth.beta_bar_per_s")
+        if not all(k in self.metadata for k in keys):
+            return None
+        return RollParams(
+            alpha=float(self.metadata["truth.alpha"]),
+            theta_bar_deg=float(self.metadata["truth.theta_bar_deg"]),
+            beta_bar_per_s=float(self.metadata["truth.beta_bar_per_s"]),
+            alpha_bar_per_deg_s=float(self.metadata.get("truth.alpha_bar_per_deg_s", "0")),
+        )
+
+    def __repr__(self) -> str:
+        cols = ",".join(c for c in self.columns() if c != "time_s")
+        return (
+            f"Recording(name={self.name!r}, source={self.source!r}, n={self.n_samples}, "
+            f"dt={self.dt_s:g} s, duration={self.duration_s:g} s, columns=[{cols}])"
+        )
+
+
+def _parse_metadata_line(path: str, lineno: int, text: str) -> tuple[str, str]:
+    body = text[1:].strip()
+    key, sep, value = body.partition(":")
+    key = key.strip()
+    if not sep or not _KEY.match(key):
+        raise RecordingError(
+            path, lineno, f"metadata line must read '# key: value', got {text.strip()!r}"
+        )
+    return key, value.strip()
+
+
+def load_recording(path: str | os.PathLike[str]) -> Recording:
+    """Read and validate a recording file (format v1).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The CSV file.
+
+    Returns
+    -------
+    Recording
+
+    Raises
+    ------
+    RecordingError
+        Naming the file, the line and the problem.
+    """
+    name = os.fspath(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordingError(name, None, f"cannot read: {exc}") from exc
+
+    meta: dict[str, str] = {}
+    meta_lines: dict[str, int] = {}
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[float]] = []
+    row_lines: list[int] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if header is None:
+            if line.startswith("#"):
+                key, value = _parse_metadata_line(name, lineno, line)
+                if key in meta:
+                    raise RecordingError(
+                        name, lineno,
+                        f"duplicate metadata key {key!r} (first on line {meta_lines[key]})",
+                    )
+                meta[key] = value
+                meta_lines[key] = lineno
+                continue
+            header = [c.strip() for c in line.split(",")]
+            header_line = lineno
+            seen: set[str] = set()
+            for column in header:
+                if column in seen:
+                    raise RecordingError(name, lineno, f"duplicate column {column!r}")
+                seen.add(column)
+            continue
+        if line.startswith("#"):
+            raise RecordingError(name, lineno, "metadata lines must come before the header row")
+        cells = line.split(",")
+        if len(cells) != len(header):
+            raise RecordingError(
+                name, lineno, f"expected {len(header)} cells ({','.join(header)}), got {len(cells)}"
+            )
+        values: list[float] = []
+        for column, cell in zip(header, cells, strict=True):
+            try:
+                value = float(cell)
+            except ValueError:
+                raise RecordingError(
+                    name, lineno, f"{column} is {cell.strip()!r}, not a number"
+                ) from None
+            if not math.isfinite(value):
+                raise RecordingError(name, lineno, f"{column} is {cell.strip()} (not finite)")
+            values.append(value)
+        rows.append(values)
+        row_lines.append(lineno)
+
+    if header is None:
+        raise RecordingError(name, None, "no header row (and no samples)")
+    fmt = meta.pop("format", FORMAT)
+    if fmt != FORMAT:
+        raise RecordingError(
+            name, meta_lines["format"], f"unsupported format {fmt!r}; this package reads {FORMAT}"
+        )
+    source = meta.pop("source", None)
+    if source is None:
+        raise RecordingError(
+            name, None, f"missing metadata '# source: ...' (one of {', '.join(SOURCES)})"
+        )
+    if source not in SOURCES:
+        raise RecordingError(
+            name, meta_lines["source"],
+            f"source must be one of {', '.join(SOURCES)}, not {source!r}",
+        )
+    rec_name = meta.pop("name", "") or Path(name).stem
+
+    data = np.array(rows, dtype=float).reshape(len(rows), len(header))
+    columns = {column: data[:, j] for j, column in enumerate(header)}
+    validate_samples(
+        columns,
+        path=name,
+        lines=np.array(row_lines, dtype=np.int64),
+        header_line=header_line,
+        source=source,
+    )
+    try:
+        return Recording(name=rec_name, source=source, metadata=meta, **columns)
+    except RecordingError as exc:  # name/metadata problems found by the constructor
+        raise RecordingError(name, None, exc.problem) from None
+
+
+def format_number(x: float) -> str:
+    """Shortest fixed-point text with at most 6 decimals; deterministic."""
+    text = f"{x:.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def recording_text(recording: Recording) -> str:
+    """The file contents :func:`save_recording` writes."""
+    lines = [f"# format: {FORMAT}", f"# name: {recording.name}", f"# source: {recording.source}"]
+    lines += [f"# {key}: {value}" for key, value in recording.metadata.items()]
+    columns = recording.columns()
+    lines.append(",".join(columns))
+    table = np.column_stack(list(columns.values())).tolist()
+    lines += [",".join(format_number(x) for x in row) for row in table]
+    return "\n".join(lines) + "\n"
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file and an atomic rename.
+
+    A reader never sees a half-written file, and on any error the target is
+    left as it was.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
+    """Write a recording in format v1, atomically.
+
+    Numbers are written in fixed point with at most 6 decimals, so the same
+    recording always gives the same bytes.
+    """
+    write_text_atomic(path, recording_text(recording))
+
+
+def metadata_items(pairs: Sequence[tuple[str, object]]) -> dict[str, str]:
+    """Metadata dict from ``(key, value)`` pairs; floats as their shortest exact repr."""
+    return {key: repr(value) if isinstance(value, float) else str(value) for key, value in pairs}

@@ -1,0 +1,48 @@
+"""The ``rocketroll`` command line.
+
+Each layer registers its own subcommands; handlers import their heavy
+dependencies lazily so ``rocketroll --help`` stays fast.  Errors a user can
+cause (:class:`identification.errors.RocketrollError`) become one line on
+stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from identification import cli as identification_cli
+from identification.errors import RocketrollError
+from rocketroll import __version__
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full ``rocketroll`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog="rocketroll",
+        description="Rocket roll dynamics under turbulence: virtual wind tunnel, recordings, "
+        "identification (Minimal modelling approach ..., eq. 36/49).",
+    )
+    parser.add_argument("--version", action="version", version=f"rocketroll {__version__}")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    identification_cli.register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    parser = build_parser()
+    ns = parser.parse_args(argv)
+    try:
+        code: int = ns.handler(ns)
+    except RocketrollError as exc:
+        print(f"rocketroll {ns.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Gymnasium environment RocketRoll-v0 (see the environment issue)."""
