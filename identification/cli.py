@@ -149,7 +149,8 @@ def register(subparsers: Any) -> None:
     p.set_defaults(handler=_cmd_tunnel)
 
     p = subparsers.add_parser(
-        "info", help="validate a recording and print its summary",
+        "info",
+        help="validate a recording and print its summary",
         description="Validate a recording (format v1) and print a summary.",
     )
     p.add_argument("recording", type=Path, help="recording file (CSV, format v1)")
@@ -167,24 +168,36 @@ def register(subparsers: Any) -> None:
     p.add_argument("input", type=Path, help="input file")
     p.add_argument("--out", required=True, type=Path, help="recording file to write")
     p.add_argument(
-        "--columns", required=True,
-        help="comma-separated role of each input column: time, fin_cmd, fin, roll, roll_rate, "
-        "skip",
+        "--columns",
+        required=True,
+        help="comma-separated role of each input column: time, fin_cmd, fin, roll, roll_rate, skip",
     )
     p.add_argument("--no-header", action="store_true", help="the file has no header row")
-    p.add_argument("--units", choices=("deg", "rad"), default="deg",
-                   help="unit of angles (and of the rate, per second); default deg")
+    p.add_argument(
+        "--units",
+        choices=("deg", "rad"),
+        default="deg",
+        help="unit of angles (and of the rate, per second); default deg",
+    )
     time_group = p.add_mutually_exclusive_group()
     time_group.add_argument("--rate", type=float, help="sampling rate in Hz (no time column)")
     time_group.add_argument(
         "--time-column", help="the time column by header name (or 1-based number without header)"
     )
-    p.add_argument("--time-unit", choices=("s", "ms", "us"), default="s",
-                   help="unit of the time column; default s")
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default="s",
+        help="unit of the time column; default s",
+    )
     p.add_argument("--delimiter", help="cell separator (default: , ; or tab, else whitespace)")
     p.add_argument("--unwrap", action="store_true", help="unwrap a roll angle that wraps at 360°")
     p.add_argument("--name", help="recording name (default: the input file's stem)")
-    p.add_argument("--source", choices=("wind-tunnel", "flight", "synthetic"),
-                   default="wind-tunnel", help="where the data come from (default wind-tunnel)")
+    p.add_argument(
+        "--source",
+        choices=("wind-tunnel", "flight", "synthetic"),
+        default="wind-tunnel",
+        help="where the data come from (default wind-tunnel)",
+    )
     p.add_argument("--notes", help="free-text notes stored in the metadata")
     p.set_defaults(handler=_cmd_import_csv)

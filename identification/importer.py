@@ -205,7 +205,8 @@ def _time_index(
     if names is not None:
         if time_column not in names:
             raise RecordingError(
-                where, header_line,
+                where,
+                header_line,
                 f"--time-column {time_column!r} is not in the header ({', '.join(names)})",
             )
         index = names.index(time_column)
@@ -214,7 +215,8 @@ def _time_index(
             index = int(time_column) - 1
         except ValueError:
             raise RecordingError(
-                where, None,
+                where,
+                None,
                 f"--time-column {time_column!r}: without a header, give the 1-based column number",
             ) from None
         if not 0 <= index < len(roles):
@@ -223,7 +225,8 @@ def _time_index(
             )
     if roles[index] not in ("time", "skip"):
         raise RecordingError(
-            where, None,
+            where,
+            None,
             f"--time-column {time_column!r} is also given the role {roles[index]!r} in --columns",
         )
     return index

@@ -17,11 +17,13 @@ in (°/s)/°, the asymmetry ``θ̄ = β/α`` in ° and the damping ``a`` in 1/s.
 Servo (eq. 23): a fin moves ``|Δθ| · 0.4/60`` seconds for a step ``Δθ``, i.e.
 at a rate limit of 150 °/s, and is limited to the ±40° range of the experiment.
 
-Integration is exact, not Euler.  Over a substep of length ``h`` the fin moves
-linearly from ``θ0`` to ``θ1`` (the servo's rate-limited path sampled at the
-substep boundaries) and ``u_d`` is held.  With ``a`` evaluated at the mean fin
-angle of the substep the ODE is linear with constant coefficients and a ramp
-input, whose closed-form solution is (``z = -a·h``, ``s = α·(θ1 - θ0)/h``)::
+Integration is exact, not Euler.  Over a piece of length ``h`` the fin moves
+linearly from ``θ0`` to ``θ1`` and ``u_d`` is held.  A servo substep is two
+such pieces: the ramp at the rate limit, then the hold once the fin reaches
+its command, so a ramp that ends inside a substep is followed exactly.  With
+``a`` evaluated at the mean fin angle of the piece the ODE is linear with
+constant coefficients and a ramp input, whose closed-form solution is
+(``z = -a·h``, ``s = α·(θ1 - θ0)/h``)::
 
     v1 = e^z·v0 + (1 - e^z)·g0 + s·a·h²·φ2(z)
     φ1 = φ0 + g0·h + s·h²/2 + (v0 - g0)·h·φ1(z) - s·h²·φ2(z)
@@ -29,7 +31,7 @@ input, whose closed-form solution is (``z = -a·h``, ``s = α·(θ1 - θ0)/h``):
 where ``g0 = α·(θ0 + θ̄ + u_d)`` and ``φ1(z) = (e^z - 1)/z``,
 ``φ2(z) = (e^z - 1 - z)/z²`` are the usual exponential-integrator functions.
 This is exact for constant damping; with θ-dependent damping the only
-approximation is ``a`` frozen at the substep's mean fin angle while the fin
+approximation is ``a`` frozen at the piece's mean fin angle while the fin
 ramps (second order in ``h``), which ``tests/identification/test_model.py``
 bounds against ``scipy.integrate.solve_ivp``.
 
@@ -41,6 +43,7 @@ computed for all substeps at once; :func:`simulate` exploits this.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -132,7 +135,8 @@ class RollParams:
 
     def steady_rate(self, theta_deg: ArrayLike, u_d_deg: ArrayLike = 0.0) -> FloatArray:
         """Steady roll rate α·(θ + θ̄ + u_d), °/s, for a held fin angle (eq. 16, 36)."""
-        return self.alpha * (np.asarray(theta_deg, float) + self.theta_bar_deg + u_d_deg)
+        theta = np.asarray(theta_deg, dtype=float)
+        return self.alpha * (theta + self.theta_bar_deg + np.asarray(u_d_deg, dtype=float))
 
     def with_constant_damping(self, a_per_s: float) -> RollParams:
         """The same α and θ̄ with constant damping ``a`` (eq. 29)."""
@@ -222,9 +226,7 @@ def servo_step(
     return theta + np.clip(target - theta, -max_move, max_move)
 
 
-def servo_path(
-    command_deg: ArrayLike, theta0_deg: float, dt_s: float, servo: Servo
-) -> FloatArray:
+def servo_path(command_deg: ArrayLike, theta0_deg: float, dt_s: float, servo: Servo) -> FloatArray:
     """Fin angle at the boundaries of consecutive steps with held commands.
 
     Parameters
@@ -266,42 +268,60 @@ def _phi_functions(z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     return np.exp(z), phi1, phi2
 
 
+def _piece(
+    params: RollParams, theta0: FloatArray, theta1: FloatArray, u_d: FloatArray, h: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Affine update over one piece with the fin linear from θ0 to θ1 (h may be 0)."""
+    a = damping(params, 0.5 * (theta0 + theta1))
+    z = -a * h
+    e, phi1, phi2 = _phi_functions(z)
+    g0 = params.alpha * (theta0 + params.theta_bar_deg + u_d)
+    sh = params.alpha * (theta1 - theta0)  # s·h: equilibrium-rate change over the piece, °/s
+    c = (1.0 - e) * g0 + sh * a * h * phi2
+    big_a = h * phi1
+    big_b = g0 * h * (1.0 - phi1) + sh * h * (0.5 - phi2)
+    return e, c, big_a, big_b
+
+
 def roll_coefficients(
     params: RollParams,
     theta0_deg: ArrayLike,
     theta1_deg: ArrayLike,
     u_d_deg: ArrayLike,
     h_s: float,
+    rate_limit_dps: float | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Coefficients of the exact substep update, linear in the rate.
 
-    Over a substep of length ``h_s`` with the fin moving linearly from
-    ``theta0_deg`` to ``theta1_deg`` and ``u_d_deg`` held::
+    Over a substep of length ``h_s`` with the fin going from ``theta0_deg`` to
+    ``theta1_deg`` and ``u_d_deg`` held::
 
         v1 = E·v0 + c
         φ1 = φ0 + A·v0 + B
 
-    See the module docstring for the closed form.  All inputs broadcast;
-    ``h_s`` is a scalar.
+    See the module docstring for the closed form.  With ``rate_limit_dps``
+    (a servo), the fin moves at that rate for ``|θ1 - θ0|/rate`` and then
+    holds -- the exact path of a rate-limited servo whose ramp may end inside
+    the substep -- and the two pieces are composed.  Without it the fin moves
+    linearly over the whole substep (e.g. a sampled, measured fin angle).
+    All inputs broadcast; ``h_s`` is a scalar.
 
     Returns
     -------
     E, c, A, B : ndarray
-        ``E`` and ``A`` (s) are dimensionless/seconds multipliers of ``v0``;
-        ``c`` in °/s and ``B`` in °.
+        ``E`` (dimensionless) and ``A`` (s) multiply ``v0``; ``c`` in °/s and
+        ``B`` in °.
     """
     theta0 = np.asarray(theta0_deg, dtype=float)
     theta1 = np.asarray(theta1_deg, dtype=float)
-    a = damping(params, 0.5 * (theta0 + theta1))
-    z = -a * h_s
-    e, phi1, phi2 = _phi_functions(z)
-    g0 = params.alpha * (theta0 + params.theta_bar_deg + np.asarray(u_d_deg, dtype=float))
-    s = params.alpha * (theta1 - theta0) / h_s  # slope of the equilibrium rate, °/s²
-    h2 = h_s * h_s
-    c = (1.0 - e) * g0 + s * a * h2 * phi2
-    big_a = h_s * phi1
-    big_b = g0 * h_s + 0.5 * s * h2 - g0 * h_s * phi1 - s * h2 * phi2
-    return e, c, big_a, big_b
+    u_d = np.asarray(u_d_deg, dtype=float)
+    if rate_limit_dps is None:
+        return _piece(params, theta0, theta1, u_d, np.asarray(h_s, dtype=float))
+    h_ramp = np.minimum(np.abs(theta1 - theta0) / rate_limit_dps, h_s)
+    e1, c1, a1, b1 = _piece(params, theta0, theta1, u_d, h_ramp)
+    e2, c2, a2, b2 = _piece(params, theta1, theta1, u_d, h_s - h_ramp)
+    # Compose v -> e1·v + c1 -> e2·(e1·v + c1) + c2, and the angle increments alike.
+    return e2 * e1, e2 * c1 + c2, a1 + a2 * e1, b1 + a2 * c1 + b2
 
 
 def roll_step(
@@ -312,6 +332,7 @@ def roll_step(
     theta1_deg: ArrayLike,
     u_d_deg: ArrayLike,
     h_s: float,
+    rate_limit_dps: float | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """One exact substep of eq. 36/49 for arrays of any (broadcastable) shape.
 
@@ -322,12 +343,16 @@ def roll_step(
     rate_dps, angle_deg : array_like
         Roll rate v (°/s) and roll angle φ (°) at the start of the substep.
     theta0_deg, theta1_deg : array_like
-        Fin angle at the start and end of the substep, °; the fin moves
-        linearly in between (use :func:`servo_step` to get ``theta1_deg``).
+        Fin angle at the start and end of the substep, °
+        (use :func:`servo_step` to get ``theta1_deg``).
     u_d_deg : array_like
         Disturbance as an equivalent fin angle, held over the substep, °.
     h_s : float
         Substep length, s.
+    rate_limit_dps : float, optional
+        The servo's rate limit: the fin moves at this rate, then holds
+        (exact servo path).  Without it, the fin moves linearly over the
+        whole substep.
 
     Returns
     -------
@@ -341,7 +366,9 @@ def roll_step(
     >>> round(float(v), 6) == round(float(PAPER_THETA.steady_rate(10.0)), 6)
     True
     """
-    e, c, big_a, big_b = roll_coefficients(params, theta0_deg, theta1_deg, u_d_deg, h_s)
+    e, c, big_a, big_b = roll_coefficients(
+        params, theta0_deg, theta1_deg, u_d_deg, h_s, rate_limit_dps
+    )
     v0 = np.asarray(rate_dps, dtype=float)
     return e * v0 + c, np.asarray(angle_deg, dtype=float) + big_a * v0 + big_b
 
@@ -383,7 +410,7 @@ def simulate(
     *,
     rate0_dps: float | None = None,
     angle0_deg: float = 0.0,
-    servo: Servo | None = Servo(),  # noqa: B008 - frozen, immutable default
+    servo: Servo | None = Servo(),
     theta0_deg: float | None = None,
     substeps: int = 10,
     t0_s: float = 0.0,
@@ -449,7 +476,8 @@ def simulate(
         theta = np.interp(frac, np.arange(n + 1), fin)
     u_fine = np.repeat(u_d, substeps)
 
-    e, c, big_a, big_b = roll_coefficients(params, theta[:-1], theta[1:], u_fine, h)
+    rate_limit = None if servo is None else servo.rate_limit_dps
+    e, c, big_a, big_b = roll_coefficients(params, theta[:-1], theta[1:], u_fine, h, rate_limit)
     v0 = float(params.steady_rate(theta[0], u_d[0])) if rate0_dps is None else float(rate0_dps)
     rate = _linear_recurrence(e, c, v0)
     angle = np.empty_like(rate)
@@ -458,7 +486,7 @@ def simulate(
     angle[1:] += angle0_deg
 
     grid = slice(None, None, substeps)
-    time = t0_s + dt_s * np.arange(n + 1)
+    time = t0_s + dt_s * np.arange(n + 1, dtype=float)
     return SimResult(time_s=time, fin_deg=theta[grid], rate_dps=rate[grid], angle_deg=angle[grid])
 
 

@@ -158,18 +158,22 @@ def validate_samples(
     if not any(c in columns for c in ROLL_COLUMNS):
         missing.append(" or ".join(ROLL_COLUMNS))
     if missing:
-        raise RecordingError(path, header_line, f"missing column {'; missing column '.join(missing)}")
+        raise RecordingError(
+            path, header_line, f"missing column {'; missing column '.join(missing)}"
+        )
     if "ud_true_deg" in columns and source is not None and source != "synthetic":
         raise RecordingError(
-            path, header_line, f"column 'ud_true_deg' is only allowed when source is synthetic, "
-            f"not {source!r}"
+            path,
+            header_line,
+            f"column 'ud_true_deg' is only allowed when source is synthetic, not {source!r}",
         )
 
     n = len(columns["time_s"])
     for name, values in columns.items():
         if values.ndim != 1 or len(values) != n:
-            raise RecordingError(path, header_line, f"column {name!r} has {len(values)} samples, "
-                                 f"time_s has {n}")
+            raise RecordingError(
+                path, header_line, f"column {name!r} has {len(values)} samples, time_s has {n}"
+            )
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             i = int(bad[0])
@@ -263,7 +267,8 @@ class Recording:
             raise RecordingError("<recording>", None, f"invalid name {self.name!r}")
         if self.source not in SOURCES:
             raise RecordingError(
-                "<recording>", None,
+                "<recording>",
+                None,
                 f"source must be one of {', '.join(SOURCES)}, not {self.source!r}",
             )
         meta = dict(self.metadata)
@@ -376,7 +381,8 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
                 key, value = _parse_metadata_line(name, lineno, line)
                 if key in meta:
                     raise RecordingError(
-                        name, lineno,
+                        name,
+                        lineno,
                         f"duplicate metadata key {key!r} (first on line {meta_lines[key]})",
                     )
                 meta[key] = value
@@ -400,14 +406,14 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         values: list[float] = []
         for column, cell in zip(header, cells, strict=True):
             try:
-                value = float(cell)
+                number = float(cell)
             except ValueError:
                 raise RecordingError(
                     name, lineno, f"{column} is {cell.strip()!r}, not a number"
                 ) from None
-            if not math.isfinite(value):
+            if not math.isfinite(number):
                 raise RecordingError(name, lineno, f"{column} is {cell.strip()} (not finite)")
-            values.append(value)
+            values.append(number)
         rows.append(values)
         row_lines.append(lineno)
 
@@ -425,7 +431,8 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         )
     if source not in SOURCES:
         raise RecordingError(
-            name, meta_lines["source"],
+            name,
+            meta_lines["source"],
             f"source must be one of {', '.join(SOURCES)}, not {source!r}",
         )
     rec_name = meta.pop("name", "") or Path(name).stem
@@ -462,6 +469,12 @@ def recording_text(recording: Recording) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file and an atomic rename.
 
@@ -474,6 +487,8 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
             handle.write(text)
+        # mkstemp makes 0600 files; give the permissions a plain open() would.
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -19,13 +19,15 @@ __all__ = ["RecordingSummary", "plot_recording", "rate_from_angle", "summarize"]
 RATE_WINDOW_S = 1.0
 
 
-def rate_from_angle(angle_deg: FloatArray, dt_s: float, window_s: float = RATE_WINDOW_S) -> FloatArray:
+def rate_from_angle(
+    angle_deg: FloatArray, dt_s: float, window_s: float = RATE_WINDOW_S
+) -> FloatArray:
     """Roll rate from a sampled roll angle, °/s.
 
     A quadratic Savitzky-Golay derivative over ``window_s`` (odd number of
     samples, at least 3), which suppresses the encoder's quantisation steps.
     """
-    window = max(3, int(round(window_s / dt_s)) | 1)
+    window = max(3, round(window_s / dt_s) | 1)
     window = min(window, angle_deg.size - (1 - angle_deg.size % 2))
     return np.asarray(savgol_filter(angle_deg, window, 2, deriv=1, delta=dt_s), dtype=float)
 
@@ -84,9 +86,10 @@ class RecordingSummary:
         if self.roll_total_deg is not None:
             lines.append(f"roll travel    {self.roll_total_deg:.1f} °")
         if self.truth:
-            lines.append("ground truth   " + ", ".join(
-                f"{k.removeprefix('truth.')}={v}" for k, v in self.truth.items()
-            ))
+            lines.append(
+                "ground truth   "
+                + ", ".join(f"{k.removeprefix('truth.')}={v}" for k, v in self.truth.items())
+            )
         if self.ud_true:
             u = self.ud_true
             lines.append(
@@ -120,8 +123,12 @@ def summarize(recording: Recording) -> RecordingSummary:
     ud_stats = None
     if ud is not None:
         q05, q95 = np.percentile(ud, [5, 95])
-        ud_stats = {"mean": float(ud.mean()), "sd": float(ud.std(ddof=1)),
-                    "q05": float(q05), "q95": float(q95)}
+        ud_stats = {
+            "mean": float(ud.mean()),
+            "sd": float(ud.std(ddof=1)),
+            "q05": float(q05),
+            "q95": float(q95),
+        }
     cmd = recording.fin_cmd_deg
     return RecordingSummary(
         name=recording.name,
@@ -135,7 +142,8 @@ def summarize(recording: Recording) -> RecordingSummary:
         fin_changes=None if cmd is None else int(np.count_nonzero(np.diff(cmd))),
         mean_abs_rate_dps=float(np.mean(np.abs(rate))),
         rate_source=rate_source,
-        roll_total_deg=None if recording.roll_deg is None
+        roll_total_deg=None
+        if recording.roll_deg is None
         else float(recording.roll_deg[-1] - recording.roll_deg[0]),
         truth=truth,
         ud_true=ud_stats,
@@ -156,8 +164,9 @@ def plot_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
     t = recording.time_s
     rate, rate_source = _rate(recording)
     panels = 3 + (recording.ud_true_deg is not None)
-    fig, axes = plt.subplots(panels, 1, figsize=(10, 2.3 * panels), sharex=True,
-                             constrained_layout=True)
+    fig, axes = plt.subplots(
+        panels, 1, figsize=(10, 2.3 * panels), sharex=True, constrained_layout=True
+    )
     ax = axes[0]
     if recording.fin_cmd_deg is not None:
         ax.step(t, recording.fin_cmd_deg, where="post", lw=1.2, label="commanded")
@@ -171,15 +180,25 @@ def plot_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
         ax.plot(t, recording.roll_deg, lw=1.0, color="C2")
         ax.set_ylabel("roll angle φ (°)")
     else:
-        ax.plot(t, np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))]),
-                lw=1.0, color="C2")
+        ax.plot(
+            t,
+            np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))]),
+            lw=1.0,
+            color="C2",
+        )
         ax.set_ylabel("∫ rate dt (°)")
     ax = axes[2]
     ax.plot(t, rate, lw=0.6, color="C3")
     ax.axhline(0.0, color="k", lw=0.5)
     ax.set_ylabel("roll rate v (°/s)")
-    ax.text(0.01, 0.95, f"from {rate_source}; mean |v| = {np.mean(np.abs(rate)):.1f} °/s",
-            transform=ax.transAxes, va="top", fontsize=8)
+    ax.text(
+        0.01,
+        0.95,
+        f"from {rate_source}; mean |v| = {np.mean(np.abs(rate)):.1f} °/s",
+        transform=ax.transAxes,
+        va="top",
+        fontsize=8,
+    )
     if recording.ud_true_deg is not None:
         ax = axes[3]
         ax.step(t, recording.ud_true_deg, where="post", lw=0.5, color="C4")

@@ -104,8 +104,7 @@ class Turbulence:
     def __post_init__(self) -> None:
         if self.distribution not in DISTRIBUTIONS:
             raise ValueError(
-                f"distribution must be one of {', '.join(DISTRIBUTIONS)}, "
-                f"not {self.distribution!r}"
+                f"distribution must be one of {', '.join(DISTRIBUTIONS)}, not {self.distribution!r}"
             )
         if not (np.isfinite(self.sd_deg) and self.sd_deg >= 0):
             raise ValueError(f"sd_deg must be >= 0, got {self.sd_deg!r}")
@@ -396,7 +395,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
             grid_s=spec.log_dt,
         )
     n = round(schedule.end_s / spec.log_dt)
-    time = spec.log_dt * np.arange(n + 1)
+    time = spec.log_dt * np.arange(n + 1, dtype=float)
     command = schedule.command(time)
     turbulence = spec.turbulence_model()
     u_d = turbulence.sample(n + 1, spec.log_dt, rng_turbulence)
