@@ -7,9 +7,12 @@ import json
 from collections.abc import Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from identification.errors import UsageError
+
+if TYPE_CHECKING:
+    from identification.tunnel import TunnelSpec
 
 __all__ = ["register", "tunnel_spec_from_argv"]
 
@@ -68,7 +71,7 @@ def _add_tunnel_spec_arguments(parser: argparse.ArgumentParser) -> None:
         )
 
 
-def _spec_from_namespace(ns: argparse.Namespace) -> Any:
+def _spec_from_namespace(ns: argparse.Namespace) -> TunnelSpec:
     from identification.tunnel import TunnelSpec
 
     values = {f.name: getattr(ns, f.name) for f in fields(TunnelSpec)}
@@ -78,7 +81,7 @@ def _spec_from_namespace(ns: argparse.Namespace) -> Any:
         raise UsageError(f"tunnel: {exc}") from None
 
 
-def tunnel_spec_from_argv(argv: Sequence[str]) -> Any:
+def tunnel_spec_from_argv(argv: Sequence[str]) -> TunnelSpec:
     """Parse ``rocketroll tunnel`` arguments (without ``--out``) into a TunnelSpec."""
     parser = argparse.ArgumentParser(prog="rocketroll tunnel", add_help=False)
     _add_tunnel_spec_arguments(parser)

@@ -117,7 +117,9 @@ def import_csv(
         raise RecordingError(where, None, f"time unit must be s, ms or us, not {time_unit!r}")
     if source not in SOURCES:
         raise RecordingError(where, None, f"source must be one of {', '.join(SOURCES)}")
-    time_sources = ("time" in roles) + (rate_hz is not None) + (time_column is not None)
+    # A 'time' role names the time column; --time-column may name the same column.
+    time_role = "time" in roles and time_column is None
+    time_sources = time_role + (rate_hz is not None) + (time_column is not None)
     if time_sources != 1:
         raise RecordingError(
             where,
@@ -129,7 +131,7 @@ def import_csv(
         raise RecordingError(where, None, f"--rate must be a positive number, got {rate_hz}")
 
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a BOM (Excel)
     except (OSError, UnicodeDecodeError) as exc:
         raise RecordingError(where, None, f"cannot read: {exc}") from exc
 
@@ -182,7 +184,8 @@ def import_csv(
             continue
         values = data[:, j]
         if target == "time_s":
-            out[target] = values * TIME_UNITS[time_unit]
+            if time_column is None:
+                out[target] = values * TIME_UNITS[time_unit]
         else:
             out[target] = values * scale
     if unwrap and "roll_deg" in out:

@@ -86,6 +86,9 @@ MIN_SAMPLES = 50
 #: Smallest fin-angle range (max - min) that gives something to identify, °.
 MIN_FIN_CHANGE_DEG = 0.1
 
+#: Decimals written for time_s (values: 6).
+TIME_DECIMALS = 9
+
 _KEY = re.compile(r"^[A-Za-z0-9_.\-]+$")
 _RESERVED = ("format", "name", "source")
 
@@ -219,6 +222,11 @@ def validate_samples(
         )
 
 
+def _has_line_break(text: str) -> bool:
+    """True if ``text`` holds any character ``str.splitlines`` breaks at."""
+    return bool(text) and text.splitlines() != [text]
+
+
 def _readonly(values: ArrayLike | None) -> FloatArray | None:
     if values is None:
         return None
@@ -263,21 +271,25 @@ class Recording:
     metadata: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if not self.name or "\n" in self.name:
+        # The file format trims whitespace around values and cannot hold line breaks
+        # of any kind (str.splitlines splits on \r, \u2028, ... as well as \n).
+        name = self.name.strip()
+        if not name or _has_line_break(name):
             raise RecordingError("<recording>", None, f"invalid name {self.name!r}")
+        object.__setattr__(self, "name", name)
         if self.source not in SOURCES:
             raise RecordingError(
                 "<recording>",
                 None,
                 f"source must be one of {', '.join(SOURCES)}, not {self.source!r}",
             )
-        meta = dict(self.metadata)
+        meta = {key: str(value).strip() for key, value in self.metadata.items()}
         for key, value in meta.items():
             if not _KEY.match(key) or key in _RESERVED:
                 raise RecordingError("<recording>", None, f"invalid metadata key {key!r}")
-            if "\n" in str(value):
+            if _has_line_break(value):
                 raise RecordingError("<recording>", None, f"metadata {key!r} spans lines")
-        object.__setattr__(self, "metadata", MappingProxyType({k: str(v) for k, v in meta.items()}))
+        object.__setattr__(self, "metadata", MappingProxyType(meta))
         for column in COLUMNS:
             object.__setattr__(self, column, _readonly(getattr(self, column)))
         validate_samples(self.columns(), source=self.source)
@@ -362,7 +374,7 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     """
     name = os.fspath(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a BOM (Excel)
     except (OSError, UnicodeDecodeError) as exc:
         raise RecordingError(name, None, f"cannot read: {exc}") from exc
 
@@ -392,6 +404,8 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
             header_line = lineno
             seen: set[str] = set()
             for column in header:
+                if not column:
+                    raise RecordingError(name, lineno, "empty column name (a stray comma?)")
                 if column in seen:
                     raise RecordingError(name, lineno, f"duplicate column {column!r}")
                 seen.add(column)
@@ -452,9 +466,9 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         raise RecordingError(name, None, exc.problem) from None
 
 
-def format_number(x: float) -> str:
-    """Shortest fixed-point text with at most 6 decimals; deterministic."""
-    text = f"{x:.6f}".rstrip("0").rstrip(".")
+def format_number(x: float, decimals: int = 6) -> str:
+    """Shortest fixed-point text with at most ``decimals`` decimals; deterministic."""
+    text = f"{x:.{decimals}f}".rstrip("0").rstrip(".")
     return "0" if text in ("-0", "") else text
 
 
@@ -465,7 +479,11 @@ def recording_text(recording: Recording) -> str:
     columns = recording.columns()
     lines.append(",".join(columns))
     table = np.column_stack(list(columns.values())).tolist()
-    lines += [",".join(format_number(x) for x in row) for row in table]
+    # Time gets nanoseconds so that even fast loggers stay uniformly sampled.
+    lines += [
+        ",".join([format_number(row[0], TIME_DECIMALS), *(format_number(x) for x in row[1:])])
+        for row in table
+    ]
     return "\n".join(lines) + "\n"
 
 

@@ -41,6 +41,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RocketrollError as exc:
         print(f"rocketroll {ns.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+        sys.stderr.close()
+        return 0
     return code
 
 
