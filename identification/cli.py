@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections.abc import Sequence
 from dataclasses import fields
 from pathlib import Path
@@ -100,19 +101,23 @@ def _cmd_tunnel(ns: argparse.Namespace) -> int:
 
 
 def _cmd_info(ns: argparse.Namespace) -> int:
-    from identification.recording import load_recording, write_text_atomic
+    from identification.recording import load_recording, write_all_atomic
     from identification.summary import plot_recording, summarize
 
+    if ns.plot is not None and ns.plot.suffix.lower() != ".png":
+        raise UsageError(f"--plot {ns.plot}: the figure is a PNG; give a path ending in .png")
     recording = load_recording(ns.recording)
     summary = summarize(recording)
-    print(summary.format())
+    # Everything is computed before anything is written.
+    outputs: dict[str | os.PathLike[str], str | bytes] = {}
     if ns.json:
-        write_text_atomic(ns.json, json.dumps(summary.to_dict(), indent=2) + "\n")
-        print(f"wrote {ns.json}")
+        outputs[ns.json] = json.dumps(summary.to_dict(), indent=2) + "\n"
     if ns.plot:
-        Path(ns.plot).parent.mkdir(parents=True, exist_ok=True)
-        plot_recording(recording, ns.plot)
-        print(f"wrote {ns.plot}")
+        outputs[ns.plot] = plot_recording(recording)
+    write_all_atomic(outputs)  # all or nothing
+    print(summary.format())
+    for path in outputs:
+        print(f"wrote {path}")
     return 0
 
 

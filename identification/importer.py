@@ -22,6 +22,7 @@ from identification.recording import (
     FloatArray,
     Recording,
     RecordingError,
+    parse_number,
     validate_samples,
 )
 
@@ -127,6 +128,8 @@ def import_csv(
             "give time exactly one way: a 'time' entry in --columns, --rate HZ, "
             "or --time-column NAME",
         )
+    if delimiter == "":
+        raise RecordingError(where, None, "--delimiter must not be empty")
     if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
         raise RecordingError(where, None, f"--rate must be a positive number, got {rate_hz}")
 
@@ -159,7 +162,7 @@ def import_csv(
                 row.append(0.0)
                 continue
             try:
-                row.append(float(cell))
+                row.append(parse_number(cell))
             except ValueError:
                 if role == "skip":  # a skipped column need not be numeric
                     row.append(np.nan)

@@ -112,6 +112,8 @@ class RollParams:
         alpha_bar : float, optional
             ᾱ, 1/(s·°).
         """
+        if alpha == 0.0:
+            raise ValueError("alpha must be non-zero (the fins must act on roll)")
         return cls(
             alpha=alpha,
             theta_bar_deg=beta / alpha,

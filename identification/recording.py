@@ -31,6 +31,7 @@ the line and the problem.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import re
@@ -222,9 +223,52 @@ def validate_samples(
         )
 
 
+_NUMBER = re.compile(
+    r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:nan|inf|infinity)", re.ASCII | re.I
+)
+
+
+def parse_number(cell: str) -> float:
+    """A CSV number: ASCII decimal or scientific notation (or nan/inf, to be reported).
+
+    Stricter than ``float()``, which also takes ``5_0`` and non-ASCII digits.
+
+    Raises
+    ------
+    ValueError
+        If ``cell`` is not such a number.
+    """
+    text = cell.strip()
+    if not _NUMBER.fullmatch(text):
+        raise ValueError(f"not a number: {cell!r}")
+    return float(text)
+
+
 def _has_line_break(text: str) -> bool:
     """True if ``text`` holds any character ``str.splitlines`` breaks at."""
     return bool(text) and text.splitlines() != [text]
+
+
+#: Metadata keys holding text; every other ``truth.*`` and ``sensor.*`` value is a number.
+TEXT_KEYS = frozenset({"truth.model", "truth.turbulence"})
+
+
+def metadata_problem(key: str, value: str) -> str | None:
+    """What is wrong with a typed metadata value, or None.
+
+    ``seed`` is a non-negative integer; ``truth.*`` and ``sensor.*`` values
+    (but :data:`TEXT_KEYS`) are finite numbers.  Other keys are free text.
+    """
+    if key == "seed" and not (value.isascii() and value.isdigit()):
+        return f"metadata 'seed' must be a non-negative integer, not {value!r}"
+    if key.startswith(("truth.", "sensor.")) and key not in TEXT_KEYS:
+        try:
+            number = parse_number(value)
+        except ValueError:
+            return f"metadata {key!r} must be a number, not {value!r}"
+        if not math.isfinite(number):
+            return f"metadata {key!r} must be finite, not {value!r}"
+    return None
 
 
 def _readonly(values: ArrayLike | None) -> FloatArray | None:
@@ -289,6 +333,10 @@ class Recording:
                 raise RecordingError("<recording>", None, f"invalid metadata key {key!r}")
             if _has_line_break(value):
                 raise RecordingError("<recording>", None, f"metadata {key!r} spans lines")
+        for key, value in meta.items():
+            problem = metadata_problem(key, value)
+            if problem:
+                raise RecordingError("<recording>", None, problem)
         object.__setattr__(self, "metadata", MappingProxyType(meta))
         for column in COLUMNS:
             object.__setattr__(self, column, _readonly(getattr(self, column)))
@@ -397,6 +445,9 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
                         lineno,
                         f"duplicate metadata key {key!r} (first on line {meta_lines[key]})",
                     )
+                problem = metadata_problem(key, value)
+                if problem:
+                    raise RecordingError(name, lineno, problem)
                 meta[key] = value
                 meta_lines[key] = lineno
                 continue
@@ -420,7 +471,7 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         values: list[float] = []
         for column, cell in zip(header, cells, strict=True):
             try:
-                number = float(cell)
+                number = parse_number(cell)
             except ValueError:
                 raise RecordingError(
                     name, lineno, f"{column} is {cell.strip()!r}, not a number"
@@ -493,24 +544,41 @@ def _umask() -> int:
     return mask
 
 
-def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file and an atomic rename.
+def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> None:
+    """Write ``data`` (text as UTF-8) to ``path`` via a temporary file and a rename.
 
     A reader never sees a half-written file, and on any error the target is
-    left as it was.
+    left as it was.  See :func:`write_all_atomic`.
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    write_all_atomic({path: data})
+
+
+def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> None:
+    """Write several files all or nothing.
+
+    Every file is first written in full to a temporary file beside its target;
+    only when all of them are staged are they renamed into place.  Any error
+    while staging (a directory as target, an unwritable folder, a full disk)
+    leaves every target as it was.
+    """
+    staged: list[tuple[str, Path]] = []
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        # mkstemp makes 0600 files; give the permissions a plain open() would.
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        for path, data in outputs.items():
+            target = Path(path)
+            if target.is_dir():
+                raise IsADirectoryError(errno.EISDIR, "is a directory", str(target))
+            target.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+            staged.append((tmp, target))
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(data.encode("utf-8") if isinstance(data, str) else data)
+            # mkstemp makes 0600 files; give the permissions a plain open() would.
+            os.chmod(tmp, 0o666 & ~_umask())
+        for tmp, target in staged:
+            os.replace(tmp, target)
+    finally:
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
 
 
 def save_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
@@ -519,7 +587,7 @@ def save_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
     Numbers are written in fixed point with at most 6 decimals, so the same
     recording always gives the same bytes.
     """
-    write_text_atomic(path, recording_text(recording))
+    write_atomic(path, recording_text(recording))
 
 
 def metadata_items(pairs: Sequence[tuple[str, object]]) -> dict[str, str]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import os
+import io
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -150,11 +150,12 @@ def summarize(recording: Recording) -> RecordingSummary:
     )
 
 
-def plot_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
-    """Write a PNG in the spirit of the paper's Fig. 2: fin input, roll response.
+def plot_recording(recording: Recording) -> bytes:
+    """A PNG in the spirit of the paper's Fig. 2: fin input, roll response.
 
     Panels: fin angle (command and measured), roll angle, roll rate and, for
-    synthetic recordings, the ground-truth disturbance ``u_d``.
+    synthetic recordings, the ground-truth disturbance ``u_d``.  Returns the
+    PNG bytes, so the caller decides where (and whether) they are written.
     """
     import matplotlib
 
@@ -204,5 +205,7 @@ def plot_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
         ax.step(t, recording.ud_true_deg, where="post", lw=0.5, color="C4")
         ax.set_ylabel("true u_d (°)")
     axes[-1].set_xlabel("time (s)")
-    fig.savefig(path, dpi=110)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
     plt.close(fig)
+    return buffer.getvalue()

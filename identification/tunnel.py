@@ -74,6 +74,8 @@ PAPER_TABLE1: tuple[tuple[float, float], ...] = (
     (511.6, -26.67),
 )
 PAPER_END_S = 573.0
+#: Smallest difference between consecutive staircase levels, °.
+MIN_STEP_DEG = 5.0
 
 
 @dataclass(frozen=True)
@@ -195,7 +197,7 @@ class FinSchedule:
         range_deg: float = 40.0,
         dwell_s: tuple[float, float] = (20.0, 60.0),
         lead_s: float = 20.0,
-        min_step_deg: float = 5.0,
+        min_step_deg: float = MIN_STEP_DEG,
         grid_s: float = 0.1,
     ) -> FinSchedule:
         """Random staircase: ``steps`` levels uniform in ±``range_deg``.
@@ -280,16 +282,37 @@ class TunnelSpec:
             raise ValueError(f"model must be 'theta' or 'constant', not {self.model!r}")
         if self.model == "constant" and self.alpha_bar not in (None, 0.0):
             raise ValueError("alpha_bar must be 0 for the constant-damping model")
-        if not (self.log_dt > 0 and self.substeps >= 1):
-            raise ValueError("log_dt must be > 0 and substeps >= 1")
+        for name in ("alpha", "beta", "alpha_bar", "beta_bar"):
+            value = getattr(self, name)
+            if value is not None and not np.isfinite(value):
+                raise ValueError(f"{name} must be finite, got {value!r}")
+        if self.alpha == 0.0:
+            raise ValueError("alpha must be non-zero (the fins must act on roll)")
+        if not (np.isfinite(self.log_dt) and 0 < self.log_dt <= 10.0):
+            raise ValueError(f"log_dt must be in (0, 10] s, got {self.log_dt!r}")
+        if self.substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
         if self.encoder_counts < 0:
             raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
         if self.no_encoder and self.gyro_noise is None:
             raise ValueError("no_encoder needs a rate gyro (set gyro_noise, e.g. 0)")
-        if self.gyro_noise is not None and self.gyro_noise < 0:
+        if self.gyro_noise is not None and not (
+            np.isfinite(self.gyro_noise) and self.gyro_noise >= 0
+        ):
             raise ValueError(f"gyro_noise must be >= 0, got {self.gyro_noise}")
-        if self.fin_range > Servo().range_deg or self.fin_range <= 0:
-            raise ValueError(f"fin_range must be in (0, {Servo().range_deg}], got {self.fin_range}")
+        limit = Servo().range_deg
+        if not (MIN_STEP_DEG / 2 < self.fin_range <= limit):
+            raise ValueError(
+                f"fin_range must be in ({MIN_STEP_DEG / 2:g}, {limit:g}]°, got {self.fin_range}"
+            )
+        if self.steps < 1:
+            raise ValueError(f"steps must be >= 1, got {self.steps}")
+        if not (np.isfinite(self.dwell_max) and self.log_dt <= self.dwell_min <= self.dwell_max):
+            raise ValueError(
+                f"dwell must satisfy log_dt ({self.log_dt:g} s) <= dwell_min <= dwell_max "
+                f"(finite), got {self.dwell_min}, {self.dwell_max}"
+            )
+        self.servo()  # validates the servo rate
         self.turbulence_model()  # validates the turbulence fields
         self.params()
 

@@ -786,7 +786,35 @@ def test_import_csv_subprocess_exit_code(tmp_path: Path) -> None:
     [
         pytest.param(["--no-encoder"], ["no_encoder needs a rate gyro"], id="no-sensor"),
         pytest.param(["--seed", "-1"], ["seed must be >= 0, got -1"], id="negative-seed"),
-        pytest.param(["--fin-range", "50"], ["fin_range must be in (0, 40"], id="fin-range"),
+        pytest.param(["--fin-range", "50"], ["fin_range must be in (2.5, 40]"], id="fin-range"),
+        # Found in review: these reached run_tunnel and ended in a traceback with exit 1.
+        pytest.param(["--servo-rate", "-5"], ["rate_limit_dps must be > 0"], id="servo-rate"),
+        pytest.param(["--servo-rate", "0"], ["rate_limit_dps must be > 0"], id="servo-rate-0"),
+        pytest.param(["--alpha", "0"], ["alpha must be non-zero"], id="alpha-0"),
+        pytest.param(["--log-dt", "inf"], ["log_dt must be in (0, 10]"], id="log-dt-inf"),
+        pytest.param(["--log-dt", "-0.1"], ["log_dt must be in (0, 10]"], id="log-dt-neg"),
+        pytest.param(["--substeps", "0"], ["substeps must be >= 1"], id="substeps-0"),
+        pytest.param(["--turbulence-sd", "-1"], ["sd_deg must be >= 0"], id="sd-negative"),
+        pytest.param(
+            ["--schedule", "staircase", "--steps", "0"], ["steps must be >= 1"], id="steps-0"
+        ),
+        pytest.param(
+            ["--schedule", "staircase", "--dwell-min", "5", "--dwell-max", "1"],
+            ["dwell must satisfy"],
+            id="dwell-reversed",
+        ),
+        pytest.param(
+            ["--schedule", "staircase", "--dwell-min", "nan"],
+            ["dwell must satisfy"],
+            id="dwell-nan",
+        ),
+        pytest.param(
+            ["--dwell-min", "0.01", "--dwell-max", "0.01"],
+            ["dwell must satisfy"],
+            id="dwell-below-log-dt",
+        ),
+        pytest.param(["--fin-range", "1"], ["fin_range must be in"], id="fin-range-small"),
+        pytest.param(["--fin-range", "nan"], ["fin_range must be in"], id="fin-range-nan"),
     ],
 )
 def test_tunnel_rejects_bad_spec(
@@ -824,3 +852,59 @@ def test_trailing_comma_in_header_is_reported_at_the_header(tmp_path, capsys) ->
     code, _out, err = run_cli(capsys, "info", bad)
     assert code == 2
     assert f"{bad}:{header + 1}: empty column name" in err
+
+
+# ------------------------------------------------------------- output paths and strict input
+
+
+def test_output_that_cannot_be_written_is_one_line_exit_2(tmp_path: Path, capsys) -> None:
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    code, out, err = run_cli(capsys, "tunnel", "--out", folder)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "is a directory" in err and str(folder) in err
+    assert list(folder.iterdir()) == []
+
+
+def test_info_writes_all_outputs_or_none(tmp_path: Path, capsys) -> None:
+    good = write_lines(tmp_path / "good.csv", valid_lines())
+    summary = tmp_path / "s.json"
+    blocked = tmp_path / "blocked.png"
+    blocked.mkdir()  # the figure cannot be written: the JSON must not be either
+    code, _out, err = run_cli(capsys, "info", good, "--json", summary, "--plot", blocked)
+    assert code == 2 and "is a directory" in err and err.count("\n") == 1
+    assert not summary.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocked.png", "good.csv"]
+    code, _out, err = run_cli(
+        capsys, "info", good, "--json", summary, "--plot", tmp_path / "fig.txt"
+    )
+    assert code == 2 and "ending in .png" in err and not summary.exists()
+
+
+@pytest.mark.parametrize("cell", ["5_0", "\u0663", "\uff15", "0x10", "1,5"])
+def test_cells_must_be_ascii_decimal_numbers(tmp_path: Path, capsys, cell: str) -> None:
+    lines = set_cell(40, "fin_cmd_deg", cell)(valid_lines())
+    bad = write_lines(tmp_path / "bad.csv", lines)
+    code, _out, err = run_cli(capsys, "info", bad)
+    assert code == 2 and f"{bad}:{row_line(40)}:" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    ("line", "keyword"),
+    [
+        ("# seed: abc", "'seed' must be a non-negative integer"),
+        ("# truth.alpha: x", "'truth.alpha' must be a number"),
+        ("# sensor.encoder_counts: inf", "must be finite"),
+    ],
+)
+def test_typed_metadata_is_checked_at_its_line(tmp_path: Path, capsys, line, keyword) -> None:
+    bad = write_lines(tmp_path / "bad.csv", [line, *valid_lines()])
+    code, _out, err = run_cli(capsys, "info", bad)
+    assert code == 2 and f"{bad}:1: " in err and keyword in err
+
+
+def test_empty_delimiter_is_a_clear_error(tmp_path: Path, capsys) -> None:
+    src = write_lines(tmp_path / "run.txt", headerless_input())
+    out = tmp_path / "rec.csv"
+    code, _o, err = run_cli(capsys, "import-csv", src, "--out", out, *HEADERLESS, "--delimiter", "")
+    assert code == 2 and "--delimiter must not be empty" in err and not out.exists()
