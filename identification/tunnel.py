@@ -39,8 +39,8 @@ from __future__ import annotations
 
 import shlex
 from collections.abc import Sequence
-from dataclasses import dataclass, fields, replace
-from typing import Any, Literal
+from dataclasses import dataclass, fields
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -368,9 +368,6 @@ class TunnelSpec:
         """The full shell command, e.g. ``rocketroll tunnel --seed 0``."""
         return shlex.join(["rocketroll", "tunnel", *self.to_args()])
 
-    def with_(self, **changes: Any) -> TunnelSpec:
-        """A copy with some fields changed."""
-        return replace(self, **changes)
 
 
 def _streams(seed: int) -> tuple[np.random.Generator, ...]:
