@@ -369,7 +369,6 @@ class TunnelSpec:
         return shlex.join(["rocketroll", "tunnel", *self.to_args()])
 
 
-
 def _streams(seed: int) -> tuple[np.random.Generator, ...]:
     """Independent generators for schedule, turbulence and sensors.
 
