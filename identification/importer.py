@@ -175,34 +175,31 @@ def import_csv(
 
     data = np.array(rows, dtype=float)
     out: dict[str, FloatArray] = {}
-    if time_column is not None:
-        index = _time_index(where, time_column, names, roles, header_line)
-        out["time_s"] = data[:, index] * TIME_UNITS[time_unit]
-    elif rate_hz is not None:
+    if rate_hz is not None:
         out["time_s"] = np.arange(len(rows)) / rate_hz
+    else:
+        index = (
+            roles.index("time")
+            if time_column is None
+            else _time_index(where, time_column, names, roles, header_line)
+        )
+        out["time_s"] = data[:, index] * TIME_UNITS[time_unit]
     scale = ANGLE_UNITS[units]
     for j, role in enumerate(roles):
         target = ROLES[role]
-        if target is None:
-            continue
-        values = data[:, j]
-        if target == "time_s":
-            if time_column is None:
-                out[target] = values * TIME_UNITS[time_unit]
-        else:
-            out[target] = values * scale
+        if target is not None and target != "time_s":
+            out[target] = data[:, j] * scale
     if unwrap and "roll_deg" in out:
         out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
 
-    ordered = {c: out[c] for c in ("time_s", *[ROLES[r] for r in roles if ROLES[r]]) if c in out}
     validate_samples(
-        ordered, path=where, lines=np.array(lines, dtype=np.int64), header_line=header_line
+        out, path=where, lines=np.array(lines, dtype=np.int64), header_line=header_line
     )
     meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
     meta["import.units"] = units
     if notes:
         meta["notes"] = notes
-    return Recording(name=name or Path(where).stem, source=source, metadata=meta, **ordered)
+    return Recording(name=name or Path(where).stem, source=source, metadata=meta, **out)
 
 
 def _time_index(

@@ -333,7 +333,6 @@ class Recording:
                 raise RecordingError("<recording>", None, f"invalid metadata key {key!r}")
             if _has_line_break(value):
                 raise RecordingError("<recording>", None, f"metadata {key!r} spans lines")
-        for key, value in meta.items():
             problem = metadata_problem(key, value)
             if problem:
                 raise RecordingError("<recording>", None, problem)
@@ -584,8 +583,8 @@ def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> N
 def save_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
     """Write a recording in format v1, atomically.
 
-    Numbers are written in fixed point with at most 6 decimals, so the same
-    recording always gives the same bytes.
+    Numbers are written in fixed point with at most 6 decimals (time with
+    :data:`TIME_DECIMALS`), so the same recording always gives the same bytes.
     """
     write_atomic(path, recording_text(recording))
 
