@@ -40,7 +40,10 @@ BUNDLED: dict[str, str] = {
 
 
 def bundled_path(name: str) -> Path:
-    """Path of a bundled recording by file name (e.g. ``tunnel-paper-seed0.csv``)."""
+    """Path of a bundled recording by file name (``tunnel-paper-seed0.csv``; the
+    ``.csv`` may be left out)."""
+    if name not in BUNDLED and f"{name}.csv" in BUNDLED:
+        name = f"{name}.csv"
     if name not in BUNDLED:
         raise KeyError(f"no bundled recording {name!r}; have {', '.join(BUNDLED)}")
     return DATA_DIR / name

@@ -38,7 +38,10 @@ _TUNNEL_HELP: dict[str, str] = {
     "dof": "degrees of freedom of the student-t marginal",
     "log_dt": "logging interval, s (the paper: 0.1)",
     "substeps": "exact-update substeps per logging interval",
-    "encoder_counts": "encoder counts per revolution (HEDS-5702: 256; 0: ideal)",
+    "encoder_counts": (
+        "encoder counts per revolution (HEDS-5702: 256 cycles read in 4x quadrature = 1024; "
+        "0: ideal)"
+    ),
     "no_encoder": "omit the encoder angle (needs --gyro-noise)",
     "gyro_noise": "add a rate-gyro column with eq. 52 noise of this many percent",
     "measured_fin": "add the actual (measured) fin angle column fin_deg",

@@ -42,6 +42,7 @@ computed for all substeps at once; :func:`simulate` exploits this.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -252,6 +253,18 @@ def servo_path(command_deg: ArrayLike, theta0_deg: float, dt_s: float, servo: Se
     max_move = servo.rate_limit_dps * dt_s
     theta = float(theta0_deg)
     out[0] = theta
+    starts = np.flatnonzero(np.diff(cmd)) + 1 if cmd.size else np.empty(0, dtype=np.intp)
+    if cmd.size and starts.size < cmd.size // 32:
+        # Few command changes (a schedule, a substep-repeated command): within a
+        # run of one command the fin approaches it linearly, so each run is
+        # one vectorised expression.
+        edges = [0, *starts.tolist(), cmd.size]
+        for lo, hi in itertools.pairwise(edges):
+            reach = max_move * np.arange(1, hi - lo + 1)
+            move = np.clip(cmd[lo] - theta, -reach, reach)
+            out[lo + 1 : hi + 1] = theta + move
+            theta = float(out[hi])
+        return out
     # The rate limit makes this a sequential recurrence; plain floats keep it fast.
     for k, target in enumerate(cmd.tolist()):
         delta = target - theta
@@ -492,14 +505,38 @@ def simulate(
     return SimResult(time_s=time, fin_deg=theta[grid], rate_dps=rate[grid], angle_deg=angle[grid])
 
 
+#: Largest |log| of the decay accumulated inside one block of
+#: :func:`_linear_recurrence`; keeps every scaled term within e^±20.
+_BLOCK_LOG_SPAN = 20.0
+
+
 def _linear_recurrence(e: FloatArray, c: FloatArray, x0: float) -> FloatArray:
-    """``x[k+1] = e[k]·x[k] + c[k]`` from ``x[0] = x0``; returns all n+1 values."""
-    out = np.empty(e.size + 1)
-    x = x0
-    out[0] = x
-    # Sequential by nature; plain Python floats cost ~0.1 µs per step here,
-    # far less than a numpy call per step.
-    for k, (ek, ck) in enumerate(zip(e.tolist(), c.tolist(), strict=True)):
-        x = ek * x + ck
-        out[k + 1] = x
+    """``x[k+1] = e[k]·x[k] + c[k]`` from ``x[0] = x0``; returns all n+1 values.
+
+    Vectorised in blocks: inside a block starting from ``xs`` with the running
+    products ``Q[k] = e[0]···e[k]`` (all positive here, ``e = exp(-a·h)``),
+    ``x[k+1] = Q[k]·(xs + Σ_{j≤k} c[j]/Q[j])``.  The block length keeps
+    ``|log Q|`` below :data:`_BLOCK_LOG_SPAN`, so the scaled terms neither
+    overflow nor lose precision; only the block starts are sequential.
+    """
+    n = e.size
+    out = np.empty(n + 1)
+    out[0] = x0
+    if n == 0:
+        return out
+    log_e = np.log(e)
+    span = float(np.max(np.abs(log_e)))
+    length = n if span == 0.0 else int(max(1, min(n, _BLOCK_LOG_SPAN // span)))
+    blocks = -(-n // length)
+    pad = blocks * length - n
+    log_q = np.cumsum(np.pad(log_e, (0, pad)).reshape(blocks, length), axis=1)
+    q = np.exp(log_q)
+    t = np.cumsum(np.pad(c, (0, pad)).reshape(blocks, length) * np.exp(-log_q), axis=1)
+    starts = np.empty(blocks)
+    x = float(x0)
+    q_end, t_end = q[:, -1].tolist(), t[:, -1].tolist()
+    for b in range(blocks):
+        starts[b] = x
+        x = q_end[b] * (x + t_end[b])
+    out[1:] = (q * (starts[:, None] + t)).ravel()[:n]
     return out

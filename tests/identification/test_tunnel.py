@@ -74,15 +74,15 @@ def test_paper_schedule_is_table1() -> None:
     assert np.count_nonzero(np.diff(cmd)) == 8
 
 
-def test_encoder_quantises_to_256_counts_per_revolution() -> None:
+def test_encoder_quantises_to_1024_counts_per_revolution() -> None:
     rec = run_tunnel(TunnelSpec(seed=1))
     assert rec.roll_deg is not None
-    counts = rec.roll_deg / (360.0 / 256)
+    counts = rec.roll_deg / (360.0 / 1024)
     np.testing.assert_allclose(counts, np.round(counts), atol=1e-6)
     ideal = run_tunnel(TunnelSpec(seed=1, encoder_counts=0))
     assert ideal.roll_deg is not None
-    assert np.max(np.abs(ideal.roll_deg - rec.roll_deg)) < 360.0 / 256 + 1e-6
-    assert np.max(np.abs(ideal.roll_deg - rec.roll_deg)) > 0.5
+    assert np.max(np.abs(ideal.roll_deg - rec.roll_deg)) < 360.0 / 1024 + 1e-6
+    assert np.max(np.abs(ideal.roll_deg - rec.roll_deg)) > 0.2
 
 
 def test_sensors_do_not_change_the_turbulence() -> None:
@@ -140,13 +140,6 @@ def test_turbulence_correlation_time() -> None:
     # Through the copula the correlation is close to, not exactly, exp(-Δt/τ).
     assert np.corrcoef(y[:-1], y[1:])[0, 1] == pytest.approx(np.exp(-0.1 / 0.3), abs=0.05)
     assert stats.kurtosis(y) > 2.0  # heavy tails kept (Laplace excess kurtosis is 3)
-
-
-def test_default_turbulence_matches_the_paper_interval() -> None:
-    # Paper §3.2: the 90 % interval of u_d,θ is [-13.38, 14.28]°.
-    ud = np.concatenate([run_tunnel(TunnelSpec(seed=s)).ud_true_deg for s in range(4)])
-    q05, q95 = np.percentile(ud, [5, 95])
-    assert q05 == pytest.approx(-13.38, abs=1.5) and q95 == pytest.approx(14.28, abs=1.5)
 
 
 def test_bad_tunnel_arguments_exit_2_and_write_nothing(tmp_path, capsys) -> None:

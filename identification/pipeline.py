@@ -1,0 +1,421 @@
+"""``identify(recording) -> Identification``: the paper's whole pipeline.
+
+Chains the steps of :mod:`identification.steps` (Fig. 9), the noise study of
+:mod:`identification.noise` (§3.3) and the disturbance statistics of
+:mod:`identification.statistics` (§3.4) into one frozen result.  The result
+is what the CLI prints, what ``--json`` writes and what the disturbance
+database stores (:meth:`Identification.to_dict` plus the ``u_d`` traces).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from identification.model import RollParams, damping
+from identification.noise import NoiseStudy, noise_study
+from identification.recording import FloatArray, Recording
+from identification.statistics import DisturbanceStatistics, disturbance_statistics
+from identification.steps import (
+    PAPER_SERVO,
+    BilinearFit,
+    DampingFit,
+    DampingVsFin,
+    Disturbance,
+    FineGrid,
+    IdentificationError,
+    PiecewiseLinearFit,
+    Resimulation,
+    Segments,
+    SteadyStateFit,
+    bilinear_velocity,
+    detect_segments,
+    fin_angle_model,
+    fine_grid,
+    fit_bilinear,
+    fit_damping,
+    fit_damping_vs_fin,
+    fit_piecewise_linear,
+    fit_steady_state,
+    identify_disturbance,
+    measured_angle,
+    measured_velocity,
+    resimulate,
+)
+
+__all__ = ["Identification", "IdentifyOptions", "identify"]
+
+MODELS = ("constant", "theta")
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """Settings of :func:`identify`; the defaults are the paper's.
+
+    Attributes
+    ----------
+    min_step_deg : float
+        Smallest fin change that counts as a step (step 1), °.
+    max_breakpoint_s : float
+        ΔT0 of the bi-linear search (step 4; 4 s).
+    breakpoint_resolution_s : float
+        Breakpoint search step (step 4; 0.01 s).
+    servo_rate_dps : float
+        Servo rate limit of eq. 23 (step 5; 0.4 s per 60° = 150 °/s).  Not
+        used when the recording has the measured fin angle.
+    outlier_level : float
+        Bonferroni p-value below which step 7 leaves one step out.
+    smoothing_passes : int
+        Times the 3-point moving average is applied to the measured velocity
+        (§3.2, "several times").
+    fine_step_s : float
+        δt of the interpolated velocity (§2.7.1; 0.01 s = 100 Hz).
+    ud_interval_s : float
+        Δt over which ``u_d`` is constant (§2.7.1; 0.1 s).
+    noise_levels_pct : tuple of float
+        η of the Monte Carlo noise study (§3.3; 1, 2, 5, 10 %).
+    noise_runs : int
+        Monte Carlo runs per level (100); 0 skips the study.
+    noise_seed : int
+        Seed of the noise study.
+    progress : bool
+        Show a progress bar for the noise study.
+    """
+
+    min_step_deg: float = 1.0
+    max_breakpoint_s: float = 4.0
+    breakpoint_resolution_s: float = 0.01
+    servo_rate_dps: float = 60.0 / 0.4
+    outlier_level: float = 0.05
+    smoothing_passes: int = 3
+    fine_step_s: float = 0.01
+    ud_interval_s: float = 0.1
+    noise_levels_pct: tuple[float, ...] = (1.0, 2.0, 5.0, 10.0)
+    noise_runs: int = 100
+    noise_seed: int = 0
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        positive = (
+            "min_step_deg",
+            "max_breakpoint_s",
+            "breakpoint_resolution_s",
+            "servo_rate_dps",
+            "fine_step_s",
+            "ud_interval_s",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise IdentificationError(f"option {name} must be a positive number, got {value!r}")
+        if not 0 < self.outlier_level < 1:
+            raise IdentificationError(
+                f"option outlier_level must be in (0, 1), got {self.outlier_level!r}"
+            )
+        for name in ("smoothing_passes", "noise_runs", "noise_seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or value < 0:
+                raise IdentificationError(
+                    f"option {name} must be a non-negative integer, got {value!r}"
+                )
+        if not all(np.isfinite(x) and x >= 0 for x in self.noise_levels_pct):
+            raise IdentificationError(
+                "option noise_levels_pct must be non-negative numbers, "
+                f"got {self.noise_levels_pct!r}"
+            )
+        if self.breakpoint_resolution_s > self.max_breakpoint_s:
+            raise IdentificationError("option breakpoint_resolution_s exceeds max_breakpoint_s")
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Every step's result for one recording (paper Fig. 9 and §3).
+
+    Attributes
+    ----------
+    recording : Recording
+        The input.
+    options : IdentifyOptions
+        The settings used.
+    segments : Segments
+        Step 1.
+    angle_deg, angle_source
+        The roll angle used by step 2 and where it came from.
+    velocity_dps, velocity_source
+        The smoothed measured velocity at the samples (steps 4, 8, 9).
+    grid : FineGrid
+        The 100 Hz grid; ``velocity_fine`` and ``theta_fine`` live on it.
+    theta_source : str
+        How the fin angle θ(t) was obtained (step 5).
+    piecewise : PiecewiseLinearFit
+        Step 2.
+    steady : SteadyStateFit
+        Step 3.
+    bilinear : BilinearFit
+        Step 4.
+    damping : DampingFit
+        Step 6.
+    damping_vs_fin : DampingVsFin
+        Step 7.
+    disturbances : dict
+        Step 8, ``{"constant": ..., "theta": ...}``.
+    resimulations : dict
+        Step 9, same keys.
+    statistics : DisturbanceStatistics
+        §3.4.
+    noise : NoiseStudy or None
+        §3.3 (``None`` when ``options.noise_runs == 0``).
+    """
+
+    recording: Recording
+    options: IdentifyOptions
+    segments: Segments
+    angle_deg: FloatArray
+    angle_source: str
+    velocity_dps: FloatArray
+    velocity_source: str
+    grid: FineGrid
+    velocity_fine: FloatArray
+    theta_fine: FloatArray
+    theta_source: str
+    piecewise: PiecewiseLinearFit
+    steady: SteadyStateFit
+    bilinear: BilinearFit
+    bilinear_fine: FloatArray
+    damping: DampingFit
+    damping_vs_fin: DampingVsFin
+    disturbances: dict[str, Disturbance]
+    resimulations: dict[str, Resimulation]
+    statistics: DisturbanceStatistics
+    noise: NoiseStudy | None = field(default=None)
+
+    @property
+    def constant_model(self) -> RollParams:
+        """The constant-damping model, eq. 29 with eq. 46."""
+        return self.damping.params()
+
+    @property
+    def theta_model(self) -> RollParams:
+        """The θ-dependent model, eq. 49 with eq. 48."""
+        return self.damping_vs_fin.params(self.steady.alpha, self.steady.theta_bar_deg)
+
+    def model(self, name: str) -> RollParams:
+        """``constant`` or ``theta``."""
+        if name not in MODELS:
+            raise IdentificationError(f"model must be one of {', '.join(MODELS)}, not {name!r}")
+        return self.constant_model if name == "constant" else self.theta_model
+
+    def parameters(self) -> dict[str, float]:
+        """The intrinsic parameters, flat (names as in :meth:`to_dict`)."""
+        return {
+            "alpha": self.steady.alpha,
+            "beta_dps": self.steady.beta_dps,
+            "theta_bar_deg": self.steady.theta_bar_deg,
+            "steady_state_r2": self.steady.r_squared,
+            "a_per_s": self.damping.a_per_s,
+            "b_per_s2": self.damping.b_per_s2,
+            "alpha_bar_per_deg_s": self.damping_vs_fin.alpha_bar_per_deg_s,
+            "beta_bar_per_s": self.damping_vs_fin.beta_bar_per_s,
+            "damping_vs_fin_r2": self.damping_vs_fin.r_squared,
+        }
+
+    def truth(self) -> dict[str, float] | None:
+        """Ground truth of a synthetic recording, keyed like :meth:`parameters`.
+
+        For a θ-dependent truth the constant ``a`` has no single true value;
+        ``a_per_s`` is then ``a(θ)`` averaged over the steps' fin levels.
+        """
+        true = self.recording.truth()
+        if true is None:
+            return None
+        a_levels = damping(true, self.segments.step_levels_deg)
+        return {
+            "alpha": true.alpha,
+            "beta_dps": true.beta_dps,
+            "theta_bar_deg": true.theta_bar_deg,
+            "a_per_s": float(np.mean(a_levels)),
+            "b_per_s2": float(np.mean(a_levels)) * true.alpha,
+            "alpha_bar_per_deg_s": true.alpha_bar_per_deg_s,
+            "beta_bar_per_s": true.beta_bar_per_s,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """Machine-readable results (JSON-safe; ``u_d`` traces summarised)."""
+        seg = self.segments
+        out: dict[str, Any] = {
+            "recording": {
+                "name": self.recording.name,
+                "source": self.recording.source,
+                "n_samples": self.recording.n_samples,
+                "dt_s": self.recording.dt_s,
+                "duration_s": self.recording.duration_s,
+                "seed": self.recording.seed,
+            },
+            "options": {
+                k: list(v) if isinstance(v, tuple) else v
+                for k, v in dataclasses.asdict(self.options).items()
+            },
+            "sources": {
+                "fin_steps": seg.fin_source,
+                "angle": self.angle_source,
+                "velocity": self.velocity_source,
+                "fin_angle": self.theta_source,
+            },
+            "parameters": self.parameters(),
+            "truth": self.truth(),
+            "steps": [
+                {
+                    "start_s": float(seg.time_s[i]),
+                    "end_s": float(seg.bounds_s[i + 1]),
+                    "fin_deg": float(seg.step_levels_deg[i]),
+                    "vss_dps": float(self.piecewise.slopes_dps[i]),
+                    "t0_s": float(self.bilinear.t0_s[i]),
+                    "a_per_s": float(self.damping.a_steps_per_s[i]),
+                    "b_per_s2": float(self.damping.b_steps_per_s2[i]),
+                    "outlier": self.damping_vs_fin.outlier == i,
+                }
+                for i in range(seg.n_steps)
+            ],
+            "piecewise_rms_deg": self.piecewise.rms_deg,
+            "damping_fit_rms_dps": self.damping.rms_dps,
+            "damping_vs_fin": {
+                "outlier_step": None
+                if self.damping_vs_fin.outlier is None
+                else self.damping_vs_fin.outlier + 1,
+                "outlier_p": self.damping_vs_fin.outlier_p,
+                "rule": self.damping_vs_fin.rule,
+            },
+            "resimulation": {
+                name: {
+                    "rate_mae_dps": r.rate_mae_dps,
+                    "rate_sd_dps": r.rate_sd_dps,
+                    "angle_mae_deg": r.angle_mae_deg,
+                    "angle_sd_deg": r.angle_sd_deg,
+                }
+                for name, r in self.resimulations.items()
+            },
+            "disturbance": self.statistics.to_dict(),
+            "noise_study": None if self.noise is None else self.noise.to_dict(),
+        }
+        return out
+
+
+def identify(recording: Recording, options: IdentifyOptions | None = None) -> Identification:
+    """Run the paper's pipeline (Fig. 9) on a recording.
+
+    Parameters
+    ----------
+    recording : Recording
+        Any format-v1 recording: an encoder and/or a rate gyro, a commanded
+        and/or a measured fin angle, with at least two fin steps.
+    options : IdentifyOptions, optional
+        Settings; the defaults are the paper's.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    IdentificationError
+        If the recording cannot be identified (e.g. fewer than two fin levels).
+
+    Examples
+    --------
+    >>> from identification.bundled import load_bundled
+    >>> from identification.pipeline import IdentifyOptions, identify
+    >>> result = identify(load_bundled("tunnel-paper-seed0"), IdentifyOptions(noise_runs=0))
+    >>> round(result.steady.alpha, 2), result.segments.n_steps
+    (0.68, 8)
+    """
+    opts = IdentifyOptions() if options is None else options
+    segments = detect_segments(recording, min_step_deg=opts.min_step_deg)
+    if segments.n_steps < 2:
+        raise IdentificationError(
+            f"{recording.name}: found {segments.n_steps} fin step; the steady-state fit "
+            "(eq. 16) needs at least two"
+        )
+    angle, angle_source = measured_angle(recording)
+    velocity, velocity_source = measured_velocity(recording, opts.smoothing_passes)
+    grid = fine_grid(recording, opts.fine_step_s)
+    velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
+    servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=opts.servo_rate_dps)
+    theta_fine, theta_source = fin_angle_model(recording, grid, servo)
+
+    # Steps 2-7 on the data after the first deflection (§2.1).
+    piecewise = fit_piecewise_linear(
+        recording.time_s, angle, segments.bounds_s, angle_source=angle_source
+    )
+    steady = fit_steady_state(segments.step_levels_deg, piecewise.slopes_dps)
+    bilinear = fit_bilinear(
+        segments,
+        steady,
+        grid,
+        velocity_fine,
+        max_breakpoint_s=opts.max_breakpoint_s,
+        resolution_s=opts.breakpoint_resolution_s,
+    )
+    bilinear_fine, _ = bilinear_velocity(segments, bilinear, grid)
+    damping_fit = fit_damping(segments, steady, grid, bilinear_fine, theta_fine)
+    vs_fin = fit_damping_vs_fin(
+        segments.step_levels_deg,
+        damping_fit.a_steps_per_s,
+        steady.theta_bar_deg,
+        outlier_level=opts.outlier_level,
+    )
+
+    # Steps 8-9 on all the data, for both models.
+    models = {
+        "constant": damping_fit.params(),
+        "theta": vs_fin.params(steady.alpha, steady.theta_bar_deg),
+    }
+    disturbances = {
+        name: identify_disturbance(
+            params, name, grid, theta_fine, velocity_fine, interval_s=opts.ud_interval_s
+        )
+        for name, params in models.items()
+    }
+    resims = {
+        name: resimulate(dist, recording, grid, theta_fine, velocity, angle)
+        for name, dist in disturbances.items()
+    }
+    statistics = disturbance_statistics(disturbances["theta"], disturbances["constant"])
+    noise = None
+    if opts.noise_runs > 0 and opts.noise_levels_pct:
+        noise = noise_study(
+            models["constant"],
+            grid,
+            theta_fine,
+            velocity_fine,
+            levels_pct=opts.noise_levels_pct,
+            runs=opts.noise_runs,
+            seed=opts.noise_seed,
+            interval_s=opts.ud_interval_s,
+            progress=opts.progress,
+        )
+    return Identification(
+        recording=recording,
+        options=opts,
+        segments=segments,
+        angle_deg=angle,
+        angle_source=angle_source,
+        velocity_dps=velocity,
+        velocity_source=velocity_source,
+        grid=grid,
+        velocity_fine=velocity_fine,
+        theta_fine=theta_fine,
+        theta_source=theta_source,
+        piecewise=piecewise,
+        steady=steady,
+        bilinear=bilinear,
+        bilinear_fine=bilinear_fine,
+        damping=damping_fit,
+        damping_vs_fin=vs_fin,
+        disturbances=disturbances,
+        resimulations=resims,
+        statistics=statistics,
+        noise=noise,
+    )
