@@ -31,7 +31,10 @@ demo: $(VENV)/.installed
 	@mkdir -p $(DEMO)
 	$(BIN)/rocketroll tunnel --seed 0 --out $(DEMO)/tunnel-seed0.csv
 	$(BIN)/rocketroll info $(DEMO)/tunnel-seed0.csv --plot $(DEMO)/tunnel-seed0.png
-	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv and $(DEMO)/tunnel-seed0.png"
+	$(BIN)/rocketroll identify identification/data/tunnel-paper-seed0.csv \
+		--report $(DEMO)/identify-paper-seed0 --json $(DEMO)/identify-paper-seed0.json
+	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png and the"
+	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

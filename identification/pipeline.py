@@ -27,6 +27,7 @@ from identification.steps import (
     Disturbance,
     FineGrid,
     IdentificationError,
+    OptionError,
     PiecewiseLinearFit,
     Resimulation,
     Segments,
@@ -110,24 +111,19 @@ class IdentifyOptions:
         for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
-                raise IdentificationError(f"option {name} must be a positive number, got {value!r}")
+                raise OptionError(name, f"must be a positive number, got {value!r}")
         if not 0 < self.outlier_level < 1:
-            raise IdentificationError(
-                f"option outlier_level must be in (0, 1), got {self.outlier_level!r}"
-            )
+            raise OptionError("outlier_level", f"must be in (0, 1), got {self.outlier_level!r}")
         for name in ("smoothing_passes", "noise_runs", "noise_seed"):
             value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 0:
-                raise IdentificationError(
-                    f"option {name} must be a non-negative integer, got {value!r}"
-                )
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+                raise OptionError(name, f"must be a non-negative integer, got {value!r}")
         if not all(np.isfinite(x) and x >= 0 for x in self.noise_levels_pct):
-            raise IdentificationError(
-                "option noise_levels_pct must be non-negative numbers, "
-                f"got {self.noise_levels_pct!r}"
+            raise OptionError(
+                "noise_levels_pct", f"must be non-negative numbers, got {self.noise_levels_pct!r}"
             )
         if self.breakpoint_resolution_s > self.max_breakpoint_s:
-            raise IdentificationError("option breakpoint_resolution_s exceeds max_breakpoint_s")
+            raise OptionError("breakpoint_resolution_s", "must not exceed max_breakpoint_s")
 
 
 @dataclass(frozen=True, eq=False)
@@ -394,6 +390,7 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
             runs=opts.noise_runs,
             seed=opts.noise_seed,
             interval_s=opts.ud_interval_s,
+            smoothing_passes=opts.smoothing_passes,
             progress=opts.progress,
         )
     return Identification(

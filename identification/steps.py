@@ -78,6 +78,15 @@ class IdentificationError(RocketrollError, ValueError):
     """A recording that the pipeline cannot identify (too few steps, too short, ...)."""
 
 
+class OptionError(IdentificationError):
+    """An invalid identification option; ``option`` names it."""
+
+    def __init__(self, option: str, problem: str) -> None:
+        super().__init__(f"option {option} {problem}")
+        self.option = option
+        self.problem = problem
+
+
 def _readonly(x: ArrayLike) -> FloatArray:
     out = np.array(x, dtype=float)
     out.setflags(write=False)
@@ -252,11 +261,11 @@ def measured_angle(recording: Recording) -> tuple[FloatArray, str]:
 def smooth3(x: ArrayLike, passes: int) -> FloatArray:
     """Three-point moving average applied ``passes`` times (paper §3.2).
 
-    The ends use the nearest sample (``mode="nearest"``).
+    Along the last axis; the ends use the nearest sample (``mode="nearest"``).
     """
     out = np.asarray(x, dtype=float)
     for _ in range(passes):
-        out = uniform_filter1d(out, 3, mode="nearest")
+        out = uniform_filter1d(out, 3, axis=-1, mode="nearest")
     return out
 
 

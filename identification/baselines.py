@@ -1,0 +1,165 @@
+"""A peer estimator for comparison: output-error nonlinear least squares.
+
+The paper contrasts its integral-based method with the usual approach to
+roll identification, nonlinear optimisation of a simulated model's output
+(§1, refs. 28-30).  :func:`output_error` is that approach on the same
+recording and the same model (eq. 29 or eq. 49, simulated by
+:func:`identification.model.simulate`): the parameters minimise the squared
+difference between the simulated roll rate -- with the disturbance left out,
+i.e. treated as output noise -- and the measured one, by
+``scipy.optimize.least_squares`` (trust-region reflective, finite-difference
+Jacobian).  Same data as steps 1-4 (after the first deflection), same
+velocity processing and fin-angle model as the pipeline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from identification.model import RollParams, damping, simulate
+from identification.pipeline import IdentifyOptions
+from identification.recording import FloatArray, Recording
+from identification.steps import (
+    PAPER_SERVO,
+    IdentificationError,
+    detect_segments,
+    fin_angle_model,
+    fine_grid,
+    measured_velocity,
+)
+
+__all__ = ["OutputErrorFit", "output_error"]
+
+#: Smallest damping the optimiser may visit, 1/s (keeps the simulation stable).
+MIN_DAMPING = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class OutputErrorFit:
+    """Result of :func:`output_error`.
+
+    Attributes
+    ----------
+    model : str
+        ``constant`` (α, θ̄, a) or ``theta`` (α, θ̄, ᾱ, β̄).
+    params : RollParams
+        The estimate.
+    rate_rmse_dps : float
+        RMS of simulated minus measured roll rate at the optimum, °/s.
+    nfev : int
+        Model simulations used by the optimiser (without the Jacobian's).
+    success : bool
+        ``scipy.optimize.least_squares`` converged.
+    message : str
+        Its message.
+    """
+
+    model: str
+    params: RollParams
+    rate_rmse_dps: float
+    nfev: int
+    success: bool
+    message: str
+
+
+def output_error(
+    recording: Recording,
+    model: str = "constant",
+    *,
+    options: IdentifyOptions | None = None,
+    x0: RollParams | None = None,
+) -> OutputErrorFit:
+    """Fit eq. 29 (``model="constant"``) or eq. 49 (``"theta"``) by output error.
+
+    Parameters
+    ----------
+    recording : Recording
+        Any recording the pipeline accepts.
+    model : str
+        ``constant`` or ``theta``.
+    options : IdentifyOptions, optional
+        Velocity smoothing, fine grid and servo settings (shared with
+        :func:`identification.pipeline.identify`).
+    x0 : RollParams, optional
+        Starting point.  Default: α and β from a straight line through the
+        measured rate against the fin angle (all samples after the first
+        deflection), ``a = 1 1/s``, ``ᾱ = 0`` -- nothing from the paper's
+        method or the ground truth.
+
+    Returns
+    -------
+    OutputErrorFit
+    """
+    if model not in ("constant", "theta"):
+        raise IdentificationError(f"model must be 'constant' or 'theta', not {model!r}")
+    opts = IdentifyOptions() if options is None else options
+    segments = detect_segments(recording, min_step_deg=opts.min_step_deg)
+    velocity, _ = measured_velocity(recording, opts.smoothing_passes)
+    grid = fine_grid(recording, opts.fine_step_s)
+    servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=opts.servo_rate_dps)
+    theta_fine, _ = fin_angle_model(recording, grid, servo)
+
+    first = int(segments.start_index[0])
+    start_fine = first * grid.per_sample
+    theta = theta_fine[start_fine:]
+    target = velocity[first:]
+    n_intervals = theta.size - 1
+    dt, per = grid.step_s, grid.per_sample
+    t0 = float(grid.time_s[start_fine])
+
+    def params_of(x: FloatArray) -> RollParams:
+        if model == "constant":
+            return RollParams(float(x[0]), float(x[1]), float(x[2]))
+        return RollParams(float(x[0]), float(x[1]), float(x[3]), float(x[2]))
+
+    def residual(x: FloatArray) -> FloatArray:
+        params = params_of(x)
+        if float(np.min(damping(params, theta))) < MIN_DAMPING:
+            # Outside the stable region: a large, finite cost steers the optimiser back.
+            return np.full(target.size, 1e3)
+        sim = simulate(
+            params,
+            dt,
+            theta,
+            np.zeros(n_intervals),
+            rate0_dps=float(target[0]),
+            servo=None,
+            substeps=1,
+            t0_s=t0,
+        )
+        return np.asarray(sim.rate_dps[::per] - target, dtype=float)
+
+    if x0 is None:
+        fin_samples = np.asarray(theta[::per])
+        slope, intercept = np.polyfit(fin_samples, target, 1)
+        start = RollParams(float(slope), float(intercept / slope), 1.0)
+    else:
+        start = x0
+    if model == "constant":
+        x_start = [start.alpha, start.theta_bar_deg, start.beta_bar_per_s]
+        lower = [-np.inf, -np.inf, MIN_DAMPING]
+        upper = [np.inf, np.inf, np.inf]
+    else:
+        x_start = [
+            start.alpha,
+            start.theta_bar_deg,
+            start.alpha_bar_per_deg_s,
+            start.beta_bar_per_s,
+        ]
+        lower = [-np.inf, -np.inf, -np.inf, MIN_DAMPING]
+        upper = [np.inf, np.inf, np.inf, np.inf]
+    result = least_squares(
+        residual, np.asarray(x_start), bounds=(lower, upper), x_scale="jac", method="trf"
+    )
+    return OutputErrorFit(
+        model=model,
+        params=params_of(result.x),
+        rate_rmse_dps=float(np.sqrt(np.mean(result.fun**2))),
+        nfev=int(result.nfev),
+        success=bool(result.success),
+        message=str(result.message),
+    )
