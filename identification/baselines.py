@@ -98,7 +98,7 @@ def output_error(
         raise IdentificationError(f"model must be 'constant' or 'theta', not {model!r}")
     opts = IdentifyOptions() if options is None else options
     segments = detect_segments(recording, min_step_deg=opts.min_step_deg)
-    velocity, _ = measured_velocity(recording, opts.smoothing_passes)
+    velocity, _ = measured_velocity(recording, opts.smoothing_passes, opts.smoothing_window_s)
     grid = fine_grid(recording, opts.fine_step_s)
     servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=opts.servo_rate_dps)
     theta_fine, _ = fin_angle_model(recording, grid, servo)

@@ -171,6 +171,11 @@ _IDENTIFY_FLAGS: dict[str, tuple[str, type, str]] = {
         int,
         "3-point moving-average passes on the measured velocity (3)",
     ),
+    "--smoothing-window": (
+        "smoothing_window_s",
+        float,
+        "span of one moving-average pass, s (0.3: three points at 10 Hz)",
+    ),
     "--ud-interval": ("ud_interval_s", float, "Δt over which u_d is constant, s (0.1)"),
     "--mc-runs": ("noise_runs", int, "Monte Carlo runs per noise level; 0 skips the study (100)"),
     "--mc-seed": ("noise_seed", int, "seed of the noise study (0)"),
@@ -255,6 +260,9 @@ def parameter_table(result: Identification) -> str:
             f"  a(θ): step {dvf.outlier + 1} left out as an outlier (Bonferroni p = "
             f"{dvf.outlier_p:.3g})"
         )
+    if dvf.excluded:
+        steps = ", ".join(str(i + 1) for i in dvf.excluded)
+        lines.append(f"  a(θ): step(s) {steps} left out, a_i <= 0 is not a damping")
     lines += ["", "step  start s   fin °    v_ss °/s   t0 s    a_i 1/s"]
     for i in range(result.segments.n_steps):
         mark = "  outlier" if dvf.outlier == i else ""

@@ -21,6 +21,7 @@ from identification.recording import FloatArray, Recording
 from identification.statistics import DisturbanceStatistics, disturbance_statistics
 from identification.steps import (
     PAPER_SERVO,
+    SMOOTHING_WINDOW_S,
     BilinearFit,
     DampingFit,
     DampingVsFin,
@@ -72,6 +73,10 @@ class IdentifyOptions:
     smoothing_passes : int
         Times the 3-point moving average is applied to the measured velocity
         (§3.2, "several times").
+    smoothing_window_s : float
+        Span of one moving-average pass, s: the paper's three points at 10 Hz
+        (0.3 s); at other sampling rates the number of points follows
+        (:func:`identification.steps.smoothing_width`).
     fine_step_s : float
         δt of the interpolated velocity (§2.7.1; 0.01 s = 100 Hz).
     ud_interval_s : float
@@ -92,6 +97,7 @@ class IdentifyOptions:
     servo_rate_dps: float = 60.0 / 0.4
     outlier_level: float = 0.05
     smoothing_passes: int = 3
+    smoothing_window_s: float = SMOOTHING_WINDOW_S
     fine_step_s: float = 0.01
     ud_interval_s: float = 0.1
     noise_levels_pct: tuple[float, ...] = (1.0, 2.0, 5.0, 10.0)
@@ -106,6 +112,7 @@ class IdentifyOptions:
             "breakpoint_resolution_s",
             "servo_rate_dps",
             "fine_step_s",
+            "smoothing_window_s",
             "ud_interval_s",
         )
         for name in positive:
@@ -282,6 +289,7 @@ class Identification:
                 if self.damping_vs_fin.outlier is None
                 else self.damping_vs_fin.outlier + 1,
                 "outlier_p": self.damping_vs_fin.outlier_p,
+                "excluded_steps": [i + 1 for i in self.damping_vs_fin.excluded],
                 "rule": self.damping_vs_fin.rule,
             },
             "resimulation": {
@@ -335,7 +343,9 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
             "(eq. 16) needs at least two"
         )
     angle, angle_source = measured_angle(recording)
-    velocity, velocity_source = measured_velocity(recording, opts.smoothing_passes)
+    velocity, velocity_source = measured_velocity(
+        recording, opts.smoothing_passes, opts.smoothing_window_s
+    )
     grid = fine_grid(recording, opts.fine_step_s)
     velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
     servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=opts.servo_rate_dps)
@@ -391,6 +401,7 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
             seed=opts.noise_seed,
             interval_s=opts.ud_interval_s,
             smoothing_passes=opts.smoothing_passes,
+            smoothing_window_s=opts.smoothing_window_s,
             progress=opts.progress,
         )
     return Identification(

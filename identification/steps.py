@@ -63,8 +63,10 @@ __all__ = [
     "identify_disturbance",
     "measured_angle",
     "measured_velocity",
+    "moving_average",
     "resimulate",
     "smooth3",
+    "smoothing_width",
 ]
 
 IntArray = NDArray[np.intp]
@@ -258,24 +260,48 @@ def measured_angle(recording: Recording) -> tuple[FloatArray, str]:
     return np.asarray(angle, dtype=float), "rate gyro integrated (trapezium rule)"
 
 
-def smooth3(x: ArrayLike, passes: int) -> FloatArray:
-    """Three-point moving average applied ``passes`` times (paper §3.2).
+def moving_average(x: ArrayLike, passes: int, width: int = 3) -> FloatArray:
+    """``width``-point moving average applied ``passes`` times (paper §3.2).
 
     Along the last axis; the ends use the nearest sample (``mode="nearest"``).
     """
     out = np.asarray(x, dtype=float)
     for _ in range(passes):
-        out = uniform_filter1d(out, 3, axis=-1, mode="nearest")
+        out = uniform_filter1d(out, width, axis=-1, mode="nearest")
     return out
 
 
-def measured_velocity(recording: Recording, smoothing_passes: int) -> tuple[FloatArray, str]:
+def smooth3(x: ArrayLike, passes: int) -> FloatArray:
+    """The paper's three-point moving average applied ``passes`` times (§3.2)."""
+    return moving_average(x, passes, 3)
+
+
+#: Span of one moving-average pass, s: the paper's three points at 0.1 s.
+SMOOTHING_WINDOW_S = 0.3
+
+
+def smoothing_width(dt_s: float, window_s: float = SMOOTHING_WINDOW_S) -> int:
+    """Odd number of samples spanning ``window_s`` at step ``dt_s``.
+
+    3 at the paper's 10 Hz; 31 at 100 Hz, so a pass smooths over the same
+    time whatever the sampling rate (three points at 100 Hz would leave the
+    encoder's quantisation noise, amplified by the differentiation, nearly
+    untouched).
+    """
+    width = max(1, round(window_s / dt_s))
+    return width if width % 2 else width + 1
+
+
+def measured_velocity(
+    recording: Recording, smoothing_passes: int, window_s: float = SMOOTHING_WINDOW_S
+) -> tuple[FloatArray, str]:
     """Roll rate at the recording's samples, °/s, and where it came from.
 
     The rate gyro when present, else the roll angle differentiated by central
     differences (``numpy.gradient``; paper §2.5: "computed by differentiating
-    the roll angle data"); then :func:`smooth3` ``smoothing_passes`` times
-    (paper §3.2).
+    the roll angle data"); then a moving average over ``window_s``
+    (:func:`smoothing_width` samples: the paper's three points at 10 Hz)
+    applied ``smoothing_passes`` times (§3.2).
     """
     if recording.roll_rate_dps is not None:
         raw, source = np.asarray(recording.roll_rate_dps, dtype=float), "rate gyro"
@@ -283,9 +309,10 @@ def measured_velocity(recording: Recording, smoothing_passes: int) -> tuple[Floa
         assert recording.roll_deg is not None
         raw = np.gradient(np.asarray(recording.roll_deg, dtype=float), recording.time_s)
         source = "encoder angle, central differences"
+    width = smoothing_width(recording.dt_s, window_s)
     if smoothing_passes:
-        source += f", 3-point moving average x{smoothing_passes}"
-    return smooth3(raw, smoothing_passes), source
+        source += f", {width}-point moving average x{smoothing_passes}"
+    return moving_average(raw, smoothing_passes, width), source
 
 
 # --------------------------------------------------------------------------- step 2
@@ -730,6 +757,11 @@ def fit_damping(
         )
     a_steps = num / den
     a = float(num.sum() / den.sum())
+    if a <= 0.0:
+        raise IdentificationError(
+            f"the identified constant damping a = {a:.4g} 1/s (eq. 26) is not positive; "
+            "the step responses do not decay towards their steady states"
+        )
     # Residual of the stacked system with the common a.
     resid_sq = float(sq.sum() - 2 * a * num.sum() + a * a * den.sum())
     count = sum(
@@ -772,6 +804,8 @@ class DampingVsFin:
         Its Bonferroni-adjusted p-value.
     rule : str
         The outlier rule, in words.
+    excluded : tuple of int
+        Steps left out because their ``a_i <= 0`` is not a damping.
     """
 
     alpha_bar_per_deg_s: float
@@ -782,6 +816,7 @@ class DampingVsFin:
     outlier: int | None
     outlier_p: float | None
     rule: str
+    excluded: tuple[int, ...] = ()
 
     def params(self, alpha: float, theta_bar_deg: float) -> RollParams:
         """The θ-dependent model of eq. 49."""
@@ -790,9 +825,10 @@ class DampingVsFin:
 
 #: Outlier rule of step 7.
 OUTLIER_RULE = (
-    "at most one step is left out: the one with the largest externally studentized "
-    "residual, if its Bonferroni-adjusted two-sided p-value is below {level:g} "
-    "(needs at least 4 steps)"
+    "steps with a_i <= 0 are left out (not a damping); then at most one more step is left "
+    "out: the one with the largest externally studentized residual, if its "
+    "Bonferroni-adjusted two-sided p-value is below {level:g} (needs at least 4 steps; "
+    "a fit exact to rounding has no outlier)"
 )
 
 
@@ -825,18 +861,31 @@ def fit_damping_vs_fin(
     keep = np.ones(x.size, dtype=bool)
     outlier: int | None = None
     outlier_p: float | None = None
-    if x.size >= 4:
-        import statsmodels.api as sm
-
-        design = np.column_stack([np.ones_like(x), x])
-        result = sm.OLS(a, design).fit()
-        table = result.outlier_test(method="bonf")
-        worst = int(np.argmax(np.abs(table[:, 0])))
-        p = float(table[worst, 2])
-        if p < outlier_level and np.unique(np.round(np.delete(x, worst), 9)).size >= 2:
-            outlier, outlier_p = worst, p
-            keep[worst] = False
+    # A non-positive a_i is not a damping (e.g. a breakpoint shorter than the
+    # servo ramp); such steps are left out and reported.
+    excluded = tuple(int(i) for i in np.flatnonzero(a <= 0.0))
+    keep[list(excluded)] = False
+    if np.unique(np.round(x[keep], 9)).size < 2:
+        raise IdentificationError(
+            "a(θ) (eq. 48) needs positive per-step damping a_i at two or more different "
+            f"|θ + θ̄|; the a_i are {np.array2string(a, precision=3)} 1/s"
+        )
+    candidates = np.flatnonzero(keep)
+    if candidates.size >= 4:
+        worst, p = _largest_outlier(x[candidates], a[candidates])
+        rest = np.delete(candidates, worst)
+        if p < outlier_level and np.unique(np.round(x[rest], 9)).size >= 2:
+            outlier, outlier_p = int(candidates[worst]), p
+            keep[outlier] = False
     fit = stats.linregress(x[keep], a[keep])
+    # The fin passes every |θ + θ̄| from 0 to the largest step while it ramps.
+    lowest = float(min(fit.intercept, fit.intercept + fit.slope * x.max()))
+    if lowest <= 0.0:
+        raise IdentificationError(
+            f"the fitted a(θ) = {fit.slope:.4g}·|θ + θ̄| + {fit.intercept:.4g} (eq. 48) is not a "
+            f"damping: {lowest:.3g} 1/s within the recorded fin range; the per-step a_i "
+            f"{np.array2string(a, precision=3)} 1/s are too scattered for the θ-dependent model"
+        )
     return DampingVsFin(
         alpha_bar_per_deg_s=float(fit.slope),
         beta_bar_per_s=float(fit.intercept),
@@ -846,7 +895,27 @@ def fit_damping_vs_fin(
         outlier=outlier,
         outlier_p=outlier_p,
         rule=OUTLIER_RULE.format(level=outlier_level),
+        excluded=excluded,
     )
+
+
+def _largest_outlier(x: FloatArray, a: FloatArray) -> tuple[int, float]:
+    """Index of the largest externally studentized residual and its Bonferroni p.
+
+    A fit that is exact to rounding has no outlier (p = 1): its studentized
+    residuals would be rounding divided by rounding.
+    """
+    import statsmodels.api as sm
+
+    design = np.column_stack([np.ones_like(x), x])
+    result = sm.OLS(a, design).fit()
+    scale = max(float(np.max(np.abs(a))), 1.0)
+    if float(np.sqrt(np.mean(result.resid**2))) <= 1e-9 * scale:
+        return 0, 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        table = result.outlier_test(method="bonf")
+    worst = int(np.nanargmax(np.abs(table[:, 0])))
+    return worst, float(table[worst, 2])
 
 
 # --------------------------------------------------------------------------- step 8

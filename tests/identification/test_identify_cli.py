@@ -1,0 +1,169 @@
+"""``rocketroll identify``: the table, ``--json``, ``--report`` and every user error.
+
+User errors exit with code 2, print one line on stderr that names the argument
+or file and the problem, and write nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from identification.bundled import bundled_path
+from identification.recording import Recording, save_recording
+from rocketroll.cli import main
+
+PAPER = bundled_path("tunnel-paper-seed0")
+
+
+def test_table_json_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out_json = tmp_path / "result.json"
+    report = tmp_path / "report"
+    code = main(
+        [
+            "identify",
+            str(PAPER),
+            "--json",
+            str(out_json),
+            "--report",
+            str(report),
+            "--mc-runs",
+            "3",
+            "--mc-levels",
+            "1,10",
+        ]
+    )
+    assert code == 0
+    out = capsys.readouterr().out
+    # The parameter table with the truth and the paper beside the estimate.
+    header = next(line for line in out.splitlines() if line.startswith("parameter"))
+    assert header.split() == ["parameter", "identified", "truth", "paper"]
+    alpha_row = next(line for line in out.splitlines() if line.startswith("α"))
+    assert alpha_row.split()[-2:] == ["0.659", "0.659"]
+    assert "synthetic" in out and "noise study" in out
+    data = json.loads(out_json.read_text())
+    params = data["parameters"]
+    assert params["alpha"] == pytest.approx(0.659, rel=0.03)
+    assert data["truth"]["alpha"] == pytest.approx(0.659)
+    assert len(data["steps"]) == 8
+    assert data["noise_study"]["levels_pct"] == [1.0, 10.0]
+    assert data["noise_study"]["runs"] == 3
+    assert set(data["resimulation"]) == {"constant", "theta"}
+    assert all(math.isfinite(v) for v in params.values())
+    assert (report / "report.md").is_file()
+    assert len(list(report.glob("*.png"))) == 13
+
+
+def test_real_recording_has_no_truth_column(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from identification.bundled import load_bundled
+
+    rec = load_bundled("tunnel-paper-seed1")
+    real = Recording(
+        name="tunnel-run",
+        source="wind-tunnel",
+        time_s=rec.time_s,
+        fin_cmd_deg=rec.fin_cmd_deg,
+        roll_deg=rec.roll_deg,
+    )
+    path = tmp_path / "real.csv"
+    save_recording(real, path)
+    assert main(["identify", str(path), "--mc-runs", "0"]) == 0
+    out = capsys.readouterr().out
+    header = next(line for line in out.splitlines() if line.startswith("parameter"))
+    assert header.split() == ["parameter", "identified", "paper"]
+    assert "synthetic" not in out and "noise study" not in out
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["--smoothing-passes", "-1"], "--smoothing-passes must be a non-negative integer"),
+        (["--smoothing-passes", "two"], "--smoothing-passes must be an integer, not 'two'"),
+        (["--ud-interval", "0"], "--ud-interval must be a positive number"),
+        (["--ud-interval", "nan"], "--ud-interval must be a positive number"),
+        (["--ud-interval", "0.013"], "not a multiple of the 0.01 s fine grid"),
+        (["--servo-rate", "-5"], "--servo-rate must be a positive number"),
+        (["--max-breakpoint", "inf"], "--max-breakpoint must be a positive number"),
+        (["--outlier-level", "1.5"], "--outlier-level must be in (0, 1)"),
+        (["--mc-runs", "-3"], "--mc-runs must be a non-negative integer"),
+        (["--mc-levels", "1,x"], "--mc-levels must be comma-separated numbers"),
+        (["--mc-levels", "1,-2"], "--mc-levels must be non-negative numbers"),
+        (["--min-step", "500"], "never steps by 500° or more"),
+    ],
+)
+def test_bad_options_exit_2_and_write_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], expected: str
+) -> None:
+    out_json = tmp_path / "r.json"
+    report = tmp_path / "rep"
+    argv = ["identify", str(PAPER), "--json", str(out_json), "--report", str(report), *args]
+    try:
+        code = main([*argv, "--mc-runs", "0"] if "--mc-runs" not in args else argv)
+    except SystemExit as exc:  # argparse type errors
+        code = int(exc.code or 0)
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    # One error line (argparse's own type errors come after its usage text).
+    assert expected in err.splitlines()[-1]
+    assert not out_json.exists() and not report.exists()
+
+
+def test_missing_and_invalid_recordings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "nope.csv"
+    assert main(["identify", str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert "nope.csv" in err and err.count("\n") == 1
+    bad = tmp_path / "bad.csv"
+    bad.write_text("# name: x\n# source: wind-tunnel\ntime_s,fin_cmd_deg,roll_deg\n0,0,zero\n")
+    assert main(["identify", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv:4:" in err
+
+
+def test_report_path_that_is_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("keep me")
+    out_json = tmp_path / "r.json"
+    code = main(
+        [
+            "identify",
+            str(PAPER),
+            "--mc-runs",
+            "0",
+            "--report",
+            str(blocker),
+            "--json",
+            str(out_json),
+        ]
+    )
+    assert code == 2
+    assert "--report" in capsys.readouterr().err
+    assert blocker.read_text() == "keep me"
+    assert not out_json.exists()
+
+
+def test_single_step_recording_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import numpy as np
+
+    t = np.asarray(0.1 * np.arange(600), dtype=np.float64)
+    fin = np.where(t < 20, 0.0, 10.0)
+    rate = 0.659 * (fin + 4.38)
+    rec = Recording(
+        name="one-step",
+        source="wind-tunnel",
+        time_s=t,
+        fin_cmd_deg=fin,
+        roll_deg=np.cumsum(rate) * 0.1,
+    )
+    path = tmp_path / "one.csv"
+    save_recording(rec, path)
+    assert main(["identify", str(path), "--mc-runs", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "one-step" in err and "at least two" in err
