@@ -94,7 +94,8 @@ class RecordingSummary:
             u = self.ud_true
             lines.append(
                 f"true u_d       mean {u['mean']:.2f}°, SD {u['sd']:.2f}°, "
-                f"90 % interval [{u['q05']:.2f}, {u['q95']:.2f}]° (paper u_d,θ: [-13.38, 14.28]°)"
+                f"90 % interval [{u['q05']:.2f}, {u['q95']:.2f}]° (the identified u_d of "
+                "`rocketroll identify` is smoother)"
             )
         return "\n".join(lines)
 

@@ -1,0 +1,233 @@
+"""Speed of the paper's identification pipeline on the bundled 573-s recording.
+
+Measures, in one run and on one machine, on ``tunnel-paper-seed0`` (the
+paper's Table 1 experiment, 5731 samples at 10 Hz):
+
+* the whole pipeline without the Monte Carlo noise study,
+  ``identify(rec, IdentifyOptions(noise_runs=0))`` -- one warm-up call, then
+  ``--repeats`` timed calls; median and IQR against the 50 ms target;
+* the named reference measured in the same run: the output-error peer
+  :func:`identification.baselines.output_error` (``"constant"`` and
+  ``"theta"``) on the same recording, with its ratio to the pipeline;
+* the §3.3 Monte Carlo (4 noise levels x 100 runs = 400 runs) timed by
+  calling :func:`identification.noise.noise_study` directly with the pieces of
+  one identification, median of ``--mc-repeats`` against the 5 s target.
+
+The timed calls of the four tasks are interleaved over one schedule, so that
+a busy spell of a shared machine slows them alike.  Wall-clock times by
+:func:`time.perf_counter`.  The exit status is 0 whatever
+the timings unless ``--strict`` is given, when a missed target gives 1.
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/speed.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import platform
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from identification.baselines import output_error
+from identification.bundled import load_bundled
+from identification.noise import noise_study
+from identification.pipeline import Identification, IdentifyOptions, identify
+
+RECORDING = "tunnel-paper-seed0"
+PIPELINE_TARGET_MS = 50.0
+MONTE_CARLO_TARGET_MS = 5000.0
+MONTE_CARLO_RUNS = 100
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Repeated wall-clock timings of one task, ms (``first_ms``: the untimed warm-up call)."""
+
+    name: str
+    samples_ms: tuple[float, ...]
+    first_ms: float
+
+    @property
+    def median_ms(self) -> float:
+        return float(np.median(self.samples_ms))
+
+    @property
+    def iqr_ms(self) -> float:
+        q75, q25 = np.percentile(self.samples_ms, [75, 25])
+        return float(q75 - q25)
+
+    @property
+    def min_ms(self) -> float:
+        return float(np.min(self.samples_ms))
+
+
+def time_interleaved(tasks: Sequence[tuple[str, Callable[[], object], int]]) -> list[Timing]:
+    """Time several tasks with their calls interleaved.
+
+    Each task ``(name, func, repeats)`` is called once untimed (warm-up), then
+    ``repeats`` times; the timed calls of all tasks are spread evenly over one
+    schedule, so that a slow spell of the machine hits every task alike and
+    the ratios between them stay meaningful.
+    """
+    first: list[float] = []
+    for _, func, _ in tasks:
+        start = time.perf_counter()
+        func()
+        first.append((time.perf_counter() - start) * 1e3)
+    events = sorted(
+        ((k + 0.5) / repeats, i) for i, (_, _, repeats) in enumerate(tasks) for k in range(repeats)
+    )
+    samples: list[list[float]] = [[] for _ in tasks]
+    for _, i in events:
+        func = tasks[i][1]
+        start = time.perf_counter()
+        func()
+        samples[i].append((time.perf_counter() - start) * 1e3)
+    return [
+        Timing(name, tuple(times), first_ms)
+        for (name, _, _), times, first_ms in zip(tasks, samples, first, strict=True)
+    ]
+
+
+def run_monte_carlo(result: Identification, runs: int) -> None:
+    """The §3.3 noise study of ``identify`` with ``runs`` runs per level, alone."""
+    opts = result.options
+    noise_study(
+        result.constant_model,
+        result.grid,
+        result.theta_fine,
+        result.velocity_fine,
+        levels_pct=opts.noise_levels_pct,
+        runs=runs,
+        seed=opts.noise_seed,
+        interval_s=opts.ud_interval_s,
+        smoothing_passes=opts.smoothing_passes,
+    )
+
+
+def verdict(median_ms: float, target_ms: float) -> str:
+    return "PASS" if median_ms <= target_ms else "FAIL"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="benchmarks/speed.py",
+        description=(
+            f"Time identify() on the bundled {RECORDING} recording against a "
+            f"{PIPELINE_TARGET_MS:g} ms median target, the output-error peer beside it, "
+            f"and the 400-run Monte Carlo against {MONTE_CARLO_TARGET_MS / 1e3:g} s."
+        ),
+    )
+    parser.add_argument("--repeats", type=int, default=30, help="timed pipeline calls (default 30)")
+    parser.add_argument(
+        "--peer-repeats", type=int, default=5, help="timed calls of each peer fit (default 5)"
+    )
+    parser.add_argument(
+        "--mc-repeats", type=int, default=3, help="timed Monte Carlo studies (default 3)"
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit with status 1 when a target is missed"
+    )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ns = build_parser().parse_args(argv)
+    for name in ("repeats", "peer_repeats", "mc_repeats"):
+        if getattr(ns, name) < 1:
+            raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
+
+    rec = load_bundled(RECORDING)
+    options = IdentifyOptions(noise_runs=0)
+    print(
+        f"recording {rec.name}: {rec.n_samples} samples, {rec.duration_s:.1f} s; "
+        f"python {platform.python_version()}, numpy {np.__version__}, "
+        f"{os.cpu_count()} CPU(s), {platform.machine()}"
+    )
+
+    # The first identify() is the process's first call: it pays one-off costs.
+    start = time.perf_counter()
+    result = identify(rec, options)
+    first_call_ms = (time.perf_counter() - start) * 1e3
+    n_levels = len(result.options.noise_levels_pct)
+    pipeline, *peers, monte_carlo = time_interleaved(
+        [
+            ("identify(noise_runs=0)", lambda: identify(rec, options), ns.repeats),
+            *(
+                (
+                    f'output_error("{model}")',
+                    functools.partial(output_error, rec, model),
+                    ns.peer_repeats,
+                )
+                for model in ("constant", "theta")
+            ),
+            (
+                f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)",
+                lambda: run_monte_carlo(result, MONTE_CARLO_RUNS),
+                ns.mc_repeats,
+            ),
+        ]
+    )
+
+    header = (
+        f"{'task':30s} {'n':>3s} {'median ms':>10s} {'IQR ms':>8s} {'min ms':>8s} {'1st ms':>8s} "
+        f"{'target ms':>10s} {'x pipeline':>10s}  verdict"
+    )
+    print()
+    print(header)
+    print("-" * len(header))
+
+    def row(t: Timing, target: float | None) -> None:
+        ratio = t.median_ms / pipeline.median_ms
+        target_text = f"{target:10.0f}" if target is not None else f"{'-':>10s}"
+        mark = verdict(t.median_ms, target) if target is not None else "(reference)"
+        print(
+            f"{t.name:30s} {len(t.samples_ms):3d} {t.median_ms:10.1f} {t.iqr_ms:8.1f} "
+            f"{t.min_ms:8.1f} {t.first_ms:8.1f} {target_text} {ratio:10.2f}  {mark}"
+        )
+
+    row(pipeline, PIPELINE_TARGET_MS)
+    for peer in peers:
+        row(peer, None)
+    row(monte_carlo, MONTE_CARLO_TARGET_MS)
+    print()
+    peer_total = sum(p.median_ms for p in peers)
+    print(
+        f"peer / pipeline: constant {peers[0].median_ms / pipeline.median_ms:.2f}x, "
+        f"theta {peers[1].median_ms / pipeline.median_ms:.2f}x, "
+        f"both models {peer_total / pipeline.median_ms:.2f}x "
+        "(the pipeline identifies both models plus u_d and the re-simulations)"
+    )
+
+    missed = [
+        t.name
+        for t, target in ((pipeline, PIPELINE_TARGET_MS), (monte_carlo, MONTE_CARLO_TARGET_MS))
+        if t.median_ms > target
+    ]
+    print(
+        f"first identify() call of the process: {first_call_ms:.0f} ms (one-off costs); "
+        "1st ms: each task's untimed warm-up call after it; verdicts use the median; "
+        "timed calls of all tasks interleaved"
+    )
+    noisy = [t.name for t in (pipeline, *peers, monte_carlo) if t.iqr_ms > 0.25 * t.median_ms]
+    if noisy:
+        print(
+            f"warning: IQR above 25 % of the median for {', '.join(noisy)}: the machine was "
+            "busy or throttled during the run; compare min ms, or rerun"
+        )
+    if missed:
+        print(f"missed targets: {', '.join(missed)}")
+    else:
+        print("all targets met")
+    return 1 if ns.strict and missed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
