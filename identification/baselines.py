@@ -14,22 +14,16 @@ velocity processing and fin-angle model as the pipeline.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from identification.model import RollParams, damping, simulate
-from identification.pipeline import IdentifyOptions
+from identification.pipeline import IdentifyOptions, measurements
 from identification.recording import FloatArray, Recording
 from identification.steps import (
-    PAPER_SERVO,
     IdentificationError,
-    detect_segments,
-    fin_angle_model,
-    fine_grid,
-    measured_velocity,
 )
 
 __all__ = ["OutputErrorFit", "output_error"]
@@ -97,11 +91,9 @@ def output_error(
     if model not in ("constant", "theta"):
         raise IdentificationError(f"model must be 'constant' or 'theta', not {model!r}")
     opts = IdentifyOptions() if options is None else options
-    segments = detect_segments(recording, min_step_deg=opts.min_step_deg)
-    velocity, _ = measured_velocity(recording, opts.smoothing_passes, opts.smoothing_window_s)
-    grid = fine_grid(recording, opts.fine_step_s)
-    servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=opts.servo_rate_dps)
-    theta_fine, _ = fin_angle_model(recording, grid, servo)
+    inputs = measurements(recording, opts)
+    segments, grid, theta_fine = inputs.segments, inputs.grid, inputs.theta_fine
+    velocity = inputs.velocity_dps
 
     first = int(segments.start_index[0])
     start_fine = first * grid.per_sample

@@ -307,6 +307,34 @@ class Identification:
         return out
 
 
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """What every estimator on a recording starts from (steps 1 and 5, §3.2).
+
+    Shared by :func:`identify` and :func:`identification.baselines.output_error`
+    so both see the same steps, velocity and fin angle.
+    """
+
+    segments: Segments
+    velocity_dps: FloatArray
+    velocity_source: str
+    grid: FineGrid
+    theta_fine: FloatArray
+    theta_source: str
+
+
+def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:
+    """Fin steps (step 1), smoothed velocity (§3.2), 100 Hz grid and fin angle (step 5)."""
+    segments = detect_segments(recording, min_step_deg=options.min_step_deg)
+    velocity, velocity_source = measured_velocity(
+        recording, options.smoothing_passes, options.smoothing_window_s
+    )
+    grid = fine_grid(recording, options.fine_step_s)
+    servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=options.servo_rate_dps)
+    theta_fine, theta_source = fin_angle_model(recording, grid, servo)
+    return Measurements(segments, velocity, velocity_source, grid, theta_fine, theta_source)
+
+
 def identify(recording: Recording, options: IdentifyOptions | None = None) -> Identification:
     """Run the paper's pipeline (Fig. 9) on a recording.
 
@@ -336,20 +364,16 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
     (0.68, 8)
     """
     opts = IdentifyOptions() if options is None else options
-    segments = detect_segments(recording, min_step_deg=opts.min_step_deg)
+    inputs = measurements(recording, opts)
+    segments, grid, theta_fine = inputs.segments, inputs.grid, inputs.theta_fine
+    velocity = inputs.velocity_dps
     if segments.n_steps < 2:
         raise IdentificationError(
             f"{recording.name}: found {segments.n_steps} fin step; the steady-state fit "
             "(eq. 16) needs at least two"
         )
     angle, angle_source = measured_angle(recording)
-    velocity, velocity_source = measured_velocity(
-        recording, opts.smoothing_passes, opts.smoothing_window_s
-    )
-    grid = fine_grid(recording, opts.fine_step_s)
     velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
-    servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=opts.servo_rate_dps)
-    theta_fine, theta_source = fin_angle_model(recording, grid, servo)
 
     # Steps 2-7 on the data after the first deflection (§2.1).
     piecewise = fit_piecewise_linear(
@@ -411,11 +435,11 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
         angle_deg=angle,
         angle_source=angle_source,
         velocity_dps=velocity,
-        velocity_source=velocity_source,
+        velocity_source=inputs.velocity_source,
         grid=grid,
         velocity_fine=velocity_fine,
         theta_fine=theta_fine,
-        theta_source=theta_source,
+        theta_source=inputs.theta_source,
         piecewise=piecewise,
         steady=steady,
         bilinear=bilinear,

@@ -741,6 +741,7 @@ def fit_damping(
     num = np.empty(segments.n_steps)
     den = np.empty(segments.n_steps)
     sq = np.empty(segments.n_steps)
+    rows: list[FloatArray] = []
     for i in range(segments.n_steps):
         lo = int(np.searchsorted(t, bounds[i] - 1e-9))
         hi = int(np.searchsorted(t, bounds[i + 1] - 1e-9)) if i + 1 < segments.n_steps else t.size
@@ -750,6 +751,7 @@ def fit_damping(
         num[i] = col @ rhs
         den[i] = col @ col
         sq[i] = rhs @ rhs
+        rows.append(rhs)
     if np.any(den <= 0):
         bad = int(np.argmin(den))
         raise IdentificationError(
@@ -764,12 +766,7 @@ def fit_damping(
         )
     # Residual of the stacked system with the common a.
     resid_sq = float(sq.sum() - 2 * a * num.sum() + a * a * den.sum())
-    count = sum(
-        int(np.searchsorted(t, bounds[i + 1] - 1e-9) if i + 1 < segments.n_steps else t.size)
-        - int(np.searchsorted(t, bounds[i] - 1e-9))
-        - 1
-        for i in range(segments.n_steps)
-    )
+    count = sum(len(r) for r in rows)
     return DampingFit(
         a_per_s=a,
         a_steps_per_s=_readonly(a_steps),
