@@ -140,9 +140,7 @@ def noise_study(
     q, f, index, _ = disturbance_system(params, grid, theta, interval_s=interval_s)
     a = damping(params, theta)
     width = smoothing_width(grid.step_s, smoothing_window_s)
-    reference = solve_disturbance(
-        params, grid, a, q, f, index, moving_average(v, smoothing_passes, width)
-    )
+    reference = solve_disturbance(grid, a, q, f, index, moving_average(v, smoothing_passes, width))
     chunk = max(1, _CHUNK_SAMPLES // v.size)
     streams = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(levels.size)]
     mae = np.empty(levels.size)
@@ -158,7 +156,7 @@ def noise_study(
                 eps = rng.standard_normal((n, v.size))
                 noisy = (1.0 + eta / 100.0 * eps) * v  # eq. 52
                 noisy = moving_average(noisy, smoothing_passes, width)
-                u = solve_disturbance(params, grid, a, q, f, index, noisy)
+                u = solve_disturbance(grid, a, q, f, index, noisy)
                 err = np.abs(u - reference)
                 run_mae[i, lo : lo + n] = err.mean(axis=1)
                 errors.append(err.ravel())

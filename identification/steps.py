@@ -984,7 +984,6 @@ def disturbance_system(
 
 
 def solve_disturbance(
-    params: RollParams,
     grid: FineGrid,
     a_fine: FloatArray,
     q: FloatArray,
@@ -1049,7 +1048,7 @@ def identify_disturbance(
     theta = np.asarray(theta_fine, dtype=float)
     q, f, index, _ = disturbance_system(params, grid, theta, interval_s=interval_s)
     a = damping(params, theta)
-    u = solve_disturbance(params, grid, a, q, f, index, np.asarray(velocity_fine, dtype=float))
+    u = solve_disturbance(grid, a, q, f, index, np.asarray(velocity_fine, dtype=float))
     return Disturbance(
         model=model,
         params=params,
