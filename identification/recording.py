@@ -271,12 +271,15 @@ def metadata_problem(key: str, value: str) -> str | None:
     return None
 
 
-def _readonly(values: ArrayLike | None) -> FloatArray | None:
-    if values is None:
-        return None
-    arr = np.array(values, dtype=float)  # a private copy
+def readonly_array(values: ArrayLike) -> FloatArray:
+    """A private, read-only float copy of ``values`` (for frozen results)."""
+    arr = np.array(values, dtype=float)
     arr.setflags(write=False)
     return arr
+
+
+def _readonly(values: ArrayLike | None) -> FloatArray | None:
+    return None if values is None else readonly_array(values)
 
 
 @dataclass(frozen=True, eq=False)

@@ -40,7 +40,7 @@ from scipy.ndimage import uniform_filter1d
 
 from identification.errors import RocketrollError
 from identification.model import RollParams, Servo, damping, servo_path, simulate
-from identification.recording import FloatArray, Recording
+from identification.recording import FloatArray, Recording, readonly_array
 
 __all__ = [
     "BilinearFit",
@@ -89,10 +89,19 @@ class OptionError(IdentificationError):
         self.problem = problem
 
 
-def _readonly(x: ArrayLike) -> FloatArray:
-    out = np.array(x, dtype=float)
-    out.setflags(write=False)
-    return out
+#: Tolerance when comparing sample times with step and interval boundaries, s.
+_TIME_TOL = 1e-9
+
+
+def _interval_index(edges: ArrayLike, time_s: ArrayLike) -> IntArray:
+    """Index ``k`` with ``edges[k] <= t < edges[k+1]`` (-1 before the first edge)."""
+    found = np.searchsorted(edges, np.asarray(time_s, dtype=float) + _TIME_TOL, side="right")
+    return np.asarray(found - 1, dtype=np.intp)
+
+
+def _first_at(time_s: FloatArray, t: float) -> int:
+    """Index of the first sample at or after ``t``."""
+    return int(np.searchsorted(time_s, t - _TIME_TOL))
 
 
 # --------------------------------------------------------------------------- step 1
@@ -229,9 +238,9 @@ def detect_segments(
         fin_source=source,
         start_index=start_index,
         settle_index=np.asarray(keep_settle, dtype=np.intp),
-        levels_deg=_readonly(levels),
+        levels_deg=readonly_array(levels),
         end_index=n - 1,
-        time_s=_readonly(t[start_index]),
+        time_s=readonly_array(t[start_index]),
         end_s=float(t[-1]),
     )
 
@@ -346,7 +355,7 @@ class PiecewiseLinearFit:
         """The fitted angle at ``time_s`` (extrapolated at both ends), °."""
         t = np.asarray(time_s, dtype=float)
         last = self.slopes_dps.size - 1
-        k = np.clip(np.searchsorted(self.bounds_s, t, side="right") - 1, 0, last)
+        k = np.clip(_interval_index(self.bounds_s, t), 0, last)
         return np.asarray(self.intercepts_deg[k] + self.slopes_dps[k] * t, dtype=float)
 
 
@@ -375,9 +384,9 @@ def fit_piecewise_linear(
     y = np.asarray(angle_deg, dtype=float)
     bounds = np.asarray(bounds_s, dtype=float)
     m = bounds.size - 1
-    use = (t >= bounds[0] - 1e-9) & (t <= bounds[-1] + 1e-9)
+    use = (t >= bounds[0] - _TIME_TOL) & (t <= bounds[-1] + _TIME_TOL)
     t, y = t[use], y[use]
-    seg = np.clip(np.searchsorted(bounds, t + 1e-9, side="right") - 1, 0, m - 1)
+    seg = np.clip(_interval_index(bounds, t), 0, m - 1)
     counts = np.bincount(seg, minlength=m)
     if np.any(counts < 2):
         raise IdentificationError(
@@ -405,9 +414,9 @@ def fit_piecewise_linear(
     intercepts = c - b * bounds[:-1]
     residual = y - (design @ x)
     return PiecewiseLinearFit(
-        bounds_s=_readonly(bounds),
-        intercepts_deg=_readonly(intercepts),
-        slopes_dps=_readonly(b),
+        bounds_s=readonly_array(bounds),
+        intercepts_deg=readonly_array(intercepts),
+        slopes_dps=readonly_array(b),
         rms_deg=float(np.sqrt(np.mean(residual**2))),
         angle_source=angle_source,
     )
@@ -479,8 +488,8 @@ def fit_steady_state(fin_deg: ArrayLike, rate_dps: ArrayLike) -> SteadyStateFit:
         r_squared=float(fit.rvalue**2),
         alpha_se=float(fit.stderr) if se_ok else float("nan"),
         beta_se=float(fit.intercept_stderr) if se_ok else float("nan"),
-        fin_deg=_readonly(f),
-        rate_dps=_readonly(v),
+        fin_deg=readonly_array(f),
+        rate_dps=readonly_array(v),
     )
 
 
@@ -519,7 +528,7 @@ def fine_grid(recording: Recording, fine_step_s: float = 0.01) -> FineGrid:
     t0 = float(recording.time_s[0])
     h = recording.duration_s / n_fine
     time = t0 + h * np.arange(n_fine + 1, dtype=float)
-    return FineGrid(time_s=_readonly(time), step_s=h, per_sample=per)
+    return FineGrid(time_s=readonly_array(time), step_s=h, per_sample=per)
 
 
 # --------------------------------------------------------------------------- step 5
@@ -626,19 +635,19 @@ def fit_bilinear(
     bounds = segments.bounds_s
     errors = np.empty((segments.n_steps, candidates.size))
     for i in range(segments.n_steps):
-        lo = int(np.searchsorted(grid.time_s, bounds[i] - 1e-9))
-        hi = int(np.searchsorted(grid.time_s, min(bounds[i] + window, bounds[i + 1]) - 1e-9))
+        lo = _first_at(grid.time_s, bounds[i])
+        hi = _first_at(grid.time_s, min(bounds[i] + window, bounds[i + 1]))
         tau = grid.time_s[lo:hi] - bounds[i]
         ramp = tau[None, :] / candidates[:, None]
         model = np.where(ramp < 1.0, v0[i] + (vss[i] - v0[i]) * ramp, vss[i])
         errors[i] = np.sum((model - v[None, lo:hi]) ** 2, axis=1)
     t0 = candidates[np.argmin(errors, axis=1)]
     return BilinearFit(
-        t0_s=_readonly(t0),
-        v0_dps=_readonly(v0),
-        vss_dps=_readonly(vss),
-        candidates_s=_readonly(candidates),
-        errors=_readonly(errors),
+        t0_s=readonly_array(t0),
+        v0_dps=readonly_array(v0),
+        vss_dps=readonly_array(vss),
+        candidates_s=readonly_array(candidates),
+        errors=readonly_array(errors),
         window_s=window,
     )
 
@@ -653,7 +662,7 @@ def bilinear_velocity(
     """
     t = grid.time_s
     bounds = segments.bounds_s
-    step = np.searchsorted(bounds, t + 1e-9, side="right") - 1
+    step = _interval_index(bounds, t)
     step = np.where(step >= segments.n_steps, segments.n_steps - 1, step)
     v = np.full(t.size, np.nan)
     after = step >= 0
@@ -743,8 +752,8 @@ def fit_damping(
     sq = np.empty(segments.n_steps)
     rows: list[FloatArray] = []
     for i in range(segments.n_steps):
-        lo = int(np.searchsorted(t, bounds[i] - 1e-9))
-        hi = int(np.searchsorted(t, bounds[i + 1] - 1e-9)) if i + 1 < segments.n_steps else t.size
+        lo = _first_at(t, bounds[i])
+        hi = _first_at(t, bounds[i + 1]) if i + 1 < segments.n_steps else t.size
         integrand = v[lo:hi] - steady.rate(theta[lo:hi])
         col = -cumulative_trapezoid(integrand, t[lo:hi])  # I_Ni of eq. 28
         rhs = v[lo + 1 : hi] - v[lo]  # v̄_data,Ni of eq. 27
@@ -769,7 +778,7 @@ def fit_damping(
     count = sum(len(r) for r in rows)
     return DampingFit(
         a_per_s=a,
-        a_steps_per_s=_readonly(a_steps),
+        a_steps_per_s=readonly_array(a_steps),
         alpha=steady.alpha,
         theta_bar_deg=steady.theta_bar_deg,
         rms_dps=float(np.sqrt(max(resid_sq, 0.0) / max(count, 1))),
@@ -887,8 +896,8 @@ def fit_damping_vs_fin(
         alpha_bar_per_deg_s=float(fit.slope),
         beta_bar_per_s=float(fit.intercept),
         r_squared=float(fit.rvalue**2),
-        x_deg=_readonly(x),
-        a_per_s=_readonly(a),
+        x_deg=readonly_array(x),
+        a_per_s=readonly_array(a),
         outlier=outlier,
         outlier_p=outlier_p,
         rule=OUTLIER_RULE.format(level=outlier_level),
@@ -945,7 +954,7 @@ class Disturbance:
     def at(self, time_s: ArrayLike) -> FloatArray:
         """The piecewise-constant ``u_d(t)`` of eq. 44 (held past the last interval), °."""
         t = np.asarray(time_s, dtype=float)
-        k = np.searchsorted(self.start_s, t + 1e-9, side="right") - 1
+        k = _interval_index(self.start_s, t)
         return np.asarray(self.u_d_deg[np.clip(k, 0, self.u_d_deg.size - 1)], dtype=float)
 
 
@@ -1053,8 +1062,8 @@ def identify_disturbance(
         model=model,
         params=params,
         interval_s=interval_s,
-        start_s=_readonly(grid.time_s[index[:, 0]]),
-        u_d_deg=_readonly(u),
+        start_s=readonly_array(grid.time_s[index[:, 0]]),
+        u_d_deg=readonly_array(u),
     )
 
 
@@ -1126,9 +1135,9 @@ def resimulate(
     angle_err = np.abs(phi - phi_meas)
     return Resimulation(
         model=disturbance.model,
-        time_s=_readonly(recording.time_s),
-        rate_dps=_readonly(rate),
-        angle_deg=_readonly(phi),
+        time_s=readonly_array(recording.time_s),
+        rate_dps=readonly_array(rate),
+        angle_deg=readonly_array(phi),
         rate_mae_dps=float(rate_err.mean()),
         rate_sd_dps=float(rate_err.std(ddof=1)),
         angle_mae_deg=float(angle_err.mean()),
