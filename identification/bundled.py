@@ -36,6 +36,12 @@ BUNDLED: dict[str, str] = {
     # Random staircases for diverse data.
     "tunnel-staircase-seed10.csv": "rocketroll tunnel --seed 10 --schedule staircase --steps 12",
     "tunnel-staircase-seed11.csv": "rocketroll tunnel --seed 11 --schedule staircase --steps 12",
+    # Held out for evaluation by declaration (metadata `split: test`); the rest
+    # fall to train or test by content hash (disturbances.rows.split_of).
+    "tunnel-paper-seed5.csv": "rocketroll tunnel --seed 5 --split test",
+    "tunnel-staircase-seed12.csv": (
+        "rocketroll tunnel --seed 12 --schedule staircase --steps 12 --split test"
+    ),
 }
 
 

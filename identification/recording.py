@@ -256,9 +256,12 @@ TEXT_KEYS = frozenset({"truth.model", "truth.turbulence"})
 def metadata_problem(key: str, value: str) -> str | None:
     """What is wrong with a typed metadata value, or None.
 
-    ``seed`` is a non-negative integer; ``truth.*`` and ``sensor.*`` values
-    (but :data:`TEXT_KEYS`) are finite numbers.  Other keys are free text.
+    ``seed`` is a non-negative integer; ``split`` is ``train`` or ``test``;
+    ``truth.*`` and ``sensor.*`` values (but :data:`TEXT_KEYS`) are finite numbers.
+    Other keys are free text.
     """
+    if key == "split" and value not in ("train", "test"):
+        return f"metadata 'split' must be 'train' or 'test', not {value!r}"
     if key == "seed" and not (value.isascii() and value.isdigit()):
         return f"metadata 'seed' must be a non-negative integer, not {value!r}"
     if key.startswith(("truth.", "sensor.")) and key not in TEXT_KEYS:

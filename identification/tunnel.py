@@ -287,6 +287,7 @@ class TunnelSpec:
     gyro_noise: float | None = None
     measured_fin: bool = False
     name: str | None = None
+    split: Literal["train", "test"] | None = None
 
     def __post_init__(self) -> None:
         if self.seed < 0:
@@ -295,6 +296,8 @@ class TunnelSpec:
             raise ValueError(f"schedule must be 'paper' or 'staircase', not {self.schedule!r}")
         if self.model not in ("theta", "constant"):
             raise ValueError(f"model must be 'theta' or 'constant', not {self.model!r}")
+        if self.split not in (None, "train", "test"):
+            raise ValueError(f"split must be 'train' or 'test', not {self.split!r}")
         if self.model == "constant" and self.alpha_bar not in (None, 0.0):
             raise ValueError("alpha_bar must be 0 for the constant-damping model")
         for name in ("alpha", "beta", "alpha_bar", "beta_bar"):
@@ -486,6 +489,8 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         meta.append(("sensor.encoder_counts", spec.encoder_counts))
     if spec.gyro_noise is not None:
         meta.append(("sensor.gyro_noise_pct", spec.gyro_noise))
+    if spec.split is not None:
+        meta.append(("split", spec.split))
     return Recording(
         name=spec.default_name(),
         source="synthetic",
