@@ -17,10 +17,10 @@ from typing import TYPE_CHECKING, Any
 from identification.errors import UsageError
 
 if TYPE_CHECKING:
-    from identification.pipeline import Identification
+    from identification.pipeline import Identification, IdentifyOptions
     from identification.tunnel import TunnelSpec
 
-__all__ = ["register", "tunnel_spec_from_argv"]
+__all__ = ["add_identify_options", "identify_options", "register", "tunnel_spec_from_argv"]
 
 # Help text for each TunnelSpec field; the flag is the field name with dashes.
 _TUNNEL_HELP: dict[str, str] = {
@@ -51,11 +51,16 @@ _TUNNEL_HELP: dict[str, str] = {
     "gyro_noise": "add a rate-gyro column with eq. 52 noise of this many percent",
     "measured_fin": "add the actual (measured) fin angle column fin_deg",
     "name": "recording name (default tunnel-<schedule>-seed<N>)",
+    "split": (
+        "evaluation split to record in the metadata (default: none; the disturbance "
+        "database then splits by content hash)"
+    ),
 }
 _CHOICES: dict[str, tuple[str, ...]] = {
     "schedule": ("paper", "staircase"),
     "model": ("theta", "constant"),
     "turbulence": ("gaussian", "laplace", "student-t"),
+    "split": ("train", "test"),
 }
 
 
@@ -297,10 +302,18 @@ def parameter_table(result: Identification) -> str:
     return "\n".join(lines)
 
 
-def _cmd_identify(ns: argparse.Namespace) -> int:
-    from identification.pipeline import IdentifyOptions, identify
-    from identification.recording import load_recording, write_all_atomic
-    from identification.report import render_report
+def add_identify_options(parser: argparse.ArgumentParser) -> None:
+    """Add the identification settings (``--min-step`` ... ``--mc-levels``) to a parser."""
+    for flag, (name, kind, text) in _IDENTIFY_FLAGS.items():
+        parser.add_argument(flag, dest=name, type=_number(kind, flag), help=text)
+    parser.add_argument(
+        "--mc-levels", type=_levels, help="noise levels η of the study, %% (1,2,5,10)"
+    )
+
+
+def identify_options(ns: argparse.Namespace) -> IdentifyOptions:
+    """The :class:`IdentifyOptions` of flags added by :func:`add_identify_options`."""
+    from identification.pipeline import IdentifyOptions
     from identification.steps import OptionError
 
     values: dict[str, Any] = {}
@@ -319,6 +332,15 @@ def _cmd_identify(ns: argparse.Namespace) -> int:
             "--mc-levels",
         )
         raise UsageError(f"{flag} {exc.problem}") from None
+    return options
+
+
+def _cmd_identify(ns: argparse.Namespace) -> int:
+    from identification.pipeline import identify
+    from identification.recording import load_recording, write_all_atomic
+    from identification.report import render_report
+
+    options = identify_options(ns)
     if ns.report is not None and ns.report.exists() and not ns.report.is_dir():
         raise UsageError(f"--report {ns.report}: exists and is not a directory")
     recording = load_recording(ns.recording)
@@ -330,8 +352,14 @@ def _cmd_identify(ns: argparse.Namespace) -> int:
         for name, content in render_report(result).items():
             outputs[ns.report / name] = content
         ns.report.mkdir(parents=True, exist_ok=True)
+    # A higher layer may keep the result (``rocketroll identify --db``, added by
+    # the disturbances layer, which this one does not import).
+    store = getattr(ns, "store_result", None)
+    stored = store(ns, result) if store is not None else None
     write_all_atomic(outputs)  # all or nothing
     print(parameter_table(result))
+    if stored:
+        print(stored)
     if ns.json is not None:
         print(f"wrote {ns.json}")
     if ns.report is not None:
@@ -418,7 +446,5 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--report", type=Path, help="also write PNG figures and report.md into this directory"
     )
-    for flag, (name, kind, text) in _IDENTIFY_FLAGS.items():
-        p.add_argument(flag, dest=name, type=_number(kind, flag), help=text)
-    p.add_argument("--mc-levels", type=_levels, help="noise levels η of the study, %% (1,2,5,10)")
+    add_identify_options(p)
     p.set_defaults(handler=_cmd_identify)

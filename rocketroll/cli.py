@@ -12,6 +12,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from disturbances import cli as disturbances_cli
 from identification import cli as identification_cli
 from identification.errors import RocketrollError
 from rocketroll import __version__
@@ -29,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"rocketroll {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     identification_cli.register(subparsers)
+    disturbances_cli.register(subparsers)
     return parser
 
 

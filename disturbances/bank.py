@@ -1,0 +1,233 @@
+"""``TraceBank``: traces held in memory for drawing episode windows without SQL.
+
+The environment draws a window of ``u_d`` at every ``reset``.  A bank loads
+the matching traces once (checked against their checksums) and then draws a
+window in a few microseconds: one integer from the caller's generator picks a
+(trace, offset) pair uniformly among all windows of that length, and the
+window is a read-only view, not a copy.  ``benchmarks/db_windows.py`` measures
+it against the 100 µs budget.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from disturbances.db import DisturbanceDB, Trace, TraceInfo
+from identification.model import RollParams
+from identification.recording import FloatArray
+
+__all__ = ["TraceBank", "Window"]
+
+
+@dataclass(frozen=True, eq=False)
+class Window:
+    """A stretch of one trace.
+
+    Attributes
+    ----------
+    trace : int
+        Index of the trace in its bank.
+    uid : str
+        The trace's uid.
+    start : int
+        Index of the first sample in the trace.
+    u_d_deg : ndarray, shape (n,)
+        The samples, ° (a read-only view into the bank).
+    dt_s : float
+        Δt of each sample, s.
+    params : RollParams
+        The parameters identified together with the trace.
+    """
+
+    trace: int
+    uid: str
+    start: int
+    u_d_deg: FloatArray
+    dt_s: float
+    params: RollParams
+
+    @property
+    def start_s(self) -> float:
+        """Offset of the window from the start of the trace, s."""
+        return self.start * self.dt_s
+
+    def __repr__(self) -> str:
+        return (
+            f"Window(uid={self.uid!r}, start={self.start_s:g} s, n={self.u_d_deg.size}, "
+            f"dt={self.dt_s:g} s)"
+        )
+
+
+class TraceBank:
+    """Traces in memory, for fast windows.
+
+    Parameters
+    ----------
+    traces : sequence of Trace
+        The traces (e.g. ``db.load_traces(db.traces(split="train"))``).
+    description : str
+        What was selected, for error messages (e.g. ``split='train'``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from disturbances.db import Trace, TraceInfo
+    >>> bank = TraceBank.from_arrays([np.arange(10.0)], dt_s=0.1)
+    >>> w = bank.window(np.random.default_rng(0), 0.5)
+    >>> w.u_d_deg.size, float(w.u_d_deg[1] - w.u_d_deg[0])
+    (5, 1.0)
+    """
+
+    def __init__(self, traces: Sequence[Trace], description: str = "the selection") -> None:
+        if not traces:
+            raise ValueError(f"no traces match {description}")
+        self.traces = tuple(traces)
+        self.description = description
+        self._arrays = [t.u_d_deg for t in self.traces]
+        self._uids = [t.info.uid for t in self.traces]
+        self._dts = np.array([t.info.dt_s for t in self.traces])
+        self._params = [t.info.params for t in self.traces]
+        self._sizes = np.array([a.size for a in self._arrays], dtype=np.int64)
+        self._plans: dict[float, tuple[np.ndarray, np.ndarray, int]] = {}
+
+    @classmethod
+    def from_db(cls, db: DisturbanceDB, **filters: Any) -> TraceBank:
+        """Load the traces matching ``filters`` (see :meth:`DisturbanceDB.traces`)."""
+        infos = db.traces(**filters)
+        described = ", ".join(f"{k}={v!r}" for k, v in filters.items() if v is not None)
+        if not infos:
+            raise ValueError(f"{db.path}: no traces match {described or 'the database'}")
+        return cls(db.load_traces(infos), described or "all traces")
+
+    @classmethod
+    def from_arrays(
+        cls,
+        arrays: Sequence[FloatArray],
+        dt_s: float,
+        params: RollParams | None = None,
+    ) -> TraceBank:
+        """A bank of bare arrays (tests, user-made disturbances)."""
+        from disturbances.rows import checksum
+        from identification.model import PAPER_THETA
+        from identification.recording import readonly_array
+
+        p = PAPER_THETA if params is None else params
+        traces = []
+        for k, values in enumerate(arrays):
+            u = readonly_array(values)
+            info = TraceInfo(
+                id=k,
+                uid=f"array-{k}-{checksum(u)[:8]}",
+                kind="identified",
+                source_uid=None,
+                seed=None,
+                recording=f"array-{k}",
+                recording_id=k,
+                source="synthetic",
+                split="train",
+                method="paper",
+                model="constant" if p.is_constant_damping else "theta",
+                params=p,
+                dt_s=float(dt_s),
+                t0_s=0.0,
+                n_samples=int(u.size),
+                mean_deg=float(u.mean()),
+                sd_deg=float(u.std()),
+                q05_deg=float(np.percentile(u, 5)),
+                q95_deg=float(np.percentile(u, 95)),
+                normality_p=None,
+                package_version="",
+                created_at="",
+            )
+            traces.append(Trace(info=info, u_d_deg=u))
+        return cls(traces, "the given arrays")
+
+    def __len__(self) -> int:
+        return len(self.traces)
+
+    def __repr__(self) -> str:
+        return f"TraceBank({len(self)} traces, {self.total_duration_s:g} s, {self.description})"
+
+    @property
+    def total_duration_s(self) -> float:
+        """Sum of the traces' lengths, s."""
+        return float(np.sum(self._sizes * self._dts))
+
+    @property
+    def longest_s(self) -> float:
+        """The longest trace, s."""
+        return float(np.max(self._sizes * self._dts))
+
+    @property
+    def params(self) -> tuple[RollParams, ...]:
+        """Each trace's parameters, in bank order."""
+        return tuple(self._params)
+
+    def samples_for(self, duration_s: float) -> np.ndarray:
+        """Samples a window of ``duration_s`` takes in each trace."""
+        return np.ceil(duration_s / self._dts - 1e-9).astype(np.int64)
+
+    def _plan(self, duration_s: float) -> tuple[np.ndarray, np.ndarray, int]:
+        plan = self._plans.get(duration_s)
+        if plan is None:
+            self.require(duration_s)
+            lengths = self.samples_for(duration_s)
+            offsets = np.maximum(self._sizes - lengths + 1, 0)
+            cum = np.cumsum(offsets)
+            plan = (cum, lengths, int(cum[-1]))
+            self._plans[duration_s] = plan
+        return plan
+
+    def require(self, duration_s: float) -> None:
+        """Raise ``ValueError`` unless some trace is at least ``duration_s`` long."""
+        if not (math.isfinite(duration_s) and duration_s > 0):
+            raise ValueError(f"window duration must be positive, got {duration_s!r}")
+        if not np.any(self._sizes >= self.samples_for(duration_s)):
+            raise ValueError(
+                f"no trace in {self.description} is {duration_s:g} s long; the longest is "
+                f"{self.longest_s:g} s (shorten the episode or add longer recordings)"
+            )
+
+    def window(self, rng: np.random.Generator, duration_s: float) -> Window:
+        """A window of ``duration_s``, uniform over every (trace, offset) that fits.
+
+        Longer traces are drawn more often, in proportion to the windows they
+        hold; the offset is on the trace's own Δt grid.
+        """
+        cum, lengths, total = self._plan(duration_s)
+        k = int(rng.integers(total))
+        i = int(np.searchsorted(cum, k, side="right"))
+        start = k - (int(cum[i - 1]) if i else 0)
+        n = int(lengths[i])
+        return Window(
+            trace=i,
+            uid=self._uids[i],
+            start=start,
+            u_d_deg=self._arrays[i][start : start + n],
+            dt_s=float(self._dts[i]),
+            params=self._params[i],
+        )
+
+    def at(self, trace: int, start: int, duration_s: float) -> Window:
+        """A given window (``trace`` index, ``start`` sample): for replays and evaluation."""
+        if not 0 <= trace < len(self):
+            raise IndexError(f"trace index {trace} out of range 0..{len(self) - 1}")
+        n = int(self.samples_for(duration_s)[trace])
+        if not 0 <= start <= self._sizes[trace] - n:
+            raise ValueError(
+                f"a {duration_s:g} s window at sample {start} does not fit in trace "
+                f"{self._uids[trace]} ({self._sizes[trace]} samples)"
+            )
+        return Window(
+            trace=trace,
+            uid=self._uids[trace],
+            start=start,
+            u_d_deg=self._arrays[trace][start : start + n],
+            dt_s=float(self._dts[trace]),
+            params=self._params[trace],
+        )

@@ -1,0 +1,237 @@
+"""The default database: built from the bundled recordings, found or built automatically.
+
+The environment and the CLI need no argument on a fresh install.  The default
+database lives at
+
+1. ``$ROCKETROLL_DB`` if that variable is set (the CLI's ``--db PATH`` wins
+   over both), else
+2. ``$XDG_CACHE_HOME/rocketroll/disturbances.sqlite`` (``~/.cache/...``).
+
+It is made from the bundled synthetic recordings
+(:data:`identification.bundled.BUNDLED`): each is identified by the paper's
+method and the output-error peer, both models, with
+:data:`DEFAULT_SURROGATES` IAAFT surrogates of every paper-method trace.  The
+recipe, the package version, the schema and the bundled files' bytes make its
+*fingerprint*; a database built this way is marked ``origin: bundled``.  A
+default database whose fingerprint differs -- built by another rocketroll
+version, or from other bundled data -- is rebuilt, with a notice on stderr;
+results of two versions are never mixed in it.  Once a user adds to a
+database (``origin: user``) it is never rebuilt silently: opening one that
+holds another version's identifications warns instead.
+
+Builds are atomic: the new database is written beside the target and renamed
+into place when complete.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+from disturbances.db import SCHEMA_VERSION, DatabaseError, DisturbanceDB, package_version
+from disturbances.rows import SURROGATE_KINDS
+from identification.bundled import bundled_paths
+from identification.pipeline import IdentifyOptions
+from identification.recording import load_recording
+
+__all__ = [
+    "BUILD_RECIPE",
+    "DEFAULT_SURROGATES",
+    "ENV_VAR",
+    "build_database",
+    "default_path",
+    "fingerprint",
+    "open_database",
+    "open_default",
+]
+
+#: Environment variable naming the default database file.
+ENV_VAR = "ROCKETROLL_DB"
+#: IAAFT surrogates per paper-method trace in the default database.
+DEFAULT_SURROGATES = 2
+#: Version of the recipe below; bump it when the build changes in any other way.
+BUILD_RECIPE = 1
+
+
+def default_path() -> Path:
+    """Where the default database is: ``$ROCKETROLL_DB``, else the user's cache folder."""
+    env = os.environ.get(ENV_VAR)
+    if env:
+        return Path(env).expanduser()
+    cache = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(cache) / "rocketroll" / "disturbances.sqlite"
+
+
+def fingerprint(
+    recordings: Sequence[Path],
+    options: IdentifyOptions,
+    surrogates: int,
+    surrogate_kinds: Sequence[str],
+) -> str:
+    """What a build depends on, hashed: recipe, versions, settings and the input bytes."""
+    h = hashlib.sha256()
+    recipe = {
+        "recipe": BUILD_RECIPE,
+        "schema": SCHEMA_VERSION,
+        "package": package_version(),
+        "options": dataclasses.asdict(dataclasses.replace(options, progress=False)),
+        "surrogates": surrogates,
+        "surrogate_kinds": list(surrogate_kinds),
+    }
+    h.update(json.dumps(recipe, sort_keys=True).encode())
+    for path in recordings:
+        h.update(path.name.encode() + b"\0" + hashlib.sha256(path.read_bytes()).digest())
+    return h.hexdigest()
+
+
+def _discard_journal(path: Path) -> None:
+    """Fold a leftover WAL into ``path`` before the file is replaced.
+
+    A ``-wal`` file left beside a replaced database would be applied to the
+    new one; checkpointing the old database first empties it.
+    """
+    wal = Path(f"{path}-wal")
+    if path.exists() and wal.exists():
+        try:
+            with DisturbanceDB(path, create=False) as old, old._errors():
+                old._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except DatabaseError:
+            pass
+    for suffix in ("-wal", "-shm"):
+        Path(f"{path}{suffix}").unlink(missing_ok=True)
+
+
+def build_database(
+    path: str | os.PathLike[str],
+    recordings: Sequence[str | os.PathLike[str]] | None = None,
+    *,
+    options: IdentifyOptions | None = None,
+    surrogates: int = DEFAULT_SURROGATES,
+    surrogate_kinds: Sequence[str] = ("iaaft",),
+    progress: bool = False,
+) -> Path:
+    """Build a database from recordings (default: the bundled ones), atomically.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The database to (re)place.
+    recordings : sequence of paths, optional
+        Recording files; the bundled recordings by default.  Built from the
+        bundled ones with the default settings, the database is marked
+        ``origin: bundled`` with its fingerprint.
+    options : IdentifyOptions, optional
+        Identification settings (the paper's).
+    surrogates : int
+        Surrogates per kind and per paper-method trace.
+    surrogate_kinds : sequence of str
+        ``iaaft`` and/or ``ar``.
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    from tqdm.auto import tqdm
+
+    target = Path(path)
+    bundled = recordings is None
+    files = bundled_paths() if recordings is None else [Path(p) for p in recordings]
+    unknown = [k for k in surrogate_kinds if k not in SURROGATE_KINDS]
+    if unknown:
+        raise ValueError(f"unknown surrogate kind(s) {unknown}; use {', '.join(SURROGATE_KINDS)}")
+    opts = IdentifyOptions() if options is None else options
+    loaded = [load_recording(f) for f in files]  # every file is validated before any work
+    if not target.parent.is_dir():
+        target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(
+        prefix=f".{target.name}.", suffix=".building", dir=target.parent
+    )
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        with DisturbanceDB(tmp) as db:
+            for recording in tqdm(
+                loaded, desc="building disturbance database", unit="recording", disable=not progress
+            ):
+                db.add_recording(
+                    recording,
+                    opts,
+                    surrogates=surrogates,
+                    surrogate_kinds=surrogate_kinds,
+                )
+            made = fingerprint(files, opts, surrogates, surrogate_kinds)
+            # Only the default recipe on the bundled data may be rebuilt automatically.
+            default = bundled and made == _expected_fingerprint()
+            db.set_info(
+                {
+                    "origin": "bundled" if default else "user",
+                    "fingerprint": made,
+                    "recordings": json.dumps([f.name for f in files]),
+                }
+            )
+        _discard_journal(target)
+        os.replace(tmp, target)
+    finally:
+        for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+            leftover.unlink(missing_ok=True)
+    return target
+
+
+def _expected_fingerprint() -> str:
+    return fingerprint(bundled_paths(), IdentifyOptions(), DEFAULT_SURROGATES, ("iaaft",))
+
+
+def open_default(*, progress: bool | None = None) -> DisturbanceDB:
+    """The default database (:func:`default_path`), built or rebuilt when needed.
+
+    Missing: built from the bundled recordings (about half a minute, once).
+    Built by another package version or from other bundled data
+    (``origin: bundled`` with a different fingerprint): rebuilt, with a
+    notice on stderr.  A database the user has added to is opened as it is.
+    """
+    path = default_path()
+    show = sys.stderr.isatty() if progress is None else progress
+    if not path.exists():
+        print(
+            f"rocketroll: building the default disturbance database at {path} "
+            "from the bundled recordings (once)",
+            file=sys.stderr,
+        )
+        build_database(path, progress=show)
+        return DisturbanceDB(path, create=False)
+    db = DisturbanceDB(path, create=False)
+    info = db.info()
+    if info.get("origin") == "bundled" and info.get("fingerprint") != _expected_fingerprint():
+        db.close()
+        built_by = info.get("created_by", "?")
+        why = (
+            f"was built by rocketroll {built_by}; this is {package_version()}"
+            if built_by != package_version()
+            else "was built from other bundled recordings or settings"
+        )
+        print(
+            f"rocketroll: the default disturbance database {path} {why}; rebuilding it",
+            file=sys.stderr,
+        )
+        build_database(path, progress=show)
+        return DisturbanceDB(path, create=False)
+    db.check_version()
+    return db
+
+
+def open_database(path: str | os.PathLike[str] | None = None) -> DisturbanceDB:
+    """``path`` if given (it must exist), else :func:`open_default`."""
+    if path is None:
+        return open_default()
+    db = DisturbanceDB(path, create=False)
+    db.check_version()
+    return db

@@ -1,0 +1,324 @@
+"""What the database holds, as plain frozen rows (no SQL here).
+
+The same row types carry data into the database (:mod:`disturbances.ingest`
+makes them from an identification), out of it (:meth:`DisturbanceDB.dump`)
+and through export and import (:mod:`disturbances.exchange`), so there is one
+description of a stored recording, identification and trace.
+
+Identity is by content, never by row number:
+
+* a recording by :func:`content_hash` of its samples (the same samples added
+  twice are one recording, whatever the file or name they came in);
+* an identification by ``(recording hash, method, model)``;
+* a trace by its ``uid``: ``<hash[:12]>-<method>-<model>`` for an identified
+  trace, ``<source uid>-<surrogate method>-<seed>`` for a surrogate.
+
+The train/test split belongs to the recording: its ``split`` metadata line
+when it has one (a user holding out chosen runs), else a function of its
+content hash (:func:`split_of`).  Either way it is deterministic, does not
+move when the database grows, and every trace of a recording -- both models,
+both methods and all surrogates -- falls on the same side: evaluation never
+sees a disturbance that training saw in another form.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identification.model import RollParams
+from identification.recording import FloatArray, Recording, readonly_array
+
+__all__ = [
+    "KINDS",
+    "METHODS",
+    "MODELS",
+    "SPLITS",
+    "SURROGATE_KINDS",
+    "TEST_FRACTION",
+    "IdentificationRow",
+    "RecordingRow",
+    "TraceRow",
+    "checksum",
+    "content_hash",
+    "identified_uid",
+    "json_safe",
+    "split_of",
+    "surrogate_uid",
+]
+
+#: Identification methods: the paper's integral least squares, the output-error peer.
+METHODS = ("paper", "output-error")
+#: Model variants: constant damping (eq. 29) and θ-dependent damping (eq. 49).
+MODELS = ("constant", "theta")
+#: Surrogate generators of :mod:`disturbances.surrogate`.
+SURROGATE_KINDS = ("iaaft", "ar")
+#: A trace is identified from a recording, or a surrogate of another trace.
+KINDS = ("identified", *SURROGATE_KINDS)
+SPLITS = ("train", "test")
+#: Share of recordings (by hash) that go to the test split.
+TEST_FRACTION = 0.25
+_SPLIT_SALT = b"rocketroll-split/1:"
+
+
+def checksum(samples: ArrayLike) -> str:
+    """SHA-256 (hex) of the stored bytes of a trace: little-endian float64."""
+    return hashlib.sha256(np.ascontiguousarray(samples, dtype="<f8").tobytes()).hexdigest()
+
+
+def content_hash(columns: Mapping[str, ArrayLike]) -> str:
+    """SHA-256 (hex) of a recording's samples: column names and float64 values.
+
+    Name, source and metadata are not part of it: the same samples are the
+    same recording.
+    """
+    h = hashlib.sha256(b"rocketroll-recording-samples/1\n")
+    for name in sorted(columns):
+        h.update(name.encode() + b"\n")
+        h.update(np.ascontiguousarray(columns[name], dtype="<f8").tobytes())
+    return h.hexdigest()
+
+
+def split_of(recording_hash: str, test_fraction: float = TEST_FRACTION) -> str:
+    """``train`` or ``test`` for a recording, from its content hash alone."""
+    digest = hashlib.sha256(_SPLIT_SALT + recording_hash.encode()).digest()
+    u = int.from_bytes(digest[:8], "big") / 2.0**64
+    return "test" if u < test_fraction else "train"
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with NaN and infinities as ``None`` and tuples as lists (strict JSON)."""
+    if isinstance(value, float | np.floating):
+        f = float(value)
+        return f if math.isfinite(f) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [json_safe(v) for v in value]
+    return value
+
+
+def _frozen(mapping: Mapping[str, Any]) -> Mapping[str, Any]:
+    return MappingProxyType(dict(mapping))
+
+
+@dataclass(frozen=True, eq=False)
+class RecordingRow:
+    """A recording as stored: its samples, exactly, with name, source and metadata.
+
+    Attributes
+    ----------
+    content_hash : str
+        :func:`content_hash` of ``samples`` (checked on construction).
+    name, source : str
+        As in the recording file.
+    metadata : mapping of str to str
+        The recording's other ``# key: value`` lines.
+    columns : tuple of str
+        Column names, ``time_s`` first.
+    samples : ndarray, shape (n, len(columns))
+        The values, float64.
+    added_at : str
+        When it entered the database (UTC, ISO 8601).
+    """
+
+    content_hash: str
+    name: str
+    source: str
+    metadata: Mapping[str, str]
+    columns: tuple[str, ...]
+    samples: FloatArray
+    added_at: str
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "metadata", _frozen(self.metadata))
+        object.__setattr__(self, "samples", readonly_array(self.samples))
+        if self.samples.ndim != 2 or self.samples.shape[1] != len(self.columns):
+            raise ValueError(
+                f"recording {self.name!r}: samples of shape {self.samples.shape} do not match "
+                f"{len(self.columns)} columns"
+            )
+        actual = content_hash(self.column_dict())
+        if actual != self.content_hash:
+            raise ValueError(
+                f"recording {self.name!r}: content hash {self.content_hash[:12]}… does not "
+                f"match its samples ({actual[:12]}…)"
+            )
+
+    @classmethod
+    def of(cls, recording: Recording, added_at: str) -> RecordingRow:
+        """The row for a :class:`~identification.recording.Recording`."""
+        columns = recording.columns()
+        return cls(
+            content_hash=content_hash(columns),
+            name=recording.name,
+            source=recording.source,
+            metadata=dict(recording.metadata),
+            columns=tuple(columns),
+            samples=np.column_stack(list(columns.values())),
+            added_at=added_at,
+        )
+
+    @property
+    def split(self) -> str:
+        """``train`` or ``test``: the recording's ``split`` metadata if it has one,
+        else :func:`split_of` its content hash."""
+        declared = self.metadata.get("split")
+        return declared if declared in SPLITS else split_of(self.content_hash)
+
+    def column_dict(self) -> dict[str, FloatArray]:
+        """``{column: values}``."""
+        return {name: self.samples[:, i] for i, name in enumerate(self.columns)}
+
+    def recording(self) -> Recording:
+        """The :class:`~identification.recording.Recording` (validated again)."""
+        return Recording(
+            name=self.name, source=self.source, metadata=self.metadata, **self.column_dict()
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationRow:
+    """One identified model of one recording.
+
+    Attributes
+    ----------
+    recording_hash : str
+        The recording it was identified from.
+    method : str
+        ``paper`` or ``output-error``.
+    model : str
+        ``constant`` or ``theta``.
+    params : RollParams
+        α, θ̄, β̄ (or the constant ``a``) and ᾱ.
+    metrics : mapping
+        Fit metrics (JSON-safe): R², re-simulation errors, the noise study, ...
+    options : mapping
+        The :class:`~identification.pipeline.IdentifyOptions` used (JSON-safe).
+    package_version : str
+        The rocketroll version that identified it.
+    created_at : str
+        UTC, ISO 8601.
+    """
+
+    recording_hash: str
+    method: str
+    model: str
+    params: RollParams
+    metrics: Mapping[str, Any]
+    options: Mapping[str, Any]
+    package_version: str
+    created_at: str
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}, not {self.method!r}")
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {', '.join(MODELS)}, not {self.model!r}")
+        object.__setattr__(self, "metrics", _frozen(json_safe(self.metrics)))
+        object.__setattr__(self, "options", _frozen(json_safe(self.options)))
+
+    @property
+    def key(self) -> tuple[str, str, str]:
+        """``(recording_hash, method, model)``: unique in a database."""
+        return (self.recording_hash, self.method, self.model)
+
+
+def identified_uid(recording_hash: str, method: str, model: str) -> str:
+    """The uid of the trace identified by ``method``/``model`` from a recording."""
+    return f"{recording_hash[:12]}-{method}-{model}"
+
+
+def surrogate_uid(source_uid: str, kind: str, seed: int) -> str:
+    """The uid of surrogate number ``seed`` of kind ``kind`` made from ``source_uid``."""
+    return f"{source_uid}-{kind}-{seed}"
+
+
+@dataclass(frozen=True, eq=False)
+class TraceRow:
+    """One ``u_d`` trace: identified from a recording, or a surrogate of another trace.
+
+    Attributes
+    ----------
+    uid : str
+        Stable identity (see the module docstring).
+    recording_hash, method, model : str
+        The identification whose parameters go with it (for a surrogate:
+        its source's).
+    kind : str
+        ``identified``, ``iaaft`` or ``ar``.
+    source_uid : str or None
+        The trace a surrogate was made from; ``None`` for an identified one.
+    seed : int or None
+        The surrogate's seed.
+    settings : mapping
+        How it was made (JSON-safe).
+    dt_s : float
+        Δt over which each sample of ``u_d`` is held, s (eq. 44: 0.1).
+    t0_s : float
+        Start of the first interval, s (recording time).
+    u_d_deg : ndarray, shape (n,)
+        The trace, ° of equivalent fin angle.
+    checksum : str
+        :func:`checksum` of ``u_d_deg`` (checked on construction).
+    statistics : mapping
+        ``mean_deg``, ``sd_deg``, ``q05_deg``, ``q95_deg``, ``normality_p``
+        (Lilliefors on the thinned trace; ``None`` if it could not be computed).
+    validation : mapping or None
+        A surrogate's check against its source (:mod:`disturbances.surrogate`).
+    created_at : str
+        UTC, ISO 8601.
+    """
+
+    uid: str
+    recording_hash: str
+    method: str
+    model: str
+    kind: str
+    source_uid: str | None
+    seed: int | None
+    settings: Mapping[str, Any]
+    dt_s: float
+    t0_s: float
+    u_d_deg: FloatArray
+    checksum: str
+    statistics: Mapping[str, Any]
+    validation: Mapping[str, Any] | None
+    created_at: str = field(default="")
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"trace {self.uid}: kind must be one of {', '.join(KINDS)}")
+        if (self.kind == "identified") != (self.source_uid is None):
+            raise ValueError(f"trace {self.uid}: only a surrogate has a source trace")
+        object.__setattr__(self, "u_d_deg", readonly_array(self.u_d_deg))
+        if self.u_d_deg.ndim != 1 or self.u_d_deg.size < 2:
+            raise ValueError(f"trace {self.uid}: needs a 1-D trace of at least 2 samples")
+        if not np.all(np.isfinite(self.u_d_deg)):
+            raise ValueError(f"trace {self.uid}: has NaN or infinite samples")
+        if not (math.isfinite(self.dt_s) and self.dt_s > 0):
+            raise ValueError(f"trace {self.uid}: dt_s must be positive, got {self.dt_s!r}")
+        actual = checksum(self.u_d_deg)
+        if actual != self.checksum:
+            raise ValueError(
+                f"trace {self.uid}: checksum {self.checksum[:12]}… does not match its samples "
+                f"({actual[:12]}…)"
+            )
+        object.__setattr__(self, "settings", _frozen(json_safe(self.settings)))
+        object.__setattr__(self, "statistics", _frozen(json_safe(self.statistics)))
+        if self.validation is not None:
+            object.__setattr__(self, "validation", _frozen(json_safe(self.validation)))
+
+    @property
+    def identification_key(self) -> tuple[str, str, str]:
+        """``(recording_hash, method, model)`` of its parameters."""
+        return (self.recording_hash, self.method, self.model)
