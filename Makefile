@@ -33,8 +33,12 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll info $(DEMO)/tunnel-seed0.csv --plot $(DEMO)/tunnel-seed0.png
 	$(BIN)/rocketroll identify identification/data/tunnel-paper-seed0.csv \
 		--report $(DEMO)/identify-paper-seed0 --json $(DEMO)/identify-paper-seed0.json
-	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png and the"
-	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md"
+	$(BIN)/rocketroll db build
+	$(BIN)/rocketroll db list --kind identified --method paper
+	$(BIN)/rocketroll db show 2d68d98ae09b-paper-theta-iaaft-0 --plot $(DEMO)/surrogate.png
+	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
+	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md, and"
+	@echo "      $(DEMO)/surrogate.png; the default disturbance database is listed above"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

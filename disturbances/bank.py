@@ -169,8 +169,8 @@ class TraceBank:
         return tuple(self._params)
 
     def samples_for(self, duration_s: float) -> np.ndarray:
-        """Samples a window of ``duration_s`` takes in each trace."""
-        return np.ceil(duration_s / self._dts - 1e-9).astype(np.int64)
+        """Samples a window of ``duration_s`` takes in each trace (at least one)."""
+        return np.maximum(np.ceil(duration_s / self._dts - 1e-9), 1).astype(np.int64)
 
     def _plan(self, duration_s: float) -> tuple[np.ndarray, np.ndarray, int]:
         plan = self._plans.get(duration_s)
@@ -180,6 +180,8 @@ class TraceBank:
             offsets = np.maximum(self._sizes - lengths + 1, 0)
             cum = np.cumsum(offsets)
             plan = (cum, lengths, int(cum[-1]))
+            if len(self._plans) >= 64:  # callers use a few durations; keep the cache small
+                self._plans.clear()
             self._plans[duration_s] = plan
         return plan
 

@@ -138,14 +138,7 @@ def _cmd_list(ns: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UsageError(str(exc)) from None
         if ns.json:
-            from dataclasses import asdict
-
-            out = []
-            for info in infos:
-                d = asdict(info)
-                d["params"] = asdict(info.params)
-                out.append(d)
-            print(json.dumps(out, indent=2, allow_nan=False))
+            print(json.dumps([_info_json(i) for i in infos], indent=2, allow_nan=False))
             return 0
         counts = db.counts()
         print(
@@ -156,13 +149,22 @@ def _cmd_list(ns: argparse.Namespace) -> int:
     return 0
 
 
+def _info_json(info: TraceInfo) -> dict[str, Any]:
+    """A :class:`TraceInfo` as JSON-ready values."""
+    from dataclasses import asdict, fields
+
+    out: dict[str, Any] = {f.name: getattr(info, f.name) for f in fields(info)}
+    out["params"] = asdict(info.params)
+    out["validation"] = None if info.validation is None else dict(info.validation)
+    out["duration_s"] = info.duration_s
+    return out
+
+
 def _key(text: str) -> int | str:
     return int(text) if text.isdigit() else text
 
 
 def _cmd_show(ns: argparse.Namespace) -> int:
-    from dataclasses import asdict
-
     with _open(ns) as db:
         trace = db.trace(_key(ns.trace))
         info = trace.info
@@ -180,8 +182,7 @@ def _cmd_show(ns: argparse.Namespace) -> int:
             source = None if info.source_uid is None else db.trace(info.source_uid)
             write_atomic(ns.plot, plot_trace(trace, source))
     if ns.json:
-        d = asdict(info)
-        d["params"] = asdict(info.params)
+        d = _info_json(info)
         d["metrics"] = dict(ident.metrics)
         print(json.dumps(d, indent=2, allow_nan=False))
         return 0
@@ -205,6 +206,13 @@ def _cmd_show(ns: argparse.Namespace) -> int:
             else f"ᾱ = {p.alpha_bar_per_deg_s:.4f} 1/(s·°), β̄ = {p.beta_bar_per_s:.4f} 1/s"
         ),
     ]
+    if info.validation is not None:
+        v = info.validation
+        lines.append(
+            f"  validation   KS p = {v['ks_p']:.3g} (thinned every {v['stride']}), PSD "
+            f"log-distance {v['psd_log_distance']:.3f} decades (limit "
+            f"{v['psd_tolerance_decades']:g}): " + ("passed" if v["passed"] else "FAILED")
+        )
     m = ident.metrics
     if "resim_angle_mae_deg" in m:
         lines.append(
@@ -221,6 +229,10 @@ def _cmd_add(ns: argparse.Namespace) -> int:
     from identification.cli import identify_options
     from identification.recording import load_recording
 
+    if ns.surrogates < 0:
+        raise UsageError(f"--surrogates must be >= 0, got {ns.surrogates}")
+    if ns.surrogate_kind and ns.surrogates == 0:
+        raise UsageError("--surrogate-kind needs --surrogates N (how many of each kind)")
     options = identify_options(ns)
     recording = load_recording(ns.recording)
     methods = ("paper",) if ns.no_output_error else ("paper", "output-error")
@@ -245,6 +257,8 @@ def _cmd_add(ns: argparse.Namespace) -> int:
 def _cmd_surrogate(ns: argparse.Namespace) -> int:
     if ns.count < 1:
         raise UsageError(f"--count must be >= 1, got {ns.count}")
+    if ns.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {ns.seed}")
     with _open(ns) as db:
         uid = db.trace(_key(ns.trace)).info.uid
         result = db.add_surrogates(uid, ns.kind, ns.count, ns.seed)
@@ -274,9 +288,16 @@ def _cmd_import(ns: argparse.Namespace) -> int:
     from disturbances.exchange import import_export, read_export
 
     read_export(ns.folder)  # every file checked before the database is touched
-    with _open(ns, create=True) as db:
-        db.check_version(writing=True)
-        result = import_export(db, ns.folder)
+    new_file = ns.db is not None and not ns.db.exists()
+    try:
+        with _open(ns, create=True) as db:
+            db.check_version(writing=True)
+            result = import_export(db, ns.folder)
+    except BaseException:
+        if new_file:  # leave no empty database behind
+            for suffix in ("", "-wal", "-shm"):
+                Path(f"{ns.db}{suffix}").unlink(missing_ok=True)
+        raise
     print(
         f"imported {ns.folder}: {result.recordings} recordings, {result.identifications} "
         f"identifications, {result.traces} traces added; {result.skipped} already present"

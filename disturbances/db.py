@@ -244,6 +244,9 @@ class TraceInfo:
         The rocketroll version that identified it.
     created_at : str
         UTC, ISO 8601.
+    validation : mapping or None
+        A surrogate's check against its source (KS p-value, PSD
+        log-distance, ``passed``); ``None`` for an identified trace.
     """
 
     id: int
@@ -268,6 +271,7 @@ class TraceInfo:
     normality_p: float | None
     package_version: str
     created_at: str
+    validation: Mapping[str, Any] | None = None
 
     @property
     def duration_s(self) -> float:
@@ -903,7 +907,8 @@ class DisturbanceDB:
         "SELECT t.id, t.uid, t.kind, s.uid AS source_uid, t.seed, r.name AS recording, "
         "r.id AS recording_id, r.source, r.split, i.method, i.model, i.alpha, i.theta_bar_deg, "
         "i.beta_bar_per_s, i.alpha_bar_per_deg_s, t.dt_s, t.t0_s, t.n_samples, t.mean_deg, "
-        "t.sd_deg, t.q05_deg, t.q95_deg, t.normality_p, i.package_version, t.created_at "
+        "t.sd_deg, t.q05_deg, t.q95_deg, t.normality_p, i.package_version, t.created_at, "
+        "t.validation "
         "FROM traces t JOIN identifications i ON i.id = t.identification_id "
         "JOIN recordings r ON r.id = i.recording_id LEFT JOIN traces s ON s.id = t.source_trace_id"
     )
@@ -935,6 +940,9 @@ class DisturbanceDB:
             normality_p=r["normality_p"],
             package_version=r["package_version"],
             created_at=r["created_at"],
+            validation=None
+            if r["validation"] is None
+            else MappingProxyType(json.loads(r["validation"])),
         )
 
     _FILTERS: Mapping[str, tuple[str, tuple[str, ...] | None]] = {
@@ -1106,9 +1114,7 @@ class DisturbanceDB:
             ikey = (info.recording_id, info.method, info.model)
             if ikey not in idents:
                 idents[ikey] = self._identification_row(rec.content_hash, *ikey)
-            extra = self._query(
-                "SELECT settings, validation, checksum FROM traces WHERE id = ?", (info.id,)
-            )[0]
+            extra = self._query("SELECT settings, checksum FROM traces WHERE id = ?", (info.id,))[0]
             traces.append(
                 TraceRow(
                     uid=info.uid,
@@ -1130,9 +1136,7 @@ class DisturbanceDB:
                         "q95_deg": info.q95_deg,
                         "normality_p": info.normality_p,
                     },
-                    validation=None
-                    if extra["validation"] is None
-                    else json.loads(extra["validation"]),
+                    validation=None if info.validation is None else dict(info.validation),
                     created_at=info.created_at,
                 )
             )

@@ -38,7 +38,7 @@ from disturbances.db import SCHEMA_VERSION, DatabaseError, DisturbanceDB, packag
 from disturbances.rows import SURROGATE_KINDS
 from identification.bundled import bundled_paths
 from identification.pipeline import IdentifyOptions
-from identification.recording import load_recording
+from identification.recording import file_mode, load_recording
 
 __all__ = [
     "BUILD_RECIPE",
@@ -178,6 +178,7 @@ def build_database(
                     "recordings": json.dumps([f.name for f in files]),
                 }
             )
+        os.chmod(tmp, file_mode())  # mkstemp made it private
         _discard_journal(target)
         os.replace(tmp, target)
     finally:

@@ -356,6 +356,41 @@ def read_export(folder: str | os.PathLike[str]) -> Dump:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ExchangeError(f"{root / 'parameters.json'}: not valid JSON ({exc})") from None
 
+    try:
+        dump = _parse(root, fmt, params, contents)
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
+        raise ExchangeError(
+            f"{root}: parameters.json and the sample files disagree ({type(exc).__name__}: {exc})"
+        ) from None
+    _check_references(root, dump)
+    return dump
+
+
+def _check_references(root: Path, dump: Dump) -> None:
+    """An export is self-contained: everything a row refers to is in it."""
+    recordings = {r.content_hash for r in dump.recordings}
+    for i in dump.identifications:
+        if i.recording_hash not in recordings:
+            raise ExchangeError(
+                f"{root}: identification {i.method}/{i.model} refers to recording "
+                f"{i.recording_hash[:12]}…, which the export does not contain"
+            )
+    identifications = {i.key for i in dump.identifications}
+    uids: set[str] = set()
+    for t in dump.traces:
+        if t.identification_key not in identifications:
+            raise ExchangeError(
+                f"{root}: trace {t.uid} refers to an identification the export does not contain"
+            )
+        if t.source_uid is not None and t.source_uid not in uids:
+            raise ExchangeError(
+                f"{root}: surrogate {t.uid} refers to trace {t.source_uid}, which does not "
+                "come before it in the export"
+            )
+        uids.add(t.uid)
+
+
+def _parse(root: Path, fmt: str, params: Any, contents: Mapping[str, bytes]) -> Dump:
     # Samples by recording hash and by trace uid.
     rec_samples: dict[str, FloatArray] = {}
     trace_samples: dict[str, FloatArray] = {}

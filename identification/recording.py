@@ -543,10 +543,15 @@ def recording_text(recording: Recording) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _umask() -> int:
+def file_mode() -> int:
+    """The permissions a plain ``open()`` gives a new file (0o666 less the umask).
+
+    Files staged with :func:`tempfile.mkstemp` are 0o600; they get these
+    before they are renamed into place.
+    """
     mask = os.umask(0)
     os.umask(mask)
-    return mask
+    return 0o666 & ~mask
 
 
 def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> None:
@@ -578,7 +583,7 @@ def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> N
             with os.fdopen(fd, "wb") as handle:
                 handle.write(data.encode("utf-8") if isinstance(data, str) else data)
             # mkstemp makes 0600 files; give the permissions a plain open() would.
-            os.chmod(tmp, 0o666 & ~_umask())
+            os.chmod(tmp, file_mode())
         for tmp, target in staged:
             os.replace(tmp, target)
     finally:

@@ -1,0 +1,276 @@
+"""Speed of drawing an episode's ``u_d`` window from the disturbance database.
+
+The environment draws a 60-s window of ``u_d`` at every ``reset``; the need is
+one window in at most 100 µs once the traces are loaded (held in memory, no
+SQL per episode).  In one run, on the default database (built from the bundled
+recordings if missing; ``--db`` for another file), this measures:
+
+* the first load, ``TraceBank.from_db(db, split="train", method="paper",
+  model="theta", kind="identified")`` -- one SQL query and every trace's
+  checksum verified (reported, not judged);
+* ``bank.window(rng, 60.0)``: ``--draws`` draws timed in batches of
+  ``--batch``; the per-draw time of each batch (batch time / batch size) gives
+  the median, mean and 99th percentile, and the p99 is judged against the
+  100 µs target; ``--single`` more draws timed one by one show the tail of
+  single draws (p99, max; includes ~0.1 µs of timer overhead);
+* the named reference measured in the same run: the same draw done with SQL
+  per episode -- the same uniform choice of (trace, offset) from the same
+  generator, then ``db.trace(uid)`` (one query, checksum verified) and a
+  slice -- ``--sql-draws`` draws timed one by one, interleaved with the bank's
+  batches so that a busy spell of a shared machine slows both alike; the
+  ``x bank`` column is the ratio of medians.  The first windows of both are
+  compared to check that they are the same windows.
+
+Wall-clock times by :func:`time.perf_counter`.  The exit status is 0 whatever
+the timings unless ``--strict`` is given, when a missed target gives 1.
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/db_windows.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from disturbances.bank import TraceBank
+from disturbances.db import DatabaseError, DisturbanceDB, TraceInfo
+from disturbances.default import default_path, open_database
+from identification.recording import FloatArray
+
+TARGET_US = 100.0
+WINDOW_S = 60.0
+SELECTION = {"split": "train", "method": "paper", "model": "theta", "kind": "identified"}
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Per-draw wall-clock times of one task, µs."""
+
+    name: str
+    samples_us: tuple[float, ...]
+    draws: int
+
+    @property
+    def median_us(self) -> float:
+        return float(np.median(self.samples_us))
+
+    @property
+    def mean_us(self) -> float:
+        return float(np.mean(self.samples_us))
+
+    @property
+    def p99_us(self) -> float:
+        return float(np.percentile(self.samples_us, 99))
+
+    @property
+    def min_us(self) -> float:
+        return float(np.min(self.samples_us))
+
+    @property
+    def max_us(self) -> float:
+        return float(np.max(self.samples_us))
+
+
+class SqlWindows:
+    """The reference: the bank's choice of window, but the trace read by SQL each episode."""
+
+    def __init__(self, db: DisturbanceDB, infos: Sequence[TraceInfo], duration_s: float) -> None:
+        self.db = db
+        self.uids = [i.uid for i in infos]
+        sizes = np.array([i.n_samples for i in infos], dtype=np.int64)
+        dts = np.array([i.dt_s for i in infos])
+        # As TraceBank: whole samples on each trace's grid, uniform over (trace, offset).
+        self.lengths = np.ceil(duration_s / dts - 1e-9).astype(np.int64)
+        self.cum = np.cumsum(np.maximum(sizes - self.lengths + 1, 0))
+        self.total = int(self.cum[-1])
+
+    def window(self, rng: np.random.Generator) -> tuple[str, int, FloatArray]:
+        k = int(rng.integers(self.total))
+        i = int(np.searchsorted(self.cum, k, side="right"))
+        start = k - (int(self.cum[i - 1]) if i else 0)
+        trace = self.db.trace(self.uids[i])
+        return self.uids[i], start, trace.u_d_deg[start : start + int(self.lengths[i])]
+
+
+def check_same_windows(bank: TraceBank, sql: SqlWindows, seed: int, n: int = 20) -> None:
+    """Both draw the same windows from the same seed (else the comparison is unfair)."""
+    a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+    for _ in range(n):
+        w = bank.window(a, WINDOW_S)
+        uid, start, values = sql.window(b)
+        if (w.uid, w.start) != (uid, start) or not np.array_equal(w.u_d_deg, values):
+            raise SystemExit("the SQL reference drew other windows than the bank; fix the script")
+
+
+def verdict(p99_us: float) -> str:
+    return "PASS" if p99_us <= TARGET_US else "FAIL"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="benchmarks/db_windows.py",
+        description=(
+            f"Time TraceBank.window(rng, {WINDOW_S:g}) on the default disturbance database "
+            f"against a {TARGET_US:g} µs target, with the same draw done by SQL per episode "
+            "beside it."
+        ),
+    )
+    parser.add_argument(
+        "--draws", type=int, default=100_000, help="bank draws timed in batches (default 100000)"
+    )
+    parser.add_argument("--batch", type=int, default=1000, help="draws per batch (default 1000)")
+    parser.add_argument(
+        "--single", type=int, default=10_000, help="bank draws timed one by one (default 10000)"
+    )
+    parser.add_argument(
+        "--sql-draws", type=int, default=200, help="SQL-per-episode draws (default 200)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="generator seed (default 0)")
+    parser.add_argument(
+        "--db",
+        type=Path,
+        help="database file (default: the default database, built from the bundled recordings "
+        "if missing)",
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit with status 1 when the target is missed"
+    )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ns = build_parser().parse_args(argv)
+    for name in ("draws", "batch", "single", "sql_draws"):
+        if getattr(ns, name) < 1:
+            raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
+    if ns.draws < ns.batch:
+        raise SystemExit(f"--draws ({ns.draws}) must be at least --batch ({ns.batch})")
+
+    path = ns.db if ns.db is not None else default_path()
+    built = ns.db is None and not path.exists()
+    start = time.perf_counter()
+    try:
+        db = open_database(ns.db)
+    except DatabaseError as exc:
+        raise SystemExit(f"benchmarks/db_windows.py: {exc}") from None
+    open_ms = (time.perf_counter() - start) * 1e3
+
+    with db:
+        start = time.perf_counter()
+        try:
+            bank = TraceBank.from_db(db, **SELECTION)
+        except (ValueError, DatabaseError) as exc:
+            raise SystemExit(f"benchmarks/db_windows.py: {exc}") from None
+        load_ms = (time.perf_counter() - start) * 1e3
+        bank.require(WINDOW_S)
+        counts = db.counts()
+        sql = SqlWindows(db, [t.info for t in bank.traces], WINDOW_S)
+
+        print(
+            f"database {db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
+            f"{counts['surrogates']} surrogates"
+            + (f" (built now, {open_ms / 1e3:.1f} s)" if built else "")
+        )
+        nbytes = sum(t.u_d_deg.nbytes for t in bank.traces)
+        print(
+            f"selection {', '.join(f'{k}={v}' for k, v in SELECTION.items())}: {len(bank)} traces, "
+            f"{bank.total_duration_s:.0f} s, {nbytes / 1e6:.2f} MB in memory; "
+            f"{WINDOW_S:g}-s windows of {int(bank.samples_for(WINDOW_S)[0])} samples, "
+            f"{sql.total} possible"
+        )
+        print(
+            f"python {platform.python_version()}, numpy {np.__version__}, "
+            f"{os.cpu_count()} CPU(s), {platform.machine()}"
+        )
+
+        check_same_windows(bank, sql, ns.seed)
+        rng = np.random.default_rng(ns.seed)
+        sql_rng = np.random.default_rng(ns.seed + 1)
+        # First draws after the load (the bank plans the window length once).
+        start = time.perf_counter()
+        bank.window(rng, WINDOW_S)
+        first_draw_us = (time.perf_counter() - start) * 1e6
+        start = time.perf_counter()
+        sql.window(sql_rng)
+        first_sql_us = (time.perf_counter() - start) * 1e6
+
+        # Bank batches with the SQL draws spread evenly between them.
+        n_batches = ns.draws // ns.batch
+        window = bank.window
+        batch_us: list[float] = []
+        sql_us: list[float] = []
+        sql_done = 0
+        for b in range(n_batches):
+            t0 = time.perf_counter()
+            for _ in range(ns.batch):
+                window(rng, WINDOW_S)
+            batch_us.append((time.perf_counter() - t0) * 1e6 / ns.batch)
+            while sql_done < ns.sql_draws * (b + 1) // n_batches:
+                t0 = time.perf_counter()
+                sql.window(sql_rng)
+                sql_us.append((time.perf_counter() - t0) * 1e6)
+                sql_done += 1
+        single_us: list[float] = []
+        for _ in range(ns.single):
+            t0 = time.perf_counter()
+            window(rng, WINDOW_S)
+            single_us.append((time.perf_counter() - t0) * 1e6)
+
+    batches = Timing(f"bank.window, batches of {ns.batch}", tuple(batch_us), n_batches * ns.batch)
+    singles = Timing("bank.window, one at a time", tuple(single_us), ns.single)
+    reference = Timing("db.trace(uid) + slice (SQL)", tuple(sql_us), len(sql_us))
+
+    print()
+    print(
+        f"first load TraceBank.from_db: {load_ms:.1f} ms (open: {open_ms:.1f} ms); "
+        f"first draw after it: bank {first_draw_us:.1f} µs, SQL {first_sql_us:.0f} µs (untimed "
+        "below)"
+    )
+    header = (
+        f"{'task':34s} {'draws':>7s} {'median µs':>10s} {'mean µs':>9s} {'p99 µs':>9s} "
+        f"{'min µs':>8s} {'max µs':>9s} {'target µs':>10s} {'x bank':>8s}  verdict"
+    )
+    print()
+    print(header)
+    print("-" * len(header))
+
+    def row(t: Timing, judged: bool, note: str = "") -> None:
+        ratio = t.median_us / batches.median_us
+        target = f"{TARGET_US:10.0f}" if judged else f"{'-':>10s}"
+        mark = f"{verdict(t.p99_us)} (p99)" if judged else note
+        print(
+            f"{t.name:34s} {t.draws:7d} {t.median_us:10.2f} {t.mean_us:9.2f} {t.p99_us:9.2f} "
+            f"{t.min_us:8.2f} {t.max_us:9.2f} {target} {ratio:8.2f}  {mark}"
+        )
+
+    row(batches, True)
+    row(singles, False, "(tail; not judged)")
+    row(reference, False, "(reference)")
+    print()
+    print(
+        f"SQL per episode / bank: {reference.median_us / batches.median_us:.0f}x slower "
+        f"(medians); the bank's p99 is {batches.p99_us / TARGET_US:.1%} of the "
+        f"{TARGET_US:g} µs budget"
+    )
+    print(
+        "batch rows: statistics over the per-draw time of each batch; single and SQL rows: "
+        "over individually timed draws; SQL draws interleaved with the batches; same windows "
+        "checked for both on 20 draws"
+    )
+    missed = batches.p99_us > TARGET_US
+    print(f"missed target: {batches.name}" if missed else "target met")
+    return 1 if ns.strict and missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
