@@ -169,6 +169,13 @@ def _blob(values: FloatArray) -> bytes:
     return np.ascontiguousarray(values, dtype="<f8").tobytes()
 
 
+def _params(row: sqlite3.Row) -> RollParams:
+    """The roll parameters of an ``identifications`` row (or a join holding its columns)."""
+    return RollParams(
+        row["alpha"], row["theta_bar_deg"], row["beta_bar_per_s"], row["alpha_bar_per_deg_s"]
+    )
+
+
 def _nan_to_none(x: float | None) -> float | None:
     return None if x is None or not np.isfinite(x) else float(x)
 
@@ -892,9 +899,7 @@ class DisturbanceDB:
                 recording=r["recording_name"],
                 method=r["method"],
                 model=r["model"],
-                params=RollParams(
-                    r["alpha"], r["theta_bar_deg"], r["beta_bar_per_s"], r["alpha_bar_per_deg_s"]
-                ),
+                params=_params(r),
                 metrics=MappingProxyType(json.loads(r["metrics"])),
                 options=MappingProxyType(json.loads(r["options"])),
                 package_version=r["package_version"],
@@ -927,9 +932,7 @@ class DisturbanceDB:
             split=r["split"],
             method=r["method"],
             model=r["model"],
-            params=RollParams(
-                r["alpha"], r["theta_bar_deg"], r["beta_bar_per_s"], r["alpha_bar_per_deg_s"]
-            ),
+            params=_params(r),
             dt_s=r["dt_s"],
             t0_s=r["t0_s"],
             n_samples=r["n_samples"],
@@ -1157,9 +1160,7 @@ class DisturbanceDB:
             recording_hash=recording_hash,
             method=method,
             model=model,
-            params=RollParams(
-                r["alpha"], r["theta_bar_deg"], r["beta_bar_per_s"], r["alpha_bar_per_deg_s"]
-            ),
+            params=_params(r),
             metrics=json.loads(r["metrics"]),
             options=json.loads(r["options"]),
             package_version=r["package_version"],

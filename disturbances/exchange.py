@@ -27,6 +27,7 @@ adds everything in one transaction, recognising what the database already has.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import hashlib
 import io
 import json
@@ -76,15 +77,6 @@ def _sha256(data: bytes) -> str:
 # --------------------------------------------------------------------------- parameters
 
 
-def _params_dict(p: RollParams) -> dict[str, float]:
-    return {
-        "alpha": p.alpha,
-        "theta_bar_deg": p.theta_bar_deg,
-        "beta_bar_per_s": p.beta_bar_per_s,
-        "alpha_bar_per_deg_s": p.alpha_bar_per_deg_s,
-    }
-
-
 def _parameters(dump: Dump) -> dict[str, Any]:
     return {
         "recordings": [
@@ -105,7 +97,7 @@ def _parameters(dump: Dump) -> dict[str, Any]:
                 "recording_hash": i.recording_hash,
                 "method": i.method,
                 "model": i.model,
-                "params": _params_dict(i.params),
+                "params": dataclasses.asdict(i.params),
                 "metrics": dict(i.metrics),
                 "options": dict(i.options),
                 "package_version": i.package_version,
