@@ -244,7 +244,7 @@ def _cmd_add(ns: argparse.Namespace) -> int:
             surrogates=ns.surrogates,
             surrogate_kinds=tuple(ns.surrogate_kind or ["iaaft"]),
         )
-        if result.recordings == 0:
+        if result.recordings == 0 and result.traces == 0:
             print(f"{db.path}: {recording.name} is already stored (same samples); nothing added")
             return 0
         print(

@@ -588,7 +588,9 @@ class DisturbanceDB:
         traces of each kind in ``surrogate_kinds`` are made from each trace
         identified by the paper's method.  Nothing is written unless all of
         it succeeds.  A recording whose samples are already stored is
-        recognised (``StoreResult.recordings == 0``) and not identified again.
+        recognised (``StoreResult.recordings == 0``): it is not stored twice,
+        and identified again only for methods it lacks (e.g. the
+        output-error peer after an add with ``methods=("paper",)``).
 
         Parameters
         ----------
@@ -605,8 +607,13 @@ class DisturbanceDB:
         surrogate_seed : int
             Seed of the first surrogate (the next ones count up).
         """
-        existing = self._recording_id(content_hash(recording.columns()))
-        if existing is not None:
+        recording_hash = content_hash(recording.columns())
+        existing = self._recording_id(recording_hash)
+        if existing is not None and all(
+            self._identification_id(recording_hash, method, model) is not None
+            for method in methods
+            for model in MODELS
+        ):
             return StoreResult(existing, 0, 0, 0, 1, ())
         from identification.pipeline import identify
 

@@ -114,6 +114,18 @@ def test_surrogates_are_linked_to_their_source_and_validated(small_db: Path) -> 
         assert row.validation is not None and row.validation["passed"] is True
 
 
+def test_adding_again_fills_in_only_the_missing_methods(tmp_path: Path) -> None:
+    rec = load_bundled("tunnel-paper-seed0")
+    with DisturbanceDB(tmp_path / "db.sqlite") as db:
+        db.add_recording(rec, FAST, methods=("paper",))
+        paper = [t.uid for t in db.traces()]
+        more = db.add_recording(rec, FAST)  # now with the output-error peer too
+        assert (more.recordings, more.identifications, more.traces) == (0, 2, 2)
+        assert [t.uid for t in db.traces(method="paper")] == paper
+        assert len(db.recordings()) == 1
+        assert db.add_recording(rec, FAST).skipped == 1
+
+
 # --------------------------------------------------------------------------- split
 
 
