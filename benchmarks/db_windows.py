@@ -39,6 +39,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,12 @@ from identification.recording import FloatArray
 
 TARGET_US = 100.0
 WINDOW_S = 60.0
-SELECTION = {"split": "train", "method": "paper", "model": "theta", "kind": "identified"}
+SELECTION: dict[str, Any] = {
+    "split": "train",
+    "method": "paper",
+    "model": "theta",
+    "kind": "identified",
+}
 
 
 @dataclass(frozen=True)

@@ -96,8 +96,34 @@ class TraceBank:
         self._plans: dict[float, tuple[np.ndarray, np.ndarray, int]] = {}
 
     @classmethod
-    def from_db(cls, db: DisturbanceDB, **filters: Any) -> TraceBank:
-        """Load the traces matching ``filters`` (see :meth:`DisturbanceDB.traces`)."""
+    def from_db(
+        cls,
+        db: DisturbanceDB,
+        split: str,
+        *,
+        method: str = "paper",
+        model: str = "theta",
+        kind: str | Sequence[str] = "identified",
+        validated: bool = True,
+        **filters: Any,
+    ) -> TraceBank:
+        """Load the traces of one split (see :meth:`DisturbanceDB.traces` for ``filters``).
+
+        ``split`` is required, so a bank never mixes training and evaluation
+        disturbances.  The defaults select each recording once: the paper's
+        method, the θ-dependent model, identified traces (``kind="surrogate"``
+        for surrogates), and only surrogates that passed their check.
+        """
+        if split not in ("train", "test"):
+            raise ValueError(f"split must be 'train' or 'test', not {split!r}")
+        filters = {
+            "split": split,
+            "method": method,
+            "model": model,
+            "kind": kind,
+            "validated": validated,
+            **filters,
+        }
         infos = db.traces(**filters)
         described = ", ".join(f"{k}={v!r}" for k, v in filters.items() if v is not None)
         if not infos:

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -27,14 +30,35 @@ _DB_HELP = (
 
 
 def _open(ns: argparse.Namespace, *, create: bool = False) -> DisturbanceDB:
+    """``--db`` (or the default database), with a version notice as one stderr line."""
+    import warnings
+
     from disturbances.db import DisturbanceDB
     from disturbances.default import open_database
 
-    if ns.db is not None and create:
-        db = DisturbanceDB(ns.db, create=True)
-        db.check_version()
-        return db
-    return open_database(ns.db)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        if ns.db is not None and create:
+            db = DisturbanceDB(ns.db, create=True)
+            db.check_version()
+        else:
+            db = open_database(ns.db)
+    for warning in caught:
+        print(f"rocketroll: warning: {warning.message}", file=sys.stderr)
+    return db
+
+
+@contextmanager
+def _new_file_removed_on_error(path: Path | None) -> Iterator[None]:
+    """If ``path`` does not exist yet and the block fails, leave no database behind."""
+    new = path is not None and not path.exists()
+    try:
+        yield
+    except BaseException:
+        if new and path is not None:
+            for suffix in ("", "-wal", "-shm"):
+                Path(f"{path}{suffix}").unlink(missing_ok=True)
+        raise
 
 
 def _add_filters(p: argparse.ArgumentParser) -> None:
@@ -236,7 +260,7 @@ def _cmd_add(ns: argparse.Namespace) -> int:
     options = identify_options(ns)
     recording = load_recording(ns.recording)
     methods = ("paper",) if ns.no_output_error else ("paper", "output-error")
-    with _open(ns, create=True) as db:
+    with _new_file_removed_on_error(ns.db), _open(ns, create=True) as db:
         result = db.add_recording(
             recording,
             options,
@@ -265,7 +289,14 @@ def _cmd_surrogate(ns: argparse.Namespace) -> int:
         added = db.traces_by_uid([db.trace(i).info.uid for i in result.trace_ids])
     print(f"added {result.traces} {ns.kind} surrogate(s) of {uid} ({result.skipped} existed)")
     for info in added:
-        print(f"  {info.id:>4}  {info.uid}")
+        v = info.validation or {}
+        verdict = (
+            "check passed"
+            if v.get("passed")
+            else f"check FAILED (KS p {v.get('ks_p', float('nan')):.3g}, PSD log-distance "
+            f"{v.get('psd_log_distance', float('nan')):.3f}); left out of banks by default"
+        )
+        print(f"  {info.id:>4}  {info.uid}  {verdict}")
     return 0
 
 
@@ -288,16 +319,9 @@ def _cmd_import(ns: argparse.Namespace) -> int:
     from disturbances.exchange import import_export, read_export
 
     read_export(ns.folder)  # every file checked before the database is touched
-    new_file = ns.db is not None and not ns.db.exists()
-    try:
-        with _open(ns, create=True) as db:
-            db.check_version(writing=True)
-            result = import_export(db, ns.folder)
-    except BaseException:
-        if new_file:  # leave no empty database behind
-            for suffix in ("", "-wal", "-shm"):
-                Path(f"{ns.db}{suffix}").unlink(missing_ok=True)
-        raise
+    with _new_file_removed_on_error(ns.db), _open(ns, create=True) as db:
+        db.check_version(writing=True)
+        result = import_export(db, ns.folder)
     print(
         f"imported {ns.folder}: {result.recordings} recordings, {result.identifications} "
         f"identifications, {result.traces} traces added; {result.skipped} already present"
@@ -311,7 +335,7 @@ def _store_result(ns: argparse.Namespace, result: Identification) -> str | None:
         return None
     from disturbances.db import DisturbanceDB
 
-    with DisturbanceDB(ns.db, create=True) as db:
+    with _new_file_removed_on_error(ns.db), DisturbanceDB(ns.db, create=True) as db:
         stored = db.add_identification(result)
     if stored.recordings == 0 and stored.traces == 0:
         return f"{ns.db}: this recording is already stored (same samples); nothing added"

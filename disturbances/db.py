@@ -27,6 +27,7 @@ they are read.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import sqlite3
@@ -52,6 +53,7 @@ from disturbances.rows import (
     TraceRow,
     checksum,
     content_hash,
+    identified_uid,
 )
 from identification.errors import RocketrollError
 from identification.model import RollParams
@@ -419,6 +421,8 @@ class DisturbanceDB:
         if path.exists():
             if not path.is_file():
                 raise self._fail("is not a file")
+            if not create and path.stat().st_size == 0:
+                raise self._fail("is empty, not a database (build one with `rocketroll db build`)")
             problem = _header_problem(path)
             if problem:
                 raise self._fail(f"{problem}; not a usable rocketroll disturbance database")
@@ -440,28 +444,44 @@ class DisturbanceDB:
             raise
         return conn
 
+    @staticmethod
+    def _tables(conn: sqlite3.Connection) -> set[str]:
+        rows = conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
+        return {r[0] for r in rows}
+
     def _configure(self, conn: sqlite3.Connection) -> None:
         conn.execute("PRAGMA foreign_keys = ON")
         version = int(conn.execute("PRAGMA user_version").fetchone()[0])
         app = int(conn.execute("PRAGMA application_id").fetchone()[0])
-        tables = {
-            r[0]
-            for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
-        }
+        tables = self._tables(conn)
         if version == 0 and app == 0 and not tables:
-            conn.execute("PRAGMA journal_mode = WAL")
+            # A new file.  Another process may be creating it too: decide under the
+            # write lock, and only one of them makes the schema.
             conn.execute("BEGIN IMMEDIATE")
-            for statement in _SCHEMA.split(";"):
-                if statement.strip():
-                    conn.execute(statement)
-            conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
-            conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
-            conn.executemany(
-                "INSERT INTO info (key, value) VALUES (?, ?)",
-                [("created_by", package_version()), ("created_at", now()), ("origin", "user")],
-            )
-            conn.execute("COMMIT")
-            return
+            try:
+                version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+                app = int(conn.execute("PRAGMA application_id").fetchone()[0])
+                tables = self._tables(conn)
+                if version == 0 and app == 0 and not tables:
+                    for statement in _SCHEMA.split(";"):
+                        if statement.strip():
+                            conn.execute(statement)
+                    conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+                    conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                    conn.executemany(
+                        "INSERT INTO info (key, value) VALUES (?, ?)",
+                        [
+                            ("created_by", package_version()),
+                            ("created_at", now()),
+                            ("origin", "user"),
+                        ],
+                    )
+                    version, app, tables = SCHEMA_VERSION, APPLICATION_ID, set(_TABLES)
+                conn.execute("COMMIT")
+            except BaseException:
+                if conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                raise
         if app != APPLICATION_ID:
             raise self._fail(
                 "an SQLite database, but not a rocketroll disturbance database "
@@ -475,7 +495,8 @@ class DisturbanceDB:
         if version < SCHEMA_VERSION:
             raise self._fail(
                 f"schema version {version} is older than this rocketroll's ({SCHEMA_VERSION}); "
-                "rebuild it with `rocketroll db build --force`"
+                f"rebuild it (`rocketroll db build --db {self.path} --force` for a bundled "
+                "build) or export it with the older rocketroll and import it into a new file"
             )
         missing = set(_TABLES) - tables
         if missing:
@@ -500,6 +521,17 @@ class DisturbanceDB:
         """Turn SQLite's errors into a :class:`DatabaseError` naming the file."""
         try:
             yield
+        except sqlite3.OperationalError as exc:
+            text = str(exc)
+            if "locked" in text or "busy" in text:
+                raise self._fail(
+                    f"busy: another process kept it locked for {BUSY_TIMEOUT_S:g} s ({text})"
+                ) from None
+            if "readonly" in text:
+                raise self._fail(f"cannot write: {text}") from None
+            raise self._fail(f"damaged or unreadable ({text})") from None
+        except sqlite3.IntegrityError as exc:
+            raise self._fail(f"refused by the schema's constraints ({exc})") from None
         except sqlite3.DatabaseError as exc:
             raise self._fail(f"damaged or unreadable ({exc})") from None
         except sqlite3.Error as exc:
@@ -513,7 +545,8 @@ class DisturbanceDB:
             try:
                 yield self._conn
             except BaseException:
-                self._conn.execute("ROLLBACK")
+                if self._conn.in_transaction:  # SQLite may have rolled back already
+                    self._conn.execute("ROLLBACK")
                 raise
             self._conn.execute("COMMIT")
 
@@ -563,8 +596,8 @@ class DisturbanceDB:
         )
         if writing:
             raise DatabaseError(
-                f"{message}: adding to it would mix two versions' results; rebuild it "
-                "(`rocketroll db build --db PATH --force`) or use a new file"
+                f"{message}: adding to it would mix two versions' results; add to a new "
+                "database file instead (`--db NEW.sqlite`)"
             )
         warnings.warn(message, UserWarning, stacklevel=2)
 
@@ -614,7 +647,18 @@ class DisturbanceDB:
             for method in methods
             for model in MODELS
         ):
-            return StoreResult(existing, 0, 0, 0, 1, ())
+            if surrogates == 0:
+                return StoreResult(existing, 0, 0, 0, 1, ())
+            # Everything identified already: only the surrogates asked for are new.
+            from disturbances.ingest import surrogate_rows
+
+            self.check_version(writing=True)
+            made: list[TraceRow] = []
+            for model in MODELS:
+                source = self.dump_trace(identified_uid(recording_hash, "paper", model))
+                made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
+            stored = self.store(None, [], made)
+            return dataclasses.replace(stored, recording_id=existing, skipped=stored.skipped + 1)
         from identification.pipeline import identify
 
         result = identify(recording, options)
@@ -640,10 +684,25 @@ class DisturbanceDB:
 
         self.check_version(writing=True)
         recording, identifications, traces = identification_rows(result, methods)
+        if self._recording_id(recording.content_hash) is not None:
+            # Partly stored already: new identifications must be made like the stored
+            # ones, and surrogates come from the stored traces, never from new twins.
+            stored_options = {
+                json.dumps(dict(i.options), sort_keys=True)
+                for i in self.identifications(recording_hash=recording.content_hash)
+            }
+            options = json.dumps(dict(identifications[0].options), sort_keys=True)
+            if stored_options and stored_options != {options}:
+                raise self._fail(
+                    f"recording {recording.name} is stored with other identification options; "
+                    "add it to a new database to identify it differently"
+                )
         made: list[TraceRow] = []
         for trace in traces:
             if trace.method == "paper":
-                made += surrogate_rows(trace, surrogate_kinds, surrogates, surrogate_seed)
+                stored_uid = self._trace_id(trace.uid)
+                source = trace if stored_uid is None else self.dump_trace(trace.uid)
+                made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
         return self.store(recording, identifications, [*traces, *made])
 
     def add_surrogates(
@@ -893,7 +952,9 @@ class DisturbanceDB:
 
     def identifications(self, **filters: Any) -> list[IdentificationInfo]:
         """Stored identifications; filters ``method``, ``model``, ``recording`` (name)."""
-        where, params = self._where(filters, allowed=("method", "model", "recording"))
+        where, params = self._where(
+            filters, allowed=("method", "model", "recording", "recording_hash")
+        )
         rows = self._query(
             "SELECT i.*, r.name AS recording_name FROM identifications i "
             f"JOIN recordings r ON r.id = i.recording_id {where} ORDER BY i.id",
@@ -950,9 +1011,7 @@ class DisturbanceDB:
             normality_p=r["normality_p"],
             package_version=r["package_version"],
             created_at=r["created_at"],
-            validation=None
-            if r["validation"] is None
-            else MappingProxyType(json.loads(r["validation"])),
+            validation=None if r["validation"] is None else json.loads(r["validation"]),
         )
 
     _FILTERS: Mapping[str, tuple[str, tuple[str, ...] | None]] = {
@@ -962,6 +1021,7 @@ class DisturbanceDB:
         "kind": ("t.kind", (*KINDS, "surrogate")),
         "source": ("r.source", ("synthetic", "wind-tunnel", "flight")),
         "recording": ("r.name", None),
+        "recording_hash": ("r.content_hash", None),
     }
 
     def _where(self, filters: Mapping[str, Any], allowed: Sequence[str]) -> tuple[str, list[Any]]:
@@ -976,6 +1036,12 @@ class DisturbanceDB:
                 for mkey, mvalue in dict(value).items():
                     clauses.append("json_extract(r.metadata, ?) = ?")
                     params += [f'$."{mkey}"', str(mvalue)]
+                continue
+            if key == "validated":
+                if key not in allowed:
+                    raise ValueError(f"unknown filter {key!r}")
+                passed = "(t.validation IS NULL OR json_extract(t.validation, '$.passed') = 1)"
+                clauses.append(passed if value else f"NOT {passed}")
                 continue
             if key == "min_duration_s":
                 if key not in allowed:
@@ -1005,6 +1071,7 @@ class DisturbanceDB:
         "recording",
         "metadata",
         "min_duration_s",
+        "validated",
     )
 
     def traces(self, **filters: Any) -> list[TraceInfo]:
@@ -1014,8 +1081,10 @@ class DisturbanceDB:
         ``model`` (constant, theta), ``method`` (paper, output-error),
         ``kind`` (identified, iaaft, ar, or ``surrogate`` for both), ``source``
         (synthetic, wind-tunnel, flight), ``recording`` (name); ``metadata``
-        (a mapping of the recording's metadata keys to required values) and
-        ``min_duration_s``.  An unknown filter or value is a ``ValueError``.
+        (a mapping of the recording's metadata keys to required values),
+        ``min_duration_s``, and ``validated`` (``True``: identified traces and
+        surrogates that passed their check; ``False``: surrogates that failed).
+        An unknown filter or value is a ``ValueError``.
         """
         where, params = self._where(filters, allowed=self.TRACE_FILTERS)
         rows = self._query(f"{self._TRACE_SELECT} {where} ORDER BY t.id", params)
@@ -1112,7 +1181,8 @@ class DisturbanceDB:
             pending = [
                 i.source_uid for i in by_uid.values() if i.source_uid and i.source_uid not in by_uid
             ]
-        ordered = sorted(by_uid.values(), key=lambda i: (i.source_uid is not None, i.id))
+        # By uid, sources first: the same selection exports the same bytes from any database.
+        ordered = sorted(by_uid.values(), key=lambda i: (i.source_uid is not None, i.uid))
         recordings: dict[int, RecordingRow] = {}
         idents: dict[tuple[int, str, str], IdentificationRow] = {}
         traces: list[TraceRow] = []

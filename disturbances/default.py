@@ -31,7 +31,8 @@ import json
 import os
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 from disturbances.db import SCHEMA_VERSION, DatabaseError, DisturbanceDB, package_version
@@ -201,7 +202,32 @@ def open_default(*, progress: bool | None = None) -> DisturbanceDB:
     """
     path = default_path()
     show = sys.stderr.isatty() if progress is None else progress
-    if not path.exists():
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _build_lock(path):
+        return _open_or_build(path, show)
+
+
+@contextmanager
+def _build_lock(path: Path) -> Iterator[None]:
+    """One process at a time checks, builds or replaces the default database.
+
+    Others wait, then find it built.  (POSIX ``flock``; elsewhere no lock.)
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    with open(f"{path}.lock", "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
+    if not path.exists() or path.stat().st_size == 0:
         print(
             f"rocketroll: building the default disturbance database at {path} "
             "from the bundled recordings (once)",

@@ -484,4 +484,12 @@ def _parse(root: Path, fmt: str, params: Any, contents: Mapping[str, bytes]) -> 
 def import_export(db: DisturbanceDB, folder: str | os.PathLike[str]) -> StoreResult:
     """Import an export folder into ``db`` in one transaction (present rows are skipped)."""
     dump = read_export(folder)
+    versions = set(db.versions()) | {i.package_version for i in dump.identifications}
+    if len(versions) > 1:
+        raise ExchangeError(
+            f"{folder}: holds identifications of rocketroll "
+            f"{', '.join(sorted({i.package_version for i in dump.identifications}))}; importing "
+            f"into {db.path} would mix versions {', '.join(sorted(versions))}; import into a new "
+            "database file instead"
+        )
     return db.store(None, dump.identifications, dump.traces, recordings=dump.recordings)

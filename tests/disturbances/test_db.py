@@ -449,3 +449,107 @@ def test_info_records_the_recipe(small_db: Path) -> None:
     assert info["origin"] == "user"  # not the default recipe: never rebuilt silently
     assert json.loads(info["recordings"]) == [f"{n}.csv" for n in SMALL]
     assert len(info["fingerprint"]) == 64
+
+
+# --------------------------------------------------------------------------- review findings
+
+
+def test_adding_again_never_pairs_a_surrogate_with_a_new_twin(tmp_path: Path) -> None:
+    rec = load_bundled("tunnel-paper-seed0")
+    with DisturbanceDB(tmp_path / "db.sqlite") as db:
+        db.add_recording(rec, FAST, methods=("paper",))
+        before = file_digest_open(db)
+        other = dataclasses.replace(FAST, ud_interval_s=0.2)
+        with pytest.raises(DatabaseError, match="stored with other identification options"):
+            db.add_recording(rec, other, surrogates=1)
+        assert file_digest_open(db) == before
+        # With the same options, surrogates come from the stored traces.
+        added = db.add_recording(rec, FAST, surrogates=1)
+        assert added.identifications == 2  # the output-error peer was missing
+        for info in db.traces(kind="iaaft"):
+            source = db.trace(info.source_uid or "")
+            trace = db.trace(info.uid)
+            assert trace.dt_s == source.dt_s
+            np.testing.assert_array_equal(np.sort(trace.u_d_deg), np.sort(source.u_d_deg))
+        # Everything stored: asking for more surrogates makes only those.
+        more = db.add_recording(rec, FAST, surrogates=2)
+        assert (more.recordings, more.identifications, more.traces) == (0, 0, 2)
+
+
+def file_digest_open(db: DisturbanceDB) -> list[tuple[object, ...]]:
+    """The rows of every table (a database that is still open cannot be hashed as a file)."""
+    out: list[tuple[object, ...]] = []
+    for table in ("recordings", "identifications", "traces", "info"):
+        out += [tuple(r) for r in db._query(f"SELECT * FROM {table} ORDER BY 1")]
+    return out
+
+
+CREATOR = textwrap.dedent(
+    """
+    import sys
+    from disturbances.db import DisturbanceDB
+    with DisturbanceDB(sys.argv[1]) as db:
+        print(db.counts()["recordings"], flush=True)
+    """
+)
+
+
+def test_processes_creating_one_new_database_at_once(tmp_path: Path) -> None:
+    path = tmp_path / "new.sqlite"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", CREATOR, str(path)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for _ in range(4)
+    ]
+    results = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0, 0], results
+    assert [out.strip() for out, _ in results] == ["0"] * 4
+    with DisturbanceDB(path, create=False) as db:
+        assert db.counts()["recordings"] == 0
+
+
+def test_an_empty_file_is_not_taken_for_a_database_when_reading(tmp_path: Path) -> None:
+    path = tmp_path / "empty.sqlite"
+    path.write_bytes(b"")
+    with pytest.raises(DatabaseError, match="is empty, not a database"):
+        DisturbanceDB(path, create=False)
+    assert path.read_bytes() == b""
+
+
+def test_validated_filter_separates_failed_surrogates(db_copy: Path) -> None:
+    with DisturbanceDB(db_copy, create=False) as db:
+        (uid,) = [t.uid for t in db.traces(kind="iaaft", split="train", model="theta")]
+    conn = sqlite3.connect(db_copy)
+    validation = json.loads(
+        conn.execute("SELECT validation FROM traces WHERE uid = ?", (uid,)).fetchone()[0]
+    )
+    validation["passed"] = False
+    conn.execute("UPDATE traces SET validation = ? WHERE uid = ?", (json.dumps(validation), uid))
+    conn.commit()
+    conn.close()
+    with DisturbanceDB(db_copy, create=False) as db:
+        assert [t.uid for t in db.traces(validated=False)] == [uid]
+        good = db.traces(validated=True)
+        assert uid not in {t.uid for t in good} and len(good) == len(db.traces()) - 1
+
+
+def test_import_refuses_to_mix_versions(db_copy: Path, tmp_path: Path) -> None:
+    from disturbances.exchange import ExchangeError, import_export, write_export
+
+    with DisturbanceDB(db_copy, create=False) as db:
+        write_export(db, tmp_path / "export", "npz", split="test")
+    mark_old(db_copy)
+    target = tmp_path / "target.sqlite"
+    with DisturbanceDB(target) as db:
+        db.add_recording(load_bundled("tunnel-paper-seed1"), FAST, methods=("paper",))
+        mark_old(target)  # the target now holds 0.0.1 results only
+    before = file_digest(target)
+    with DisturbanceDB(target, create=False) as db, pytest.raises(ExchangeError, match="mix"):
+        import_export(db, tmp_path / "export")
+    assert file_digest(target) == before

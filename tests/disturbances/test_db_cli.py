@@ -554,3 +554,40 @@ def test_opening_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
         str(other),
         "not a rocketroll disturbance database",
     )
+
+
+def test_failed_identification_into_a_new_database_leaves_no_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import numpy as np
+
+    from identification.recording import Recording, save_recording
+
+    t = np.arange(0, 60, 0.1)
+    one_step = Recording(
+        name="one-step",
+        source="wind-tunnel",
+        time_s=t,
+        fin_cmd_deg=np.where(t < 30, 0.0, 10.0),
+        roll_deg=3.0 * t,
+    )
+    rec = tmp_path / "one-step.csv"
+    save_recording(one_step, rec)
+    new = tmp_path / "new.sqlite"
+    fails(["db", "add", str(rec), "--db", str(new), "--mc-runs", "0"], capsys, "fin step")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one-step.csv"]
+
+
+def test_the_identification_layer_imports_nothing_above_it() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, identification.cli, identification.pipeline, identification.report\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('disturbances', 'rollenv', 'agents', 'rocketroll')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip() == "[]"
