@@ -117,7 +117,7 @@ def _trace_table(infos: list[TraceInfo]) -> str:
 
 
 def _cmd_build(ns: argparse.Namespace) -> int:
-    from disturbances.db import DisturbanceDB
+    from disturbances.db import DatabaseError, DisturbanceDB
     from disturbances.default import (
         DEFAULT_SURROGATES,
         _expected_fingerprint,
@@ -130,8 +130,11 @@ def _cmd_build(ns: argparse.Namespace) -> int:
         raise UsageError(f"--surrogates must be >= 0, got {ns.surrogates}")
     default_recipe = not ns.recordings and ns.surrogates == DEFAULT_SURROGATES
     if path.exists() and not ns.force:
-        with DisturbanceDB(path, create=False) as db:
-            info = db.info()
+        try:
+            with DisturbanceDB(path, create=False) as db:
+                info = db.info()
+        except DatabaseError as exc:
+            raise UsageError(f"{exc}; give --force to replace it") from None
         if info.get("origin") != "bundled":
             raise UsageError(
                 f"{path}: exists and is not a default build (it holds data added by hand or "

@@ -591,3 +591,12 @@ def test_the_identification_layer_imports_nothing_above_it() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout
     assert out.strip() == "[]"
+
+
+def test_build_over_a_file_that_is_not_a_database_asks_for_force(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "notes.sqlite"
+    path.write_text("not a database\n")
+    fails(["db", "build", "--db", str(path)], capsys, str(path), "--force")
+    assert path.read_text() == "not a database\n"
