@@ -94,6 +94,7 @@ class TraceBank:
         self._params = [t.info.params for t in self.traces]
         self._sizes = np.array([a.size for a in self._arrays], dtype=np.int64)
         self._plans: dict[float, tuple[np.ndarray, np.ndarray, int]] = {}
+        self._flat: tuple[FloatArray, np.ndarray] | None = None
 
     @classmethod
     def from_db(
@@ -240,6 +241,30 @@ class TraceBank:
             dt_s=float(self._dts[i]),
             params=self._params[i],
         )
+
+    def draw(
+        self, rng: np.random.Generator, duration_s: float, size: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``size`` windows at once, drawn as :meth:`window` does: ``(trace, start)`` arrays.
+
+        One ``rng.integers`` call for all of them, so a batch of environments
+        resets without a Python loop.
+        """
+        cum, _, total = self._plan(duration_s)
+        k = rng.integers(total, size=size)
+        i = np.searchsorted(cum, k, side="right")
+        start = k - np.where(i > 0, cum[np.maximum(i - 1, 0)], 0)
+        return i.astype(np.int64), start.astype(np.int64)
+
+    def concatenated(self) -> tuple[FloatArray, np.ndarray]:
+        """All traces end to end and the index where each begins (for batched replay)."""
+        if self._flat is None:
+            flat = np.concatenate(self._arrays) if len(self._arrays) > 1 else self._arrays[0]
+            offsets = np.concatenate([[0], np.cumsum(self._sizes)[:-1]]).astype(np.int64)
+            flat = np.array(flat, dtype=np.float64)
+            flat.flags.writeable = False
+            self._flat = (flat, offsets)
+        return self._flat
 
     def at(self, trace: int, start: int, duration_s: float) -> Window:
         """A given window (``trace`` index, ``start`` sample): for replays and evaluation."""

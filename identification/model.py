@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,6 +58,7 @@ __all__ = [
     "Servo",
     "SimResult",
     "damping",
+    "piece_coefficients",
     "roll_coefficients",
     "roll_step",
     "servo_path",
@@ -273,29 +275,57 @@ def servo_path(command_deg: ArrayLike, theta0_deg: float, dt_s: float, servo: Se
     return out
 
 
-def _phi_functions(z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """``e^z``, ``φ1(z) = (e^z-1)/z`` and ``φ2(z) = (e^z-1-z)/z²``, stable near 0."""
+def select(condition: Any, if_true: Any, if_false: Any) -> Any:
+    """``np.where``; the environment's compiled kernel gives numba a scalar ``if`` for it."""
+    return np.where(condition, if_true, if_false)
+
+
+def piece_coefficients(
+    alpha: Any,
+    theta_bar_deg: Any,
+    beta_bar_per_s: Any,
+    alpha_bar_per_deg_s: Any,
+    theta0_deg: Any,
+    theta1_deg: Any,
+    u_d_deg: Any,
+    h_s: Any,
+) -> tuple[Any, Any, Any, Any]:
+    """Affine update over one piece with the fin linear from θ0 to θ1 (``h_s`` may be 0).
+
+    The closed form of the module docstring, and the only place it is
+    written.  It takes plain numbers or arrays (the parameters spelled out,
+    not a :class:`RollParams`) and uses only arithmetic and numpy ufuncs, so
+    the same source runs vectorised here and compiled by numba in the
+    environment's per-env kernel (:mod:`rollenv.core`).
+
+    Returns ``E, c, A, B`` with ``v1 = E·v0 + c`` and ``φ1 = φ0 + A·v0 + B``.
+    """
+    a = alpha_bar_per_deg_s * np.abs(0.5 * (theta0_deg + theta1_deg) + theta_bar_deg)
+    a = a + beta_bar_per_s  # damping a(θ) at the piece's mean fin angle (eq. 48)
+    z = -a * h_s
+    # e^z, φ1(z) = (e^z-1)/z and φ2(z) = (e^z-1-z)/z², stable near 0.
+    em1 = np.expm1(z)
+    e = 1.0 + em1
     small = np.abs(z) < 1e-4
-    zs = np.where(small, 1.0, z)  # avoid 0/0 in the branch that is not used
-    em1 = np.expm1(zs)
-    phi1 = np.where(small, 1.0 + z / 2.0 + z * z / 6.0, em1 / zs)
-    phi2 = np.where(small, 0.5 + z / 6.0 + z * z / 24.0, (em1 - zs) / (zs * zs))
-    return np.exp(z), phi1, phi2
+    inv = 1.0 / select(small, 1.0, z)  # no 0/0 in the branch that is not used
+    phi1 = select(small, 1.0 + z / 2.0 + z * z / 6.0, em1 * inv)
+    phi2 = select(small, 0.5 + z / 6.0 + z * z / 24.0, (em1 - z) * inv * inv)
+    g0 = alpha * (theta0_deg + theta_bar_deg + u_d_deg)
+    sh = alpha * (theta1_deg - theta0_deg)  # s·h: equilibrium-rate change over the piece, °/s
+    c = (1.0 - e) * g0 + sh * a * h_s * phi2
+    big_a = h_s * phi1
+    big_b = g0 * h_s * (1.0 - phi1) + sh * h_s * (0.5 - phi2)
+    return e, c, big_a, big_b
 
 
 def _piece(
     params: RollParams, theta0: FloatArray, theta1: FloatArray, u_d: FloatArray, h: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Affine update over one piece with the fin linear from θ0 to θ1 (h may be 0)."""
-    a = damping(params, 0.5 * (theta0 + theta1))
-    z = -a * h
-    e, phi1, phi2 = _phi_functions(z)
-    g0 = params.alpha * (theta0 + params.theta_bar_deg + u_d)
-    sh = params.alpha * (theta1 - theta0)  # s·h: equilibrium-rate change over the piece, °/s
-    c = (1.0 - e) * g0 + sh * a * h * phi2
-    big_a = h * phi1
-    big_b = g0 * h * (1.0 - phi1) + sh * h * (0.5 - phi2)
-    return e, c, big_a, big_b
+    """:func:`piece_coefficients` for a :class:`RollParams`."""
+    p = params
+    return piece_coefficients(
+        p.alpha, p.theta_bar_deg, p.beta_bar_per_s, p.alpha_bar_per_deg_s, theta0, theta1, u_d, h
+    )
 
 
 def roll_coefficients(

@@ -1,0 +1,59 @@
+"""Loading the disturbance traces an environment replays (through the database API only)."""
+
+from __future__ import annotations
+
+import difflib
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+from disturbances.bank import TraceBank
+from disturbances.default import open_database
+from rollenv.core import RollConfig, config_fields
+
+__all__ = ["load_bank", "make_config"]
+
+_CACHE: dict[tuple[Any, ...], TraceBank] = {}
+_LOCK = threading.Lock()
+
+
+def make_config(env_id: str, settings: dict[str, Any]) -> RollConfig:
+    """``RollConfig(**settings)``, with an unknown name rejected by name (and a suggestion)."""
+    known = config_fields()
+    for name in settings:
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ValueError(
+                f"{env_id}: unknown option {name!r}{hint}; the options are: "
+                f"{', '.join(known)}, and bank, db, render_mode"
+            )
+    return RollConfig(**settings)
+
+
+def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
+    """The traces ``config`` asks for, from ``db`` (default: the default database).
+
+    Identified traces for ``disturbance="replay"`` (and ``"none"``, which
+    still takes the rocket's parameters from them), validated surrogates for
+    ``"surrogate"``; the paper's method; ``config.model``; ``config.split``.
+    Banks are cached per file state and selection, so a vector of
+    environments in one process loads the traces once.
+    """
+    kind = "surrogate" if config.disturbance == "surrogate" else "identified"
+    database = open_database(None if db is None else Path(db))
+    try:
+        path = Path(database.path).resolve()
+        stat = path.stat()
+        key = (str(path), stat.st_mtime_ns, stat.st_size, config.split, config.model, kind)
+        with _LOCK:
+            bank = _CACHE.get(key)
+            if bank is None:
+                bank = TraceBank.from_db(database, config.split, model=config.model, kind=kind)
+                if len(_CACHE) >= 16:
+                    _CACHE.clear()
+                _CACHE[key] = bank
+    finally:
+        database.close()
+    return bank

@@ -1,0 +1,722 @@
+"""The pure core shared by :class:`~rollenv.env.RocketRollEnv` and the vector envs.
+
+Two layers, as in Gymnasium's ``phys2d`` and gymnax:
+
+* :class:`RollConfig` -- a frozen dataclass of every setting (task, timing,
+  servo, sensors, disturbance, reward), validated once.
+* :func:`step_kernel` / :func:`observe_kernel` -- compiled (numba) functions
+  of plain arrays that advance any number of environments by one control
+  step and compute what their sensors read.  They hold no state and draw no
+  random numbers: the caller passes the Gaussian draws in, so every source
+  of randomness stays in the environment's ``np_random``.
+
+:class:`RollBatch` is the state of a batch (arrays of length ``n``) with
+``reset`` and ``step``; the single environment is a batch of one, the vector
+environment a batch of ``num_envs``, and the Stable-Baselines3 adapter of the
+agents layer another thin shell over it.
+
+Physics
+-------
+Each control step of ``dt_s`` (0.1 s) is ``dt_s / substep_s`` substeps of the
+paper's δt = 0.01 s.  The fin command is held over the control step; on each
+substep the servo moves the fin toward it by at most ``rate_limit·δt``
+(eq. 23) within ±``range``, and the fin is linear within the substep -- the
+fin-angle model of identification step 5 on its fine grid.  Over a substep
+the roll model (eq. 36/49) is advanced by the exact update of
+:func:`identification.model.piece_coefficients`, the one closed form of the
+project, compiled here by numba: ``u_d`` is held on its own grid, ``a(θ)`` is
+taken at the substep's mean fin angle.  Consecutive substeps with the fin at
+rest and the same ``u_d`` are merged into one piece, which is exact.  This is
+the computation of the identification's re-simulation (step 9), so a replay
+reproduces it to rounding.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numba
+import numba.extending
+import numpy as np
+from numpy.typing import NDArray
+
+from disturbances.bank import TraceBank
+from identification import model
+from identification.model import RollParams, Servo, piece_coefficients
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+__all__ = [
+    "DISTURBANCES",
+    "OBSERVATION_NAMES",
+    "SETPOINTS",
+    "TASKS",
+    "RollBatch",
+    "RollConfig",
+    "observation_bounds",
+]
+
+TASKS = ("angle", "rate")
+DISTURBANCES = ("replay", "surrogate", "none")
+MODELS = ("theta", "constant")
+SETPOINTS = ("steps", "zero")
+SPLITS = ("train", "test")
+
+#: Names and units of the observation's entries, in order.
+OBSERVATION_NAMES = (
+    "tracking_error",  # ° (angle task, wrapped to ±180°) or °/s (rate task)
+    "roll_rate_dps",  # measured roll rate, °/s
+    "fin_deg",  # actual fin angle, °
+    "fin_cmd_deg",  # last fin command, °
+)
+
+
+@dataclass(frozen=True)
+class RollConfig:
+    """Every setting of a RocketRoll environment (see :class:`rollenv.env.RocketRollEnv`).
+
+    Attributes
+    ----------
+    task : str
+        ``"angle"`` (hold the roll angle at a setpoint) or ``"rate"`` (track
+        a roll-rate setpoint).
+    dt_s : float
+        Control step, s: one action is held this long.
+    substep_s : float
+        Integration substep δt, s (the paper's 0.01 s); ``dt_s`` must be a
+        whole number of substeps and so must the traces' Δt.
+    episode_s : float
+        Episode length, s; the environment truncates after
+        ``round(episode_s / dt_s)`` steps.
+    rate_limit_dps, fin_range_deg : float
+        Servo slew-rate limit (eq. 23: 150 °/s) and fin range (±40°).
+    sensors : bool
+        Sensor model on: encoder quantisation and gyro noise.  Off: the
+        observation holds the true angle and rate.
+    encoder_counts : int
+        Encoder counts per revolution (256: 1.40625° resolution); 0 turns
+        quantisation off.
+    gyro_noise_pct : float
+        η of eq. 52: measured rate ``(1 + η/100·ε)·v``, ε ~ N(0, 1); 0 is none.
+    gyro_range_dps : float
+        Gyro full scale: the measured rate is clipped to ±this, °/s.
+    disturbance : str
+        ``"replay"`` identified ``u_d`` traces, ``"surrogate"`` surrogate
+        traces, or ``"none"`` (``u_d = 0``, the rocket still one of the
+        database's).
+    disturbance_scale : float
+        Factor on ``u_d``.
+    model : str
+        ``"theta"`` (eq. 49, a(θ)) or ``"constant"`` damping (eq. 29).
+    split : str
+        Database split the traces come from: ``"train"`` or ``"test"``.
+    domain_randomization : bool
+        Draw α, θ̄, β̄ and ᾱ at each reset uniformly over the range found in
+        the bank instead of using the trace's own.
+    setpoint : str
+        ``"steps"``: 0 for the first ``setpoint_period_s``, then a new value
+        uniform in ±``setpoint_range`` every period; ``"zero"``: always 0.
+    setpoint_period_s : float
+        Time between setpoint steps, s.
+    setpoint_range : float or None
+        Largest setpoint, ° (angle task) or °/s (rate task); default 90° or
+        10 °/s.
+    initial_angle_deg : float
+        The roll angle starts uniform in ±this, °.
+    error_scale, rate_scale_dps : float or None
+        Reward normalisers (default 10° or 5 °/s for the error, 10 °/s).
+    rate_weight, fin_weight : float
+        Reward weights of the roll-rate term (angle task only) and the fin
+        travel term.
+    """
+
+    task: str = "angle"
+    dt_s: float = 0.1
+    substep_s: float = 0.01
+    episode_s: float = 60.0
+    rate_limit_dps: float = Servo().rate_limit_dps
+    fin_range_deg: float = Servo().range_deg
+    sensors: bool = True
+    encoder_counts: int = 256
+    gyro_noise_pct: float = 2.0
+    gyro_range_dps: float = 250.0
+    disturbance: str = "replay"
+    disturbance_scale: float = 1.0
+    model: str = "theta"
+    split: str = "train"
+    domain_randomization: bool = False
+    setpoint: str = "steps"
+    setpoint_period_s: float = 10.0
+    setpoint_range: float | None = None
+    initial_angle_deg: float = 0.0
+    error_scale: float | None = None
+    rate_scale_dps: float = 10.0
+    rate_weight: float = 0.1
+    fin_weight: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name, allowed in (
+            ("task", TASKS),
+            ("disturbance", DISTURBANCES),
+            ("model", MODELS),
+            ("setpoint", SETPOINTS),
+            ("split", SPLITS),
+        ):
+            value = getattr(self, name)
+            if value not in allowed:
+                raise ValueError(
+                    f"{name} must be one of {', '.join(map(repr, allowed))}, not {value!r}"
+                )
+        positive = (
+            "dt_s",
+            "substep_s",
+            "episode_s",
+            "rate_limit_dps",
+            "fin_range_deg",
+            "gyro_range_dps",
+            "setpoint_period_s",
+            "rate_scale_dps",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise TypeError(f"{name} must be a number, not {type(value).__name__}")
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        for name in ("gyro_noise_pct", "disturbance_scale", "initial_angle_deg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise TypeError(f"{name} must be a number, not {type(value).__name__}")
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+        for name in ("rate_weight", "fin_weight"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+        for name in ("setpoint_range", "error_scale"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number or None, got {value!r}")
+        for name in ("sensors", "domain_randomization"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if isinstance(self.encoder_counts, bool) or not isinstance(self.encoder_counts, int):
+            raise TypeError(f"encoder_counts must be an int, got {self.encoder_counts!r}")
+        if self.encoder_counts < 0:
+            raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
+        substeps = self.dt_s / self.substep_s
+        if abs(substeps - round(substeps)) > 1e-9 * substeps or round(substeps) < 1:
+            raise ValueError(
+                f"dt_s = {self.dt_s:g} s must be a whole number of substeps of {self.substep_s:g} s"
+            )
+        steps = self.episode_s / self.dt_s
+        if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * steps:
+            raise ValueError(
+                f"episode_s = {self.episode_s:g} s must be a whole number of control steps "
+                f"of {self.dt_s:g} s"
+            )
+
+    # ------------------------------------------------------------ derived values
+    @property
+    def substeps(self) -> int:
+        """Substeps per control step."""
+        return round(self.dt_s / self.substep_s)
+
+    @property
+    def max_episode_steps(self) -> int:
+        """Control steps per episode."""
+        return round(self.episode_s / self.dt_s)
+
+    @property
+    def setpoint_max(self) -> float:
+        """The largest setpoint, ° or °/s."""
+        if self.setpoint_range is not None:
+            return float(self.setpoint_range)
+        return 90.0 if self.task == "angle" else 10.0
+
+    @property
+    def error_norm(self) -> float:
+        """Error normaliser of the reward, ° or °/s."""
+        if self.error_scale is not None:
+            return float(self.error_scale)
+        return 10.0 if self.task == "angle" else 5.0
+
+    @property
+    def setpoint_period_steps(self) -> int:
+        """Control steps between setpoint steps (at least one)."""
+        return max(1, round(self.setpoint_period_s / self.dt_s))
+
+    @property
+    def setpoint_segments(self) -> int:
+        """Setpoint values per episode."""
+        return -(-self.max_episode_steps // self.setpoint_period_steps)
+
+    @property
+    def encoder_resolution_deg(self) -> float:
+        """One encoder count, ° (0 without quantisation)."""
+        return 360.0 / self.encoder_counts if self.sensors and self.encoder_counts else 0.0
+
+    @property
+    def servo(self) -> Servo:
+        """The servo of eq. 23 with this rate limit and range."""
+        return Servo(self.rate_limit_dps, self.fin_range_deg)
+
+    def kernel_settings(self) -> FloatArray:
+        """The scalars the kernels read, packed in one array (see :data:`_CFG`)."""
+        cfg = np.zeros(len(_CFG))
+        cfg[_CFG["substeps"]] = self.substeps
+        cfg[_CFG["h"]] = self.substep_s
+        cfg[_CFG["max_move"]] = self.rate_limit_dps * self.substep_s
+        cfg[_CFG["fin_range"]] = self.fin_range_deg
+        cfg[_CFG["task_rate"]] = 1.0 if self.task == "rate" else 0.0
+        cfg[_CFG["enc_res"]] = self.encoder_resolution_deg
+        cfg[_CFG["gyro_eta"]] = self.gyro_noise_pct / 100.0 if self.sensors else 0.0
+        cfg[_CFG["gyro_range"]] = self.gyro_range_dps
+        cfg[_CFG["err_norm"]] = self.error_norm
+        cfg[_CFG["rate_norm"]] = self.rate_scale_dps
+        cfg[_CFG["rate_w"]] = self.rate_weight if self.task == "angle" else 0.0
+        cfg[_CFG["fin_w"]] = self.fin_weight
+        cfg[_CFG["travel_norm"]] = self.rate_limit_dps * self.dt_s
+        cfg[_CFG["scale"]] = 0.0 if self.disturbance == "none" else self.disturbance_scale
+        cfg[_CFG["sp_period"]] = self.setpoint_period_steps
+        cfg[_CFG["error_max"]] = observation_bounds(self)[0][0]
+        return cfg
+
+
+#: Positions of the settings in the array the kernels read.
+_CFG = {
+    name: k
+    for k, name in enumerate(
+        (
+            "substeps",
+            "h",
+            "max_move",
+            "fin_range",
+            "task_rate",
+            "enc_res",
+            "gyro_eta",
+            "gyro_range",
+            "err_norm",
+            "rate_norm",
+            "rate_w",
+            "fin_w",
+            "travel_norm",
+            "scale",
+            "sp_period",
+            "error_max",
+            "u_per",
+        )
+    )
+}
+
+
+def observation_bounds(config: RollConfig) -> tuple[FloatArray, FloatArray]:
+    """Finite ``(high, low)`` of the observation: error, rate, fin, command."""
+    error = 180.0 if config.task == "angle" else 2.0 * config.gyro_range_dps
+    high = np.array(
+        [error, config.gyro_range_dps, config.fin_range_deg, config.fin_range_deg],
+        dtype=np.float64,
+    )
+    return high, -high
+
+
+def config_fields() -> tuple[str, ...]:
+    """Names a user may set (the constructor's keyword arguments)."""
+    return tuple(f.name for f in fields(RollConfig) if f.init)
+
+
+# ----------------------------------------------------------------------------- kernels
+@numba.extending.overload(model.select)
+def _select_scalar(condition: Any, if_true: Any, if_false: Any) -> Any:
+    """Scalar ``select`` for numba: a branch, not a 0-d array per call."""
+
+    def impl(condition: Any, if_true: Any, if_false: Any) -> Any:
+        return if_true if condition else if_false
+
+    return impl
+
+
+_piece = numba.njit(cache=True, nogil=True)(piece_coefficients)
+
+# Kernel settings as compile-time-free indices (numba reads module globals as constants).
+_I_SUB, _I_H, _I_MOVE, _I_RANGE, _I_TASK, _I_ENC, _I_ETA, _I_GYRO = range(8)
+_I_ERRN, _I_RATEN, _I_RATEW, _I_FINW, _I_TRAV, _I_SCALE, _I_SPP, _I_ERRMAX, _I_UPER = range(8, 17)
+
+
+@numba.njit(cache=True, nogil=True)
+def _wrap(angle_deg: float) -> float:
+    """An angle difference in [-180°, 180°)."""
+    return angle_deg - 360.0 * math.floor((angle_deg + 180.0) / 360.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _observe_one(
+    i: int,
+    state: FloatArray,
+    setpoint: float,
+    eps: float,
+    cfg: FloatArray,
+    obs: NDArray[np.float32],
+) -> float:
+    """Sensor readings of env ``i`` into ``obs[i]``; returns the true tracking error."""
+    rate = state[i, 0]
+    angle = state[i, 1]
+    res = cfg[_I_ENC]
+    measured_angle = angle
+    if res > 0.0:
+        measured_angle = math.floor(angle / res + 1e-9) * res
+    measured_rate = (1.0 + cfg[_I_ETA] * eps) * rate
+    gyro = cfg[_I_GYRO]
+    measured_rate = min(max(measured_rate, -gyro), gyro)
+    if cfg[_I_TASK] > 0.0:
+        error = setpoint - rate
+        measured_error = setpoint - measured_rate
+    else:
+        error = _wrap(setpoint - angle)
+        measured_error = _wrap(setpoint - measured_angle)
+    emax = cfg[_I_ERRMAX]
+    obs[i, 0] = min(max(measured_error, -emax), emax)
+    obs[i, 1] = measured_rate
+    obs[i, 2] = state[i, 2]
+    obs[i, 3] = state[i, 3]
+    return error
+
+
+@numba.njit(cache=True, nogil=True)
+def observe_kernel(
+    index: IntArray,
+    state: FloatArray,
+    step: IntArray,
+    setpoints: FloatArray,
+    eps: FloatArray,
+    cfg: FloatArray,
+    obs: NDArray[np.float32],
+    error: FloatArray,
+) -> None:
+    """Observations of the envs in ``index`` (``eps[k]`` is the gyro draw of ``index[k]``)."""
+    period = int(cfg[_I_SPP])
+    last = setpoints.shape[1] - 1
+    for k in range(index.size):
+        i = index[k]
+        sp = setpoints[i, min(step[i] // period, last)]
+        error[i] = _observe_one(i, state, sp, eps[k], cfg, obs)
+
+
+def _step_envs(
+    index: IntArray,
+    action: FloatArray,
+    state: FloatArray,
+    step: IntArray,
+    params: FloatArray,
+    u_flat: FloatArray,
+    u_start: IntArray,
+    setpoints: FloatArray,
+    eps: FloatArray,
+    cfg: FloatArray,
+    obs: NDArray[np.float32],
+    reward: FloatArray,
+    error: FloatArray,
+    u_now: FloatArray,
+) -> None:
+    """Advance the envs in ``index`` by one control step.
+
+    ``action`` holds fin commands in [-1, 1] (already checked and clipped),
+    ``state[i] = (rate °/s, angle °, fin °, last command °)``, ``params[i] =
+    (α, θ̄, β̄, ᾱ)``, ``u_flat[u_start[i] + m]`` is env ``i``'s ``m``-th
+    ``u_d`` sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new
+    state, ``step + 1``, observation, reward, true error and the last ``u_d``.
+    """
+    n_sub = int(cfg[_I_SUB])
+    h = cfg[_I_H]
+    max_move = cfg[_I_MOVE]
+    fin_range = cfg[_I_RANGE]
+    scale = cfg[_I_SCALE]
+    u_per = int(cfg[_I_UPER])
+    period = int(cfg[_I_SPP])
+    last_sp = setpoints.shape[1] - 1
+    for k in numba.prange(index.size):
+        i = index[k]
+        alpha = params[i, 0]
+        theta_bar = params[i, 1]
+        beta_bar = params[i, 2]
+        alpha_bar = params[i, 3]
+        v = state[i, 0]
+        phi = state[i, 1]
+        theta = state[i, 2]
+        previous_theta = theta
+        command = min(max(action[i] * fin_range, -fin_range), fin_range)
+        first = step[i] * n_sub
+        u_index = u_start[i] + first // u_per  # u_d sample of the current substep
+        u_phase = first % u_per
+        held = 0  # fin-at-rest substeps with the same u_d, not yet applied (merged: exact)
+        held_u = 0.0
+        u = 0.0
+        for _ in range(n_sub):
+            u = scale * u_flat[u_index]
+            u_phase += 1
+            if u_phase == u_per:
+                u_phase = 0
+                u_index += 1
+            moved = theta + min(max(command - theta, -max_move), max_move)
+            if held > 0 and (moved != theta or u != held_u):
+                e, c, a_, b_ = _piece(
+                    alpha, theta_bar, beta_bar, alpha_bar, theta, theta, held_u, held * h
+                )
+                phi = phi + a_ * v + b_
+                v = e * v + c
+                held = 0
+            if moved == theta:
+                held += 1
+                held_u = u
+                continue
+            e, c, a_, b_ = _piece(alpha, theta_bar, beta_bar, alpha_bar, theta, moved, u, h)
+            phi = phi + a_ * v + b_
+            v = e * v + c
+            theta = moved
+        if held > 0:
+            e, c, a_, b_ = _piece(
+                alpha, theta_bar, beta_bar, alpha_bar, theta, theta, held_u, held * h
+            )
+            phi = phi + a_ * v + b_
+            v = e * v + c
+        travel = abs(theta - previous_theta)
+        state[i, 0] = v
+        state[i, 1] = phi
+        state[i, 2] = theta
+        state[i, 3] = command
+        step[i] += 1
+        u_now[i] = u
+        sp = setpoints[i, min(step[i] // period, last_sp)]
+        err = _observe_one(i, state, sp, eps[k], cfg, obs)
+        error[i] = err
+        e_n = err / cfg[_I_ERRN]
+        v_n = v / cfg[_I_RATEN]
+        t_n = travel / cfg[_I_TRAV]
+        reward[i] = -(e_n * e_n + cfg[_I_RATEW] * v_n * v_n + cfg[_I_FINW] * t_n * t_n)
+
+
+#: The step kernel, one env after the other (small batches, the single env).
+step_kernel = numba.njit(cache=True, nogil=True)(_step_envs)
+
+
+def _renamed(func: Any, name: str) -> Any:
+    """A copy of ``func`` under another name: numba keys its disk cache by name, so
+    the serial and the parallel build of one kernel need two."""
+    copy = types.FunctionType(func.__code__, func.__globals__, name, func.__defaults__)
+    copy.__qualname__ = name
+    copy.__doc__ = func.__doc__
+    return copy
+
+
+#: The same kernel with its env loop spread over numba's threads (large batches).
+step_kernel_parallel = numba.njit(cache=True, nogil=True, parallel=True)(
+    _renamed(_step_envs, "_step_envs_parallel")
+)
+#: Batches at least this large use :data:`step_kernel_parallel` when numba has threads.
+PARALLEL_MIN_ENVS = 512
+
+
+# ----------------------------------------------------------------------------- batch
+class RollBatch:
+    """The state of ``n`` environments and the two operations on it.
+
+    Parameters
+    ----------
+    config : RollConfig
+        Settings.
+    bank : TraceBank
+        Disturbance traces with their identified parameters.  Every trace's
+        Δt must be a whole number of substeps, and some trace must be at
+        least one episode long.
+    n : int
+        Batch size.
+
+    Notes
+    -----
+    ``reset(index, rng)`` and ``step(action, rng, index)`` draw from the
+    generator they are given in a fixed order -- per reset: windows, then
+    parameters (with domain randomisation), setpoints, initial angles, gyro
+    noise; per step: gyro noise -- so a batch of one and a single
+    environment given the same generator agree exactly.
+    """
+
+    def __init__(self, config: RollConfig, bank: TraceBank, n: int) -> None:
+        if n < 1:
+            raise ValueError(f"the batch needs at least one environment, got {n}")
+        self.config = config
+        self.bank = bank
+        self.n = n
+        self.duration_s = config.max_episode_steps * config.dt_s
+        bank.require(self.duration_s)
+        dts = np.array([t.dt_s for t in bank.traces])
+        per = dts / config.substep_s
+        if np.any(np.abs(per - np.round(per)) > 1e-9 * per) or np.any(np.round(per) < 1):
+            raise ValueError(
+                f"the traces' Δt ({', '.join(f'{d:g}' for d in np.unique(dts))} s) must be a "
+                f"whole number of {config.substep_s:g} s substeps"
+            )
+        if np.unique(np.round(per)).size != 1:
+            raise ValueError("all traces of a bank must share one Δt")
+        self.u_flat, self.u_offsets = bank.concatenated()
+        self.cfg = config.kernel_settings()
+        self.cfg[_CFG["u_per"]] = float(np.round(per[0]))
+        self.bank_params = np.array(
+            [
+                [p.alpha, p.theta_bar_deg, p.beta_bar_per_s, p.alpha_bar_per_deg_s]
+                for p in bank.params
+            ]
+        )
+        self.param_low = self.bank_params.min(axis=0)
+        self.param_high = self.bank_params.max(axis=0)
+        if config.domain_randomization:
+            _check_damping_box(self.param_low, self.param_high, config.fin_range_deg)
+        self.all = np.arange(n, dtype=np.int64)
+        self.state = np.zeros((n, 4))
+        self.step_count = np.zeros(n, dtype=np.int64)
+        self.params = np.zeros((n, 4))
+        self.trace = np.zeros(n, dtype=np.int64)
+        self.start = np.zeros(n, dtype=np.int64)
+        self.u_start = np.zeros(n, dtype=np.int64)
+        self.setpoints = np.zeros((n, config.setpoint_segments))
+        self.obs = np.zeros((n, 4), dtype=np.float32)
+        self.reward = np.zeros(n)
+        self.error = np.zeros(n)
+        self.u_now = np.zeros(n)
+        self.parallel = n >= PARALLEL_MIN_ENVS and numba.get_num_threads() > 1
+
+    # ------------------------------------------------------------------ reset
+    def reset(
+        self,
+        index: IntArray,
+        rng: np.random.Generator,
+        *,
+        trace: int | None = None,
+        start: int | None = None,
+        rate_dps: float | None = None,
+        angle_deg: float | None = None,
+        fin_deg: float | None = None,
+        setpoint: float | None = None,
+    ) -> None:
+        """Start new episodes for the envs in ``index``.
+
+        Keyword arguments fix what would otherwise be drawn (replays,
+        evaluation episodes): the trace index in the bank, the start sample,
+        the initial rate, angle and fin angle, a constant setpoint.
+        """
+        cfg = self.config
+        m = index.size
+        if m == 0:
+            return
+        if trace is None:
+            traces, starts = self.bank.draw(rng, self.duration_s, m)
+            if start is not None:
+                starts = np.full(m, start, dtype=np.int64)
+        else:
+            window = self.bank.at(trace, 0 if start is None else start, self.duration_s)
+            traces = np.full(m, window.trace, dtype=np.int64)
+            starts = np.full(m, window.start, dtype=np.int64)
+        self.trace[index] = traces
+        self.start[index] = starts
+        self.u_start[index] = self.u_offsets[traces] + starts
+        if cfg.domain_randomization:
+            draw = rng.uniform(size=(m, 4))
+            self.params[index] = self.param_low + draw * (self.param_high - self.param_low)
+        else:
+            self.params[index] = self.bank_params[traces]
+        if setpoint is not None:
+            self.setpoints[index] = setpoint
+        elif cfg.setpoint == "steps" and self.setpoints.shape[1] > 1:
+            sp = rng.uniform(-cfg.setpoint_max, cfg.setpoint_max, size=(m, self.setpoints.shape[1]))
+            sp[:, 0] = 0.0
+            self.setpoints[index] = sp
+        else:
+            self.setpoints[index] = 0.0
+        if angle_deg is None:
+            angles = (
+                rng.uniform(-cfg.initial_angle_deg, cfg.initial_angle_deg, size=m)
+                if cfg.initial_angle_deg > 0
+                else np.zeros(m)
+            )
+        else:
+            angles = np.full(m, float(angle_deg))
+        fin = np.clip(
+            0.0 if fin_deg is None else float(fin_deg), -cfg.fin_range_deg, cfg.fin_range_deg
+        )
+        p = self.params[index]
+        if rate_dps is None:
+            u0 = self.cfg[_CFG["scale"]] * self.u_flat[self.u_start[index]]
+            rates = p[:, 0] * (fin + p[:, 1] + u0)  # steady rate (eq. 16, 36)
+        else:
+            rates = np.full(m, float(rate_dps))
+        self.state[index, 0] = rates
+        self.state[index, 1] = angles
+        self.state[index, 2] = fin
+        self.state[index, 3] = fin
+        self.step_count[index] = 0
+        self.u_now[index] = self.cfg[_CFG["scale"]] * self.u_flat[self.u_start[index]]
+        eps = self._gyro_draws(rng, m)
+        observe_kernel(
+            index, self.state, self.step_count, self.setpoints, eps, self.cfg, self.obs, self.error
+        )
+
+    # ------------------------------------------------------------------- step
+    def step(self, action: FloatArray, rng: np.random.Generator, index: IntArray) -> None:
+        """Advance the envs in ``index`` with fin commands ``action`` in [-1, 1] (length n)."""
+        eps = self._gyro_draws(rng, index.size)
+        kernel = step_kernel_parallel if self.parallel else step_kernel
+        kernel(
+            index,
+            action,
+            self.state,
+            self.step_count,
+            self.params,
+            self.u_flat,
+            self.u_start,
+            self.setpoints,
+            eps,
+            self.cfg,
+            self.obs,
+            self.reward,
+            self.error,
+            self.u_now,
+        )
+
+    def _gyro_draws(self, rng: np.random.Generator, m: int) -> FloatArray:
+        if self.cfg[_CFG["gyro_eta"]] > 0.0:
+            return rng.standard_normal(m)
+        return np.zeros(m)
+
+    # ---------------------------------------------------------------- queries
+    @property
+    def truncated(self) -> NDArray[np.bool_]:
+        """Envs whose episode has reached ``max_episode_steps``."""
+        return self.step_count >= self.config.max_episode_steps
+
+    def setpoint_now(self) -> FloatArray:
+        """Each env's current setpoint, ° or °/s."""
+        seg = np.minimum(
+            self.step_count // self.config.setpoint_period_steps, self.setpoints.shape[1] - 1
+        )
+        return self.setpoints[self.all, seg]
+
+    def roll_params(self, i: int) -> RollParams:
+        """The model parameters env ``i`` runs with."""
+        alpha, theta_bar, beta_bar, alpha_bar = (float(x) for x in self.params[i])
+        return RollParams(alpha, theta_bar, beta_bar, alpha_bar)
+
+
+def _check_damping_box(low: FloatArray, high: FloatArray, fin_range: float) -> None:
+    """Refuse a randomisation box in which a(θ) could reach 0 (an undamped rocket)."""
+    worst_slope = min(low[3], 0.0)
+    reach = fin_range + max(abs(low[1]), abs(high[1]))
+    worst = low[2] + worst_slope * reach
+    if worst <= 0.0:
+        raise ValueError(
+            f"domain randomisation over the bank's parameter range could give a(θ) = "
+            f"{worst:.3g} 1/s <= 0 at a fin angle of ±{fin_range:g}° (β̄ from {low[2]:.3g}, "
+            f"ᾱ from {low[3]:.3g}); select traces with a narrower spread"
+        )

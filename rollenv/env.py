@@ -1,0 +1,390 @@
+"""``RocketRoll-v0`` and ``RocketRollRate-v0``: roll control of a sounding rocket in turbulence."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import deque
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from disturbances.bank import TraceBank
+from rollenv.bank import load_bank, make_config
+from rollenv.core import RollBatch, RollConfig, observation_bounds
+
+__all__ = ["RESET_OPTIONS", "RocketRollEnv", "check_action"]
+
+#: Keys ``reset(options=...)`` accepts.
+RESET_OPTIONS = ("trace", "start", "rate_dps", "angle_deg", "fin_deg", "setpoint")
+
+#: Seconds of history a rendered frame shows.
+RENDER_HISTORY_S = 10.0
+
+ObsType = NDArray[np.float32]
+ActType = NDArray[np.float32]
+
+
+class RocketRollEnv(gym.Env[ObsType, ActType]):
+    """Roll control of a 5-kg sounding rocket in a turbulent vertical wind tunnel.
+
+    ## Description
+
+    The rocket of the paper "Minimal modelling approach to describe turbulent
+    rocket roll dynamics in a vertical wind tunnel" hangs on a shaft in the
+    tunnel's vertical flow, free to roll.  Four fins, moved together by one
+    servo, are its only control.  The flow is turbulent: the disturbance
+    ``u_d(t)``, an equivalent fin angle identified from recordings, pushes the
+    roll rate around by several °/s.  The agent commands the fin angle to hold
+    the roll angle at a setpoint (``RocketRoll-v0``, ``task="angle"``) or to
+    track a roll-rate setpoint (``RocketRollRate-v0``, ``task="rate"``).
+
+    Everything that moves the rocket comes from data: each episode replays a
+    window of an identified ``u_d`` trace from the disturbance database,
+    with the rocket parameters (α, θ̄, a or a(θ)) identified together with
+    that trace, so a replay is consistent with its identification.
+
+    ## Action Space
+
+    ``Box(-1, 1, (1,), float32)``: the fin command, scaled by the fin range.
+
+    | Num | Action      | Min | Max | Unit                                  |
+    |-----|-------------|-----|-----|---------------------------------------|
+    | 0   | fin command | -1  | 1   | fraction of ``fin_range_deg`` (40°)   |
+
+    Actions outside [-1, 1] are clipped to it; NaN or infinite actions raise
+    ``ValueError``.  The command is held for the control step; the servo
+    follows it at no more than 150 °/s (eq. 23).
+
+    ## Observation Space
+
+    ``Box(low, high, (4,), float32)``, what a flight computer would have:
+
+    | Num | Observation      | Min  | Max | Unit                                   |
+    |-----|------------------|------|-----|----------------------------------------|
+    | 0   | tracking error   | -180 | 180 | ° (angle: setpoint - measured angle, wrapped) |
+    |     |                  | -500 | 500 | °/s (rate: setpoint - measured rate)   |
+    | 1   | roll rate        | -250 | 250 | °/s, rate gyro, clipped to full scale  |
+    | 2   | fin angle        | -40  | 40  | °, the servo's actual fin angle        |
+    | 3   | last fin command | -40  | 40  | °                                      |
+
+    With ``sensors=True`` (default) the angle is read by an encoder of
+    ``encoder_counts`` (256) counts per revolution, floor-quantised to
+    1.40625°, and the rate by a gyro with the multiplicative noise of eq. 52,
+    ``(1 + η/100·ε)·v`` with ε ~ N(0, 1) and η = ``gyro_noise_pct`` (2).
+    The true state is never in the observation; it is in ``info``.
+
+    ## Transition Dynamics
+
+    The θ-dependent roll model of the paper (eq. 36 with eq. 48-49)::
+
+        dv/dt = -a(θ)·(v - α·(θ + θ̄ + u_d)),   a(θ) = ᾱ·|θ + θ̄| + β̄,   dφ/dt = v
+
+    (``model="constant"``: a constant ``a``, eq. 29).  Each 0.1-s control
+    step is ten 0.01-s substeps (the paper's δt).  On each substep the fin
+    moves toward the held command by at most 1.5° (150 °/s) within ±40°, the
+    fin is linear within the substep, ``u_d`` is held on its own 0.1-s grid,
+    and rate and angle are advanced by the exact exponential update of
+    :func:`identification.model.piece_coefficients` -- the computation of the
+    identification's re-simulation, so replaying a recording's commands
+    reproduces it to rounding.
+
+    ## Rewards
+
+    Per step, a Python float::
+
+        r = -[(e/E)² + w_v·(v/V)² + w_f·(Δθ/(150 °/s·Δt))²]
+
+    with ``e`` the true tracking error (° wrapped to ±180, or °/s), ``E`` =
+    ``error_scale`` (10° or 5 °/s), ``v`` the roll rate and ``V`` =
+    ``rate_scale_dps`` (10 °/s) -- this term only for the angle task, weight
+    ``w_v = rate_weight`` (0.1) -- and ``Δθ`` the fin travel over the step,
+    normalised by the most the servo can travel, weight ``w_f =
+    fin_weight`` (0.1).  A perfect, still controller earns 0.  Evaluation
+    metrics (RMS error, fin travel, time at the limits) are computed by the
+    agents' evaluation protocol, not from the reward.
+
+    ## Starting State
+
+    A window of ``episode_s`` (60 s) is drawn uniformly over all (trace,
+    offset) pairs of the chosen split (``split="train"``; ``"test"`` for
+    evaluation).  The fin starts at 0°, the rate at the steady rate
+    ``α·(θ̄ + u_d[0])`` for that fin angle, the angle uniform in
+    ±``initial_angle_deg`` (0).  The setpoint (``setpoint="steps"``) is 0
+    for the first ``setpoint_period_s`` (10 s) and then steps every period to
+    a value uniform in ±``setpoint_range`` (90° or 10 °/s);
+    ``setpoint="zero"`` holds 0.
+
+    ``reset(options=...)`` fixes any of these for replays and evaluation:
+    ``trace`` (index in the bank or uid), ``start`` (sample of the trace),
+    ``rate_dps``, ``angle_deg``, ``fin_deg``, ``setpoint`` (held constant).
+
+    ## Episode End
+
+    * Termination: never -- the rocket is on its shaft; no physical limit of
+      the rig can be crossed.  (The gyro saturates at ±250 °/s.)
+    * Truncation: after ``episode_s / dt_s`` steps (600).  The environment
+      truncates itself, so ``gym.make(..., max_episode_steps=N)`` can only
+      shorten episodes.  Stepping past the end raises ``RuntimeError``.
+
+    ## Arguments
+
+    ``gym.make("RocketRoll-v0", **options)`` (``import rollenv`` first, or
+    ``gym.make("rollenv:RocketRoll-v0")``), with any field of
+    :class:`rollenv.core.RollConfig` as a keyword:
+
+    * ``task`` "angle" | "rate"; ``split`` "train" | "test";
+      ``disturbance`` "replay" | "surrogate" | "none";
+      ``disturbance_scale`` (1.0); ``model`` "theta" | "constant";
+      ``domain_randomization`` (False: α, θ̄, β̄, ᾱ drawn each reset uniformly
+      over the range found among the bank's traces);
+    * timing: ``dt_s`` (0.1), ``substep_s`` (0.01), ``episode_s`` (60);
+    * sensors: ``sensors`` (True), ``encoder_counts`` (256),
+      ``gyro_noise_pct`` (2), ``gyro_range_dps`` (250);
+    * setpoints: ``setpoint`` "steps" | "zero", ``setpoint_period_s``,
+      ``setpoint_range``, ``initial_angle_deg``;
+    * reward: ``error_scale``, ``rate_scale_dps``, ``rate_weight``,
+      ``fin_weight``;
+    * ``db``: a database file (default: ``$ROCKETROLL_DB`` or the default
+      database, built on first use); ``bank``: a
+      :class:`disturbances.bank.TraceBank` to use instead;
+    * ``render_mode``: "rgb_array" | "human".
+
+    An unknown option is a ``ValueError`` naming it.  A database with no
+    trace as long as an episode is a ``ValueError`` at construction.
+
+    >>> import gymnasium as gym
+    >>> import numpy as np
+    >>> import rollenv
+    >>> from disturbances.bank import TraceBank
+    >>> bank = TraceBank.from_arrays([np.zeros(600)], dt_s=0.1)  # or omit: the database
+    >>> env = gym.make("RocketRoll-v0", bank=bank)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs.shape, obs.dtype
+    ((4,), dtype('float32'))
+    >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    >>> type(reward), terminated, truncated
+    (<class 'float'>, False, False)
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata: dict[str, Any] = {  # noqa: RUF012 (Gymnasium's convention; copied per instance)
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+    }
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        *,
+        bank: TraceBank | None = None,
+        db: str | os.PathLike[str] | None = None,
+        **settings: Any,
+    ) -> None:
+        env_id = "RocketRollRate-v0" if settings.get("task") == "rate" else "RocketRoll-v0"
+        self.config = make_config(env_id, settings)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                f"not {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self.bank = load_bank(self.config, db) if bank is None else bank
+        self._batch = RollBatch(self.config, self.bank, 1)
+        self._index = self._batch.all
+        self._action = np.zeros(1)
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.dt_s}
+        high, low = observation_bounds(self.config)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.observation_space = spaces.Box(
+            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
+        )
+        self._started = False
+        self._history: deque[tuple[float, ...]] = deque(
+            maxlen=max(2, round(RENDER_HISTORY_S / self.config.dt_s) + 1)
+        )
+        self._renderer: Any = None
+
+    # ------------------------------------------------------------------- gym API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[ObsType, dict[str, Any]]:
+        super().reset(seed=seed)
+        fixed = reset_arguments(options, self.bank)
+        self._batch.reset(self._index, self.np_random, **fixed)
+        self._started = True
+        self._history.clear()
+        if self.render_mode is not None:
+            self._record()
+        if self.render_mode == "human":
+            self.render()
+        return self._batch.obs[0].copy(), self._info()
+
+    def step(self, action: ActType) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        if self._batch.step_count[0] >= self.config.max_episode_steps:
+            raise RuntimeError(
+                f"the episode ended (truncated after {self.config.max_episode_steps} steps); "
+                "call reset()"
+            )
+        self._action[0] = check_action(action, 1)[0]
+        self._batch.step(self._action, self.np_random, self._index)
+        if self.render_mode is not None:
+            self._record()
+        if self.render_mode == "human":
+            self.render()
+        truncated = bool(self._batch.step_count[0] >= self.config.max_episode_steps)
+        return (
+            self._batch.obs[0].copy(),
+            float(self._batch.reward[0]),
+            False,
+            truncated,
+            self._info(),
+        )
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() was called without a render_mode; pass render_mode='rgb_array' or "
+                "'human' to gym.make"
+            )
+            return None
+        from rollenv.render import Renderer
+
+        if self._renderer is None:
+            self._renderer = Renderer(self.render_mode, self.metadata["render_fps"])
+        snapshot = self._snapshot()
+        if self.render_mode == "rgb_array":
+            frame: NDArray[np.uint8] = self._renderer.frame(snapshot)
+            return frame
+        self._renderer.show(snapshot)
+        return None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # ------------------------------------------------------------------ helpers
+    def _info(self) -> dict[str, Any]:
+        b = self._batch
+        state = b.state[0]
+        return {
+            "roll_deg": float(state[1]),
+            "roll_rate_dps": float(state[0]),
+            "fin_deg": float(state[2]),
+            "fin_cmd_deg": float(state[3]),
+            "u_d_deg": float(b.u_now[0]),
+            "setpoint": float(b.setpoint_now()[0]),
+            "tracking_error": float(b.error[0]),
+            "time_s": round(float(b.step_count[0]) * self.config.dt_s, 9),
+            "trace": b.bank.traces[int(b.trace[0])].info.uid,
+            "start_s": float(b.start[0]) * b.bank.traces[int(b.trace[0])].dt_s,
+        }
+
+    def _record(self) -> None:
+        b = self._batch
+        s = b.state[0]
+        self._history.append(
+            (
+                float(b.step_count[0]) * self.config.dt_s,
+                float(s[1]),
+                float(s[0]),
+                float(s[2]),
+                float(s[3]),
+                float(b.u_now[0]),
+                float(b.setpoint_now()[0]),
+            )
+        )
+
+    def _snapshot(self) -> Any:
+        from rollenv.render import Snapshot
+
+        if not self._history:
+            raise RuntimeError("call reset() before render()")
+        cols = np.array(self._history, dtype=float).T
+        info = self.bank.traces[int(self._batch.trace[0])].info
+        return Snapshot(
+            time_s=cols[0],
+            angle_deg=cols[1],
+            rate_dps=cols[2],
+            fin_deg=cols[3],
+            command_deg=cols[4],
+            u_d_deg=cols[5],
+            setpoint=cols[6],
+            task=self.config.task,
+            fin_range_deg=self.config.fin_range_deg,
+            label=f"{info.uid} ({info.split}, {self.config.disturbance})",
+        )
+
+    def roll_config(self) -> RollConfig:
+        """The settings this environment runs with."""
+        return self.config
+
+
+def check_action(action: Any, n: int) -> NDArray[np.float64]:
+    """Actions as ``n`` finite numbers clipped to [-1, 1]; a clear ``ValueError`` otherwise."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"action must be numbers, got {action!r}") from exc
+    if a.size != n:
+        shape = "(1,)" if n == 1 else f"({n}, 1) or ({n},)"
+        raise ValueError(f"action must have shape {shape}, got shape {a.shape}")
+    a = a.reshape(n)
+    if not np.all(np.isfinite(a)):
+        bad = a[~np.isfinite(a)][0]
+        raise ValueError(f"action must be finite, got {bad!r}")
+    return np.clip(a, -1.0, 1.0)
+
+
+def reset_arguments(options: dict[str, Any] | None, bank: TraceBank) -> dict[str, Any]:
+    """``reset(options=...)`` checked and turned into :meth:`RollBatch.reset` keywords."""
+    if not options:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(f"options must be a dict, got {type(options).__name__}")
+    unknown = sorted(set(options) - set(RESET_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"unknown reset option(s) {', '.join(map(repr, unknown))}; known: "
+            f"{', '.join(RESET_OPTIONS)}"
+        )
+    fixed: dict[str, Any] = {}
+    trace = options.get("trace")
+    if trace is not None:
+        if isinstance(trace, str):
+            uids = [t.info.uid for t in bank.traces]
+            if trace not in uids:
+                raise ValueError(f"reset option trace={trace!r} is not in {bank.description}")
+            fixed["trace"] = uids.index(trace)
+        elif isinstance(trace, int | np.integer) and not isinstance(trace, bool):
+            if not 0 <= int(trace) < len(bank):
+                raise ValueError(f"reset option trace={trace} is out of range 0..{len(bank) - 1}")
+            fixed["trace"] = int(trace)
+        else:
+            raise ValueError(f"reset option trace must be an index or a uid, got {trace!r}")
+    start = options.get("start")
+    if start is not None:
+        if not isinstance(start, int | np.integer) or isinstance(start, bool) or start < 0:
+            raise ValueError(f"reset option start must be a sample index >= 0, got {start!r}")
+        if "trace" not in fixed:
+            raise ValueError("reset option start needs a trace")
+        fixed["start"] = int(start)
+    for name in ("rate_dps", "angle_deg", "fin_deg", "setpoint"):
+        value = options.get(name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+            raise ValueError(f"reset option {name} must be a number, got {value!r}")
+        if not math.isfinite(float(value)):
+            raise ValueError(f"reset option {name} must be finite, got {value!r}")
+        fixed[name] = float(value)
+    return fixed
