@@ -280,6 +280,53 @@ def select(condition: Any, if_true: Any, if_false: Any) -> Any:
     return np.where(condition, if_true, if_false)
 
 
+#: Below this ``|z|`` the exponential-integrator functions come from their Taylor
+#: series (truncation below 1e-18); above it from ``expm1`` (cancellation below 1e-14).
+PHI_TAYLOR_BELOW = 0.05
+
+
+def phi_taylor(z: Any) -> tuple[Any, Any, Any]:
+    """``e^z``, ``φ1(z)`` and ``φ2(z)`` from their Taylor series to ``z^8`` (small ``|z|``)."""
+    phi2 = 1.0 / 2 + z * (
+        1.0 / 6
+        + z
+        * (
+            1.0 / 24
+            + z
+            * (
+                1.0 / 120
+                + z
+                * (
+                    1.0 / 720
+                    + z * (1.0 / 5040 + z * (1.0 / 40320 + z * (1.0 / 362880 + z / 3628800)))
+                )
+            )
+        )
+    )
+    phi1 = 1.0 + z * phi2  # φ1 = 1 + z·φ2
+    return 1.0 + z * phi1, phi1, phi2  # e^z = 1 + z·φ1
+
+
+def phi_direct(z: Any) -> tuple[Any, Any, Any]:
+    """``e^z``, ``φ1(z) = (e^z - 1)/z`` and ``φ2(z) = (e^z - 1 - z)/z²`` from ``expm1`` (z ≠ 0)."""
+    em1 = np.expm1(z)
+    inv = 1.0 / z
+    return 1.0 + em1, em1 * inv, (em1 - z) * inv * inv
+
+
+def phi_functions(z: Any) -> tuple[Any, Any, Any]:
+    """``e^z``, ``φ1(z)`` and ``φ2(z)``, accurate to rounding for every ``z`` (arrays too).
+
+    Taylor series below :data:`PHI_TAYLOR_BELOW`, ``expm1`` above.  The
+    environment's compiled kernel replaces this function by a scalar branch
+    between the same two functions.
+    """
+    small = np.abs(z) < PHI_TAYLOR_BELOW
+    e_t, phi1_t, phi2_t = phi_taylor(z)
+    e_d, phi1_d, phi2_d = phi_direct(select(small, 1.0, z))  # no 0/0 in the unused branch
+    return select(small, e_t, e_d), select(small, phi1_t, phi1_d), select(small, phi2_t, phi2_d)
+
+
 def piece_coefficients(
     alpha: Any,
     theta_bar_deg: Any,
@@ -303,13 +350,7 @@ def piece_coefficients(
     a = alpha_bar_per_deg_s * np.abs(0.5 * (theta0_deg + theta1_deg) + theta_bar_deg)
     a = a + beta_bar_per_s  # damping a(θ) at the piece's mean fin angle (eq. 48)
     z = -a * h_s
-    # e^z, φ1(z) = (e^z-1)/z and φ2(z) = (e^z-1-z)/z², stable near 0.
-    em1 = np.expm1(z)
-    e = 1.0 + em1
-    small = np.abs(z) < 1e-4
-    inv = 1.0 / select(small, 1.0, z)  # no 0/0 in the branch that is not used
-    phi1 = select(small, 1.0 + z / 2.0 + z * z / 6.0, em1 * inv)
-    phi2 = select(small, 0.5 + z / 6.0 + z * z / 24.0, (em1 - z) * inv * inv)
+    e, phi1, phi2 = phi_functions(z)
     g0 = alpha * (theta0_deg + theta_bar_deg + u_d_deg)
     sh = alpha * (theta1_deg - theta0_deg)  # s·h: equilibrium-rate change over the piece, °/s
     c = (1.0 - e) * g0 + sh * a * h_s * phi2

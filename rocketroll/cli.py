@@ -16,6 +16,7 @@ from disturbances import cli as disturbances_cli
 from identification import cli as identification_cli
 from identification.errors import RocketrollError
 from rocketroll import __version__
+from rollenv import cli as rollenv_cli
 
 __all__ = ["build_parser", "main"]
 
@@ -25,12 +26,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rocketroll",
         description="Rocket roll dynamics under turbulence: virtual wind tunnel, recordings, "
-        "identification (Minimal modelling approach ..., eq. 36/49).",
+        "identification (Minimal modelling approach ..., eq. 36/49), disturbance database, "
+        "RocketRoll-v0 environment.",
     )
     parser.add_argument("--version", action="version", version=f"rocketroll {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     identification_cli.register(subparsers)
     disturbances_cli.register(subparsers)
+    rollenv_cli.register(subparsers)
     return parser
 
 

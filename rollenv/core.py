@@ -340,6 +340,22 @@ def _select_scalar(condition: Any, if_true: Any, if_false: Any) -> Any:
     return impl
 
 
+_phi_taylor = numba.njit(cache=True, nogil=True)(model.phi_taylor)
+_phi_direct = numba.njit(cache=True, nogil=True)(model.phi_direct)
+
+
+@numba.extending.overload(model.phi_functions)
+def _phi_functions_scalar(z: Any) -> Any:
+    """Scalar ``phi_functions`` for numba: only the branch that is used is computed."""
+
+    def impl(z: Any) -> Any:
+        if abs(z) < model.PHI_TAYLOR_BELOW:
+            return _phi_taylor(z)
+        return _phi_direct(z)
+
+    return impl
+
+
 _piece = numba.njit(cache=True, nogil=True)(piece_coefficients)
 
 # Kernel settings as compile-time-free indices (numba reads module globals as constants).
@@ -516,8 +532,6 @@ def _renamed(func: Any, name: str) -> Any:
 step_kernel_parallel = numba.njit(cache=True, nogil=True, parallel=True)(
     _renamed(_step_envs, "_step_envs_parallel")
 )
-#: Batches at least this large use :data:`step_kernel_parallel` when numba has threads.
-PARALLEL_MIN_ENVS = 512
 
 
 # ----------------------------------------------------------------------------- batch
@@ -534,6 +548,12 @@ class RollBatch:
         least one episode long.
     n : int
         Batch size.
+    parallel : bool
+        Step with :data:`step_kernel_parallel` (numba's threads) instead of
+        one env after the other.  Worth it only for large batches on cores
+        nothing else uses: with the cores oversubscribed (a test run, torch's
+        own threads during training) the threads' barriers stall and a step
+        can take ten times longer than serially.
 
     Notes
     -----
@@ -544,7 +564,9 @@ class RollBatch:
     environment given the same generator agree exactly.
     """
 
-    def __init__(self, config: RollConfig, bank: TraceBank, n: int) -> None:
+    def __init__(
+        self, config: RollConfig, bank: TraceBank, n: int, *, parallel: bool = False
+    ) -> None:
         if n < 1:
             raise ValueError(f"the batch needs at least one environment, got {n}")
         self.config = config
@@ -586,7 +608,9 @@ class RollBatch:
         self.reward = np.zeros(n)
         self.error = np.zeros(n)
         self.u_now = np.zeros(n)
-        self.parallel = n >= PARALLEL_MIN_ENVS and numba.get_num_threads() > 1
+        self.parallel = bool(parallel)
+        self._noisy = bool(self.cfg[_CFG["gyro_eta"]] > 0.0)
+        self._no_noise = np.zeros(n)
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -667,8 +691,7 @@ class RollBatch:
     def step(self, action: FloatArray, rng: np.random.Generator, index: IntArray) -> None:
         """Advance the envs in ``index`` with fin commands ``action`` in [-1, 1] (length n)."""
         eps = self._gyro_draws(rng, index.size)
-        kernel = step_kernel_parallel if self.parallel else step_kernel
-        kernel(
+        (step_kernel_parallel if self.parallel else step_kernel)(
             index,
             action,
             self.state,
@@ -686,9 +709,9 @@ class RollBatch:
         )
 
     def _gyro_draws(self, rng: np.random.Generator, m: int) -> FloatArray:
-        if self.cfg[_CFG["gyro_eta"]] > 0.0:
+        if self._noisy:
             return rng.standard_normal(m)
-        return np.zeros(m)
+        return self._no_noise[:m]
 
     # ---------------------------------------------------------------- queries
     @property

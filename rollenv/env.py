@@ -206,6 +206,9 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
             low.astype(np.float32), high.astype(np.float32), dtype=np.float32
         )
         self._started = False
+        self._max_steps = self.config.max_episode_steps
+        self._setpoint_period = self.config.setpoint_period_steps
+        self._episode: dict[str, Any] = {}
         self._history: deque[tuple[float, ...]] = deque(
             maxlen=max(2, round(RENDER_HISTORY_S / self.config.dt_s) + 1)
         )
@@ -218,6 +221,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         super().reset(seed=seed)
         fixed = reset_arguments(options, self.bank)
         self._batch.reset(self._index, self.np_random, **fixed)
+        self._episode = self._episode_info()
         self._started = True
         self._history.clear()
         if self.render_mode is not None:
@@ -229,18 +233,17 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
     def step(self, action: ActType) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        if self._batch.step_count[0] >= self.config.max_episode_steps:
+        if self._batch.step_count[0] >= self._max_steps:
             raise RuntimeError(
-                f"the episode ended (truncated after {self.config.max_episode_steps} steps); "
-                "call reset()"
+                f"the episode ended (truncated after {self._max_steps} steps); call reset()"
             )
-        self._action[0] = check_action(action, 1)[0]
+        self._action[0] = _one_action(action)
         self._batch.step(self._action, self.np_random, self._index)
         if self.render_mode is not None:
             self._record()
         if self.render_mode == "human":
             self.render()
-        truncated = bool(self._batch.step_count[0] >= self.config.max_episode_steps)
+        truncated = bool(self._batch.step_count[0] >= self._max_steps)
         return (
             self._batch.obs[0].copy(),
             float(self._batch.reward[0]),
@@ -275,19 +278,26 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
     # ------------------------------------------------------------------ helpers
     def _info(self) -> dict[str, Any]:
         b = self._batch
-        state = b.state[0]
+        rate, angle, fin, command = b.state[0].tolist()
+        step = int(b.step_count[0])
+        setpoints = b.setpoints[0]
+        segment = min(step // self._setpoint_period, setpoints.size - 1)
         return {
-            "roll_deg": float(state[1]),
-            "roll_rate_dps": float(state[0]),
-            "fin_deg": float(state[2]),
-            "fin_cmd_deg": float(state[3]),
+            "roll_deg": angle,
+            "roll_rate_dps": rate,
+            "fin_deg": fin,
+            "fin_cmd_deg": command,
             "u_d_deg": float(b.u_now[0]),
-            "setpoint": float(b.setpoint_now()[0]),
+            "setpoint": float(setpoints[segment]),
             "tracking_error": float(b.error[0]),
-            "time_s": round(float(b.step_count[0]) * self.config.dt_s, 9),
-            "trace": b.bank.traces[int(b.trace[0])].info.uid,
-            "start_s": float(b.start[0]) * b.bank.traces[int(b.trace[0])].dt_s,
+            "time_s": round(step * self.config.dt_s, 9),
+            **self._episode,
         }
+
+    def _episode_info(self) -> dict[str, Any]:
+        b = self._batch
+        trace = b.bank.traces[int(b.trace[0])]
+        return {"trace": trace.info.uid, "start_s": float(b.start[0]) * trace.dt_s}
 
     def _record(self) -> None:
         b = self._batch
@@ -327,6 +337,16 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
     def roll_config(self) -> RollConfig:
         """The settings this environment runs with."""
         return self.config
+
+
+def _one_action(action: Any) -> float:
+    """:func:`check_action` for one env, without array work on the common path."""
+    if isinstance(action, np.ndarray) and action.size == 1:
+        value = float(action.flat[0])
+        if not math.isfinite(value):
+            raise ValueError(f"action must be finite, got {value!r}")
+        return min(max(value, -1.0), 1.0)
+    return float(check_action(action, 1)[0])
 
 
 def check_action(action: Any, n: int) -> NDArray[np.float64]:

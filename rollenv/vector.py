@@ -49,6 +49,12 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         As for :class:`rollenv.env.RocketRollEnv`.
     render_mode : None
         Vector rendering is not provided; render a single environment.
+    parallel : bool
+        Spread the batch over numba's threads (``NUMBA_NUM_THREADS``, default
+        all cores).  Off by default: it pays only when nothing else runs on
+        those cores; oversubscribed (e.g. next to torch's threads while
+        training) it can be many times slower.  ``benchmarks/env_speed.py``
+        measures both.
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 (Gymnasium's convention; copied per instance)
@@ -63,6 +69,7 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         *,
         bank: TraceBank | None = None,
         db: str | os.PathLike[str] | None = None,
+        parallel: bool = False,
         **settings: Any,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer):
@@ -79,7 +86,7 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         self.num_envs = int(num_envs)
         self.render_mode = None
         self.bank = load_bank(self.config, db) if bank is None else bank
-        self._batch = RollBatch(self.config, self.bank, self.num_envs)
+        self._batch = RollBatch(self.config, self.bank, self.num_envs, parallel=parallel)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.dt_s}
         high, low = observation_bounds(self.config)
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)

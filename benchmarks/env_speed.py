@@ -1,0 +1,185 @@
+"""Steps per second of RocketRoll-v0, single and batched, against Gymnasium's references.
+
+In one run, with random actions drawn beforehand from a seeded generator (the
+servo then moves on almost every substep, the costliest case for the exact
+update), this measures:
+
+* ``gym.make("RocketRoll-v0")`` -- with the wrappers ``gym.make`` adds and the
+  default sensors -- against ``gym.make("Pendulum-v1")``, the named reference:
+  **target: at least as fast** (ratio >= 1);
+* ``gym.make_vec("RocketRoll-v0", num_envs=4096)`` (``RocketRollVectorEnv``,
+  serial kernel, the default) and the same with ``parallel=True`` (numba's
+  threads) against Gymnasium's ``CartPoleVectorEnv(num_envs=4096)``:
+  **target: >= 10 M env-steps/s**; the CartPole row shows what this machine
+  does with a numpy-batched classic-control env.
+
+Episodes reset as they end (single envs: ``reset()`` on truncation; vector
+envs: their own NEXT_STEP autoreset), so resets are part of the cost.  Each
+task runs ``--repeats`` timed blocks, interleaved task by task so that a busy
+spell of a shared machine slows all alike; the table gives the median and
+best block.  Compilation (numba, cached on disk after the first run) and the
+default database build happen before timing and are reported separately.
+Exit status 0 whatever the timings unless ``--strict``.
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/env_speed.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numba
+import numpy as np
+from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
+
+import rollenv  # noqa: F401  (registers RocketRoll-v0)
+
+SINGLE_TARGET = 1.0  # RocketRoll-v0 / Pendulum-v1
+VECTOR_TARGET = 10e6  # env-steps/s at 4096 envs
+
+
+def _single_runner(env_id: str, steps: int, seed: int) -> Callable[[], float]:
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    actions = (
+        np.random.default_rng(seed)
+        .uniform(-1, 1, size=(steps, *(env.action_space.shape or ())))
+        .astype(np.float32)
+    )
+    if env_id.startswith("Pendulum"):
+        actions *= 2.0  # Pendulum's torque range is ±2
+
+    def run() -> float:
+        step, reset = env.step, env.reset
+        t0 = time.perf_counter()
+        for a in actions:
+            _, _, terminated, truncated, _ = step(a)
+            if terminated or truncated:
+                reset()
+        return time.perf_counter() - t0
+
+    return run
+
+
+def _vector_runner(
+    make: Callable[[], Any], steps: int, seed: int, discrete: bool
+) -> Callable[[], float]:
+    env = make()
+    env.reset(seed=seed)
+    n = env.num_envs
+    rng = np.random.default_rng(seed)
+    if discrete:
+        actions = rng.integers(0, 2, size=(steps, n))
+    else:
+        actions = rng.uniform(-1, 1, size=(steps, n, 1)).astype(np.float32)
+
+    def run() -> float:
+        step = env.step
+        t0 = time.perf_counter()
+        for a in actions:
+            step(a)
+        return time.perf_counter() - t0
+
+    return run
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--single-steps", type=int, default=20000, help="steps per timed block")
+    parser.add_argument("--vector-steps", type=int, default=100, help="batched steps per block")
+    parser.add_argument("--num-envs", type=int, default=4096, help="batch size (4096)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed blocks per task (5)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--strict", action="store_true", help="exit 1 when a target is missed")
+    ns = parser.parse_args(argv)
+
+    print(
+        f"python {platform.python_version()}, numpy {np.__version__}, gymnasium "
+        f"{gym.__version__}, numba {numba.__version__} ({numba.get_num_threads()} threads), "
+        f"{os.cpu_count()} CPU(s), {platform.machine()}"
+    )
+    t0 = time.perf_counter()
+    single = _single_runner("RocketRoll-v0", ns.single_steps, ns.seed)
+    vector = _vector_runner(
+        lambda: gym.make_vec("RocketRoll-v0", num_envs=ns.num_envs),
+        ns.vector_steps,
+        ns.seed,
+        discrete=False,
+    )
+    vector_parallel = _vector_runner(
+        lambda: gym.make_vec("RocketRoll-v0", num_envs=ns.num_envs, parallel=True),
+        ns.vector_steps,
+        ns.seed,
+        discrete=False,
+    )
+    pendulum = _single_runner("Pendulum-v1", ns.single_steps, ns.seed)
+    cartpole = _vector_runner(
+        lambda: CartPoleVectorEnv(num_envs=ns.num_envs), ns.vector_steps, ns.seed, discrete=True
+    )
+    setup = time.perf_counter() - t0
+    tasks: dict[str, tuple[Callable[[], float], int]] = {
+        "RocketRoll-v0 (gym.make)": (single, ns.single_steps),
+        "Pendulum-v1 (gym.make)": (pendulum, ns.single_steps),
+        f"RocketRoll-v0 x {ns.num_envs} (make_vec)": (vector, ns.vector_steps * ns.num_envs),
+        f"  same, parallel=True ({numba.get_num_threads()} thr.)": (
+            vector_parallel,
+            ns.vector_steps * ns.num_envs,
+        ),
+        f"CartPoleVectorEnv x {ns.num_envs}": (cartpole, ns.vector_steps * ns.num_envs),
+    }
+    warm = time.perf_counter()
+    for run, _ in tasks.values():  # first calls: numba compile or cache load, page faults
+        run()
+    warmup = time.perf_counter() - warm
+    rates: dict[str, list[float]] = {name: [] for name in tasks}
+    for _ in range(ns.repeats):
+        for name, (run, count) in tasks.items():
+            rates[name].append(count / run())
+
+    names = list(tasks)
+    med = {name: statistics.median(r) for name, r in rates.items()}
+    print(f"setup (database, construction) {setup:.1f} s; untimed warm-up pass {warmup:.1f} s\n")
+    header = f"{'task':<36} {'blocks':>6} {'median steps/s':>15} {'best steps/s':>13} {'spread':>7}"
+    print(header)
+    print("-" * len(header))
+    for name in names:
+        r = rates[name]
+        spread = (max(r) - min(r)) / med[name]
+        print(f"{name:<36} {len(r):>6} {med[name]:>15,.0f} {max(r):>13,.0f} {spread:>6.0%}")
+    ratio = med[names[0]] / med[names[1]]
+    vec = med[names[2]]
+    vec_parallel = med[names[3]]
+    cart_ratio = vec / med[names[4]]
+    ok_single = ratio >= SINGLE_TARGET
+    ok_vector = vec >= VECTOR_TARGET
+    print()
+    print(
+        f"single: RocketRoll-v0 / Pendulum-v1 = {ratio:.2f} (target >= {SINGLE_TARGET:g}): "
+        f"{'PASS' if ok_single else 'FAIL'}"
+    )
+    print(
+        f"batched: {vec / 1e6:.2f} M env-steps/s at {ns.num_envs} envs (target >= "
+        f"{VECTOR_TARGET / 1e6:g} M): {'PASS' if ok_vector else 'FAIL'}; "
+        f"{cart_ratio:.2f} x CartPoleVectorEnv"
+    )
+    print(
+        f"batched, parallel=True: {vec_parallel / 1e6:.2f} M env-steps/s "
+        f"({vec_parallel / vec:.2f} x serial): "
+        f"{'PASS' if vec_parallel >= VECTOR_TARGET else 'FAIL'}"
+    )
+    print("spread: (best - worst) / median over the blocks; a large spread means a busy machine")
+    return 1 if ns.strict and not (ok_single and ok_vector) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
