@@ -36,9 +36,12 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll db build
 	$(BIN)/rocketroll db list --kind identified --method paper
 	$(BIN)/rocketroll db show 2d68d98ae09b-paper-theta-iaaft-0 --plot $(DEMO)/surrogate.png
+	$(BIN)/rocketroll env rollout --policy zero --episodes 2 --frames $(DEMO)/env-zero.png
+	$(BIN)/rocketroll env rollout --policy random --episodes 2 --frames $(DEMO)/env-random.png
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
-	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md, and"
-	@echo "      $(DEMO)/surrogate.png; the default disturbance database is listed above"
+	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
+	@echo "      $(DEMO)/surrogate.png and the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
+	@echo "      $(DEMO)/env-random.png; the default database and the episodes are listed above"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .
