@@ -116,7 +116,8 @@ class RollConfig:
         Database split the traces come from: ``"train"`` or ``"test"``.
     domain_randomization : bool
         Draw α, θ̄, β̄ and ᾱ at each reset uniformly over the range found in
-        the bank instead of using the trace's own.
+        the bank instead of using the trace's own; a draw whose damping
+        a(θ) is not positive over the whole fin range is drawn again.
     setpoint : str
         ``"steps"``: 0 for the first ``setpoint_period_s``, then a new value
         uniform in ±``setpoint_range`` every period; ``"zero"``: always 0.
@@ -647,8 +648,7 @@ class RollBatch:
         self.start[index] = starts
         self.u_start[index] = self.u_offsets[traces] + starts
         if cfg.domain_randomization:
-            draw = rng.uniform(size=(m, 4))
-            self.params[index] = self.param_low + draw * (self.param_high - self.param_low)
+            self.params[index] = self._randomized_params(rng, m)
         else:
             self.params[index] = self.bank_params[traces]
         if setpoint is not None:
@@ -708,6 +708,21 @@ class RollBatch:
             self.u_now,
         )
 
+    def _randomized_params(self, rng: np.random.Generator, m: int) -> FloatArray:
+        """``m`` parameter sets uniform over the bank's box, redrawing any that is undamped.
+
+        A draw whose a(θ) is not positive over the whole fin range is drawn
+        again (the corners of the box can be rockets that do not exist).
+        """
+        span = self.param_high - self.param_low
+        out = self.param_low + rng.uniform(size=(m, 4)) * span
+        for _ in range(_MAX_REDRAWS):
+            bad = np.flatnonzero(_min_damping(out, self.config.fin_range_deg) <= 0.0)
+            if bad.size == 0:
+                return out
+            out[bad] = self.param_low + rng.uniform(size=(bad.size, 4)) * span
+        raise RuntimeError("domain randomisation found no damped rocket in the parameter box")
+
     def _gyro_draws(self, rng: np.random.Generator, m: int) -> FloatArray:
         if self._noisy:
             return rng.standard_normal(m)
@@ -732,14 +747,23 @@ class RollBatch:
         return RollParams(alpha, theta_bar, beta_bar, alpha_bar)
 
 
+#: Rounds of redrawing undamped rockets before domain randomisation gives up.
+_MAX_REDRAWS = 200
+
+
+def _min_damping(params: FloatArray, fin_range: float) -> FloatArray:
+    """Smallest a(θ) = ᾱ·|θ + θ̄| + β̄ over θ in ±fin_range, per row (α, θ̄, β̄, ᾱ)."""
+    reach = fin_range + np.abs(params[:, 1])
+    return np.asarray(params[:, 2] + np.minimum(params[:, 3], 0.0) * reach)
+
+
 def _check_damping_box(low: FloatArray, high: FloatArray, fin_range: float) -> None:
-    """Refuse a randomisation box in which a(θ) could reach 0 (an undamped rocket)."""
-    worst_slope = min(low[3], 0.0)
-    reach = fin_range + max(abs(low[1]), abs(high[1]))
-    worst = low[2] + worst_slope * reach
-    if worst <= 0.0:
+    """Refuse a randomisation box in which (almost) no rocket is damped over the fin range."""
+    probe = low + np.random.default_rng(0).uniform(size=(4096, 4)) * (high - low)
+    accepted = float(np.mean(_min_damping(probe, fin_range) > 0.0))
+    if accepted < 0.01:
         raise ValueError(
-            f"domain randomisation over the bank's parameter range could give a(θ) = "
-            f"{worst:.3g} 1/s <= 0 at a fin angle of ±{fin_range:g}° (β̄ from {low[2]:.3g}, "
-            f"ᾱ from {low[3]:.3g}); select traces with a narrower spread"
+            f"domain randomisation over the bank's parameter range gives a(θ) <= 0 somewhere "
+            f"in ±{fin_range:g}° for {1 - accepted:.1%} of draws (β̄ from {low[2]:.3g}, ᾱ from "
+            f"{low[3]:.3g}); select traces with a narrower spread"
         )
