@@ -34,6 +34,7 @@ reproduces it to rounding.
 from __future__ import annotations
 
 import math
+import numbers
 import types
 from dataclasses import dataclass, fields
 from typing import Any
@@ -160,6 +161,15 @@ class RollConfig:
     fin_weight: float = 0.1
 
     def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            numeric = f.type in ("float", "float | None", "int")
+            if (
+                numeric
+                and value is not None
+                and (isinstance(value, bool) or not isinstance(value, numbers.Real))
+            ):
+                raise TypeError(f"{f.name} must be a number, not {type(value).__name__}")
         for name, allowed in (
             ("task", TASKS),
             ("disturbance", DISTURBANCES),
@@ -184,14 +194,10 @@ class RollConfig:
         )
         for name in positive:
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise TypeError(f"{name} must be a number, not {type(value).__name__}")
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
         for name in ("gyro_noise_pct", "disturbance_scale", "initial_angle_deg"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise TypeError(f"{name} must be a number, not {type(value).__name__}")
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a number >= 0, got {value!r}")
         for name in ("rate_weight", "fin_weight"):
@@ -205,7 +211,7 @@ class RollConfig:
         for name in ("sensors", "domain_randomization"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        if isinstance(self.encoder_counts, bool) or not isinstance(self.encoder_counts, int):
+        if not isinstance(self.encoder_counts, numbers.Integral):
             raise TypeError(f"encoder_counts must be an int, got {self.encoder_counts!r}")
         if self.encoder_counts < 0:
             raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")

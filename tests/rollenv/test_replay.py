@@ -12,7 +12,8 @@ Tolerance: ``rtol = atol = 1e-9`` (° and °/s).  Measured on the bundled
 recordings the largest differences are about 3e-12 °/s and 1e-10 ° (over
 570 s, angles of a few thousand degrees).  The actions are float64: a float32
 action (the space's dtype) rounds the command by up to 2.4e-6° and moves the
-replay by ~1e-6, still far inside the identification's own error.
+replay by up to ~7e-7 °/s and ~1e-4 °, far inside the identification's own
+error (0.1°) but not to rounding.
 """
 
 from __future__ import annotations
