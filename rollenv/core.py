@@ -677,17 +677,16 @@ class RollBatch:
             0.0 if fin_deg is None else float(fin_deg), -cfg.fin_range_deg, cfg.fin_range_deg
         )
         p = self.params[index]
-        if rate_dps is None:
-            u0 = self.cfg[_CFG["scale"]] * self.u_flat[self.u_start[index]]
-            rates = p[:, 0] * (fin + p[:, 1] + u0)  # steady rate (eq. 16, 36)
+        u0 = self.cfg[_CFG["scale"]] * self.u_flat[self.u_start[index]]
+        if rate_dps is None:  # the steady rate for the initial fin angle (eq. 16, 36)
+            self.state[index, 0] = p[:, 0] * (fin + p[:, 1] + u0)
         else:
-            rates = np.full(m, float(rate_dps))
-        self.state[index, 0] = rates
+            self.state[index, 0] = float(rate_dps)
         self.state[index, 1] = angles
         self.state[index, 2] = fin
         self.state[index, 3] = fin
         self.step_count[index] = 0
-        self.u_now[index] = self.cfg[_CFG["scale"]] * self.u_flat[self.u_start[index]]
+        self.u_now[index] = u0
         eps = self._gyro_draws(rng, m)
         observe_kernel(
             index, self.state, self.step_count, self.setpoints, eps, self.cfg, self.obs, self.error
@@ -739,6 +738,11 @@ class RollBatch:
     def truncated(self) -> NDArray[np.bool_]:
         """Envs whose episode has reached ``max_episode_steps``."""
         return self.step_count >= self.config.max_episode_steps
+
+    def setpoint_of(self, i: int) -> float:
+        """Env ``i``'s current setpoint, ° or °/s (:meth:`setpoint_now` for one env)."""
+        segment = int(self.step_count[i]) // self.config.setpoint_period_steps
+        return float(self.setpoints[i, min(segment, self.setpoints.shape[1] - 1)])
 
     def setpoint_now(self) -> FloatArray:
         """Each env's current setpoint, ° or °/s."""

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config
-from rollenv.core import RollBatch, RollConfig, observation_bounds
+from rollenv.core import RollBatch, observation_bounds
 
 __all__ = ["RESET_OPTIONS", "RocketRollEnv", "check_action"]
 
@@ -207,7 +207,6 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         )
         self._started = False
         self._max_steps = self.config.max_episode_steps
-        self._setpoint_period = self.config.setpoint_period_steps
         self._episode: dict[str, Any] = {}
         self._history: deque[tuple[float, ...]] = deque(
             maxlen=max(2, round(RENDER_HISTORY_S / self.config.dt_s) + 1)
@@ -280,15 +279,13 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         b = self._batch
         rate, angle, fin, command = b.state[0].tolist()
         step = int(b.step_count[0])
-        setpoints = b.setpoints[0]
-        segment = min(step // self._setpoint_period, setpoints.size - 1)
         return {
             "roll_deg": angle,
             "roll_rate_dps": rate,
             "fin_deg": fin,
             "fin_cmd_deg": command,
             "u_d_deg": float(b.u_now[0]),
-            "setpoint": float(setpoints[segment]),
+            "setpoint": b.setpoint_of(0),
             "tracking_error": float(b.error[0]),
             "time_s": round(step * self.config.dt_s, 9),
             **self._episode,
@@ -310,7 +307,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
                 float(s[2]),
                 float(s[3]),
                 float(b.u_now[0]),
-                float(b.setpoint_now()[0]),
+                b.setpoint_of(0),
             )
         )
 
@@ -333,10 +330,6 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
             fin_range_deg=self.config.fin_range_deg,
             label=f"{info.uid} ({info.split}, {self.config.disturbance})",
         )
-
-    def roll_config(self) -> RollConfig:
-        """The settings this environment runs with."""
-        return self.config
 
 
 def _one_action(action: Any) -> float:

@@ -129,7 +129,8 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         action = check_action(actions, self.num_envs)
         b = self._batch
         done = self._prev_done
-        if done.any():
+        any_done = bool(done.any())
+        if any_done:
             resetting = np.flatnonzero(done)
             b.reset(resetting, self.np_random)
             index = np.flatnonzero(~done)
@@ -138,7 +139,7 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         b.step(action, self.np_random, index)
         reward = b.reward.copy()
         truncated = b.truncated
-        if done.any():
+        if any_done:
             reward[done] = 0.0
             truncated[done] = False
         terminated = np.zeros(self.num_envs, dtype=np.bool_)
