@@ -631,12 +631,15 @@ class RollBatch:
         angle_deg: float | None = None,
         fin_deg: float | None = None,
         setpoint: float | None = None,
+        setpoints: FloatArray | None = None,
     ) -> None:
         """Start new episodes for the envs in ``index``.
 
         Keyword arguments fix what would otherwise be drawn (replays,
         evaluation episodes): the trace index in the bank, the start sample,
-        the initial rate, angle and fin angle, a constant setpoint.
+        the initial rate, angle and fin angle, a constant setpoint or the
+        whole schedule (one value per ``setpoint_period_s``, length
+        ``config.setpoint_segments``).
         """
         cfg = self.config
         m = index.size
@@ -657,7 +660,9 @@ class RollBatch:
             self.params[index] = self._randomized_params(rng, m)
         else:
             self.params[index] = self.bank_params[traces]
-        if setpoint is not None:
+        if setpoints is not None:
+            self.setpoints[index] = setpoints
+        elif setpoint is not None:
             self.setpoints[index] = setpoint
         elif cfg.setpoint == "steps" and self.setpoints.shape[1] > 1:
             sp = rng.uniform(-cfg.setpoint_max, cfg.setpoint_max, size=(m, self.setpoints.shape[1]))

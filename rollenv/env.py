@@ -19,7 +19,7 @@ from rollenv.core import RollBatch, observation_bounds
 __all__ = ["RESET_OPTIONS", "RocketRollEnv", "check_action"]
 
 #: Keys ``reset(options=...)`` accepts.
-RESET_OPTIONS = ("trace", "start", "rate_dps", "angle_deg", "fin_deg", "setpoint")
+RESET_OPTIONS = ("trace", "start", "rate_dps", "angle_deg", "fin_deg", "setpoint", "setpoints")
 
 #: Seconds of history a rendered frame shows.
 RENDER_HISTORY_S = 10.0
@@ -120,7 +120,10 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
 
     ``reset(options=...)`` fixes any of these for replays and evaluation:
     ``trace`` (index in the bank or uid), ``start`` (sample of the trace),
-    ``rate_dps``, ``angle_deg``, ``fin_deg``, ``setpoint`` (held constant).
+    ``rate_dps``, ``angle_deg``, ``fin_deg``, ``setpoint`` (held constant) or
+    ``setpoints`` (the schedule: one value per period, ``episode_s /
+    setpoint_period_s`` of them, rounded up).  :meth:`replay_options` gives
+    the options that recreate the current episode's draw.
 
     ## Episode End
 
@@ -218,7 +221,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[ObsType, dict[str, Any]]:
         super().reset(seed=seed)
-        fixed = reset_arguments(options, self.bank)
+        fixed = reset_arguments(options, self.bank, self.config.setpoint_segments)
         self._batch.reset(self._index, self.np_random, **fixed)
         self._episode = self._episode_info()
         self._started = True
@@ -273,6 +276,30 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+    # ---------------------------------------------------------------- extras
+    def replay_options(self) -> dict[str, Any]:
+        """Reset options that recreate this episode's trace window and setpoints.
+
+        ``env.reset(seed=s, options=env.replay_options())`` then replays the
+        same disturbance and setpoint schedule (the gyro noise follows ``s``);
+        the evaluation protocol stores episodes this way.
+        """
+        if not self._started:
+            raise RuntimeError("call reset() before replay_options()")
+        b = self._batch
+        trace = b.bank.traces[int(b.trace[0])]
+        return {
+            "trace": trace.info.uid,
+            "start": int(b.start[0]),
+            "setpoints": b.setpoints[0].tolist(),
+        }
+
+    @property
+    def core(self) -> RollBatch:
+        """The batch of one underneath: true state and future ``u_d``, for privileged
+        controllers (the oracle bound) and tests.  Writing to it breaks the episode."""
+        return self._batch
 
     # ------------------------------------------------------------------ helpers
     def _info(self) -> dict[str, Any]:
@@ -358,8 +385,11 @@ def check_action(action: Any, n: int) -> NDArray[np.float64]:
     return np.clip(a, -1.0, 1.0)
 
 
-def reset_arguments(options: dict[str, Any] | None, bank: TraceBank) -> dict[str, Any]:
-    """``reset(options=...)`` checked and turned into :meth:`RollBatch.reset` keywords."""
+def reset_arguments(
+    options: dict[str, Any] | None, bank: TraceBank, segments: int
+) -> dict[str, Any]:
+    """``reset(options=...)`` checked and turned into :meth:`RollBatch.reset` keywords
+    (``segments``: the length a ``setpoints`` schedule must have)."""
     if not options:
         return {}
     if not isinstance(options, dict):
@@ -391,6 +421,22 @@ def reset_arguments(options: dict[str, Any] | None, bank: TraceBank) -> dict[str
         if "trace" not in fixed:
             raise ValueError("reset option start needs a trace")
         fixed["start"] = int(start)
+    schedule = options.get("setpoints")
+    if schedule is not None:
+        if "setpoint" in options and options["setpoint"] is not None:
+            raise ValueError("reset options setpoint and setpoints exclude each other")
+        try:
+            values = np.asarray(schedule, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"reset option setpoints must be numbers, got {schedule!r}") from exc
+        if values.shape != (segments,):
+            raise ValueError(
+                f"reset option setpoints must hold {segments} values (one per setpoint "
+                f"period), got shape {values.shape}"
+            )
+        if not np.all(np.isfinite(values)):
+            raise ValueError("reset option setpoints must be finite")
+        fixed["setpoints"] = values
     for name in ("rate_dps", "angle_deg", "fin_deg", "setpoint"):
         value = options.get(name)
         if value is None:

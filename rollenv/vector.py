@@ -108,7 +108,7 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         if isinstance(seed, list):
             raise ValueError("RocketRollVectorEnv takes one int seed for the batch, not a list")
         super().reset(seed=seed)
-        fixed = reset_arguments(options, self.bank)
+        fixed = reset_arguments(options, self.bank, self.config.setpoint_segments)
         self._batch.reset(self._batch.all, self.np_random, **fixed)
         self._prev_done[:] = False
         self._started = True

@@ -290,6 +290,10 @@ def test_unknown_reset_option_is_named(bank):
         ({"angle_deg": "0"}, "angle_deg"),
         ({"fin_deg": True}, "fin_deg"),
         ({"setpoint": math.inf}, "setpoint"),
+        ({"setpoints": [0.0] * 5}, "6 values"),
+        ({"setpoints": [0.0] * 5 + [math.nan]}, "finite"),
+        ({"setpoints": "abc"}, "numbers"),
+        ({"setpoints": [0.0] * 6, "setpoint": 1.0}, "exclude each other"),
     ],
 )
 def test_bad_reset_option_values_are_refused(bank, options, message):
@@ -638,6 +642,26 @@ def test_reset_options_fix_the_episode(bank):
     assert env.reset(options={"trace": 1})[1]["start_s"] == 0.0
 
 
+def test_replay_options_recreate_the_episode(bank):
+    env = RocketRollEnv(bank=bank)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.replay_options()
+    actions = np.random.default_rng(3).uniform(-1, 1, size=(600, 1)).astype(np.float32)
+    env.reset(seed=11)
+    options = env.replay_options()
+    assert len(options["setpoints"]) == env.unwrapped.config.setpoint_segments == 6
+    assert options["setpoints"][0] == 0.0 and len(set(options["setpoints"])) == 6
+    first = [env.step(a)[4] for a in actions]
+    # Another seed: the same window and schedule (the gyro noise differs).
+    _, info = env.reset(seed=99, options=options)
+    assert (info["trace"], info["start_s"]) == (first[0]["trace"], first[0]["start_s"])
+    again = [env.step(a)[4] for a in actions]
+    for key in ("u_d_deg", "setpoint"):
+        assert [i[key] for i in again] == [i[key] for i in first]
+    assert env.replay_options() == options
+    assert env.core is env._batch
+
+
 def test_unfixed_resets_draw_every_trace_and_offset(bank):
     env = RocketRollEnv(bank=bank)
     seen = {env.reset(seed=s)[1]["trace"] for s in range(200)}
@@ -861,4 +885,12 @@ def test_the_bank_and_config_pickle(default_db, bank):
 
 
 def test_reset_arguments_are_listed():
-    assert set(RESET_OPTIONS) == {"trace", "start", "rate_dps", "angle_deg", "fin_deg", "setpoint"}
+    assert set(RESET_OPTIONS) == {
+        "trace",
+        "start",
+        "rate_dps",
+        "angle_deg",
+        "fin_deg",
+        "setpoint",
+        "setpoints",
+    }
