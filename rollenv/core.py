@@ -756,6 +756,17 @@ class RollBatch:
         )
         return self.setpoints[self.all, seg]
 
+    def u_ahead(self, i: int, steps: int) -> FloatArray:
+        """The ``u_d`` (scaled, °) acting at the start of env ``i``'s next ``steps`` control
+        steps -- the future, for privileged controllers (the oracle bound)."""
+        left = self.config.max_episode_steps - int(self.step_count[i])
+        if not 0 <= steps <= left:
+            raise ValueError(f"env {i} has {left} steps left, asked for {steps}")
+        k = self.step_count[i] + np.arange(steps)
+        per = int(self.cfg[_CFG["u_per"]])
+        samples = self.u_flat[self.u_start[i] + (k * self.config.substeps) // per]
+        return np.asarray(self.cfg[_CFG["scale"]] * samples)
+
     def roll_params(self, i: int) -> RollParams:
         """The model parameters env ``i`` runs with."""
         alpha, theta_bar, beta_bar, alpha_bar = (float(x) for x in self.params[i])

@@ -1,0 +1,81 @@
+"""The nominal rocket a deployable controller is designed for, and the open-loop trim floor."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from disturbances.bank import TraceBank
+from rollenv.env import RocketRollEnv
+
+__all__ = ["NominalModel", "TrimController"]
+
+
+@dataclass(frozen=True)
+class NominalModel:
+    """One first-order roll model standing for all rockets of a database split.
+
+    ``dv/dt = -a·(v - α·(θ + θ̄ + u_d))`` (eq. 29/36), linearised about the
+    trim fin angle ``θ = -θ̄``: there the θ-dependent damping of eq. 49,
+    ``a(θ) = ᾱ·|θ + θ̄| + β̄``, is ``β̄``, so ``a = β̄`` (for the constant
+    model ``ᾱ = 0`` and ``β̄`` is ``a`` itself).
+
+    Attributes
+    ----------
+    a_per_s : float
+        Damping at trim, 1/s.
+    alpha : float
+        Gain α, (°/s) per °.
+    theta_bar_deg : float
+        Asymmetry θ̄, ° (trim fin angle ``-θ̄``).
+    source : str
+        Where the numbers come from.
+    """
+
+    a_per_s: float
+    alpha: float
+    theta_bar_deg: float
+    source: str = "given"
+
+    def __post_init__(self) -> None:
+        for name in ("a_per_s", "alpha"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"NominalModel.{name} must be a positive number, got {value!r}")
+        if not np.isfinite(self.theta_bar_deg):
+            raise ValueError(f"NominalModel.theta_bar_deg must be finite, got {self.theta_bar_deg}")
+
+    @classmethod
+    def from_bank(cls, bank: TraceBank) -> NominalModel:
+        """The median identified rocket of ``bank`` (use the *train* split: the test
+        split's parameters are what an evaluation must not have seen)."""
+        if len(bank) == 0:
+            raise ValueError(f"{bank.description} has no traces to take a nominal model from")
+        p = np.array([[q.beta_bar_per_s, q.alpha, q.theta_bar_deg] for q in bank.params])
+        a, alpha, theta_bar = np.median(p, axis=0)
+        return cls(float(a), float(alpha), float(theta_bar), f"median of {bank.description}")
+
+
+class TrimController:
+    """Open loop: fins held at the nominal trim ``-θ̄``, the floor every controller must beat.
+
+    With ``θ = -θ̄`` the steady roll rate of the nominal rocket is zero
+    (eq. 16); the rocket drifts with the turbulence and with the difference
+    between its own θ̄ and the nominal one.
+    """
+
+    name = "trim"
+
+    def __init__(self, model: NominalModel, fin_range_deg: float = 40.0) -> None:
+        self.model = model
+        fin = min(max(-model.theta_bar_deg, -fin_range_deg), fin_range_deg)
+        self._action = np.array([fin / fin_range_deg], dtype=np.float32)
+
+    def reset(self, env: RocketRollEnv) -> None:
+        """Nothing to forget."""
+
+    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+        """The trim command, whatever ``obs`` says."""
+        return self._action.copy()

@@ -1,0 +1,134 @@
+"""The oracle bound: perfect preview of ``u_d``, the true model, the true state.
+
+Not a deployable controller: it measures how close the others come to what
+this servo could achieve against this turbulence at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rollenv.core import RollBatch, RollConfig
+from rollenv.env import RocketRollEnv
+
+__all__ = ["DEFAULT_HORIZON", "OracleController"]
+
+#: Planning horizon (steps) per task: the best of 2, 5, 10, 20 on train-split protocol
+#: episodes (a longer plan holds ``w`` constant for longer, a shorter one brakes late).
+DEFAULT_HORIZON = {"angle": 5, "rate": 2}
+
+
+class OracleController:
+    """Receding-horizon optimal control with the future ``u_d`` and the exact model.
+
+    ``u_d`` enters the roll model exactly where the fin angle does (eq. 36:
+    ``θ + θ̄ + u_d``), so the oracle plans in the effective fin angle
+    ``w = θ + u_d``.  At every control step it copies the environment's true
+    state, its rocket's parameters and its ``u_d`` trace (the future
+    included) into a batch of predictors -- the environment's own kernel, so
+    the prediction is exact -- and simulates each candidate ``w`` held for
+    the next ``horizon`` steps: the fin command of step ``j`` is
+    ``w - u_d(j)`` within the fin range, feedforward cancellation with
+    perfect preview.  It applies the first step of the candidate with the
+    lowest predicted cost, searching a grid of ``grid`` values over the fin
+    range (widened by the largest coming ``|u_d|``) and then ``refine``
+    values around the best, and plans again at the next step.  The servo's
+    rate and range limits are inside the prediction, so every plan respects
+    them.
+
+    The cost is the environment's reward with the fin-travel weight set to
+    ``fin_weight`` (default 0: the bound on tracking error, whatever the fin
+    travel).  The oracle knows the current setpoint, not the future ones
+    (the schedule is not part of the physics); the predictors hold it.  It
+    sees no sensor noise and no encoder quantisation.
+
+    The plan is the best over the candidates, not a proven optimum: an
+    approximate bound on what this actuator can achieve, reported as such.
+
+    Parameters
+    ----------
+    config : RollConfig
+        The environment's settings.
+    horizon : int or None
+        Steps each candidate is simulated for (0.1 s each); default
+        :data:`DEFAULT_HORIZON` for the task.
+    grid, refine : int
+        Candidates on the coarse grid and on the fine grid spanning one
+        coarse cell either side of the coarse best.
+    fin_weight : float
+        Weight of the fin-travel term in the planning cost.
+    """
+
+    name = "oracle"
+
+    def __init__(
+        self,
+        config: RollConfig,
+        horizon: int | None = None,
+        grid: int = 41,
+        refine: int = 21,
+        fin_weight: float = 0.0,
+    ) -> None:
+        if horizon is None:
+            horizon = DEFAULT_HORIZON[config.task]
+        if horizon < 1:
+            raise ValueError(f"horizon must be >= 1 step, got {horizon}")
+        if grid < 3 or refine < 1:
+            raise ValueError(f"grid must be >= 3 and refine >= 1, got {grid}, {refine}")
+        self.config = config
+        self.horizon = int(horizon)
+        self._grid = int(grid)
+        self._refine = int(refine)
+        self._planning = replace(config, sensors=False, fin_weight=float(fin_weight))
+        self._max_steps = config.max_episode_steps
+        self._predictor: RollBatch | None = None
+        self._bank_id = 0
+        self._rng = np.random.default_rng(0)  # never drawn from: the predictors have no noise
+
+    def reset(self, env: RocketRollEnv) -> None:
+        """Build the predictors for ``env``'s bank (once per bank)."""
+        core = env.core
+        if self._predictor is None or self._bank_id != id(core.bank):
+            n = max(self._grid, self._refine)
+            self._predictor = RollBatch(self._planning, core.bank, n)
+            self._bank_id = id(core.bank)
+
+    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+        """The first command of the best plan from ``env``'s true state."""
+        if self._predictor is None:
+            self.reset(env)
+        core = env.core
+        horizon = min(self.horizon, self._max_steps - int(core.step_count[0]))
+        u = core.u_ahead(0, horizon) / self.config.fin_range_deg  # in action units
+        reach = 1.0 + float(np.max(np.abs(u)))
+        coarse = np.linspace(-reach, reach, self._grid)
+        best = float(coarse[int(np.argmin(self._costs(core, coarse, u)))])
+        cell = coarse[1] - coarse[0]
+        fine = np.linspace(best - cell, best + cell, self._refine)
+        w = float(fine[int(np.argmin(self._costs(core, fine, u)))])
+        return np.array([min(max(w - u[0], -1.0), 1.0)], dtype=np.float32)
+
+    def _costs(
+        self, core: RollBatch, w: NDArray[np.float64], u: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Minus the predicted reward summed over the horizon, per candidate ``w``."""
+        p = self._predictor
+        assert p is not None
+        m = w.size
+        index = p.all[:m]
+        p.state[:m] = core.state[0]
+        p.params[:m] = core.params[0]
+        p.trace[:m] = core.trace[0]
+        p.u_start[:m] = core.u_start[0]
+        p.step_count[:m] = core.step_count[0]
+        p.setpoints[:m] = core.setpoint_of(0)
+        command = np.zeros(p.n)
+        total = np.zeros(m)
+        for u_j in u:
+            command[:m] = np.clip(w - u_j, -1.0, 1.0)
+            p.step(command, self._rng, index)
+            total -= p.reward[:m]
+        return total

@@ -1,0 +1,302 @@
+"""A discrete PID roll controller with gains placed on the identified roll model.
+
+Re-tuning for another database (``python -m agents.pid --db FILE``) takes the
+nominal rocket of that database's train split, sweeps the closed-loop
+bandwidth ω over train-split episodes of the evaluation protocol and prints
+the gains of the best ω; pass it back with ``rocketroll eval --policy
+pid:OMEGA``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.nominal import NominalModel
+from rollenv.core import RollConfig
+from rollenv.env import RocketRollEnv
+
+__all__ = ["DEFAULT_BANDWIDTH", "PIDController", "PIDGains", "tune_bandwidth"]
+
+#: Closed-loop bandwidth ω (rad/s) per task, chosen by :func:`tune_bandwidth`
+#: on the default database's train split (see the README's baselines section).
+DEFAULT_BANDWIDTH = {"angle": 2.5, "rate": 8.0}
+
+
+@dataclass(frozen=True)
+class PIDGains:
+    """Gains of :class:`PIDController` and how they were obtained.
+
+    The fin command (°) is ``θ_c = -θ̄ + k_ff·r + k_p·e + k_i·∫e dt - k_d·v``
+    with ``e`` the tracking error, ``r`` the setpoint and ``v`` the
+    (filtered) measured roll rate.
+
+    Attributes
+    ----------
+    kp, ki, kd : float
+        Proportional (°/° or °/(°/s)), integral (per s) and derivative (s,
+        angle task only) gains.
+    k_ff : float
+        Setpoint feedforward (rate task: ``1/α``, the fin angle that holds a
+        roll rate in steady state, eq. 16; angle task: 0).
+    trim_deg : float
+        Feedforward of the asymmetry, ``-θ̄``.
+    tf_s : float
+        Time constant of the first-order filter on the measured rate (0:
+        none, the default).  With this gyro (2 % noise, eq. 52) a filter does
+        not help: on 30 train episodes 0.02-0.2 s left the angle task's RMS
+        error unchanged and made the rate task's worse (1.52 → 1.64-5.9 °/s,
+        the lag); it is there for a noisier gyro.
+    tt_s : float
+        Anti-windup tracking time constant (back-calculation).
+    omega, zeta : float
+        The design: closed-loop poles of ``(s + ω)(s² + 2ζωs + ω²)`` (angle)
+        or ``s² + 2ζωs + ω²`` (rate).
+    model : NominalModel
+        The rocket the gains were placed on.
+    """
+
+    kp: float
+    ki: float
+    kd: float
+    k_ff: float
+    trim_deg: float
+    tf_s: float
+    tt_s: float
+    omega: float
+    zeta: float
+    model: NominalModel
+
+    @classmethod
+    def place(
+        cls,
+        model: NominalModel,
+        task: str,
+        omega: float | None = None,
+        zeta: float = 1.0,
+        tf_s: float = 0.0,
+    ) -> PIDGains:
+        """Gains that put the closed-loop poles of the linearised rocket at ``-ω``.
+
+        Notes
+        -----
+        About trim the roll model (eq. 36, 49) is linear with ``a = β̄``::
+
+            dv/dt = -a·v + a·α·(θ + θ̄ + u_d),   dφ/dt = v.
+
+        **Angle task.**  With ``θ = -θ̄ + k_p·e + k_i·∫e - k_d·v`` and
+        ``e = r - φ`` (``r`` constant), the closed loop from ``r`` and
+        ``u_d`` to ``φ`` has the characteristic polynomial::
+
+            s³ + a(1 + α·k_d)·s² + a·α·k_p·s + a·α·k_i.
+
+        Matching ``(s + ω)(s² + 2ζωs + ω²) = s³ + (1+2ζ)ω·s² + (1+2ζ)ω²·s + ω³``
+        gives::
+
+            k_d = ((1 + 2ζ)·ω/a - 1)/α,   k_p = (1 + 2ζ)·ω²/(a·α),   k_i = ω³/(a·α).
+
+        The derivative acts on the measured rate (the gyro), so setpoint
+        steps cause no derivative kick and nothing is differentiated
+        numerically.  ``u_d`` enters where θ does, so the integral removes
+        any constant part of it and any error in θ̄.
+
+        **Rate task.**  With ``θ = -θ̄ + r/α + k_p·e + k_i·∫e``, ``e = r - v``::
+
+            s² + a(1 + α·k_p)·s + a·α·k_i = s² + 2ζω·s + ω²
+            ⇒ k_p = (2ζω/a - 1)/α,   k_i = ω²/(a·α).
+
+        The feedforward ``r/α`` makes a setpoint step need no integral
+        action in the nominal case.
+
+        ζ = 1 (default) makes the angle loop a triple pole: no overshoot in
+        the linear range.  ω is limited by what the model leaves out: the
+        0.1-s sample-and-hold (a delay of about 0.05 s), the servo's 150 °/s
+        and the encoder's 1.4° quantisation, which the proportional and
+        integral gains amplify; :func:`tune_bandwidth` picks it on train
+        episodes.  The anti-windup tracking time is Åström's
+        ``T_t = sqrt(T_i·T_d)`` (``T_i = k_p/k_i``, ``T_d = k_d/k_p``; ``T_i``
+        without a derivative).
+
+        References
+        ----------
+        K. J. Åström and R. M. Murray, *Feedback Systems*, 2nd ed., ch. 11
+        (PID design by pole placement, integrator windup).
+        """
+        if task not in ("angle", "rate"):
+            raise ValueError(f"task must be 'angle' or 'rate', got {task!r}")
+        w = DEFAULT_BANDWIDTH[task] if omega is None else float(omega)
+        if not math.isfinite(w) or w <= 0:
+            raise ValueError(f"omega must be a positive number (rad/s), got {omega!r}")
+        if not math.isfinite(zeta) or zeta <= 0:
+            raise ValueError(f"zeta must be positive, got {zeta!r}")
+        if not math.isfinite(tf_s) or tf_s < 0:
+            raise ValueError(f"tf_s must be >= 0 (s), got {tf_s!r}")
+        a, alpha = model.a_per_s, model.alpha
+        if task == "angle":
+            kd = ((1 + 2 * zeta) * w / a - 1) / alpha
+            kp = (1 + 2 * zeta) * w * w / (a * alpha)
+            ki = w**3 / (a * alpha)
+            k_ff = 0.0
+            ti = kp / ki
+            tt = math.sqrt(ti * max(kd / kp, 0.0)) or ti
+        else:
+            kd = 0.0
+            kp = (2 * zeta * w / a - 1) / alpha
+            ki = w * w / (a * alpha)
+            k_ff = 1.0 / alpha
+            tt = abs(kp) / ki or 1.0 / w
+        return cls(kp, ki, kd, k_ff, -model.theta_bar_deg, tf_s, tt, w, zeta, model)
+
+
+class PIDController:
+    """Discrete PID on the sensors only (encoder error, gyro rate, fin angle).
+
+    Per control step ``Δt``: the measured rate is low-pass filtered
+    (backward Euler, time constant ``tf_s``), the command of
+    :class:`PIDGains` is computed and clipped to the fin range, and the
+    integral is advanced by ``Δt·e`` plus the back-calculation term
+    ``Δt/T_t·(θ - θ_c)/k_i``, where ``θ`` is the fin angle the servo
+    actually reached -- so both the range limit and the servo's rate limit
+    stop the integral from winding up.
+
+    The encoder floors the angle to its resolution ``q``: the true error lies
+    in ``(e_meas - q, e_meas]``; the angle loop uses the middle,
+    ``e_meas - q/2``, so it holds the rocket centred on the setpoint.
+    """
+
+    name = "PID"
+
+    def __init__(self, gains: PIDGains, config: RollConfig) -> None:
+        self.gains = gains
+        self.config = config
+        self._dt = config.dt_s
+        self._range = config.fin_range_deg
+        self._angle = config.task == "angle"
+        half_count = 0.5 * config.encoder_resolution_deg if config.sensors else 0.0
+        self._offset = half_count if self._angle else 0.0
+        self._beta = self._dt / (gains.tf_s + self._dt)
+        self._aw = self._dt / gains.tt_s / gains.ki if gains.ki > 0 else 0.0
+        self.reset()
+
+    @classmethod
+    def for_env(
+        cls,
+        config: RollConfig,
+        model: NominalModel,
+        omega: float | None = None,
+        zeta: float = 1.0,
+        tf_s: float = 0.0,
+    ) -> PIDController:
+        """Gains placed on ``model`` (:meth:`PIDGains.place`) for ``config``'s task."""
+        return cls(PIDGains.place(model, config.task, omega, zeta, tf_s), config)
+
+    def reset(self, env: RocketRollEnv | None = None) -> None:
+        """Zero the integral; the rate filter restarts from the next measurement."""
+        self._integral = 0.0
+        self._rate = math.nan
+        self._command = math.nan
+
+    def act(
+        self, obs: NDArray[np.float32], env: RocketRollEnv | None = None
+    ) -> NDArray[np.float32]:
+        """The fin command for observation ``(error, rate, fin, last command)``."""
+        g = self.gains
+        error = float(obs[0]) - self._offset
+        rate = float(obs[1])
+        fin = float(obs[2])
+        if math.isnan(self._rate):
+            self._rate = rate
+        else:
+            self._rate += self._beta * (rate - self._rate)
+            self._integral += self._aw * (fin - self._command)  # back-calculation
+        if self._angle:
+            raw = g.trim_deg + g.kp * error + g.ki * self._integral - g.kd * self._rate
+        else:
+            setpoint = float(obs[0]) + rate  # e = r - v_meas
+            error = setpoint - self._rate
+            raw = g.trim_deg + g.k_ff * setpoint + g.kp * error + g.ki * self._integral
+        command = min(max(raw, -self._range), self._range)
+        self._integral += self._dt * error
+        self._command = raw
+        return np.array([command / self._range], dtype=np.float32)
+
+
+def tune_bandwidth(
+    config: RollConfig,
+    model: NominalModel,
+    omegas: Sequence[float],
+    *,
+    episodes: int = 30,
+    seed: int = 0,
+    db: str | None = None,
+    zeta: float = 1.0,
+    tf_s: float = 0.0,
+) -> list[tuple[float, dict[str, float]]]:
+    """``(ω, mean of each protocol metric)`` for each ``ω`` on train-split protocol episodes.
+
+    The evaluation protocol's episodes are drawn with ``split`` forced to
+    ``"train"``, so tuning never sees the test split.
+    """
+    from agents.evaluate import evaluate, protocol_episodes
+
+    config = replace(config, split="train")
+    specs = protocol_episodes(config, episodes=episodes, seed=seed, db=db)
+    out = []
+    for omega in omegas:
+        pid = PIDController.for_env(config, model, omega, zeta, tf_s)
+        result = evaluate(config, pid, specs, db=db)
+        out.append((float(omega), {k: v["mean"] for k, v in result.aggregate.items()}))
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m agents.pid``: re-tune the PID for a database and print the gains."""
+    from rollenv.bank import load_bank, make_config
+
+    parser = argparse.ArgumentParser(prog="python -m agents.pid", description=__doc__)
+    parser.add_argument("--env-id", default="RocketRoll-v0")
+    parser.add_argument("--db", default=None, help="database file (default: the default one)")
+    parser.add_argument("--episodes", type=int, default=30, help="train episodes per ω")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--omegas", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0, 8.0, 10.0]
+    )
+    parser.add_argument(
+        "--metric",
+        default="rms_error",
+        choices=("rms_error", "settled_rms_error", "return"),
+        help="what the best ω optimises (default: the protocol's headline, the RMS error)",
+    )
+    ns = parser.parse_args(argv)
+    task = "rate" if ns.env_id == "RocketRollRate-v0" else "angle"
+    config = make_config(ns.env_id, {"task": task, "split": "train"})
+    model = NominalModel.from_bank(load_bank(config, ns.db))
+    print(f"nominal model: {model.source}")
+    print(f"  a = {model.a_per_s:.4g} 1/s, α = {model.alpha:.4g}, θ̄ = {model.theta_bar_deg:.4g}°")
+    results = tune_bandwidth(config, model, ns.omegas, episodes=ns.episodes, seed=ns.seed, db=ns.db)
+    unit = "°" if task == "angle" else "°/s"
+    print(f"  ω (rad/s)  RMS error ({unit})  settled RMS ({unit})  return")
+    for omega, m in results:
+        print(
+            f"  {omega:9.2f}  {m['rms_error']:14.4f}  {m['settled_rms_error']:18.4f}  "
+            f"{m['return']:8.1f}"
+        )
+    sign = -1.0 if ns.metric == "return" else 1.0
+    best = min(results, key=lambda r: sign * r[1][ns.metric])[0]
+    gains = PIDGains.place(model, task, best)
+    print(
+        f"best ω by {ns.metric} = {best:g} rad/s: kp = {gains.kp:.4g}, ki = {gains.ki:.4g}, "
+        f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°"
+    )
+    print(f"use it with: rocketroll eval --env-id {ns.env_id} --policy pid:{best:g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
