@@ -16,9 +16,9 @@ from rollenv.env import RocketRollEnv
 
 __all__ = ["DEFAULT_HORIZON", "OracleController"]
 
-#: Planning horizon (steps) per task: the best of 2, 5, 10, 20 on train-split protocol
-#: episodes (a longer plan holds ``w`` constant for longer, a shorter one brakes late).
-DEFAULT_HORIZON = {"angle": 5, "rate": 2}
+#: Planning horizon (steps) per task, picked on 30 train-split protocol episodes from
+#: 2, 3, 5, 8, 10, 20 (a longer plan holds ``w`` for longer, a shorter one brakes late).
+DEFAULT_HORIZON = {"angle": 8, "rate": 2}
 
 
 class OracleController:
@@ -39,9 +39,12 @@ class OracleController:
     rate and range limits are inside the prediction, so every plan respects
     them.
 
-    The cost is the environment's reward with the fin-travel weight set to
-    ``fin_weight`` (default 0: the bound on tracking error, whatever the fin
-    travel).  The oracle knows the current setpoint, not the future ones
+    The cost is the environment's reward with the rate and fin-travel
+    weights set to ``rate_weight`` and ``fin_weight``, by default both 0: the
+    squared tracking error alone, so the oracle bounds the tracking error
+    whatever the fin travel.  (With the reward's own rate weight, 0.1, it
+    slews more gently and its RMS angle error on train episodes rose by
+    0.03°.)  The oracle knows the current setpoint, not the future ones
     (the schedule is not part of the physics); the predictors hold it.  It
     sees no sensor noise and no encoder quantisation.
 
@@ -58,8 +61,8 @@ class OracleController:
     grid, refine : int
         Candidates on the coarse grid and on the fine grid spanning one
         coarse cell either side of the coarse best.
-    fin_weight : float
-        Weight of the fin-travel term in the planning cost.
+    rate_weight, fin_weight : float
+        Weights of the roll-rate and fin-travel terms in the planning cost.
     """
 
     name = "oracle"
@@ -70,6 +73,7 @@ class OracleController:
         horizon: int | None = None,
         grid: int = 41,
         refine: int = 21,
+        rate_weight: float = 0.0,
         fin_weight: float = 0.0,
     ) -> None:
         if horizon is None:
@@ -82,7 +86,9 @@ class OracleController:
         self.horizon = int(horizon)
         self._grid = int(grid)
         self._refine = int(refine)
-        self._planning = replace(config, sensors=False, fin_weight=float(fin_weight))
+        self._planning = replace(
+            config, sensors=False, rate_weight=float(rate_weight), fin_weight=float(fin_weight)
+        )
         self._max_steps = config.max_episode_steps
         self._predictor: RollBatch | None = None
         self._bank_id = 0
