@@ -12,6 +12,8 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from agents import evaluate as agents_evaluate
+from agents import train as agents_train
 from disturbances import cli as disturbances_cli
 from identification import cli as identification_cli
 from identification.errors import RocketrollError
@@ -27,13 +29,15 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rocketroll",
         description="Rocket roll dynamics under turbulence: virtual wind tunnel, recordings, "
         "identification (Minimal modelling approach ..., eq. 36/49), disturbance database, "
-        "RocketRoll-v0 environment.",
+        "RocketRoll-v0 environment, PID/PPO/oracle baselines and their evaluation.",
     )
     parser.add_argument("--version", action="version", version=f"rocketroll {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     identification_cli.register(subparsers)
     disturbances_cli.register(subparsers)
     rollenv_cli.register(subparsers)
+    agents_train.register(subparsers)
+    agents_evaluate.register(subparsers)
     return parser
 
 

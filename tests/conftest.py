@@ -19,3 +19,13 @@ def _private_default_database(tmp_path_factory: pytest.TempPathFactory) -> Itera
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("ROCKETROLL_DB", str(path))
         yield path
+
+
+@pytest.fixture(scope="session")
+def default_db(_private_default_database: Path) -> Path:
+    """The session's default database, built once (about 15 s); its path."""
+    from disturbances.default import open_default
+
+    with open_default(progress=False):
+        pass
+    return _private_default_database

@@ -2,16 +2,14 @@
 
 Banks of bare arrays (:func:`array_bank`) are built once per process and
 shared, so Hypothesis tests can use them without function-scoped fixtures.
-``default_db`` builds the session's default database (``$ROCKETROLL_DB``, a
-temporary path set by the root conftest) once, for the tests that draw from
-the real disturbance traces.
+``default_db`` (root conftest) builds the session's default database once,
+for the tests that draw from the real disturbance traces.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -51,16 +49,6 @@ def array_bank(model: str = "theta") -> TraceBank:
 def wrap(angle_deg: float) -> float:
     """An angle difference in [-180°, 180°), computed independently of the package."""
     return (angle_deg + 180.0) % 360.0 - 180.0
-
-
-@pytest.fixture(scope="session")
-def default_db(_private_default_database: Path) -> Path:
-    """The session's default database, built once (about 15 s); its path."""
-    from disturbances.default import open_default
-
-    with open_default(progress=False):
-        pass
-    return _private_default_database
 
 
 @pytest.fixture(scope="session")

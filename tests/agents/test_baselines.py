@@ -1,0 +1,173 @@
+"""Trim, PID and oracle: design, behaviour on the real rockets, and their ordering."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.evaluate import EpisodeSpec, _env, evaluate, protocol_episodes, run_episode
+from agents.nominal import NominalModel, TrimController
+from agents.oracle import OracleController
+from agents.pid import DEFAULT_BANDWIDTH, PIDController, PIDGains
+from rollenv.bank import load_bank, make_config
+from rollenv.core import RollConfig
+
+NOMINAL = NominalModel(a_per_s=3.0, alpha=0.66, theta_bar_deg=4.5)
+
+
+def config(**settings) -> RollConfig:
+    env_id = "RocketRollRate-v0" if settings.get("task") == "rate" else "RocketRoll-v0"
+    return make_config(env_id, settings)
+
+
+@pytest.fixture(scope="module")
+def train_model(default_db) -> NominalModel:
+    return NominalModel.from_bank(load_bank(config(split="train"), None))
+
+
+# ----------------------------------------------------------------------- design
+@pytest.mark.parametrize(("omega", "zeta"), [(2.5, 0.7), (4.0, 0.5), (1.5, 0.9)])
+def test_angle_gains_place_the_closed_loop_poles(omega, zeta):
+    g = PIDGains.place(NOMINAL, "angle", omega, zeta)
+    a, alpha = NOMINAL.a_per_s, NOMINAL.alpha
+    # s³ + a(1 + α·kd)s² + aα·kp·s + aα·ki, the loop of PIDGains.place's Notes
+    poles = np.sort_complex(
+        np.roots([1, a * (1 + alpha * g.kd), a * alpha * g.kp, a * alpha * g.ki])
+    )
+    wd = omega * math.sqrt(1 - zeta**2)
+    wanted = np.sort_complex(np.array([-omega, -zeta * omega + 1j * wd, -zeta * omega - 1j * wd]))
+    np.testing.assert_allclose(poles, wanted, rtol=1e-9, atol=1e-9)
+    assert g.trim_deg == -4.5 and g.k_ff == 0.0
+
+
+@pytest.mark.parametrize(("omega", "zeta"), [(8.0, 1.0), (5.0, 0.7)])
+def test_rate_gains_place_the_closed_loop_poles(omega, zeta):
+    g = PIDGains.place(NOMINAL, "rate", omega, zeta)
+    a, alpha = NOMINAL.a_per_s, NOMINAL.alpha
+    poles = np.roots([1, a * (1 + alpha * g.kp), a * alpha * g.ki])
+    np.testing.assert_allclose(sorted(poles.real), [-zeta * omega] * 2, rtol=1e-6)
+    np.testing.assert_allclose(abs(poles), [omega, omega], rtol=1e-9)
+    assert g.kd == 0.0 and g.k_ff == pytest.approx(1 / alpha)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"task": "yaw"}, "task"),
+        ({"omega": -1.0}, "omega"),
+        ({"omega": math.nan}, "omega"),
+        ({"zeta": 0.0}, "zeta"),
+        ({"tf_s": -0.1}, "tf_s"),
+    ],
+)
+def test_bad_design_arguments_are_named(kwargs, message):
+    args = {"task": "angle", **kwargs}
+    with pytest.raises(ValueError, match=message):
+        PIDGains.place(NOMINAL, **args)
+    with pytest.raises(ValueError, match="alpha"):
+        NominalModel(a_per_s=3.0, alpha=0.0, theta_bar_deg=4.5)
+
+
+def test_the_nominal_model_is_the_train_split_median(train_model, default_db):
+    bank = load_bank(config(split="train"), None)
+    assert train_model.a_per_s == pytest.approx(np.median([p.beta_bar_per_s for p in bank.params]))
+    assert train_model.alpha == pytest.approx(np.median([p.alpha for p in bank.params]))
+    assert train_model.theta_bar_deg == pytest.approx(
+        np.median([p.theta_bar_deg for p in bank.params])
+    )
+    assert "train" in train_model.source
+
+
+def test_trim_holds_the_fins_at_minus_theta_bar():
+    trim = TrimController(NOMINAL)
+    action = trim.act(np.zeros(4, np.float32), None)  # type: ignore[arg-type]
+    assert action.dtype == np.float32 and action.shape == (1,)
+    assert action[0] == np.float32(-4.5 / 40.0)
+
+
+# -------------------------------------------------------------------- behaviour
+@pytest.mark.parametrize("setpoint", [0.0, 30.0, -75.0])
+def test_pid_holds_a_setpoint_to_the_encoder_resolution(setpoint, train_model, default_db):
+    """No turbulence: after 10 s every true angle error is within one encoder count
+    (1.40625°), on every rocket of the test split, with the gyro noise on."""
+    cfg = config(split="test", disturbance="none")
+    bank = load_bank(cfg, None)
+    env = _env(cfg, bank)
+    for trace in range(len(bank)):
+        pid = PIDController.for_env(cfg, train_model)
+        spec = EpisodeSpec(0, 7 + trace, bank.traces[trace].info.uid, 0, (setpoint,) * 6)
+        rollout = run_episode(env, pid, spec)
+        held = np.abs(rollout.error[100:])
+        assert held.max() <= cfg.encoder_resolution_deg, (trace, held.max())
+        assert rollout.setpoint[-1] == setpoint
+
+
+def test_pid_holds_a_rate_setpoint_to_the_gyro_noise(train_model, default_db):
+    cfg = config(task="rate", split="test", disturbance="none")
+    bank = load_bank(cfg, None)
+    pid = PIDController.for_env(cfg, train_model)
+    rollout = run_episode(
+        _env(cfg, bank), pid, EpisodeSpec(0, 3, bank.traces[0].info.uid, 0, (8.0,) * 6)
+    )
+    # 2 % gyro noise on 8 °/s is 0.16 °/s (1 SD); at ω = 8 rad/s the loop passes it on
+    # (measured: RMS 0.162 °/s), so the error is of the order of the noise, no more.
+    noise_sd = cfg.gyro_noise_pct / 100 * 8.0
+    held = rollout.error[50:]
+    assert np.sqrt(np.mean(held**2)) < 1.5 * noise_sd
+    assert np.abs(held).max() < 5 * noise_sd
+    assert abs(held.mean()) < 0.05
+
+
+def test_back_calculation_limits_the_overshoot_after_a_saturated_slew(train_model, default_db):
+    cfg = config(split="test", disturbance="none")
+    bank = load_bank(cfg, None)
+    env = _env(cfg, bank)
+    spec = EpisodeSpec(0, 1, bank.traces[0].info.uid, 0, (0.0, 90.0, 90.0, 90.0, 90.0, 90.0))
+
+    def overshoot(pid: PIDController) -> float:
+        rollout = run_episode(env, pid, spec)
+        return float(-rollout.error[100:].min())  # the angle beyond 90°
+
+    with_aw = PIDController.for_env(cfg, train_model)
+    without = PIDController.for_env(cfg, train_model)
+    without._aw = 0.0  # the same loop with the integral left to wind up
+    assert overshoot(with_aw) < 3.0 < 10.0 < overshoot(without)
+
+
+@pytest.mark.parametrize("task", ["angle", "rate"])
+def test_oracle_beats_pid_beats_trim_on_a_fixed_episode(task, train_model, default_db):
+    def errors(cfg: RollConfig) -> list[dict[str, float]]:
+        specs = protocol_episodes(cfg, 1, seed=3)
+        controllers = [
+            TrimController(train_model),
+            PIDController.for_env(cfg, train_model),
+            OracleController(cfg),
+        ]
+        return [evaluate(cfg, c, specs).episodes[0] for c in controllers]
+
+    # Holding the setpoint against the turbulence: the oracle cancels what the PID fights.
+    trim, pid, oracle = errors(config(task=task, split="test", setpoint="zero"))
+    assert oracle["rms_error"] < 0.5 * pid["rms_error"] < 0.5 * trim["rms_error"]
+    # With setpoint steps, between the slews (which the servo's range limits for all).
+    trim, pid, oracle = errors(config(task=task, split="test"))
+    assert oracle["settled_rms_error"] < 0.5 * pid["settled_rms_error"]
+    assert pid["rms_error"] < trim["rms_error"]
+
+
+def test_oracle_plans_respect_the_servo(default_db):
+    cfg = config(split="test")
+    oracle = OracleController(cfg)
+    rollout = run_episode(_env(cfg, load_bank(cfg, None)), oracle, protocol_episodes(cfg, 1)[0])
+    travel = np.abs(np.diff(rollout.fin_deg))
+    assert travel.max() <= cfg.rate_limit_dps * cfg.dt_s + 1e-9
+    assert np.abs(rollout.command_deg).max() <= cfg.fin_range_deg
+    with pytest.raises(ValueError, match="horizon"):
+        OracleController(cfg, horizon=0)
+
+
+def test_default_bandwidths_are_documented():
+    assert set(DEFAULT_BANDWIDTH) == {"angle", "rate"}
+    doc = PIDGains.place.__doc__ or ""
+    assert "k_d = ((1 + 2ζ)·ω/a - 1)/α" in doc and "k_i = ω²/(a·α)" in doc

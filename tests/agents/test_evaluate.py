@@ -1,0 +1,135 @@
+"""The evaluation protocol: fixed episodes, reproducible numbers, correct metrics, outputs."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from agents.evaluate import (
+    METRICS,
+    Rollout,
+    evaluate,
+    main,
+    make_controller,
+    markdown_table,
+    metrics,
+    protocol_episodes,
+)
+from rocketroll.cli import main as rocketroll
+from rollenv.bank import load_bank, make_config
+
+
+@pytest.fixture(scope="module")
+def angle_config(default_db):
+    return make_config("RocketRoll-v0", {"split": "test"})
+
+
+def test_protocol_episodes_are_fixed_by_the_seed(angle_config):
+    first = protocol_episodes(angle_config, 5, seed=4)
+    assert protocol_episodes(angle_config, 5, seed=4) == first
+    other = protocol_episodes(angle_config, 5, seed=5)
+    assert [e.seed for e in other] != [e.seed for e in first]
+    test_uids = {t.info.uid for t in load_bank(angle_config, None).traces}
+    for spec in first:
+        assert spec.trace in test_uids  # held-out traces only
+        assert len(spec.setpoints) == 6 and spec.setpoints[0] == 0.0
+        assert all(abs(s) <= 90.0 for s in spec.setpoints)
+    # The same episodes as the environment's own draw, not a distribution of their own.
+    assert len({(e.trace, e.start) for e in first}) == 5
+
+
+@pytest.mark.parametrize("policy", ["pid", "oracle"])
+def test_the_same_seed_gives_identical_numbers(policy, angle_config):
+    specs = protocol_episodes(angle_config, 3, seed=1)
+    runs = [
+        evaluate(angle_config, make_controller(policy, angle_config), specs).episodes
+        for _ in range(2)
+    ]
+    assert runs[0] == runs[1]
+    again = protocol_episodes(angle_config, 3, seed=1)
+    third = evaluate(angle_config, make_controller(policy, angle_config), again).episodes
+    assert third == runs[0]
+    different = evaluate(
+        angle_config,
+        make_controller(policy, angle_config),
+        protocol_episodes(angle_config, 3, seed=2),
+    ).episodes
+    assert different != runs[0]
+
+
+def test_metrics_of_a_hand_made_episode(angle_config):
+    # 4 steps of 0.1 s; the fin moves 0 → 15 → 15 → 40 → 40.
+    n = 5
+    rollout = Rollout(
+        time_s=np.arange(n) * 0.1,
+        angle_deg=np.zeros(n),
+        rate_dps=np.zeros(n),
+        fin_deg=np.array([0.0, 15.0, 15.0, 40.0, 40.0]),
+        command_deg=np.array([0.0, 40.0, 15.0, 40.0, 40.0]),
+        u_d_deg=np.zeros(n),
+        setpoint=np.zeros(n),
+        error=np.array([9.0, 3.0, -4.0, 5.0, 12.0]),
+        reward=np.array([0.0, -1.0, -2.0, -3.0, -4.0]),
+    )
+    cfg = make_config("RocketRoll-v0", {"setpoint_period_s": 0.4})  # 4 steps per period
+    m = metrics(rollout, cfg)
+    assert m["rms_error"] == pytest.approx(math.sqrt((9 + 16 + 25 + 144) / 4))
+    assert m["max_error"] == 12.0
+    assert m["settled_rms_error"] == 5.0  # step 3 is the period's last quarter
+    assert m["fin_travel_dps"] == pytest.approx(40.0 / 0.4)
+    # Moving at 150 °/s: 0.1 s (40° asked), 0, 25°/150 °/s, 0 — of 0.4 s.
+    assert m["rate_limit_pct"] == pytest.approx(100 * (0.1 + 25 / 150) / 0.4)
+    assert m["range_limit_pct"] == 50.0
+    assert m["return"] == -10.0
+    assert set(m) == set(METRICS)
+
+
+def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
+    out = tmp_path / "eval"
+    code = rocketroll(
+        ["eval", "--policy", "trim", "--policy", "pid:3", "--episodes", "3", "--out", str(out)]
+    )
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "| trim |" in printed and "| PID |" in printed
+    table = (out / "table.md").read_text()
+    assert table.count("\n") == 4 and "RMS error (°)" in table
+    results = json.loads((out / "results.json").read_text())
+    assert results["protocol"]["split"] == "test"
+    assert len(results["protocol"]["episodes"]) == 3
+    assert set(results["controllers"]) == {"trim", "PID"}
+    pid = results["controllers"]["PID"]
+    assert len(pid["episodes"]) == 3
+    rms = [e["rms_error"] for e in pid["episodes"]]
+    assert pid["aggregate"]["rms_error"]["mean"] == pytest.approx(np.mean(rms))
+    assert pid["aggregate"]["rms_error"]["worst"] == max(rms)
+    for png in ("episode.png", "errors.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(out.glob("*.tmp*"))
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--policy", "lqr"], "unknown --policy 'lqr'"),
+        (["--policy", "pid:fast"], "pid:OMEGA needs a number"),
+        (["--policy", "trim:1"], "takes no argument"),
+        (["--episodes", "0"], "--episodes must be >= 1"),
+        (["--env-id", "CartPole-v1"], "--env-id"),
+    ],
+)
+def test_bad_arguments_exit_2_and_write_nothing(argv, message, tmp_path, capsys, default_db):
+    out = tmp_path / "eval"
+    assert main([*argv, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_the_table_marks_the_units_of_the_rate_task(default_db):
+    cfg = make_config("RocketRollRate-v0", {"task": "rate", "split": "test"})
+    result = evaluate(cfg, make_controller("trim", cfg), protocol_episodes(cfg, 2))
+    table = markdown_table([result], cfg)
+    assert "RMS error (°/s)" in table and "| trim |" in table

@@ -1,0 +1,248 @@
+"""``agents.train`` (a tiny PPO run end to end) and ``agents.ppo.PPOController`` on its output."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from stable_baselines3.common.running_mean_std import RunningMeanStd
+from stable_baselines3.common.vec_env import VecNormalize
+
+from agents.ppo import ObservationNormalizer, PPOController
+from agents.train import (
+    DEFAULT_HYPERPARAMS,
+    Args,
+    _field_docs,
+    load_hyperparameters,
+    main,
+    parse_args,
+    register,
+    train,
+)
+from agents.vecenv import RollVecEnv
+from disturbances.default import build_database
+from identification.bundled import bundled_path
+from identification.errors import UsageError
+from identification.pipeline import IdentifyOptions
+from rollenv.env import RocketRollEnv
+from tests.rollenv.conftest import array_bank
+
+TINY = """\
+RocketRoll-v0:
+  n_envs: 2
+  n_timesteps: 256
+  policy: MlpPolicy
+  normalize: {norm_obs: true, norm_reward: true}
+  n_steps: 32
+  batch_size: 32
+  n_epochs: 2
+  learning_rate: lin_3e-4
+  policy_kwargs: {net_arch: [16, 16], activation_fn: tanh, log_std_init: -1.0}
+"""
+
+
+@pytest.fixture(scope="module")
+def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A database of one bundled recording per split (seed 0: train, seed 4: test), ~3 s."""
+    path = tmp_path_factory.mktemp("agents-db") / "small.sqlite"
+    recordings = [bundled_path(n) for n in ("tunnel-paper-seed0", "tunnel-paper-seed4")]
+    build_database(path, recordings, options=IdentifyOptions(noise_runs=0), surrogates=0)
+    return path
+
+
+@pytest.fixture(scope="module")
+def run(small_db: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """A tiny training run's output directory and its printed output."""
+    folder = tmp_path_factory.mktemp("train")
+    hyperparams = folder / "tiny.yml"
+    hyperparams.write_text(TINY, encoding="utf-8")
+    out = folder / "run"
+    argv = [
+        "--hyperparams",
+        str(hyperparams),
+        "--db",
+        str(small_db),
+        "--out",
+        str(out),
+        "--seed",
+        "3",
+        "--eval-freq",
+        "128",
+        "--eval-episodes",
+        "2",
+        "--checkpoint-freq",
+        "128",
+        "--no-progress-bar",
+    ]
+    capture = folder / "stdout.txt"
+    with capture.open("w", encoding="utf-8") as sink, contextlib.redirect_stdout(sink):
+        assert main(argv) == 0
+    return out, capture.read_text(encoding="utf-8")
+
+
+def test_main_writes_the_model_statistics_settings_checkpoints_and_evaluations(run):
+    out, printed = run
+    for name in ("model.zip", "normalize.json", "settings.json"):
+        assert (out / name).is_file(), name
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == [
+        "ppo_128_steps.zip",
+        "ppo_256_steps.zip",
+        "ppo_vecnormalize_128_steps.pkl",
+        "ppo_vecnormalize_256_steps.pkl",
+    ]
+    evaluations = np.load(out / "eval" / "evaluations.npz")
+    assert evaluations["timesteps"].tolist() == [128, 256]
+    assert evaluations["ep_lengths"].tolist() == [[600, 600], [600, 600]]
+    rows = (out / "eval" / "tracking_error.csv").read_text().splitlines()
+    assert rows[0] == "timesteps,mean_reward,rms_tracking_error" and len(rows) == 3
+    assert all(float(r.split(",")[2]) > 0 for r in rows[1:])
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["env_id"] == "RocketRoll-v0"
+    assert settings["args"]["seed"] == 3 and settings["env_steps"] == 256
+    assert settings["hyperparameters"]["n_steps"] == 32
+    assert settings["hyperparameters"]["learning_rate"] == "lin_3e-4"
+    assert settings["env_settings"]["split"] == "train"
+    assert "--seed 3" in settings["command_line"] and "agents.train" in settings["command_line"]
+    assert parse_args(settings["equivalent_command"].split()[3:]) == parse_args(
+        settings["command_line"].split()[3:]
+    )
+    assert {"torch", "stable_baselines3", "gymnasium", "numpy"} <= set(settings["versions"])
+    assert settings["env_steps_per_s"] > 0 and settings["wall_time_s"] > 0
+    assert settings["final_test_eval"]["episodes"] == 2
+    assert "final model" in settings["result"]
+    # The settings are printed as a table first.
+    assert printed.index("n_steps") < printed.index("trained 256 env-steps")
+    assert "| 32" in printed
+
+
+def test_normalize_json_is_the_training_statistics(run):
+    out, _ = run
+    record = json.loads((out / "normalize.json").read_text())
+    assert record["norm_obs"] is True and len(record["mean"]) == len(record["var"]) == 4
+    # The checkpoint at the last step holds VecNormalize itself, pickled by SB3.
+    venv = VecNormalize.load(
+        str(out / "checkpoints" / "ppo_vecnormalize_256_steps.pkl"),
+        RollVecEnv(1, bank=array_bank()),
+    )
+    assert isinstance(venv.obs_rms, RunningMeanStd)
+    np.testing.assert_array_equal(venv.obs_rms.mean, record["mean"])
+    np.testing.assert_array_equal(venv.obs_rms.var, record["var"])
+    normalizer = ObservationNormalizer(record)
+    obs = np.random.default_rng(0).normal(0.0, 60.0, size=(200, 4)).astype(np.float32)
+    obs[:3] = [[180.0, 250.0, 40.0, 40.0], [-180.0, -250.0, -40.0, -40.0], [0.0, 0.0, 0.0, 0.0]]
+    expected = np.asarray(venv.normalize_obs(obs))
+    assert expected.dtype == normalizer(obs).dtype == np.float32
+    np.testing.assert_array_equal(normalizer(obs), expected)
+
+
+def test_controller_acts_like_predict_within_the_action_space(run):
+    out, _ = run
+    controller = PPOController.load(out)
+    assert controller.name == "PPO" and controller.task == "angle"
+    env = RocketRollEnv(bank=array_bank())
+    obs, _ = env.reset(seed=0)
+    controller.reset(env)
+    actions = []
+    for _ in range(100):
+        action = controller.act(obs, env)
+        assert action.dtype == np.float32 and action.shape == (1,)
+        np.testing.assert_array_equal(action, controller.predict(obs))
+        actions.append(float(action[0]))
+        obs, *_ = env.step(action)
+    assert all(-1.0 <= a <= 1.0 for a in actions)
+    assert len(set(actions)) > 10  # it reacts to the observation
+    extreme = np.array([-180.0, 250.0, -40.0, 40.0], np.float32)
+    np.testing.assert_array_equal(controller.act(extreme, env), controller.predict(extreme))
+    with pytest.raises(ValueError, match="'angle' task"):
+        controller.reset(RocketRollEnv(bank=array_bank(), task="rate"))
+
+
+def test_load_refuses_a_folder_without_a_model(tmp_path):
+    with pytest.raises(FileNotFoundError, match=r"model\.zip"):
+        PPOController.load(tmp_path)
+
+
+# ------------------------------------------------------------------------- arguments
+def test_arguments_parse_into_the_dataclass_with_its_docstrings_as_help():
+    assert parse_args([]) == Args()
+    args = parse_args(["--env-id", "RocketRollRate-v0", "--timesteps", "5000", "--envs", "4"])
+    assert (args.env_id, args.timesteps, args.envs) == ("RocketRollRate-v0", 5000, 4)
+    assert parse_args(["--no-progress-bar"]).progress_bar is False
+    assert parse_args(["--out", "x/y"]).out == Path("x/y")
+    docs = _field_docs(Args)
+    assert set(docs) == {f.name for f in dataclasses.fields(Args)}
+    assert "seed of torch" in docs["seed"]
+
+
+def test_register_adds_rocketroll_train_ppo():
+    parser = argparse.ArgumentParser(prog="rocketroll")
+    register(parser.add_subparsers(dest="command", required=True))
+    ns = parser.parse_args(["train", "ppo", "--env-id", "RocketRollRate-v0", "--seed", "7"])
+    assert callable(ns.handler)
+    assert (ns.env_id, ns.seed, ns.timesteps, ns.progress_bar) == (
+        "RocketRollRate-v0",
+        7,
+        None,
+        True,
+    )
+    with pytest.raises(SystemExit):
+        parser.parse_args(["train", "ppo", "--timesteps", "many"])
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--env-id", "CartPole-v1"], "--env-id must be one of"),
+        (["--timesteps", "0"], "--timesteps must be a positive integer"),
+        (["--envs", "-2"], "--envs must be a positive integer"),
+        (["--eval-episodes", "0"], "--eval-episodes must be >= 1"),
+        (["--torch-threads", "0"], "--torch-threads must be >= 1"),
+        (["--checkpoint-freq", "-1"], "--checkpoint-freq must be >= 0"),
+        (["--db", "/nonexistent/db.sqlite"], "--db /nonexistent/db.sqlite: no such file"),
+        (["--hyperparams", "/nonexistent.yml"], "--hyperparams /nonexistent.yml: no such file"),
+    ],
+)
+def test_bad_arguments_are_named_and_exit_2(argv, message, capsys):
+    assert main([*argv, "--no-progress-bar"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("agents.train: error: ") and message in err
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("RocketRollRate-v0: {n_envs: 2}\n", "no entry for 'RocketRoll-v0'"),
+        ("RocketRoll-v0: {n_envs: 2, policy: MlpPolicy}\n", "missing key 'n_timesteps'"),
+        (TINY.replace("n_steps:", "nsteps:"), "unknown key(s) 'nsteps'"),
+        (TINY.replace("n_envs: 2", "n_envs: 0"), "n_envs must be positive"),
+        (TINY.replace("lin_3e-4", "cosine"), "learning_rate must be a number or 'lin_<number>'"),
+        (TINY.replace("activation_fn: tanh", "activation_fn: swish"), "activation_fn must be"),
+        (TINY.replace("norm_reward: true", "norm_rewards: true"), "'norm_rewards'"),
+        ("- a list\n", "expected a mapping keyed by environment id"),
+    ],
+)
+def test_bad_hyperparameter_files_are_named(tmp_path, text, message):
+    path = tmp_path / "hp.yml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(UsageError) as excinfo:
+        load_hyperparameters(path, "RocketRoll-v0")
+    assert message in str(excinfo.value) and str(path) in str(excinfo.value)
+
+
+def test_batch_size_must_divide_the_rollout(tmp_path):
+    path = tmp_path / "hp.yml"
+    path.write_text(TINY.replace("batch_size: 32", "batch_size: 64"), encoding="utf-8")
+    with pytest.raises(UsageError, match=r"--envs 3 x n_steps 32 = 96 .* batch_size 64"):
+        train(Args(hyperparams=path, envs=3))
+
+
+def test_the_shipped_hyperparameters_load_for_both_tasks():
+    for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
+        hp = load_hyperparameters(DEFAULT_HYPERPARAMS, env_id)
+        assert hp.policy == "MlpPolicy" and hp.n_envs >= 1 and hp.n_timesteps >= 100_000
+        assert (hp.ppo["n_steps"] * hp.n_envs) % hp.ppo["batch_size"] == 0
