@@ -61,14 +61,14 @@ def test_the_same_seed_gives_identical_numbers(policy, angle_config):
 
 
 def test_metrics_of_a_hand_made_episode(angle_config):
-    # 4 steps of 0.1 s; the fin moves 0 → 15 → 15 → 40 → 40.
+    # 4 steps of 0.1 s; the fin moves 0 → 15 → 15 → 25 → 40 (at most 15° a step).
     n = 5
     rollout = Rollout(
         time_s=np.arange(n) * 0.1,
         angle_deg=np.zeros(n),
         rate_dps=np.zeros(n),
-        fin_deg=np.array([0.0, 15.0, 15.0, 40.0, 40.0]),
-        command_deg=np.array([0.0, 40.0, 15.0, 40.0, 40.0]),
+        fin_deg=np.array([0.0, 15.0, 15.0, 25.0, 40.0]),
+        command_deg=np.array([0.0, 40.0, 15.0, 25.0, 40.0]),
         u_d_deg=np.zeros(n),
         setpoint=np.zeros(n),
         error=np.array([9.0, 3.0, -4.0, 5.0, 12.0]),
@@ -80,9 +80,9 @@ def test_metrics_of_a_hand_made_episode(angle_config):
     assert m["max_error"] == 12.0
     assert m["settled_rms_error"] == 5.0  # step 3 is the period's last quarter
     assert m["fin_travel_dps"] == pytest.approx(40.0 / 0.4)
-    # Moving at 150 °/s: 0.1 s (40° asked), 0, 25°/150 °/s, 0 — of 0.4 s.
-    assert m["rate_limit_pct"] == pytest.approx(100 * (0.1 + 25 / 150) / 0.4)
-    assert m["range_limit_pct"] == 50.0
+    # Moving at 150 °/s: 0.1 s (40° asked), 0, 10°/150 °/s, 0.1 s -- of 0.4 s.
+    assert m["rate_limit_pct"] == pytest.approx(100 * (0.1 + 10 / 150 + 0.1) / 0.4)
+    assert m["range_limit_pct"] == 25.0
     assert m["return"] == -10.0
     assert set(m) == set(METRICS)
 
