@@ -38,10 +38,13 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll db show 2d68d98ae09b-paper-theta-iaaft-0 --plot $(DEMO)/surrogate.png
 	$(BIN)/rocketroll env rollout --policy zero --episodes 2 --frames $(DEMO)/env-zero.png
 	$(BIN)/rocketroll env rollout --policy random --episodes 2 --frames $(DEMO)/env-random.png
+	$(BIN)/rocketroll eval --env-id RocketRoll-v0 --episodes 20 --seed 0 --out $(DEMO)/eval-angle
+	$(BIN)/rocketroll eval --env-id RocketRollRate-v0 --episodes 20 --seed 0 --out $(DEMO)/eval-rate
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
 	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
-	@echo "      $(DEMO)/surrogate.png and the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
-	@echo "      $(DEMO)/env-random.png; the default database and the episodes are listed above"
+	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
+	@echo "      $(DEMO)/env-random.png and the evaluations of trim, PID, PPO and the oracle"
+	@echo "      on held-out episodes in $(DEMO)/eval-angle/ and $(DEMO)/eval-rate/ (tables above)"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from agents.base import Controller
 from agents.evaluate import EpisodeSpec, _env, evaluate, protocol_episodes, run_episode
 from agents.nominal import NominalModel, TrimController
 from agents.oracle import OracleController
@@ -140,7 +141,7 @@ def test_back_calculation_limits_the_overshoot_after_a_saturated_slew(train_mode
 def test_oracle_beats_pid_beats_trim_on_a_fixed_episode(task, train_model, default_db):
     def errors(cfg: RollConfig) -> list[dict[str, float]]:
         specs = protocol_episodes(cfg, 1, seed=3)
-        controllers = [
+        controllers: list[Controller] = [
             TrimController(train_model),
             PIDController.for_env(cfg, train_model),
             OracleController(cfg),

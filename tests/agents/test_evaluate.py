@@ -64,7 +64,7 @@ def test_metrics_of_a_hand_made_episode(angle_config):
     # 4 steps of 0.1 s; the fin moves 0 → 15 → 15 → 25 → 40 (at most 15° a step).
     n = 5
     rollout = Rollout(
-        time_s=np.arange(n) * 0.1,
+        time_s=np.linspace(0.0, 0.4, n),
         angle_deg=np.zeros(n),
         rate_dps=np.zeros(n),
         fin_deg=np.array([0.0, 15.0, 15.0, 25.0, 40.0]),

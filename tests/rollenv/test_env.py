@@ -649,7 +649,7 @@ def test_replay_options_recreate_the_episode(bank):
     actions = np.random.default_rng(3).uniform(-1, 1, size=(600, 1)).astype(np.float32)
     env.reset(seed=11)
     options = env.replay_options()
-    assert len(options["setpoints"]) == env.unwrapped.config.setpoint_segments == 6
+    assert len(options["setpoints"]) == env.config.setpoint_segments == 6
     assert options["setpoints"][0] == 0.0 and len(set(options["setpoints"])) == 6
     first = [env.step(a)[4] for a in actions]
     # Another seed: the same window and schedule (the gyro noise differs).

@@ -1,0 +1,178 @@
+"""``PPOController``: a PPO policy trained by :mod:`agents.train`, as a :class:`Controller`."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rollenv.env import RocketRollEnv
+
+__all__ = ["ObservationNormalizer", "PPOController"]
+
+
+class ObservationNormalizer:
+    """The observation normalisation of training, from ``normalize.json``.
+
+    Computes what SB3's ``VecNormalize`` does (``norm_obs``)::
+
+        clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs)
+
+    in float64, cast to float32 -- the same operations in the same order, so
+    the policy sees bit for bit what it saw in training.
+
+    Parameters
+    ----------
+    record : dict
+        The contents of ``normalize.json``: ``norm_obs`` and, when True,
+        ``mean``, ``var``, ``clip_obs``, ``epsilon``.
+    """
+
+    def __init__(self, record: dict[str, Any]) -> None:
+        self.enabled = bool(record.get("norm_obs", False))
+        if self.enabled:
+            try:
+                self.mean = np.asarray(record["mean"], dtype=np.float64)
+                self.var = np.asarray(record["var"], dtype=np.float64)
+                self.clip_obs = float(record["clip_obs"])
+                self.epsilon = float(record["epsilon"])
+            except KeyError as exc:
+                raise ValueError(f"normalize.json lacks {exc.args[0]!r}") from exc
+            if self.mean.shape != (4,) or self.var.shape != (4,):
+                raise ValueError(
+                    f"normalize.json: mean and var must hold 4 values, got {self.mean.shape} "
+                    f"and {self.var.shape}"
+                )
+            self._scale = np.sqrt(self.var + self.epsilon)
+
+    def __call__(self, obs: NDArray[Any]) -> NDArray[np.float32]:
+        """``obs`` (shape ``(..., 4)``) normalised as in training, float32."""
+        if not self.enabled:
+            return np.asarray(obs, dtype=np.float32)
+        normalized = np.clip((obs - self.mean) / self._scale, -self.clip_obs, self.clip_obs)
+        return normalized.astype(np.float32)
+
+
+class PPOController:
+    """A trained PPO policy (deterministic: the Gaussian's mean) for the evaluation protocol.
+
+    Load it with :meth:`load` from a training output directory
+    (``model.zip``, ``normalize.json``, ``settings.json``).  :meth:`act`
+    normalises the observation as training did and runs the actor's layers
+    directly under ``torch.no_grad`` (features, actor MLP, action net, clip):
+    the same numbers as ``model.predict(obs, deterministic=True)``, bit for
+    bit, at about 35 µs a call instead of about 95 µs (2-core x86_64 VM).
+
+    Attributes
+    ----------
+    name : str
+        ``"PPO"``.
+    model : stable_baselines3.PPO
+        The loaded model.
+    normalizer : ObservationNormalizer
+        The observation normalisation of training.
+    settings : dict
+        ``settings.json`` of the run (empty if the file is absent).
+    task : str or None
+        ``"angle"`` or ``"rate"``, from the settings; :meth:`reset` refuses
+        an environment of the other task.
+    """
+
+    name = "PPO"
+
+    def __init__(
+        self, model: Any, normalizer: ObservationNormalizer, settings: dict[str, Any]
+    ) -> None:
+        import torch
+        from stable_baselines3.common.distributions import (
+            DiagGaussianDistribution,
+            StateDependentNoiseDistribution,
+        )
+        from stable_baselines3.common.preprocessing import preprocess_obs
+
+        self.model = model
+        self.normalizer = normalizer
+        self.settings = settings
+        env_settings = settings.get("env_settings") or {}
+        self.task: str | None = env_settings.get("task")
+        policy = model.policy
+        policy.set_training_mode(False)
+        self._policy = policy
+        self._torch = torch
+        self._preprocess = preprocess_obs
+        # The direct forward pass is the Gaussian's mean clipped to the action space, which
+        # is what predict() returns for these policies (gSDE too, unsquashed: its mode is the
+        # mean); anything else goes through predict().
+        gaussian = (DiagGaussianDistribution, StateDependentNoiseDistribution)
+        self._direct = isinstance(policy.action_dist, gaussian) and not policy.squash_output
+        self._obs = torch.zeros((1, 4), dtype=torch.float32)
+        low = np.asarray(model.action_space.low, dtype=np.float32)
+        high = np.asarray(model.action_space.high, dtype=np.float32)
+        self._low, self._high = low, high
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> PPOController:
+        """The controller of the training output directory ``path``.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``model.zip`` or ``normalize.json`` is missing.
+        """
+        from stable_baselines3 import PPO
+
+        folder = Path(path)
+        model_file = folder / "model.zip"
+        norm_file = folder / "normalize.json"
+        for required in (model_file, norm_file):
+            if not required.is_file():
+                raise FileNotFoundError(f"{required}: not found (a PPO training output?)")
+        normalizer = ObservationNormalizer(json.loads(norm_file.read_text(encoding="utf-8")))
+        settings_file = folder / "settings.json"
+        settings: dict[str, Any] = (
+            json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
+        )
+        # Schedules are pickled closures; acting needs none of them.
+        custom = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
+        model = PPO.load(model_file, device="cpu", custom_objects=custom)
+        return cls(model, normalizer, settings)
+
+    def reset(self, env: RocketRollEnv) -> None:
+        """Nothing to forget (the policy is memoryless); checks the env's task."""
+        if self.task is not None and env.config.task != self.task:
+            raise ValueError(
+                f"this PPO policy was trained on the {self.task!r} task, the env is "
+                f"{env.config.task!r}"
+            )
+
+    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+        """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""
+        if not self._direct:
+            return self.predict(obs)
+        normalized = self.normalizer(np.asarray(obs).reshape(1, 4))
+        torch = self._torch
+        policy = self._policy
+        with torch.no_grad():
+            self._obs.copy_(torch.from_numpy(normalized))
+            preprocessed = self._preprocess(
+                self._obs, policy.observation_space, normalize_images=policy.normalize_images
+            )
+            features = policy.pi_features_extractor(preprocessed)
+            latent = policy.mlp_extractor.forward_actor(features)
+            mean = policy.action_net(latent)
+        action = mean.numpy().reshape(1)
+        return np.clip(action, self._low, self._high).astype(np.float32)
+
+    def predict(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches)."""
+        normalized = self.normalizer(np.asarray(obs).reshape(1, 4))
+        action, _ = self.model.predict(normalized, deterministic=True)
+        return np.asarray(action, dtype=np.float32).reshape(1)
+
+
+def _zero(_: float) -> float:
+    return 0.0

@@ -1,0 +1,799 @@
+"""Train Stable-Baselines3 PPO on RocketRoll-v0 / RocketRollRate-v0.
+
+Read top to bottom, as CleanRL's ``ppo_continuous_action.py``: the arguments
+(a dataclass, one docstring per field), the hyperparameters of the YAML file
+keyed by environment id (rl-baselines3-zoo's layout), then the work:
+
+1. seed everything (SB3's ``seed=``, ``torch.manual_seed``, the adapter's
+   generator) and set torch's threads;
+2. the training envs: ``VecNormalize(VecMonitor(RollVecEnv(split="train")))``
+   -- the monitor inside, so it logs the raw returns whatever
+   ``VecNormalize`` does to the rewards;
+3. the held-out evaluation: the same stack over ``split="test"`` (observation
+   statistics synced from training, frozen, raw rewards), the same seeded
+   episodes at every evaluation, deterministic actions; it logs the mean
+   return and the RMS true tracking error;
+4. ``PPO.learn`` with checkpoints and a progress bar;
+5. the **final** model is the result (``model.zip``).  It is *not* the best
+   model by the test split: the test split is the held-out set, and choosing
+   a model on it would leak it into the result.
+
+Output directory::
+
+    model.zip         the final PPO model
+    normalize.json    observation normalisation (mean, var, clip, epsilon), portable
+    settings.json     arguments, resolved hyperparameters, command line, versions,
+                      wall time, env-steps/s, the final model's test-split evaluation
+    checkpoints/      periodic models and VecNormalize pickles
+    eval/             evaluations.npz (SB3) and tracking_error.csv
+    logs/             SB3's progress.csv
+
+Run::
+
+    python -m agents.train --env-id RocketRoll-v0 --seed 0 --out runs/ppo-angle
+    rocketroll train ppo --env-id RocketRollRate-v0 --timesteps 2000000
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import itertools
+import json
+import math
+import os
+import platform
+import shlex
+import sys
+import textwrap
+import time
+import types
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Union, get_args, get_origin, get_type_hints
+
+import numpy as np
+
+from identification.errors import RocketrollError, UsageError
+
+__all__ = [
+    "DEFAULT_HYPERPARAMS",
+    "Args",
+    "Hyperparameters",
+    "load_hyperparameters",
+    "main",
+    "make_env",
+    "parse_args",
+    "ppo_arguments",
+    "register",
+    "train",
+]
+
+#: The hyperparameter file shipped with the package.
+DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
+
+#: Keys of a YAML entry that are not PPO keywords.
+SCRIPT_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
+#: PPO keywords a YAML entry may set.
+PPO_KEYS = (
+    "n_steps",
+    "batch_size",
+    "gamma",
+    "gae_lambda",
+    "n_epochs",
+    "learning_rate",
+    "ent_coef",
+    "vf_coef",
+    "clip_range",
+    "clip_range_vf",
+    "max_grad_norm",
+    "normalize_advantage",
+    "use_sde",
+    "sde_sample_freq",
+    "target_kl",
+    "policy_kwargs",
+)
+#: ``VecNormalize`` arguments a YAML ``normalize`` mapping may set.
+NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
+#: ``policy_kwargs.activation_fn`` names.
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
+
+
+@dataclass
+class Args:
+    """Arguments of a training run (``python -m agents.train --help``)."""
+
+    env_id: str = "RocketRoll-v0"
+    """environment: RocketRoll-v0 (hold the roll angle) or RocketRollRate-v0 (track a roll rate)"""
+    timesteps: int | None = None
+    """environment steps to train for (default: n_timesteps of the hyperparameter file)"""
+    seed: int = 0
+    """seed of torch, SB3 and the environments' generator"""
+    envs: int | None = None
+    """environments stepped side by side (default: n_envs of the hyperparameter file)"""
+    out: Path | None = None
+    """output directory (default: runs/ppo/<env-id>/seed<seed>)"""
+    db: Path | None = None
+    """disturbance database (default: $ROCKETROLL_DB or the default database)"""
+    hyperparams: Path = DEFAULT_HYPERPARAMS
+    """YAML file of hyperparameters keyed by environment id"""
+    eval_freq: int = 100_000
+    """evaluate on the test split every this many environment steps (0: only at the end)"""
+    eval_episodes: int = 20
+    """test-split episodes per evaluation (run side by side)"""
+    eval_seed: int = 1000
+    """seed of the evaluation episodes: every evaluation runs the same ones"""
+    checkpoint_freq: int = 250_000
+    """save a checkpoint every this many environment steps (0: never)"""
+    progress_bar: bool = True
+    """show SB3's progress bar (rich)"""
+    torch_threads: int = 1
+    """torch's intra-op threads (1 was faster than 2 on a 2-core machine, with the env on one)"""
+    verbose: int = 0
+    """SB3's verbosity: 0 quiet, 1 its training table after each update"""
+
+
+@dataclass(frozen=True)
+class Hyperparameters:
+    """One entry of the hyperparameter file, checked.
+
+    Attributes
+    ----------
+    env_id : str
+        The key it was read under.
+    n_envs : int
+        Environments stepped side by side.
+    n_timesteps : int
+        Environment steps to train for.
+    policy : str
+        SB3 policy name (``"MlpPolicy"``).
+    normalize : dict or None
+        ``VecNormalize`` arguments, None for no normalisation.
+    env_kwargs : dict
+        RocketRoll settings for the training and evaluation envs.
+    ppo : dict
+        PPO keywords as written in the file (schedules as ``"lin_<x>"``,
+        the activation as a name).
+    source : str
+        The file.
+    """
+
+    env_id: str
+    n_envs: int
+    n_timesteps: int
+    policy: str
+    normalize: dict[str, Any] | None
+    env_kwargs: dict[str, Any]
+    ppo: dict[str, Any]
+    source: str
+
+
+# ----------------------------------------------------------------------------- arguments
+def _field_docs(cls: type) -> dict[str, str]:
+    """The docstring under each field of dataclass ``cls`` (for ``--help``)."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    docs: dict[str, str] = {}
+    for node, after in itertools.pairwise(body):
+        if (
+            isinstance(node, ast.AnnAssign)
+            and isinstance(node.target, ast.Name)
+            and isinstance(after, ast.Expr)
+            and isinstance(after.value, ast.Constant)
+            and isinstance(after.value.value, str)
+        ):
+            docs[node.target.id] = " ".join(after.value.value.split())
+    return docs
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    """One option per field of :class:`Args`, typed and documented from the dataclass."""
+    docs = _field_docs(Args)
+    hints = get_type_hints(Args)
+    for f in dataclasses.fields(Args):
+        kind = hints[f.name]
+        if get_origin(kind) in (Union, types.UnionType):
+            kind = next(a for a in get_args(kind) if a is not type(None))
+        option = "--" + f.name.replace("_", "-")
+        default = f.default
+        shown = "" if default is None else f" ({default})"
+        if kind is bool:
+            parser.add_argument(
+                option,
+                action=argparse.BooleanOptionalAction,
+                default=default,
+                help=docs[f.name],
+            )
+        else:
+            parser.add_argument(
+                option,
+                type=kind,
+                default=default,
+                help=docs[f.name] + shown,
+                metavar=f.name.upper(),
+            )
+
+
+def parse_args(argv: Sequence[str] | None = None) -> Args:
+    """:class:`Args` from the command line (``argv`` without the program name)."""
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.train", description=__doc__.split("\n\n")[0]
+    )
+    _add_arguments(parser)
+    return _args_from(parser.parse_args(argv))
+
+
+def _args_from(ns: argparse.Namespace) -> Args:
+    return Args(**{f.name: getattr(ns, f.name) for f in dataclasses.fields(Args)})
+
+
+def _command_of(args: Args) -> str:
+    """The ``python -m agents.train`` command line that reproduces ``args``."""
+    words = ["python", "-m", "agents.train"]
+    for f in dataclasses.fields(Args):
+        value = getattr(args, f.name)
+        option = "--" + f.name.replace("_", "-")
+        if isinstance(value, bool):
+            words.append(option if value else "--no-" + option[2:])
+        elif value is not None:
+            words += [option, str(value)]
+    return shlex.join(words)
+
+
+def check_args(args: Args) -> None:
+    """Raise :class:`UsageError` naming the option of the first bad argument."""
+    from rollenv import ENV_IDS
+
+    if args.env_id not in ENV_IDS:
+        raise UsageError(f"--env-id must be one of {', '.join(ENV_IDS)}, not {args.env_id!r}")
+    for name in ("timesteps", "envs"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise UsageError(f"--{name} must be a positive integer, got {value}")
+    for name in ("eval_freq", "checkpoint_freq"):
+        value = getattr(args, name)
+        if value < 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
+    for name in ("eval_episodes", "torch_threads"):
+        value = getattr(args, name)
+        if value < 1:
+            raise UsageError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
+    if args.db is not None and not Path(args.db).is_file():
+        raise UsageError(f"--db {args.db}: no such file")
+
+
+# ------------------------------------------------------------------------ hyperparameters
+def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperparameters:
+    """The entry ``env_id`` of the YAML file ``path``, checked key by key.
+
+    Raises
+    ------
+    UsageError
+        The file is missing or not a mapping, has no entry for ``env_id``,
+        lacks a required key, or has an unknown one (named, with the file).
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"--hyperparams {path}: no such file")
+    try:
+        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise UsageError(f"--hyperparams {path}: not valid YAML ({exc})") from exc
+    if not isinstance(document, dict):
+        raise UsageError(f"--hyperparams {path}: expected a mapping keyed by environment id")
+    if env_id not in document:
+        raise UsageError(
+            f"--hyperparams {path} has no entry for {env_id!r} (it has: "
+            f"{', '.join(map(str, document)) or 'none'})"
+        )
+    entry = document[env_id]
+    where = f"{path}, {env_id}"
+    if not isinstance(entry, dict):
+        raise UsageError(f"{where}: expected a mapping of hyperparameters")
+    unknown = sorted(set(entry) - set(SCRIPT_KEYS) - set(PPO_KEYS))
+    if unknown:
+        raise UsageError(
+            f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; known: "
+            f"{', '.join(SCRIPT_KEYS + PPO_KEYS)}"
+        )
+    for key in ("n_envs", "n_timesteps", "policy"):
+        if key not in entry:
+            raise UsageError(f"{where}: missing key {key!r}")
+    counts = {}
+    for key in ("n_envs", "n_timesteps"):
+        value = entry[key]
+        if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
+            raise UsageError(f"{where}: {key} must be a whole number, got {value!r}")
+        if value < 1:
+            raise UsageError(f"{where}: {key} must be positive, got {value!r}")
+        counts[key] = int(value)
+    normalize = entry.get("normalize", False)
+    if normalize is True:
+        normalize = {}
+    if normalize is False or normalize is None:
+        normalize = None
+    elif not isinstance(normalize, dict):
+        raise UsageError(f"{where}: normalize must be true, false or a mapping, got {normalize!r}")
+    else:
+        bad = sorted(set(normalize) - set(NORMALIZE_KEYS))
+        if bad:
+            raise UsageError(
+                f"{where}: unknown normalize key(s) {', '.join(map(repr, bad))}; known: "
+                f"{', '.join(NORMALIZE_KEYS)}"
+            )
+    env_kwargs = entry.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    ppo = {key: entry[key] for key in PPO_KEYS if key in entry}
+    _ppo_arguments(ppo, where)  # fail now on a bad schedule or activation
+    return Hyperparameters(
+        env_id=env_id,
+        n_envs=counts["n_envs"],
+        n_timesteps=counts["n_timesteps"],
+        policy=str(entry["policy"]),
+        normalize=normalize,
+        env_kwargs=dict(env_kwargs),
+        ppo=ppo,
+        source=str(path),
+    )
+
+
+def _schedule(value: Any, key: str, where: str) -> float | Callable[[float], float]:
+    """A float, or ``"lin_<x>"``: x at the start, decaying linearly to 0 at the end."""
+    if isinstance(value, str):
+        if value.startswith("lin_"):
+            try:
+                initial = float(value[4:])
+            except ValueError:
+                initial = math.nan
+            if math.isfinite(initial) and initial > 0:
+                return _LinearSchedule(initial)
+        raise UsageError(f"{where}: {key} must be a number or 'lin_<number>', got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise UsageError(f"{where}: {key} must be a number or 'lin_<number>', got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class _LinearSchedule:
+    """SB3 schedule: ``initial`` times the fraction of training remaining."""
+
+    initial: float
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.initial * progress_remaining
+
+
+def _ppo_arguments(ppo: dict[str, Any], where: str) -> dict[str, Any]:
+    """PPO keywords from a YAML entry: schedules and the activation resolved."""
+    import torch
+
+    out = dict(ppo)
+    for key in ("learning_rate", "clip_range"):
+        if key in out:
+            out[key] = _schedule(out[key], key, where)
+    policy_kwargs = dict(out.get("policy_kwargs") or {})
+    activation = policy_kwargs.get("activation_fn")
+    if activation is not None:
+        table = {
+            "tanh": torch.nn.Tanh,
+            "relu": torch.nn.ReLU,
+            "elu": torch.nn.ELU,
+            "leaky_relu": torch.nn.LeakyReLU,
+        }
+        if activation not in table:
+            raise UsageError(
+                f"{where}: policy_kwargs.activation_fn must be one of {', '.join(ACTIVATIONS)}, "
+                f"got {activation!r}"
+            )
+        policy_kwargs["activation_fn"] = table[activation]
+    if "policy_kwargs" in out:
+        out["policy_kwargs"] = policy_kwargs
+    return out
+
+
+def ppo_arguments(hp: Hyperparameters) -> dict[str, Any]:
+    """The PPO keywords of ``hp``: ``"lin_<x>"`` schedules and the activation name resolved."""
+    return _ppo_arguments(hp.ppo, f"{hp.source}, {hp.env_id}")
+
+
+def make_env(
+    hp: Hyperparameters,
+    n_envs: int,
+    seed: int,
+    *,
+    split: str,
+    db: str | os.PathLike[str] | None = None,
+    training: bool = True,
+) -> tuple[Any, Any, Any]:
+    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``.
+
+    The monitor is inside, so it records the raw returns whatever
+    ``VecNormalize`` does to rewards.  ``training=False`` (evaluation):
+    frozen statistics (synced from training by the caller) and raw rewards.
+
+    Returns
+    -------
+    adapter : RollVecEnv
+        The adapter at the bottom (for seeding).
+    env : VecEnv
+        The top of the stack.
+    normalize : VecNormalize or None
+        The normalisation wrapper, None when ``hp.normalize`` is None.
+    """
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from agents.vecenv import RollVecEnv
+
+    for forbidden in ("split", "task"):
+        if forbidden in hp.env_kwargs:
+            raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs may not set {forbidden!r}")
+    try:
+        adapter = RollVecEnv(n_envs, hp.env_id, db=db, seed=seed, split=split, **hp.env_kwargs)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
+    env: Any = VecMonitor(adapter)
+    normalize = None
+    if hp.normalize is not None:
+        norm = dict(hp.normalize)
+        norm.setdefault("gamma", float(hp.ppo.get("gamma", 0.99)))
+        if not training:
+            norm.update(training=False, norm_reward=False)
+        normalize = VecNormalize(env, **norm)
+        env = normalize
+    return adapter, env, normalize
+
+
+# ----------------------------------------------------------------------------- evaluation
+def _make_eval_callback_class() -> type:
+    """:class:`HeldOutEval`, built lazily so importing this module does not import SB3."""
+    from stable_baselines3.common.callbacks import EvalCallback
+
+    class HeldOutEval(EvalCallback):
+        """SB3's ``EvalCallback`` on the test split, logging the RMS true tracking error.
+
+        Every evaluation runs the same episodes (the adapter is reseeded with
+        ``seed`` first).  No best model is saved: the run's result is the final
+        model, and the test split is never used to select one.
+        """
+
+        def __init__(self, eval_env: Any, adapter: Any, seed: int, **kwargs: Any) -> None:
+            super().__init__(eval_env, best_model_save_path=None, **kwargs)
+            self.adapter = adapter
+            self.eval_seed = seed
+            self.history: list[tuple[int, float, float]] = []
+            self._sq = 0.0
+            self._count = 0
+
+        def _on_step(self) -> bool:
+            evaluating = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
+            if evaluating:
+                self.adapter.seed(self.eval_seed)
+                self._sq, self._count = 0.0, 0
+            result: bool = super()._on_step()
+            if evaluating:
+                rms = math.sqrt(self._sq / max(self._count, 1))
+                self.history.append((self.num_timesteps, self.last_mean_reward, rms))
+                if self.log_path is not None:
+                    _write_history(Path(self.log_path).parent / "tracking_error.csv", self.history)
+                if self.verbose >= 1:
+                    print(f"Eval RMS tracking error (test split): {rms:.3f}")
+            return result
+
+        def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+            super()._log_success_callback(locals_, globals_)
+            error = float(locals_["info"]["tracking_error"])
+            self._sq += error * error
+            self._count += 1
+            if locals_["done"]:  # the latest value is what the logger dumps
+                self.logger.record("eval/rms_tracking_error", math.sqrt(self._sq / self._count))
+
+    return HeldOutEval
+
+
+def _write_history(path: Path, history: list[tuple[int, float, float]]) -> None:
+    lines = ["timesteps,mean_reward,rms_tracking_error"]
+    lines += [f"{t},{r!r},{e!r}" for t, r, e in history]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def evaluate_held_out(model: Any, eval_env: Any, adapter: Any, seed: int) -> dict[str, float]:
+    """Deterministic episodes of ``eval_env`` (one per env of ``adapter``), seeded with ``seed``.
+
+    Returns the mean return (raw rewards) and the RMS of the true tracking
+    error over every step of every episode.
+    """
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    sq = [0.0, 0.0]
+
+    def collect(locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        error = float(locals_["info"]["tracking_error"])
+        sq[0] += error * error
+        sq[1] += 1
+
+    adapter.seed(seed)
+    rewards, _ = evaluate_policy(
+        model,
+        eval_env,
+        n_eval_episodes=adapter.num_envs,
+        deterministic=True,
+        return_episode_rewards=True,
+        callback=collect,
+    )
+    return {
+        "episodes": float(len(rewards)),  # type: ignore[arg-type]
+        "mean_reward": float(np.mean(rewards)),
+        "rms_tracking_error": math.sqrt(sq[0] / max(sq[1], 1.0)),
+    }
+
+
+# ----------------------------------------------------------------------------- outputs
+def normalization_record(venv: Any) -> dict[str, Any]:
+    """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
+    from rollenv.core import OBSERVATION_NAMES
+
+    if venv is None or not venv.norm_obs:
+        return {"norm_obs": False, "observation_names": list(OBSERVATION_NAMES)}
+    rms = venv.obs_rms
+    return {
+        "norm_obs": True,
+        "observation_names": list(OBSERVATION_NAMES),
+        "mean": [float(x) for x in rms.mean],
+        "var": [float(x) for x in rms.var],
+        "count": float(rms.count),
+        "clip_obs": float(venv.clip_obs),
+        "epsilon": float(venv.epsilon),
+        "formula": "clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs) as float32",
+    }
+
+
+def _versions() -> dict[str, str]:
+    import gymnasium
+    import numba
+    import stable_baselines3
+    import torch
+
+    from rocketroll import __version__
+
+    return {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "torch": torch.__version__,
+        "stable_baselines3": stable_baselines3.__version__,
+        "gymnasium": gymnasium.__version__,
+        "numba": numba.__version__,
+        "rocketroll": __version__,
+        "platform": platform.platform(),
+        "cpu_count": str(os.cpu_count()),
+    }
+
+
+def _jsonable(value: Any) -> Any:
+    """``value`` with paths, classes and schedules as strings, for settings.json."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, bool | int | float | str) or value is None:
+        return value
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, type):
+        return value.__name__
+    return repr(value)
+
+
+def _print_table(rows: list[tuple[str, Any]]) -> None:
+    """``name | value`` rows as a plain-text table."""
+    width = max(len(name) for name, _ in rows)
+    print(f"{'setting':<{width}} | value")
+    print(f"{'-' * width}-+-{'-' * 40}")
+    for name, value in rows:
+        print(f"{name:<{width}} | {value}")
+    print()
+
+
+# ----------------------------------------------------------------------------- training
+def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, Any]:
+    """Train PPO as ``args`` says; write the output directory; return ``settings.json``'s data.
+
+    Raises
+    ------
+    UsageError
+        A bad argument or hyperparameter (named).
+    """
+    started = time.perf_counter()
+    check_args(args)
+    hp = load_hyperparameters(args.hyperparams, args.env_id)
+    n_envs = args.envs if args.envs is not None else hp.n_envs
+    timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
+    ppo_kwargs = ppo_arguments(hp)
+    n_steps = int(ppo_kwargs.get("n_steps", 2048))
+    batch_size = int(ppo_kwargs.get("batch_size", 64))
+    if (n_steps * n_envs) % batch_size != 0 or n_steps * n_envs < 2:
+        raise UsageError(
+            f"--envs {n_envs} x n_steps {n_steps} = {n_steps * n_envs} steps per rollout is not "
+            f"a multiple of batch_size {batch_size} ({hp.source}, {hp.env_id})"
+        )
+    out = (
+        args.out
+        if args.out is not None
+        else Path("runs") / "ppo" / args.env_id / f"seed{args.seed}"
+    )
+    out = Path(out)
+
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.logger import configure
+
+    # Seeding: torch and SB3 (python, numpy, torch, the action space, the env) and the
+    # adapters' generators; PPO(seed=...) reseeds the training adapter before its first reset.
+    torch.set_num_threads(args.torch_threads)
+    torch.manual_seed(args.seed)
+
+    adapter, train_env, normalize = make_env(hp, n_envs, args.seed, split="train", db=args.db)
+    eval_adapter, eval_env, _ = make_env(
+        hp, args.eval_episodes, args.eval_seed, split="test", db=args.db, training=False
+    )
+
+    rows: list[tuple[str, Any]] = [
+        ("env_id", args.env_id),
+        ("timesteps", f"{timesteps:,}"),
+        ("seed", args.seed),
+        ("envs", n_envs),
+        ("out", out),
+        ("hyperparams", hp.source),
+        ("torch threads", args.torch_threads),
+        ("eval", f"{args.eval_episodes} test-split episodes every {args.eval_freq:,} steps"),
+        ("checkpoints", f"every {args.checkpoint_freq:,} steps" if args.checkpoint_freq else "off"),
+        ("policy", hp.policy),
+        ("normalize", hp.normalize if hp.normalize is not None else "off"),
+        *((k, hp.ppo[k]) for k in hp.ppo),
+        ("env_kwargs", hp.env_kwargs or "-"),
+        ("database", adapter.bank.description),
+    ]
+    print(f"PPO on {args.env_id}")
+    _print_table(rows)
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "eval").mkdir(exist_ok=True)
+    model = PPO(
+        hp.policy, train_env, seed=args.seed, device="cpu", verbose=args.verbose, **ppo_kwargs
+    )
+    model.set_logger(configure(str(out / "logs"), ["csv", "stdout"] if args.verbose else ["csv"]))
+    callbacks: list[Any] = [
+        _make_eval_callback_class()(
+            eval_env,
+            eval_adapter,
+            args.eval_seed,
+            n_eval_episodes=args.eval_episodes,
+            eval_freq=max(args.eval_freq // n_envs, 1) if args.eval_freq else 0,
+            log_path=str(out / "eval"),
+            deterministic=True,
+            verbose=1,
+        )
+    ]
+    if args.checkpoint_freq:
+        callbacks.append(
+            CheckpointCallback(
+                save_freq=max(args.checkpoint_freq // n_envs, 1),
+                save_path=str(out / "checkpoints"),
+                name_prefix="ppo",
+                save_vecnormalize=normalize is not None,
+            )
+        )
+    learn_started = time.perf_counter()
+    with warnings.catch_warnings():
+        if args.progress_bar:  # tqdm's rich bar announces itself as experimental
+            from tqdm import TqdmExperimentalWarning
+
+            warnings.filterwarnings("ignore", category=TqdmExperimentalWarning)
+        model.learn(
+            total_timesteps=timesteps,
+            callback=CallbackList(callbacks),
+            progress_bar=args.progress_bar,
+        )
+    train_s = time.perf_counter() - learn_started
+
+    # The result: the final model and its observation statistics.
+    model.save(out / "model.zip")
+    norm_record = normalization_record(normalize)
+    (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
+    if normalize is not None:
+        from stable_baselines3.common.vec_env import sync_envs_normalization
+
+        sync_envs_normalization(train_env, eval_env)
+    final = evaluate_held_out(model, eval_env, eval_adapter, args.eval_seed)
+    wall_s = time.perf_counter() - started
+    settings = {
+        "env_id": args.env_id,
+        "result": "model.zip is the final model; the test split was not used to select it",
+        "args": _jsonable(dataclasses.asdict(args)),
+        "hyperparameters": _jsonable(
+            {
+                "n_envs": n_envs,
+                "n_timesteps": timesteps,
+                "policy": hp.policy,
+                "normalize": hp.normalize,
+                "env_kwargs": hp.env_kwargs,
+                **hp.ppo,
+            }
+        ),
+        "hyperparameter_file": hp.source,
+        "env_settings": _jsonable(dataclasses.asdict(adapter.config)),
+        "database": adapter.bank.description,
+        "command_line": shlex.join(sys.argv if command_line is None else command_line),
+        "equivalent_command": _command_of(args),
+        "versions": _versions(),
+        "torch_threads": args.torch_threads,
+        "env_steps": int(model.num_timesteps),
+        "train_time_s": round(train_s, 3),
+        "wall_time_s": round(wall_s, 3),
+        "env_steps_per_s": round(model.num_timesteps / train_s, 1),
+        "final_test_eval": {
+            "episodes": int(final["episodes"]),
+            "seed": args.eval_seed,
+            "mean_reward": final["mean_reward"],
+            "rms_tracking_error": final["rms_tracking_error"],
+            "unit": "deg" if adapter.config.task == "angle" else "deg/s",
+        },
+    }
+    (out / "settings.json").write_text(json.dumps(settings, indent=2) + "\n", "utf-8")
+    model.logger.close()
+    train_env.close()
+    eval_env.close()
+    print(
+        f"\ntrained {model.num_timesteps:,} env-steps in {train_s:.1f} s "
+        f"({model.num_timesteps / train_s:,.0f} env-steps/s); wall time {wall_s:.1f} s"
+    )
+    print(
+        f"final model on {int(final['episodes'])} test-split episodes: mean return "
+        f"{final['mean_reward']:.1f}, RMS tracking error {final['rms_tracking_error']:.3f}"
+    )
+    print(f"wrote {out}/model.zip, normalize.json, settings.json")
+    return settings
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m agents.train``: parse, train, exit code (2 and one line for a user error)."""
+    args = parse_args(argv)
+    words = sys.argv[1:] if argv is None else list(argv)
+    try:
+        train(args, command_line=[sys.executable, "-m", "agents.train", *words])
+    except RocketrollError as exc:
+        print(f"agents.train: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+# ----------------------------------------------------------------------------- CLI
+def _cmd_train_ppo(ns: argparse.Namespace) -> int:
+    train(_args_from(ns))
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``rocketroll train ppo ...`` to the top-level parser's ``subparsers``."""
+    parser = subparsers.add_parser(
+        "train", help="train a controller (PPO, Stable-Baselines3)", description=__doc__
+    )
+    sub = parser.add_subparsers(dest="train_command", required=True, metavar="ALGORITHM")
+    ppo = sub.add_parser(
+        "ppo",
+        help="train PPO on RocketRoll-v0 or RocketRollRate-v0",
+        description=__doc__.split("\n\n")[0],
+    )
+    _add_arguments(ppo)
+    ppo.set_defaults(handler=_cmd_train_ppo)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
