@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from agents.base import Controller
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config
+from rollenv.cli import parse_setting
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
 
@@ -349,6 +350,8 @@ class Args:
     """Directory for table.md, results.json, episode.png, errors.png (none: print only)."""
     db: Path | None = None
     """Database file (default: $ROCKETROLL_DB or the default database)."""
+    settings: dict[str, Any] = field(default_factory=dict)
+    """Environment options for every episode (``--set setpoint=zero``), as for gym.make."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -369,6 +372,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=d.seed)
     parser.add_argument("--out", type=Path, default=None, help="output directory")
     parser.add_argument("--db", type=Path, default=None, help="database file")
+    parser.add_argument(
+        "--set",
+        dest="settings",
+        type=parse_setting,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an environment option for every episode, e.g. setpoint=zero (repeatable)",
+    )
 
 
 def run(args: Args) -> list[Evaluation]:
@@ -382,8 +394,13 @@ def run(args: Args) -> list[Evaluation]:
     if args.episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
     task = "rate" if args.env_id == "RocketRollRate-v0" else "angle"
+    fixed = sorted({"task", "split"} & set(args.settings))
+    if fixed:
+        raise UsageError(
+            f"--set {fixed[0]}=... is not allowed: the task follows --env-id, the split --split"
+        )
     try:
-        config = make_config(args.env_id, {"task": task, "split": args.split})
+        config = make_config(args.env_id, {**args.settings, "task": task, "split": args.split})
         controllers = [make_controller(p, config, db=args.db) for p in args.policy]
     except (ValueError, FileNotFoundError) as exc:
         raise UsageError(str(exc)) from exc
@@ -405,6 +422,7 @@ def run(args: Args) -> list[Evaluation]:
             "seed": args.seed,
             "n_episodes": args.episodes,
             "policies": list(args.policy),
+            "settings": dict(args.settings),
             "bank": bank.description,
             "command": "rocketroll eval " + " ".join(sys.argv[1:]) if sys.argv else "",
         }
@@ -443,6 +461,7 @@ def _args(ns: argparse.Namespace) -> Args:
         seed=ns.seed,
         out=ns.out,
         db=ns.db,
+        settings=dict(ns.settings),
     )
 
 

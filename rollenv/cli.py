@@ -12,12 +12,12 @@ import numpy as np
 
 from identification.errors import UsageError
 
-__all__ = ["register", "rollout"]
+__all__ = ["parse_setting", "register", "rollout"]
 
 POLICIES = ("zero", "random")
 
 
-def _setting(text: str) -> tuple[str, Any]:
+def parse_setting(text: str) -> tuple[str, Any]:
     """``KEY=VALUE`` with VALUE read as a bool, int, float or string."""
     key, sep, raw = text.partition("=")
     if not sep or not key:
@@ -194,7 +194,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--db", type=Path, help="database file (default: the default database)")
     p.add_argument(
         "--set",
-        type=_setting,
+        type=parse_setting,
         action="append",
         metavar="KEY=VALUE",
         help="environment option, e.g. --set split=test --set sensors=false (repeatable)",
