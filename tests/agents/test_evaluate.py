@@ -119,6 +119,9 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
         (["--policy", "trim:1"], "takes no argument"),
         (["--episodes", "0"], "--episodes must be >= 1"),
         (["--env-id", "CartPole-v1"], "--env-id"),
+        (["--set", "split=train"], "--set split=... is not allowed"),
+        (["--set", "setpiont=zero"], "did you mean 'setpoint'"),
+        (["--policy", "ppo:/nonexistent/run"], "/nonexistent/run"),
     ],
 )
 def test_bad_arguments_exit_2_and_write_nothing(argv, message, tmp_path, capsys, default_db):
@@ -133,3 +136,15 @@ def test_the_table_marks_the_units_of_the_rate_task(default_db):
     result = evaluate(cfg, make_controller("trim", cfg), protocol_episodes(cfg, 2))
     table = markdown_table([result], cfg)
     assert "RMS error (°/s)" in table and "| trim |" in table
+
+
+def test_set_passes_environment_options_to_every_episode(tmp_path, default_db):
+    out = tmp_path / "zero"
+    assert (
+        main(["--policy", "pid", "--episodes", "2", "--set", "setpoint=zero", "--out", str(out)])
+        == 0
+    )
+    results = json.loads((out / "results.json").read_text())
+    assert results["protocol"]["settings"] == {"setpoint": "zero"}
+    assert results["protocol"]["config"]["setpoint"] == "zero"
+    assert all(set(e["setpoints"]) == {0.0} for e in results["protocol"]["episodes"])
