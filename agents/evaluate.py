@@ -18,6 +18,7 @@ import argparse
 import json
 import os
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -120,9 +121,13 @@ def protocol_episodes(
 ) -> list[EpisodeSpec]:
     """The protocol's episodes of ``config.split``: ``episodes`` draws of the env itself.
 
-    Episode ``i`` is what ``env.reset(seed=s_i)`` draws, with ``s_i`` the
-    ``i``-th integer of ``np.random.default_rng(seed)``; the same arguments
-    always give the same episodes.
+    Episode ``i`` has the trace window and setpoint schedule that
+    ``env.reset(seed=s_i)`` draws, with ``s_i`` the ``i``-th integer of
+    ``np.random.default_rng(seed)``; the same arguments always give the same
+    episodes.  Replayed through reset options with the same seed, what the
+    env still draws (the gyro noise; an initial angle or randomised rocket
+    when those options are on) differs from that first draw, but is the same
+    for every controller.
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
@@ -175,7 +180,8 @@ def metrics(rollout: Rollout, config: RollConfig) -> dict[str, float]:
 
     Over the steps after reset: RMS and largest |error|; the settled RMS over
     the last quarter of each setpoint period, 7.5-10 s after a change by
-    default (turbulence rejection with the slews, even of 180°, done); fin travel ``Σ|Δθ|/T``; time
+    default (turbulence rejection with the slews, even of 180°, done; the
+    episode's last quarter if no period ends within it); fin travel ``Σ|Δθ|/T``; time
     at the rate limit, the time the servo needs at 150 °/s to reach each
     command, capped at the step (the servo is a pure rate limiter, so this is
     the time it is moving, to within a substep); steps ending with
@@ -186,7 +192,9 @@ def metrics(rollout: Rollout, config: RollConfig) -> dict[str, float]:
     duration = len(error) * config.dt_s
     steps = np.arange(1, len(error) + 1)
     period = config.setpoint_period_steps
-    settled = (steps % period) >= period - period // 4
+    settled = (steps % period) >= period - max(period // 4, 1)
+    if not settled.any():  # a period as long as the episode: its last quarter
+        settled = steps > len(error) - max(len(error) // 4, 1)
     travel = np.abs(np.diff(fin))
     needed = np.abs(rollout.command_deg[1:] - fin[:-1]) / config.rate_limit_dps
     at_range = np.abs(fin[1:]) >= config.fin_range_deg * (1 - 1e-9)
@@ -315,7 +323,10 @@ def make_controller(
             omega = float(arg) if arg else None
         except ValueError:
             raise ValueError(f"--policy pid:OMEGA needs a number, got {text!r}") from None
-        return PIDController.for_env(config, model, omega)
+        pid = PIDController.for_env(config, model, omega)
+        if arg:
+            pid.name = f"PID ω={omega:g}"
+        return pid
     if kind == "oracle":
         from agents.oracle import OracleController
 
@@ -327,7 +338,15 @@ def make_controller(
 
         env_id = "RocketRollRate-v0" if config.task == "rate" else "RocketRoll-v0"
         path = Path(arg) if arg else Path(__file__).parent / "policies" / env_id
-        return PPOController.load(path)
+        ppo = PPOController.load(path)
+        if ppo.task is not None and ppo.task != config.task:
+            raise ValueError(
+                f"--policy {text}: the policy was trained on the {ppo.task!r} task, "
+                f"{env_id} is the {config.task!r} task"
+            )
+        if arg:
+            ppo.name = f"PPO {path.name}"
+        return ppo
     raise ValueError(f"unknown --policy {text!r}; use {POLICY_HELP}")
 
 
@@ -393,6 +412,11 @@ def run(args: Args) -> list[Evaluation]:
         )
     if args.episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    repeated = sorted({p for p in args.policy if args.policy.count(p) > 1})
+    if repeated:
+        raise UsageError(f"--policy {repeated[0]} is given twice")
     task = "rate" if args.env_id == "RocketRollRate-v0" else "angle"
     fixed = sorted({"task", "split"} & set(args.settings))
     if fixed:
@@ -404,6 +428,9 @@ def run(args: Args) -> list[Evaluation]:
         controllers = [make_controller(p, config, db=args.db) for p in args.policy]
     except (ValueError, FileNotFoundError) as exc:
         raise UsageError(str(exc)) from exc
+    names = [c.name for c in controllers]
+    if len(set(names)) < len(names):
+        raise UsageError(f"two --policy values give controllers of one name: {', '.join(names)}")
     print(f"rocketroll eval: {args.env_id}, split={args.split}, {args.episodes} episodes, ")
     print(f"  seed={args.seed}, policies: {', '.join(args.policy)}")
     bank = load_bank(config, args.db)
@@ -424,24 +451,41 @@ def run(args: Args) -> list[Evaluation]:
             "policies": list(args.policy),
             "settings": dict(args.settings),
             "bank": bank.description,
-            "command": "rocketroll eval " + " ".join(sys.argv[1:]) if sys.argv else "",
+            "command": command_of(args),
         }
-        _write(out / "table.md", table)
-        _write(
-            out / "results.json",
-            json.dumps(to_json(results, config, specs, protocol), indent=1) + "\n",
-        )
-        plot_episode(results, config, out / "episode.png")
-        plot_errors(results, config, out / "errors.png")
+        text = json.dumps(to_json(results, config, specs, protocol), indent=1, allow_nan=False)
+        staged: dict[str, Path] = {}
+        try:  # every file staged first: a failure leaves the folder as it was
+            for name in ("table.md", "results.json", "episode.png", "errors.png"):
+                fd, tmp_name = tempfile.mkstemp(
+                    prefix=f".{name}.", suffix=Path(name).suffix, dir=out
+                )
+                os.close(fd)
+                staged[name] = Path(tmp_name)
+            staged["table.md"].write_text(table, encoding="utf-8")
+            staged["results.json"].write_text(text + "\n", encoding="utf-8")
+            plot_episode(results, config, staged["episode.png"])
+            plot_errors(results, config, staged["errors.png"])
+            for name, tmp in staged.items():
+                os.replace(tmp, out / name)
+        finally:
+            for tmp in staged.values():
+                tmp.unlink(missing_ok=True)
         print(f"wrote {out}/table.md, results.json, episode.png, errors.png")
     return results
 
 
-def _write(path: Path, text: str) -> None:
-    """Write through a temporary file so a failed run leaves no half-written output."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+def command_of(args: Args) -> str:
+    """The ``rocketroll eval`` command line that repeats ``args``."""
+    parts = ["rocketroll eval", f"--env-id {args.env_id}"]
+    parts += [f"--policy {p}" for p in args.policy]
+    parts += [f"--split {args.split}", f"--episodes {args.episodes}", f"--seed {args.seed}"]
+    parts += [f"--set {k}={v}" for k, v in args.settings.items()]
+    if args.db is not None:
+        parts.append(f"--db {args.db}")
+    if args.out is not None:
+        parts.append(f"--out {args.out}")
+    return " ".join(parts)
 
 
 def parse_args(argv: Sequence[str] | None = None) -> Args:

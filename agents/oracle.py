@@ -38,13 +38,16 @@ class OracleController:
     the prediction is exact -- and simulates each candidate first move ``w``
     over the next ``horizon`` steps.  The fin command of step ``j`` is
     ``w_j - u_d(j)`` within the fin range, feedforward cancellation with
-    perfect preview; ``w_0 = w``, and the later ``w_j`` come from a PD loop
-    on the predicted true state placed (:meth:`PIDGains.place`, no integral:
-    nothing is left to integrate) on the episode's true rocket at
-    ``tail_omega`` -- or, with ``tail_omega=None``, stay ``w`` (the move is
-    held).  The first move is thus the best one given how the plan goes on
-    (a rollout of a base policy).  It applies the first step of the candidate with the
-    lowest predicted cost, searching a grid of ``grid`` values over the fin
+    perfect preview; ``w_0 = w``, and the later ``w_j`` come from the
+    proportional and derivative terms of the PID that :meth:`PIDGains.place`
+    puts on the episode's true rocket at ``tail_omega``, acting on the
+    predicted true state (the integral dropped: once ``u_d`` is cancelled
+    nothing is left to integrate; without it the loop's poles are those of
+    ``s² + (1+2ζ)ω·s + (1+2ζ)ω²``, not ``-ω``) -- or, with
+    ``tail_omega=None``, stay ``w`` (the move is held).  The first move is
+    thus the best one given how the plan goes on (a rollout of a base
+    policy).  It applies the first step of the candidate with the lowest
+    predicted cost, searching a grid of ``grid`` values over the fin
     range (widened by the largest coming ``|u_d|``) and then ``refine``
     values around the best, and plans again at the next step.  The servo's
     rate and range limits are inside the prediction, so every plan respects

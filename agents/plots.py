@@ -27,13 +27,13 @@ def typical_episode(results: Sequence[Evaluation]) -> int:
 
 
 def _save(fig: object, path: Path) -> None:
+    """Save as PNG (the caller stages the file; see :func:`agents.evaluate.run`)."""
     import matplotlib.pyplot as plt
 
-    path = Path(path)
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110)  # type: ignore[attr-defined]
-    plt.close(fig)  # type: ignore[arg-type]
-    tmp.replace(path)
+    try:
+        fig.savefig(Path(path), dpi=110, format="png")  # type: ignore[attr-defined]
+    finally:
+        plt.close(fig)  # type: ignore[arg-type]
 
 
 def plot_episode(results: Sequence[Evaluation], config: RollConfig, path: Path) -> int:

@@ -11,6 +11,7 @@ import pytest
 from agents.evaluate import (
     METRICS,
     Rollout,
+    _env,
     evaluate,
     main,
     make_controller,
@@ -37,8 +38,24 @@ def test_protocol_episodes_are_fixed_by_the_seed(angle_config):
         assert spec.trace in test_uids  # held-out traces only
         assert len(spec.setpoints) == 6 and spec.setpoints[0] == 0.0
         assert all(abs(s) <= 90.0 for s in spec.setpoints)
-    # The same episodes as the environment's own draw, not a distribution of their own.
-    assert len({(e.trace, e.start) for e in first}) == 5
+    # The environment's own draws, not a distribution of the protocol's.
+    env = _env(angle_config, load_bank(angle_config, None))
+    for spec in first:
+        env.reset(seed=spec.seed)
+        assert env.replay_options() == spec.options()
+
+
+def test_every_controller_meets_the_same_episodes(angle_config):
+    specs = protocol_episodes(angle_config, 2, seed=8)
+    runs = [
+        evaluate(angle_config, make_controller(p, angle_config), specs).rollouts
+        for p in ("trim", "pid", "oracle")
+    ]
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            np.testing.assert_array_equal(a.u_d_deg, b.u_d_deg)
+            np.testing.assert_array_equal(a.setpoint, b.setpoint)
+            assert not np.array_equal(a.fin_deg, b.fin_deg)
 
 
 @pytest.mark.parametrize("policy", ["pid", "oracle"])
@@ -94,21 +111,29 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
     )
     assert code == 0
     printed = capsys.readouterr().out
-    assert "| trim |" in printed and "| PID |" in printed
+    assert "| trim |" in printed and "| PID ω=3 |" in printed
     table = (out / "table.md").read_text()
     assert table.count("\n") == 4 and "RMS error (°)" in table
     results = json.loads((out / "results.json").read_text())
     assert results["protocol"]["split"] == "test"
+    assert results["protocol"]["command"].startswith(
+        "rocketroll eval --env-id RocketRoll-v0 --policy trim --policy pid:3"
+    )
     assert len(results["protocol"]["episodes"]) == 3
-    assert set(results["controllers"]) == {"trim", "PID"}
-    pid = results["controllers"]["PID"]
+    assert set(results["controllers"]) == {"trim", "PID ω=3"}
+    pid = results["controllers"]["PID ω=3"]
     assert len(pid["episodes"]) == 3
     rms = [e["rms_error"] for e in pid["episodes"]]
     assert pid["aggregate"]["rms_error"]["mean"] == pytest.approx(np.mean(rms))
     assert pid["aggregate"]["rms_error"]["worst"] == max(rms)
     for png in ("episode.png", "errors.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert not list(out.glob("*.tmp*"))
+    assert sorted(p.name for p in out.iterdir()) == [
+        "episode.png",
+        "errors.png",
+        "results.json",
+        "table.md",
+    ]
 
 
 @pytest.mark.parametrize(
@@ -122,6 +147,10 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
         (["--set", "split=train"], "--set split=... is not allowed"),
         (["--set", "setpiont=zero"], "did you mean 'setpoint'"),
         (["--policy", "ppo:/nonexistent/run"], "/nonexistent/run"),
+        (["--policy", "pid", "--policy", "pid"], "--policy pid is given twice"),
+        (["--policy", "pid:2.5", "--policy", "pid:2.50"], "one name"),
+        (["--seed", "-1"], "--seed must be >= 0"),
+        (["--policy", "ppo:agents/policies/RocketRollRate-v0"], "trained on the 'rate' task"),
     ],
 )
 def test_bad_arguments_exit_2_and_write_nothing(argv, message, tmp_path, capsys, default_db):
