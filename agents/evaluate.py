@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from agents.base import Controller
 from disturbances.bank import TraceBank
+from rollenv import ENV_IDS
 from rollenv.bank import load_bank, make_config
 from rollenv.cli import parse_setting
 from rollenv.core import RollConfig
@@ -336,14 +337,13 @@ def make_controller(
     if kind == "ppo":
         from agents.ppo import PPOController
 
-        env_id = "RocketRollRate-v0" if config.task == "rate" else "RocketRoll-v0"
+        env_id = next(i for i, task in ENV_IDS.items() if task == config.task)
         path = Path(arg) if arg else Path(__file__).parent / "policies" / env_id
         ppo = PPOController.load(path)
-        if ppo.task is not None and ppo.task != config.task:
-            raise ValueError(
-                f"--policy {text}: the policy was trained on the {ppo.task!r} task, "
-                f"{env_id} is the {config.task!r} task"
-            )
+        try:
+            ppo.require_task(config.task)
+        except ValueError as exc:
+            raise ValueError(f"--policy {text}: {exc} ({env_id})") from None
         if arg:
             ppo.name = f"PPO {path.name}"
         return ppo
@@ -406,10 +406,8 @@ def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
     from identification.errors import UsageError
 
-    if args.env_id not in ("RocketRoll-v0", "RocketRollRate-v0"):
-        raise UsageError(
-            f"--env-id must be RocketRoll-v0 or RocketRollRate-v0, not {args.env_id!r}"
-        )
+    if args.env_id not in ENV_IDS:
+        raise UsageError(f"--env-id must be one of {', '.join(ENV_IDS)}, not {args.env_id!r}")
     if args.episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
     if args.seed < 0:
@@ -417,7 +415,7 @@ def run(args: Args) -> list[Evaluation]:
     repeated = sorted({p for p in args.policy if args.policy.count(p) > 1})
     if repeated:
         raise UsageError(f"--policy {repeated[0]} is given twice")
-    task = "rate" if args.env_id == "RocketRollRate-v0" else "angle"
+    task = ENV_IDS[args.env_id]
     fixed = sorted({"task", "split"} & set(args.settings))
     if fixed:
         raise UsageError(

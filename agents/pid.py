@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.nominal import NominalModel
+from rollenv import ENV_IDS
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
 
@@ -260,7 +261,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rollenv.bank import load_bank, make_config
 
     parser = argparse.ArgumentParser(prog="python -m agents.pid", description=__doc__)
-    parser.add_argument("--env-id", default="RocketRoll-v0")
+    parser.add_argument("--env-id", default="RocketRoll-v0", choices=list(ENV_IDS))
     parser.add_argument("--db", default=None, help="database file (default: the default one)")
     parser.add_argument("--episodes", type=int, default=30, help="train episodes per ω")
     parser.add_argument("--seed", type=int, default=0)
@@ -274,7 +275,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="what the best ω optimises (default: the protocol's headline, the RMS error)",
     )
     ns = parser.parse_args(argv)
-    task = "rate" if ns.env_id == "RocketRollRate-v0" else "angle"
+    task = ENV_IDS[ns.env_id]
     config = make_config(ns.env_id, {"task": task, "split": "train"})
     model = NominalModel.from_bank(load_bank(config, ns.db))
     print(f"nominal model: {model.source}")

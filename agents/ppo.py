@@ -141,13 +141,16 @@ class PPOController:
         model = PPO.load(model_file, device="cpu", custom_objects=custom)
         return cls(model, normalizer, settings)
 
+    def require_task(self, task: str) -> None:
+        """Refuse (``ValueError``) to act for a task the policy was not trained on."""
+        if self.task is not None and task != self.task:
+            raise ValueError(
+                f"this PPO policy was trained on the {self.task!r} task, the env is {task!r}"
+            )
+
     def reset(self, env: RocketRollEnv) -> None:
         """Nothing to forget (the policy is memoryless); checks the env's task."""
-        if self.task is not None and env.config.task != self.task:
-            raise ValueError(
-                f"this PPO policy was trained on the {self.task!r} task, the env is "
-                f"{env.config.task!r}"
-            )
+        self.require_task(env.config.task)
 
     def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
         """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""

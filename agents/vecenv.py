@@ -17,7 +17,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from numpy.typing import NDArray
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
@@ -27,8 +26,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 from disturbances.bank import TraceBank
 from rollenv import ENV_IDS
 from rollenv.bank import load_bank, make_config
-from rollenv.core import RollBatch, observation_bounds
-from rollenv.env import check_action, reset_arguments
+from rollenv.core import RollBatch
+from rollenv.env import check_action, make_spaces, reset_arguments
 
 __all__ = ["ENV_ATTRIBUTES", "RollVecEnv", "StepReturn"]
 
@@ -133,11 +132,7 @@ class RollVecEnv(VecEnv):
         self.render_mode: str | None = None
         self.spec = None
         self._rng = np.random.default_rng(seed)
-        high, low = observation_bounds(self.config)
-        observation_space = spaces.Box(
-            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
-        )
-        action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        action_space, observation_space = make_spaces(self.config)
         super().__init__(int(num_envs), observation_space, action_space)
         self._actions: NDArray[np.float64] | None = None
         self._started = False

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import os
 from collections import deque
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
@@ -14,9 +14,9 @@ from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config
-from rollenv.core import RollBatch, observation_bounds
+from rollenv.core import RollBatch, RollConfig, observation_bounds
 
-__all__ = ["RESET_OPTIONS", "RocketRollEnv", "check_action"]
+__all__ = ["RESET_OPTIONS", "RocketRollEnv", "check_action", "make_spaces"]
 
 #: Keys ``reset(options=...)`` accepts.
 RESET_OPTIONS = ("trace", "start", "rate_dps", "angle_deg", "fin_deg", "setpoint", "setpoints")
@@ -203,11 +203,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         self._index = self._batch.all
         self._action = np.zeros(1)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.dt_s}
-        high, low = observation_bounds(self.config)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        self.observation_space = spaces.Box(
-            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
-        )
+        self.action_space, self.observation_space = make_spaces(self.config)
         self._started = False
         self._max_steps = self.config.max_episode_steps
         self._episode: dict[str, Any] = {}
@@ -357,6 +353,14 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
             fin_range_deg=self.config.fin_range_deg,
             label=f"{info.uid} ({info.split}, {self.config.disturbance})",
         )
+
+
+def make_spaces(config: RollConfig) -> tuple[spaces.Space[ActType], spaces.Space[ObsType]]:
+    """The action and observation space (float32 ``Box``es) of one env with ``config``."""
+    high, low = observation_bounds(config)
+    action = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+    observation = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+    return cast(spaces.Space[ActType], action), cast(spaces.Space[ObsType], observation)
 
 
 def _one_action(action: Any) -> float:

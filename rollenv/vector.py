@@ -6,15 +6,14 @@ import os
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config
-from rollenv.core import RollBatch, observation_bounds
-from rollenv.env import check_action, reset_arguments
+from rollenv.core import RollBatch
+from rollenv.env import check_action, make_spaces, reset_arguments
 
 __all__ = ["INFO_KEYS", "RocketRollVectorEnv"]
 
@@ -88,12 +87,8 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         self.bank = load_bank(self.config, db) if bank is None else bank
         self._batch = RollBatch(self.config, self.bank, self.num_envs, parallel=parallel)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.dt_s}
-        high, low = observation_bounds(self.config)
-        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.single_action_space, self.single_observation_space = make_spaces(self.config)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.single_observation_space = spaces.Box(
-            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
-        )
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._prev_done = np.zeros(self.num_envs, dtype=np.bool_)
         self._started = False
