@@ -18,7 +18,6 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -404,7 +403,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
-    from identification.errors import UsageError
+    from rocketroll_common.errors import UsageError
 
     if args.env_id not in ENV_IDS:
         raise UsageError(f"--env-id must be one of {', '.join(ENV_IDS)}, not {args.env_id!r}")
@@ -438,9 +437,9 @@ def run(args: Args) -> list[Evaluation]:
     print(table, end="")
     if args.out is not None:
         from agents.plots import plot_episode, plot_errors
+        from rocketroll_common.files import write_all_atomic
 
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         protocol = {
             "env_id": args.env_id,
             "split": args.split,
@@ -452,23 +451,15 @@ def run(args: Args) -> list[Evaluation]:
             "command": command_of(args),
         }
         text = json.dumps(to_json(results, config, specs, protocol), indent=1, allow_nan=False)
-        staged: dict[str, Path] = {}
-        try:  # every file staged first: a failure leaves the folder as it was
-            for name in ("table.md", "results.json", "episode.png", "errors.png"):
-                fd, tmp_name = tempfile.mkstemp(
-                    prefix=f".{name}.", suffix=Path(name).suffix, dir=out
-                )
-                os.close(fd)
-                staged[name] = Path(tmp_name)
-            staged["table.md"].write_text(table, encoding="utf-8")
-            staged["results.json"].write_text(text + "\n", encoding="utf-8")
-            plot_episode(results, config, staged["episode.png"])
-            plot_errors(results, config, staged["errors.png"])
-            for name, tmp in staged.items():
-                os.replace(tmp, out / name)
-        finally:
-            for tmp in staged.values():
-                tmp.unlink(missing_ok=True)
+        episode_png, _ = plot_episode(results, config)
+        write_all_atomic(  # every file or none
+            {
+                out / "table.md": table,
+                out / "results.json": text + "\n",
+                out / "episode.png": episode_png,
+                out / "errors.png": plot_errors(results, config),
+            }
+        )
         print(f"wrote {out}/table.md, results.json, episode.png, errors.png")
     return results
 
@@ -521,7 +512,7 @@ def register(subparsers: Any) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m agents.evaluate``."""
-    from identification.errors import RocketrollError
+    from rocketroll_common.errors import RocketrollError
 
     try:
         run(parse_args(argv))

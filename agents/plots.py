@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from rocketroll_common.plotting import new_figure, png_bytes
 from rollenv.core import RollConfig
 
 if TYPE_CHECKING:
@@ -26,28 +26,12 @@ def typical_episode(results: Sequence[Evaluation]) -> int:
     return int(np.argsort(rms)[(rms.size - 1) // 2])
 
 
-def _save(fig: object, path: Path) -> None:
-    """Save as PNG (the caller stages the file; see :func:`agents.evaluate.run`)."""
-    import matplotlib.pyplot as plt
-
-    try:
-        fig.savefig(Path(path), dpi=110, format="png")  # type: ignore[attr-defined]
-    finally:
-        plt.close(fig)  # type: ignore[arg-type]
-
-
-def plot_episode(results: Sequence[Evaluation], config: RollConfig, path: Path) -> int:
-    """Overlay every controller on the typical episode; returns the episode's index."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def plot_episode(results: Sequence[Evaluation], config: RollConfig) -> tuple[bytes, int]:
+    """Every controller overlaid on the typical episode: the PNG and the episode's index."""
     k = typical_episode(results)
     angle_task = config.task == "angle"
-    fig, axes = plt.subplots(
-        3, 1, figsize=(10, 7.5), sharex=True, gridspec_kw={"height_ratios": [3, 2, 1.3]}
-    )
+    fig = new_figure(figsize=(10, 7.5))
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2, 1.3]})
     first = results[0].rollouts[k]
     t = first.time_s
     top, mid, low = axes
@@ -74,19 +58,14 @@ def plot_episode(results: Sequence[Evaluation], config: RollConfig, path: Path) 
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    _save(fig, path)
-    return k
+    return png_bytes(fig, dpi=110), k
 
 
-def plot_errors(results: Sequence[Evaluation], config: RollConfig, path: Path) -> None:
-    """Per controller: the distribution of |error| over all steps, and per-episode RMS."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def plot_errors(results: Sequence[Evaluation], config: RollConfig) -> bytes:
+    """Per controller: the distribution of |error| over all steps, and per-episode RMS (PNG)."""
     unit = "°" if config.task == "angle" else "°/s"
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig = new_figure(figsize=(11, 4.5))
+    left, right = fig.subplots(1, 2)
     floor = 1e-3
     for r, colour in zip(results, COLOURS, strict=False):
         err = np.abs(np.concatenate([ro.error[1:] for ro in r.rollouts]))
@@ -112,4 +91,4 @@ def plot_errors(results: Sequence[Evaluation], config: RollConfig, path: Path) -
     n = len(results[0].episodes)
     fig.suptitle(f"Tracking error on {n} held-out episodes ({config.task} task)")
     fig.tight_layout()
-    _save(fig, path)
+    return png_bytes(fig, dpi=110)

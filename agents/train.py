@@ -58,7 +58,7 @@ from typing import Any, Union, get_args, get_origin, get_type_hints
 
 import numpy as np
 
-from identification.errors import RocketrollError, UsageError
+from rocketroll_common.errors import RocketrollError, UsageError
 
 __all__ = [
     "DEFAULT_HYPERPARAMS",
@@ -560,7 +560,7 @@ def _versions() -> dict[str, str]:
     import stable_baselines3
     import torch
 
-    from rocketroll import __version__
+    from rocketroll_common import __version__
 
     return {
         "python": platform.python_version(),

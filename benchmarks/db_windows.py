@@ -46,7 +46,7 @@ import numpy as np
 from disturbances.bank import TraceBank
 from disturbances.db import DatabaseError, DisturbanceDB, TraceInfo
 from disturbances.default import default_path, open_database
-from identification.recording import FloatArray
+from rocketroll_common.arrays import FloatArray
 
 TARGET_US = 100.0
 WINDOW_S = 60.0

@@ -52,8 +52,8 @@ from tqdm.auto import tqdm
 from identification.baselines import OutputErrorFit, output_error
 from identification.model import RollParams, damping
 from identification.pipeline import Identification, IdentifyOptions, identify
-from identification.recording import FloatArray
 from identification.tunnel import TunnelSpec, run_tunnel
+from rocketroll_common.arrays import FloatArray
 
 PAPER = "paper"
 PEER = "peer"

@@ -19,7 +19,7 @@ import numpy as np
 
 from disturbances.db import DisturbanceDB, Trace, TraceInfo
 from identification.model import RollParams
-from identification.recording import FloatArray
+from rocketroll_common.arrays import FloatArray
 
 __all__ = ["TraceBank", "Window"]
 
@@ -141,7 +141,7 @@ class TraceBank:
         """A bank of bare arrays (tests, user-made disturbances)."""
         from disturbances.rows import checksum
         from identification.model import PAPER_THETA
-        from identification.recording import readonly_array
+        from rocketroll_common.arrays import readonly_array
 
         p = PAPER_THETA if params is None else params
         traces = []

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from identification.errors import UsageError
+from rocketroll_common.errors import UsageError
 
 if TYPE_CHECKING:
     from disturbances.db import DisturbanceDB, TraceInfo
@@ -204,7 +204,7 @@ def _cmd_show(ns: argparse.Namespace) -> int:
         )
         if ns.plot is not None:
             from disturbances.plots import plot_trace
-            from identification.recording import write_atomic
+            from rocketroll_common.files import write_atomic
 
             source = None if info.source_uid is None else db.trace(info.source_uid)
             write_atomic(ns.plot, plot_trace(trace, source))

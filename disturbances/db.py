@@ -55,9 +55,11 @@ from disturbances.rows import (
     content_hash,
     identified_uid,
 )
-from identification.errors import RocketrollError
 from identification.model import RollParams
-from identification.recording import FloatArray, Recording, readonly_array
+from identification.recording import Recording
+from rocketroll_common import __version__
+from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_common.errors import RocketrollError
 
 __all__ = [
     "APPLICATION_ID",
@@ -153,8 +155,6 @@ class DatabaseError(RocketrollError):
 
 def package_version() -> str:
     """The installed rocketroll version (``0+unknown`` from an uninstalled tree)."""
-    from rocketroll import __version__
-
     return __version__
 
 

@@ -39,7 +39,8 @@ from disturbances.db import SCHEMA_VERSION, DatabaseError, DisturbanceDB, packag
 from disturbances.rows import SURROGATE_KINDS
 from identification.bundled import bundled_paths
 from identification.pipeline import IdentifyOptions
-from identification.recording import file_mode, load_recording
+from identification.recording import load_recording
+from rocketroll_common.files import file_mode
 
 __all__ = [
     "BUILD_RECIPE",

@@ -43,9 +43,9 @@ import numpy as np
 
 from disturbances.db import SCHEMA_VERSION, DisturbanceDB, Dump, StoreResult
 from disturbances.rows import IdentificationRow, RecordingRow, TraceRow
-from identification.errors import RocketrollError
 from identification.model import RollParams
-from identification.recording import FloatArray
+from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import RocketrollError
 
 __all__ = [
     "EXPORT_FORMAT",

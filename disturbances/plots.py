@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 from scipy import signal, stats
 
 from disturbances.db import Trace
+from rocketroll_common.plotting import new_figure, png_bytes
 
 __all__ = ["plot_trace"]
 
@@ -24,8 +21,7 @@ def plot_trace(trace: Trace, source: Trace | None = None) -> bytes:
     info = trace.info
     u = trace.u_d_deg
     t = info.t0_s + info.dt_s * np.arange(u.size)
-    fig = Figure(figsize=(11, 6.5), constrained_layout=True)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(11, 6.5), constrained_layout=True)
     grid = fig.add_gridspec(2, 2, height_ratios=(1, 1.1))
     ax = fig.add_subplot(grid[0, :])
     if source is not None:
@@ -65,6 +61,4 @@ def plot_trace(trace: Trace, source: Trace | None = None) -> bytes:
     ax.set_ylabel("PSD (°²/Hz)")
     ax.set_title("Welch power spectral density", fontsize=9)
     ax.legend(fontsize=8)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100)
-    return buffer.getvalue()
+    return png_bytes(fig, dpi=100)

@@ -34,7 +34,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.model import RollParams
-from identification.recording import FloatArray, Recording, readonly_array
+from identification.recording import Recording
+from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
     "KINDS",

@@ -62,8 +62,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
 from statsmodels.tsa.ar_model import AutoReg, ar_select_order
 
-from identification.recording import readonly_array
 from identification.statistics import decorrelation_stride
+from rocketroll_common.arrays import readonly_array
 
 __all__ = [
     "KS_ALPHA",

@@ -7,7 +7,6 @@
 * :mod:`identification.bundled` -- the recordings shipped with the package.
 """
 
-from identification.errors import RocketrollError, UsageError
 from identification.model import PAPER_CONSTANT, PAPER_THETA, RollParams, Servo, simulate
 from identification.recording import Recording, RecordingError, load_recording, save_recording
 
@@ -16,10 +15,8 @@ __all__ = [
     "PAPER_THETA",
     "Recording",
     "RecordingError",
-    "RocketrollError",
     "RollParams",
     "Servo",
-    "UsageError",
     "load_recording",
     "save_recording",
     "simulate",

@@ -21,10 +21,11 @@ from scipy.optimize import least_squares
 
 from identification.model import RollParams, damping, simulate
 from identification.pipeline import IdentifyOptions, measurements
-from identification.recording import FloatArray, Recording
+from identification.recording import Recording
 from identification.steps import (
     IdentificationError,
 )
+from rocketroll_common.arrays import FloatArray
 
 __all__ = ["OutputErrorFit", "output_error"]
 

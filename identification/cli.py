@@ -14,7 +14,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from identification.errors import UsageError
+from rocketroll_common.errors import UsageError
 
 if TYPE_CHECKING:
     from identification.pipeline import Identification, IdentifyOptions
@@ -114,8 +114,9 @@ def _cmd_tunnel(ns: argparse.Namespace) -> int:
 
 
 def _cmd_info(ns: argparse.Namespace) -> int:
-    from identification.recording import load_recording, write_all_atomic
+    from identification.recording import load_recording
     from identification.summary import plot_recording, summarize
+    from rocketroll_common.files import write_all_atomic
 
     if ns.plot is not None and ns.plot.suffix.lower() != ".png":
         raise UsageError(f"--plot {ns.plot}: the figure is a PNG; give a path ending in .png")
@@ -337,8 +338,9 @@ def identify_options(ns: argparse.Namespace) -> IdentifyOptions:
 
 def _cmd_identify(ns: argparse.Namespace) -> int:
     from identification.pipeline import identify
-    from identification.recording import load_recording, write_all_atomic
+    from identification.recording import load_recording
     from identification.report import render_report
+    from rocketroll_common.files import write_all_atomic
 
     options = identify_options(ns)
     if ns.report is not None and ns.report.exists() and not ns.report.is_dir():

@@ -33,7 +33,6 @@ from numpy.typing import ArrayLike
 from tqdm.auto import tqdm
 
 from identification.model import RollParams, damping
-from identification.recording import FloatArray
 from identification.steps import (
     SMOOTHING_WINDOW_S,
     FineGrid,
@@ -42,6 +41,7 @@ from identification.steps import (
     smoothing_width,
     solve_disturbance,
 )
+from rocketroll_common.arrays import FloatArray
 
 __all__ = ["NoiseStudy", "noise_study"]
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from identification.model import RollParams, damping
 from identification.noise import NoiseStudy, noise_study
-from identification.recording import FloatArray, Recording
+from identification.recording import Recording
 from identification.statistics import DisturbanceStatistics, disturbance_statistics
 from identification.steps import (
     PAPER_SERVO,
@@ -47,6 +47,7 @@ from identification.steps import (
     measured_velocity,
     resimulate,
 )
+from rocketroll_common.arrays import FloatArray
 
 __all__ = ["Identification", "IdentifyOptions", "identify"]
 

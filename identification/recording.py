@@ -31,11 +31,9 @@ the line and the problem.
 
 from __future__ import annotations
 
-import errno
 import math
 import os
 import re
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,10 +42,10 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.errors import RocketrollError
 from identification.model import RollParams
-
-FloatArray = NDArray[np.float64]
+from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_common.errors import RocketrollError
+from rocketroll_common.files import write_atomic
 
 __all__ = [
     "COLUMNS",
@@ -272,13 +270,6 @@ def metadata_problem(key: str, value: str) -> str | None:
         if not math.isfinite(number):
             return f"metadata {key!r} must be finite, not {value!r}"
     return None
-
-
-def readonly_array(values: ArrayLike) -> FloatArray:
-    """A private, read-only float copy of ``values`` (for frozen results)."""
-    arr = np.array(values, dtype=float)
-    arr.setflags(write=False)
-    return arr
 
 
 def _readonly(values: ArrayLike | None) -> FloatArray | None:
@@ -541,54 +532,6 @@ def recording_text(recording: Recording) -> str:
         for row in table
     ]
     return "\n".join(lines) + "\n"
-
-
-def file_mode() -> int:
-    """The permissions a plain ``open()`` gives a new file (0o666 less the umask).
-
-    Files staged with :func:`tempfile.mkstemp` are 0o600; they get these
-    before they are renamed into place.
-    """
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> None:
-    """Write ``data`` (text as UTF-8) to ``path`` via a temporary file and a rename.
-
-    A reader never sees a half-written file, and on any error the target is
-    left as it was.  See :func:`write_all_atomic`.
-    """
-    write_all_atomic({path: data})
-
-
-def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> None:
-    """Write several files all or nothing.
-
-    Every file is first written in full to a temporary file beside its target;
-    only when all of them are staged are they renamed into place.  Any error
-    while staging (a directory as target, an unwritable folder, a full disk)
-    leaves every target as it was.
-    """
-    staged: list[tuple[str, Path]] = []
-    try:
-        for path, data in outputs.items():
-            target = Path(path)
-            if target.is_dir():
-                raise IsADirectoryError(errno.EISDIR, "is a directory", str(target))
-            target.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-            staged.append((tmp, target))
-            with os.fdopen(fd, "wb") as handle:
-                handle.write(data.encode("utf-8") if isinstance(data, str) else data)
-            # mkstemp makes 0600 files; give the permissions a plain open() would.
-            os.chmod(tmp, file_mode())
-        for tmp, target in staged:
-            os.replace(tmp, target)
-    finally:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
 
 
 def save_recording(recording: Recording, path: str | os.PathLike[str]) -> None:

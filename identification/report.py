@@ -47,20 +47,20 @@ directly, so no pyplot state or GUI backend is involved.
 
 from __future__ import annotations
 
-import io
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from identification.errors import UsageError
 from identification.model import damping, simulate
 from identification.pipeline import Identification
-from identification.recording import FloatArray, write_all_atomic
+from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import UsageError
+from rocketroll_common.files import write_all_atomic
+from rocketroll_common.plotting import new_figure, png_bytes
 
 __all__ = ["FIGURES", "REPORT_NAME", "render_report", "write_report"]
 
@@ -224,16 +224,13 @@ def _check_directory(path: Path) -> None:
 def _figure(
     nrows: int = 1, ncols: int = 1, *, height: float = 4.5, sharex: bool = False
 ) -> tuple[Figure, list[Axes]]:
-    fig = Figure(figsize=(_WIDTH_IN, height), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(_WIDTH_IN, height), layout="constrained")
     axes = fig.subplots(nrows, ncols, sharex=sharex, squeeze=False)
     return fig, list(axes.ravel())
 
 
 def _png(fig: Figure) -> bytes:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=_DPI)
-    return buffer.getvalue()
+    return png_bytes(fig, dpi=_DPI)
 
 
 def _title(fig: Figure, result: Identification, text: str) -> None:

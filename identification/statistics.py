@@ -23,8 +23,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats
 
-from identification.recording import FloatArray
 from identification.steps import Disturbance
+from rocketroll_common.arrays import FloatArray
 
 __all__ = ["DisturbanceStatistics", "TraceStatistics", "decorrelation_stride", "trace_statistics"]
 

@@ -38,9 +38,10 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.linalg import lapack
 from scipy.ndimage import uniform_filter1d
 
-from identification.errors import RocketrollError
 from identification.model import RollParams, Servo, damping, servo_path, simulate
-from identification.recording import FloatArray, Recording, readonly_array
+from identification.recording import Recording
+from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_common.errors import RocketrollError
 
 __all__ = [
     "BilinearFit",

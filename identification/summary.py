@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import io
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 from scipy.signal import savgol_filter
 
-from identification.recording import FloatArray, Recording
+from identification.recording import Recording
+from rocketroll_common.arrays import FloatArray
 
 __all__ = ["RecordingSummary", "plot_recording", "rate_from_angle", "summarize"]
 
@@ -158,17 +158,13 @@ def plot_recording(recording: Recording) -> bytes:
     synthetic recordings, the ground-truth disturbance ``u_d``.  Returns the
     PNG bytes, so the caller decides where (and whether) they are written.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from rocketroll_common.plotting import new_figure, png_bytes
 
     t = recording.time_s
     rate, rate_source = _rate(recording)
     panels = 3 + (recording.ud_true_deg is not None)
-    fig, axes = plt.subplots(
-        panels, 1, figsize=(10, 2.3 * panels), sharex=True, constrained_layout=True
-    )
+    fig = new_figure(figsize=(10, 2.3 * panels), constrained_layout=True)
+    axes = fig.subplots(panels, 1, sharex=True)
     ax = axes[0]
     if recording.fin_cmd_deg is not None:
         ax.step(t, recording.fin_cmd_deg, where="post", lw=1.2, label="commanded")
@@ -206,7 +202,4 @@ def plot_recording(recording: Recording) -> bytes:
         ax.step(t, recording.ud_true_deg, where="post", lw=0.5, color="C4")
         ax.set_ylabel("true u_d (°)")
     axes[-1].set_xlabel("time (s)")
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
-    plt.close(fig)
-    return buffer.getvalue()
+    return png_bytes(fig, dpi=110)

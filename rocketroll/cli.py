@@ -16,8 +16,8 @@ from agents import evaluate as agents_evaluate
 from agents import train as agents_train
 from disturbances import cli as disturbances_cli
 from identification import cli as identification_cli
-from identification.errors import RocketrollError
 from rocketroll import __version__
+from rocketroll_common.errors import RocketrollError
 from rollenv import cli as rollenv_cli
 
 __all__ = ["build_parser", "main"]

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.errors import UsageError
+from rocketroll_common.errors import UsageError
 
 __all__ = ["parse_setting", "register", "rollout"]
 
@@ -122,7 +122,7 @@ def _save_strip(frames: list[np.ndarray], path: Path) -> None:
     """Frames side by side in rows of three, one PNG, written atomically."""
     import matplotlib.image
 
-    from identification.recording import write_atomic
+    from rocketroll_common.files import write_atomic
 
     per_row = min(3, len(frames))
     rows = -(-len(frames) // per_row)

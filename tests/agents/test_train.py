@@ -27,8 +27,8 @@ from agents.train import (
 from agents.vecenv import RollVecEnv
 from disturbances.default import build_database
 from identification.bundled import bundled_path
-from identification.errors import UsageError
 from identification.pipeline import IdentifyOptions
+from rocketroll_common.errors import UsageError
 from rollenv.env import RocketRollEnv
 from tests.rollenv.conftest import array_bank
 

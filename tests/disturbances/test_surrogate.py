@@ -29,7 +29,7 @@ from disturbances.surrogate import (
 )
 from identification.bundled import load_bundled
 from identification.pipeline import IdentifyOptions, identify
-from identification.recording import FloatArray
+from rocketroll_common.arrays import FloatArray
 
 DT_S = 0.1
 GAUSSIAN = "tunnel-paper-seed0"

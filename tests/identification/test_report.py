@@ -11,9 +11,9 @@ import pytest
 from matplotlib import image
 
 from identification.bundled import load_bundled
-from identification.errors import UsageError
 from identification.pipeline import Identification, IdentifyOptions, identify
 from identification.report import FIGURES, REPORT_NAME, render_report, write_report
+from rocketroll_common.errors import UsageError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 NOISE_FIGURE = "fig17_noise_study.png"

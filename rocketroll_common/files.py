@@ -1,0 +1,223 @@
+"""Outputs written all or nothing, and checked before any work is done.
+
+Every file a rocketroll command writes is staged in a temporary file beside
+its target and renamed into place only when all of the command's outputs are
+complete, so a reader never sees a half-written file and a failure leaves
+every target as it was.  Staged files get the permissions a plain ``open()``
+would give (``mkstemp`` makes them private).  Errors name the user's path,
+never the temporary one.
+
+Before a command starts its work it checks that each output can be written
+(:func:`check_output`): a long run must not end in "File exists".
+Missing folders above an output are created when it is written, for every
+output alike; nothing is created before the work has succeeded.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+
+from rocketroll_common.errors import UsageError
+
+__all__ = [
+    "check_output",
+    "created_folders_removed_on_error",
+    "file_mode",
+    "folder_mode",
+    "staged_directory",
+    "write_all_atomic",
+    "write_atomic",
+]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """The permissions a plain ``open()`` gives a new file (0o666 less the umask)."""
+    return 0o666 & ~_umask()
+
+
+def folder_mode() -> int:
+    """The permissions a plain ``mkdir()`` gives a new folder (0o777 less the umask)."""
+    return 0o777 & ~_umask()
+
+
+def _named(exc: OSError, target: Path) -> OSError:
+    """``exc`` about ``target`` (the user's path) instead of a temporary file."""
+    return OSError(exc.errno, exc.strerror or str(exc), str(target))
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest folder above ``path`` (or ``path`` itself) that exists."""
+    current = path
+    while not current.exists():
+        if current.parent == current:
+            break
+        current = current.parent
+    return current
+
+
+def check_output(path: str | os.PathLike[str], what: str, *, folder: bool = False) -> Path:
+    """Refuse, before any work, an output that could not be written.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The output: a file, or with ``folder=True`` a folder the command
+        writes files into (it may exist).
+    what : str
+        How the user named it, e.g. ``"--out"``, for the message.
+    folder : bool
+        The output is a folder.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    UsageError
+        A file output that is a folder, a folder output that is a file, or a
+        place whose nearest existing folder is not a writable folder.
+    """
+    target = Path(path)
+    if folder:
+        if target.exists() and not target.is_dir():
+            raise UsageError(f"{what} {target}: exists and is not a folder")
+    elif target.is_dir():
+        raise UsageError(f"{what} {target}: is a folder; give a file name")
+    base = _existing_ancestor(target if folder else target.parent)
+    if not base.is_dir():
+        raise UsageError(f"{what} {target}: {base} is not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise UsageError(f"{what} {target}: cannot write in {base} (permission denied)")
+    return target
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; the ones created, outermost first."""
+    made: list[Path] = []
+    current = folder
+    while not current.exists():
+        made.append(current)
+        if current.parent == current:
+            break
+        current = current.parent
+    made.reverse()
+    for path in made:
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+    return made
+
+
+def _remove_folders(folders: list[Path]) -> None:
+    """Remove folders this process made, innermost first, if they are still empty."""
+    for path in reversed(folders):
+        try:
+            path.rmdir()
+        except OSError:
+            break
+
+
+def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> None:
+    """Write ``data`` (text as UTF-8) to ``path`` via a temporary file and a rename.
+
+    See :func:`write_all_atomic`.
+    """
+    write_all_atomic({path: data})
+
+
+def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> None:
+    """Write several files all or nothing.
+
+    Every file is first written in full to a temporary file beside its target
+    (missing folders are created); only when all of them are staged are they
+    renamed into place.  Any error while staging (a folder as target, an
+    unwritable folder, a full disk) leaves every target as it was and removes
+    the folders it created.  An ``OSError`` names the target, not the
+    temporary file.
+    """
+    staged: list[tuple[str, Path]] = []
+    made: list[Path] = []
+    done = False
+    try:
+        for path, data in outputs.items():
+            target = Path(path)
+            if target.is_dir():
+                raise IsADirectoryError(errno.EISDIR, "is a directory", str(target))
+            try:
+                made += _make_parents(target.parent)
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{target.name}.", suffix=".tmp", dir=target.parent
+                )
+                staged.append((tmp, target))
+                with os.fdopen(fd, "wb") as handle:
+                    handle.write(data.encode("utf-8") if isinstance(data, str) else data)
+                # mkstemp makes 0600 files; give the permissions a plain open() would.
+                os.chmod(tmp, file_mode())
+            except OSError as exc:
+                raise _named(exc, target) from None
+        for tmp, target in staged:
+            try:
+                os.replace(tmp, target)
+            except OSError as exc:
+                raise _named(exc, target) from None
+        done = True
+    finally:
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
+        if not done:
+            _remove_folders(made)
+
+
+@contextmanager
+def staged_directory(target: str | os.PathLike[str]) -> Iterator[Path]:
+    """A new folder ``target`` that appears whole or not at all.
+
+    Yields a temporary folder beside ``target`` to fill; when the block ends
+    without an error it is renamed to ``target`` (which must not exist, or be
+    an empty folder), otherwise it is removed with everything in it.
+    """
+    final = Path(target)
+    if final.exists() and (not final.is_dir() or any(final.iterdir())):
+        raise UsageError(f"{final}: exists and is not an empty folder")
+    made = _make_parents(final.parent)
+    staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=final.parent))
+    try:
+        os.chmod(staging, folder_mode())  # mkdtemp made it private
+        yield staging
+        if final.exists():
+            final.rmdir()
+        os.replace(staging, final)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        _remove_folders(made)
+        raise
+
+
+@contextmanager
+def created_folders_removed_on_error(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Create the missing folders above ``path``; remove them again if the block fails.
+
+    For outputs that are not written through :func:`write_all_atomic` (an
+    SQLite file opened in place).  The block must remove its own file.
+    """
+    made = _make_parents(Path(path).parent)
+    try:
+        yield
+    except BaseException:
+        _remove_folders(made)
+        raise

@@ -1,0 +1,176 @@
+"""Registries: one name chooses among alternatives, decided in one place.
+
+Gymnasium's ``register``/``make`` is the model.  A :class:`Registry` maps a
+name to an entry -- an object, or a ``"module:attribute"`` string loaded on
+first use, so listing the names (for ``--help`` and error messages) imports
+nothing heavy.  Identification methods, roll models, controllers, environment
+variants and storage back ends are each one registry; a new one joins by one
+``register`` call, and the command line, the database and the evaluation
+find it.
+
+Plugins outside this distribution register themselves when they are
+imported.  :func:`load_plugins` imports every module named by an entry point
+of the group ``rocketroll.plugins`` (``[project.entry-points."rocketroll.plugins"]``
+in a plugin's ``pyproject.toml``) and by the environment variable
+``ROCKETROLL_PLUGINS`` (comma-separated module names); every registry calls it
+before it lists or looks up names.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+import os
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Generic, TypeVar
+
+__all__ = ["PLUGIN_GROUP", "PLUGIN_VARIABLE", "Entry", "Registry", "load_plugins"]
+
+T = TypeVar("T")
+
+#: Entry-point group of rocketroll plugins.
+PLUGIN_GROUP = "rocketroll.plugins"
+#: Environment variable naming plugin modules (comma-separated).
+PLUGIN_VARIABLE = "ROCKETROLL_PLUGINS"
+
+_plugins_loaded = False
+
+
+def load_plugins() -> None:
+    """Import every plugin module once (entry points, then ``$ROCKETROLL_PLUGINS``)."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    from importlib.metadata import entry_points
+
+    for point in entry_points(group=PLUGIN_GROUP):
+        point.load()
+    for name in os.environ.get(PLUGIN_VARIABLE, "").split(","):
+        if name.strip():
+            importlib.import_module(name.strip())
+
+
+def _load(reference: str) -> Any:
+    module, _, attribute = reference.partition(":")
+    value: Any = importlib.import_module(module)
+    for part in attribute.split(".") if attribute else ():
+        value = getattr(value, part)
+    return value
+
+
+@dataclass(frozen=True)
+class Entry(Generic[T]):
+    """One registered alternative.
+
+    Attributes
+    ----------
+    name : str
+        What users type.
+    target : object or str
+        The entry, or ``"module:attribute"`` to import on first use.
+    summary : str
+        One line for ``--help`` and listings.
+    info : mapping
+        Anything else the registry's users read (e.g. ``usage``, ``default``).
+    """
+
+    name: str
+    target: T | str
+    summary: str = ""
+    info: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+    def load(self) -> T:
+        """The entry itself (imported on first use)."""
+        if isinstance(self.target, str):
+            loaded: T = _load(self.target)
+            object.__setattr__(self, "target", loaded)
+        return self.target  # type: ignore[return-value]
+
+
+class Registry(Generic[T]):
+    """Names mapped to alternatives of one kind.
+
+    Parameters
+    ----------
+    kind : str
+        What is registered, for messages (``"identification method"``).
+
+    Examples
+    --------
+    >>> colours = Registry[tuple[int, int, int]]("colour")
+    >>> colours.register("red", (255, 0, 0), summary="warm")
+    >>> colours.register("blue", "colorsys:ONE_THIRD")  # imported on first use
+    >>> colours.get("red"), colours.names()
+    ((255, 0, 0), ('red', 'blue'))
+    >>> colours.check("rde")
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown colour 'rde' (did you mean 'red'?); known: red, blue
+    """
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+        self._entries: dict[str, Entry[T]] = {}
+
+    def register(
+        self,
+        name: str,
+        target: T | str,
+        *,
+        summary: str = "",
+        replace: bool = False,
+        **info: Any,
+    ) -> None:
+        """Add ``name``; registering a taken name needs ``replace=True``."""
+        if not isinstance(name, str) or not name or name != name.strip() or "," in name:
+            raise ValueError(f"a {self.kind} name must be a non-empty word, got {name!r}")
+        if name in self._entries and not replace:
+            raise ValueError(f"{self.kind} {name!r} is registered already")
+        self._entries[name] = Entry(name, target, summary, MappingProxyType(dict(info)))
+
+    def unregister(self, name: str) -> None:
+        """Remove ``name`` (tests and plugins that replace a built-in)."""
+        self._entries.pop(name, None)
+
+    def names(self) -> tuple[str, ...]:
+        """Every registered name, in registration order."""
+        load_plugins()
+        return tuple(self._entries)
+
+    def entries(self) -> tuple[Entry[T], ...]:
+        """Every entry, in registration order."""
+        load_plugins()
+        return tuple(self._entries.values())
+
+    def __contains__(self, name: object) -> bool:
+        load_plugins()
+        return name in self._entries
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names())
+
+    def __len__(self) -> int:
+        return len(self.names())
+
+    def check(self, name: str) -> str:
+        """``name`` if it is registered; otherwise a ``ValueError`` with suggestions."""
+        if name in self:
+            return name
+        close = difflib.get_close_matches(str(name), list(self._entries), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        known = ", ".join(self._entries) or "none"
+        raise ValueError(f"unknown {self.kind} {name!r}{hint}; known: {known}")
+
+    def entry(self, name: str) -> Entry[T]:
+        """The entry of ``name`` (``ValueError`` if unknown)."""
+        return self._entries[self.check(name)]
+
+    def get(self, name: str) -> T:
+        """The alternative registered as ``name``, imported on first use."""
+        return self.entry(name).load()
+
+    def __repr__(self) -> str:
+        return f"Registry({self.kind!r}: {', '.join(self._entries)})"

@@ -1,0 +1,680 @@
+"""Settings dataclasses, their checks, and the command lines made from them.
+
+A settings dataclass declares each field once, with :func:`setting`: its type
+(the annotation), default, help, choices, physical bounds, flag.  From that
+one declaration come
+
+* the checks (:func:`check`, called from the dataclass's ``__post_init__``):
+  types, choices and bounds, each failure a
+  :class:`~rocketroll_common.errors.SettingError` naming the field;
+* the command-line options (:func:`add_arguments`) and the instance from the
+  parsed options (:func:`from_namespace`), errors named by flag;
+* the words that reproduce an instance (:func:`to_argv`), which
+  :func:`parse` reads back: a recorded ``# command:`` line and the command a
+  run echoes are made by the code that parses them.
+
+This is CleanRL's ``args = tyro.cli(Args)`` on the standard library's
+``argparse``, so that ``rocketroll --help`` stays fast.  :class:`Command`
+and :func:`run_command` turn a dataclass and a function into a command with
+one-line errors (exit 2), a one-line "interrupted" on Ctrl-C (exit 130), and
+every output checked before the work starts.
+
+Examples
+--------
+>>> from dataclasses import dataclass
+>>> @dataclass(frozen=True)
+... class Args:
+...     seed: int = setting(0, "random seed", ge=0, always=True)
+...     sd: float = setting(9.8, "standard deviation, °", ge=0, le=45)
+...     fast: bool = setting(False, "skip the slow part")
+...     def __post_init__(self) -> None:
+...         check(self)
+>>> parse(Args, ["--sd", "2.5", "--fast"])
+Args(seed=0, sd=2.5, fast=True)
+>>> to_argv(Args(sd=2.5))
+['--seed', '0', '--sd', '2.5']
+>>> Args(sd=100.0)
+Traceback (most recent call last):
+...
+rocketroll_common.errors.SettingError: sd: must be in [0, 45], got 100.0
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import numbers
+import sys
+import types
+from collections.abc import Callable, Sequence
+from dataclasses import MISSING, dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
+
+from rocketroll_common.errors import RocketrollError, SettingError, UsageError
+
+__all__ = [
+    "ArgumentParser",
+    "Command",
+    "add_arguments",
+    "check",
+    "flags",
+    "from_namespace",
+    "guarded",
+    "make_parser",
+    "parse",
+    "parse_key_value",
+    "run_command",
+    "setting",
+    "to_argv",
+]
+
+_KEY = "rocketroll.setting"
+
+
+@dataclass(frozen=True)
+class _Spec:
+    help: str
+    flag: str | None
+    choices: tuple[Any, ...] | None
+    ge: float | None
+    gt: float | None
+    le: float | None
+    lt: float | None
+    unit: str
+    positional: bool
+    metavar: str | None
+    parse: Callable[[str], Any] | None
+    format: Callable[[Any], str] | None
+    output: str | None
+    flatten: bool
+    cli: bool
+    always: bool
+
+
+def setting(
+    default: Any = MISSING,
+    help: str = "",
+    *,
+    default_factory: Callable[[], Any] | Any = MISSING,
+    flag: str | None = None,
+    choices: Sequence[Any] | None = None,
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    unit: str = "",
+    positional: bool = False,
+    metavar: str | None = None,
+    parse: Callable[[str], Any] | None = None,
+    format: Callable[[Any], str] | None = None,
+    output: Literal["file", "folder"] | None = None,
+    flatten: bool = False,
+    cli: bool = True,
+    always: bool = False,
+) -> Any:
+    """A dataclass field with everything its checks and its option need.
+
+    Parameters
+    ----------
+    default, default_factory
+        As for :func:`dataclasses.field`; neither makes the option required.
+    help : str
+        One line for ``--help``.
+    flag : str, optional
+        The option (``--min-step``); default ``--`` plus the field name with
+        dashes.
+    choices : sequence, optional
+        Allowed values (a ``Literal`` annotation gives them too).
+    ge, gt, le, lt : float, optional
+        Bounds (``>=``, ``>``, ``<=``, ``<``), for numbers and for each item
+        of a tuple of numbers.  Floats must also be finite.
+    unit : str
+        Shown after the bounds in messages.
+    positional : bool
+        A positional argument instead of an option.
+    metavar : str, optional
+        The value's name in ``--help``.
+    parse, format : callable, optional
+        Text to value and value to text, for types the module does not know.
+    output : {"file", "folder"}, optional
+        The field names an output; :func:`run_command` checks it can be
+        written before the command works.
+    flatten : bool
+        The field is itself a settings dataclass whose options are added
+        here, without a prefix.
+    cli : bool
+        False: a library setting with no option.
+    always : bool
+        :func:`to_argv` writes it even at its default (a seed).
+    """
+    spec = _Spec(
+        help=help,
+        flag=flag,
+        choices=None if choices is None else tuple(choices),
+        ge=ge,
+        gt=gt,
+        le=le,
+        lt=lt,
+        unit=unit,
+        positional=positional,
+        metavar=metavar,
+        parse=parse,
+        format=format,
+        output=output,
+        flatten=flatten,
+        cli=cli,
+        always=always,
+    )
+    metadata = {_KEY: spec}
+    if default_factory is not MISSING:
+        return field(default_factory=default_factory, metadata=metadata)
+    return field(default=default, metadata=metadata)
+
+
+# ----------------------------------------------------------------------------- types
+@dataclass(frozen=True)
+class _Field:
+    name: str
+    spec: _Spec
+    base: Any  # int, float, str, bool, Path, tuple, list, dict or a dataclass
+    item: Any  # the item type of a tuple or list
+    optional: bool
+    choices: tuple[Any, ...] | None
+    default: Any  # MISSING when required
+
+    @property
+    def flag(self) -> str:
+        return self.spec.flag or "--" + self.name.replace("_", "-")
+
+    @property
+    def shown(self) -> str:
+        """How the user names it: the flag, or a positional's metavar."""
+        if self.spec.positional:
+            return self.spec.metavar or self.name.upper()
+        return self.flag
+
+
+_FIELDS: dict[type, tuple[_Field, ...]] = {}
+
+
+def _fields(cls: type) -> tuple[_Field, ...]:
+    """The annotated fields of a settings dataclass (cached per class)."""
+    cached = _FIELDS.get(cls)
+    if cached is not None:
+        return cached
+    hints = get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        spec = f.metadata.get(_KEY)
+        if spec is None or not f.init:
+            continue
+        kind = hints[f.name]
+        optional = False
+        if get_origin(kind) in (Union, types.UnionType):
+            args = [a for a in get_args(kind) if a is not type(None)]
+            optional = len(args) < len(get_args(kind))
+            kind = args[0] if len(args) == 1 else kind
+        choices = spec.choices
+        if get_origin(kind) is Literal:
+            choices = choices or get_args(kind)
+            kind = type(get_args(kind)[0])
+        item: Any = None
+        origin = get_origin(kind)
+        if origin in (tuple, list):
+            item = get_args(kind)[0] if get_args(kind) else str
+            kind = origin
+        elif origin is dict:
+            kind = dict
+        if f.default is not MISSING:
+            default = f.default
+        elif f.default_factory is not MISSING:
+            default = f.default_factory()
+        else:
+            default = MISSING
+        out.append(_Field(f.name, spec, kind, item, optional, choices, default))
+    _FIELDS[cls] = tuple(out)
+    return _FIELDS[cls]
+
+
+def _leaves(cls: type) -> list[_Field]:
+    """Every field, with flattened settings dataclasses replaced by their own fields."""
+    out: list[_Field] = []
+    for f in _fields(cls):
+        if f.spec.flatten:
+            out += _leaves(f.base)
+        else:
+            out.append(f)
+    return out
+
+
+def flags(cls: type) -> dict[str, str]:
+    """Field name -> how the user names it (flag or positional name), flattened."""
+    return {f.name: f.shown for f in _leaves(cls)}
+
+
+# ----------------------------------------------------------------------------- checks
+def _bounds_text(spec: _Spec) -> str:
+    low = (
+        ""
+        if spec.ge is None and spec.gt is None
+        else f"{spec.ge if spec.gt is None else spec.gt:g}"
+    )
+    high = (
+        ""
+        if spec.le is None and spec.lt is None
+        else f"{spec.le if spec.lt is None else spec.lt:g}"
+    )
+    unit = f" {spec.unit}" if spec.unit else ""
+    if low and high:
+        left = "[" if spec.gt is None else "("
+        right = "]" if spec.lt is None else ")"
+        return f"must be in {left}{low}, {high}{right}{unit}"
+    if low:
+        return f"must be {'>=' if spec.gt is None else '>'} {low}{unit}"
+    return f"must be {'<=' if spec.lt is None else '<'} {high}{unit}"
+
+
+def _in_bounds(spec: _Spec, x: float) -> bool:
+    return not (
+        (spec.ge is not None and not x >= spec.ge)
+        or (spec.gt is not None and not x > spec.gt)
+        or (spec.le is not None and not x <= spec.le)
+        or (spec.lt is not None and not x < spec.lt)
+    )
+
+
+def _check_number(f: _Field, kind: Any, value: Any) -> str | None:
+    """What is wrong with one number, or None."""
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            return f"must be an integer, got {value!r}"
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            return f"must be a number, got {value!r}"
+        if not math.isfinite(float(value)):
+            return f"must be finite, got {value!r}"
+    else:
+        return None
+    if not _in_bounds(f.spec, float(value)):
+        return f"{_bounds_text(f.spec)}, got {value!r}"
+    return None
+
+
+def check(obj: Any) -> None:
+    """Check every :func:`setting` field of ``obj`` against its declaration.
+
+    Raises
+    ------
+    SettingError
+        Naming the first field that has the wrong type, a value outside its
+        choices, or a number outside its bounds.
+    """
+    for f in _fields(type(obj)):
+        value = getattr(obj, f.name)
+        if value is None:
+            if f.optional:
+                continue
+            raise SettingError(f.name, "is required")
+        if f.choices is not None and value not in f.choices:
+            allowed = ", ".join(map(str, f.choices))
+            raise SettingError(f.name, f"must be one of {allowed}, not {value!r}")
+        if f.base is bool and not isinstance(value, bool):
+            raise SettingError(f.name, f"must be True or False, got {value!r}")
+        if f.base is tuple:
+            try:
+                items = tuple(value)
+            except TypeError:
+                raise SettingError(f.name, f"must be a sequence, got {value!r}") from None
+            for item in items:
+                problem = _check_number(f, f.item, item)
+                if problem:
+                    raise SettingError(f.name, problem)
+            continue
+        problem = _check_number(f, f.base, value)
+        if problem:
+            raise SettingError(f.name, problem)
+
+
+# ----------------------------------------------------------------------------- parsing
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse`` that raises :class:`UsageError` instead of printing usage and exiting."""
+
+    def error(self, message: str) -> Any:
+        raise UsageError(message)
+
+
+def parse_key_value(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` with VALUE read as a bool, int, float or string."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    value: Any = raw
+    if raw.lower() in ("true", "false"):
+        value = raw.lower() == "true"
+    else:
+        for kind in (int, float):
+            try:
+                value = kind(raw)
+                break
+            except ValueError:
+                continue
+    return key, value
+
+
+def _number_parser(kind: type, shown: str) -> Callable[[str], Any]:
+    def parse(text: str) -> Any:
+        try:
+            return kind(text)
+        except ValueError:
+            word = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"{shown} must be {word}, not {text!r}") from None
+
+    return parse
+
+
+def _tuple_parser(kind: type, shown: str) -> Callable[[str], tuple[Any, ...]]:
+    one = _number_parser(kind, shown) if kind in (int, float) else kind
+
+    def parse(text: str) -> tuple[Any, ...]:
+        try:
+            return tuple(one(x) for x in text.split(","))
+        except argparse.ArgumentTypeError:
+            raise argparse.ArgumentTypeError(
+                f"{shown} must be comma-separated {'numbers' if kind is float else 'values'}, "
+                f"not {text!r}"
+            ) from None
+
+    return parse
+
+
+def _help(f: _Field) -> str:
+    text = f.spec.help
+    shown = f.default
+    if (
+        shown is not MISSING
+        and shown is not None
+        and not (isinstance(shown, bool) or shown == [] or shown == {})
+        and "default" not in text
+        and not f.spec.positional
+    ):
+        if f.base is tuple:
+            shown = ",".join(map(str, shown))
+        elif f.base is list:
+            shown = " ".join(map(str, shown))
+        text = f"{text} (default: {shown})"
+    return text.replace("%", "%%")
+
+
+def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
+    """One option (or positional) per :func:`setting` field of ``cls``, flattened."""
+    seen: set[str] = set()
+    for f in _leaves(cls):
+        if not f.spec.cli:
+            continue
+        if f.name in seen:
+            raise TypeError(f"{cls.__name__}: field {f.name!r} appears twice when flattened")
+        seen.add(f.name)
+        kwargs: dict[str, Any] = {"help": _help(f)}
+        if f.spec.metavar:
+            kwargs["metavar"] = f.spec.metavar
+        if f.choices is not None:
+            kwargs["choices"] = f.choices
+        parse = f.spec.parse
+        if f.base is bool:
+            if f.default is True:
+                kwargs["action"] = argparse.BooleanOptionalAction
+                kwargs["default"] = True
+            else:
+                kwargs["action"] = "store_true"
+            parser.add_argument(f.flag, dest=f.name, **kwargs)
+            continue
+        if parse is None:
+            if f.base in (int, float):
+                parse = _number_parser(f.base, f.shown)
+            elif f.base is tuple:
+                parse = _tuple_parser(f.item, f.shown)
+            elif f.base is dict:
+                parse = parse_key_value
+            elif f.base is list:
+                parse = f.item if f.item in (str, Path) else _number_parser(f.item, f.shown)
+            else:
+                parse = f.base
+        kwargs["type"] = parse
+        if f.spec.positional:
+            if f.base is list:
+                kwargs["nargs"] = "*"
+            elif f.default is not MISSING:
+                kwargs["nargs"] = "?"
+                kwargs["default"] = f.default
+            kwargs.setdefault("metavar", f.spec.metavar or f.name)
+            parser.add_argument(f.name, **kwargs)
+            continue
+        if f.base in (list, dict):
+            kwargs["action"] = "append"
+            kwargs["default"] = None
+        elif f.default is MISSING:
+            kwargs["required"] = True
+        else:
+            kwargs["default"] = f.default
+        parser.add_argument(f.flag, dest=f.name, **kwargs)
+
+
+def _value(f: _Field, ns: argparse.Namespace) -> Any:
+    if not f.spec.cli or not hasattr(ns, f.name):
+        return f.default
+    value = getattr(ns, f.name)
+    if f.base is dict:
+        return dict(value) if value else dict(f.default)
+    if f.base is list:
+        return list(value) if value else list(f.default)
+    return value
+
+
+def _build(cls: type, ns: argparse.Namespace) -> Any:
+    kwargs: dict[str, Any] = {}
+    for f in _fields(cls):
+        value = _build(f.base, ns) if f.spec.flatten else _value(f, ns)
+        if value is not MISSING:
+            kwargs[f.name] = value
+    return cls(**kwargs)
+
+
+def from_namespace(cls: type, ns: argparse.Namespace) -> Any:
+    """The instance of ``cls`` the parsed options describe.
+
+    Raises
+    ------
+    UsageError
+        The dataclass refused a value: a :class:`SettingError` is reported
+        under the option's flag, another ``ValueError`` as it is.
+    """
+    try:
+        return _build(cls, ns)
+    except SettingError as exc:
+        shown = flags(cls).get(exc.setting, exc.setting)
+        raise UsageError(f"{shown}: {exc.problem}") from None
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def make_parser(cls: type, prog: str, description: str | None = None) -> ArgumentParser:
+    """A parser with the options of ``cls``."""
+    parser = ArgumentParser(
+        prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    add_arguments(parser, cls)
+    return parser
+
+
+def parse(cls: type, argv: Sequence[str], prog: str | None = None) -> Any:
+    """``cls`` from command-line words (:class:`UsageError` on any problem)."""
+    parser = make_parser(cls, prog or cls.__name__)
+    return from_namespace(cls, parser.parse_args(list(argv)))
+
+
+# ----------------------------------------------------------------------------- writing
+def _text(f: _Field, value: Any) -> str:
+    if f.spec.format is not None:
+        return f.spec.format(value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, tuple):
+        return ",".join(repr(x) if isinstance(x, float) else str(x) for x in value)
+    return str(value)
+
+
+def to_argv(obj: Any) -> list[str]:
+    """The command-line words that :func:`parse` turns back into ``obj``.
+
+    Options at their default are left out (but those declared ``always``);
+    floats are written as their shortest exact ``repr``.
+    """
+    words: list[str] = []
+    for f in _fields(type(obj)):
+        value = getattr(obj, f.name)
+        if f.spec.flatten:
+            words += to_argv(value)
+            continue
+        if not f.spec.cli:
+            continue
+        if f.spec.positional:
+            items = value if f.base is list else [value]
+            words += [_text(f, x) for x in items if x is not None]
+            continue
+        if value is None or (value == f.default and not f.spec.always):
+            continue
+        if f.base is bool:
+            words.append(f.flag if value else "--no-" + f.flag[2:])
+        elif f.base is dict:
+            for key, item in value.items():
+                words += [f.flag, f"{key}={item}"]
+        elif f.base is list:
+            for item in value:
+                words += [f.flag, _text(f, item)]
+        else:
+            words += [f.flag, _text(f, value)]
+    return words
+
+
+# ----------------------------------------------------------------------------- commands
+@dataclass(frozen=True)
+class Command:
+    """A command: its settings dataclass, the function it runs, its help.
+
+    Attributes
+    ----------
+    name : str
+        The word on the command line.
+    help : str
+        One line for the list of commands.
+    args : type or None
+        The settings dataclass; the function gets an instance.
+    run : callable or None
+        ``run(args) -> exit code`` (None: 0).
+    description : str
+        The text above the options in ``--help``.
+    subcommands : tuple of Command
+        For a group (``rocketroll db ...``): the commands under it.
+    """
+
+    name: str
+    help: str
+    args: type | None = None
+    run: Callable[[Any], int | None] | None = None
+    description: str = ""
+    subcommands: tuple[Command, ...] = ()
+
+    def parser(self, prog: str) -> ArgumentParser:
+        """The full parser of this command (and of its subcommands)."""
+        parser = ArgumentParser(
+            prog=prog,
+            description=self.description or self.help,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        self._fill(parser, prog)
+        return parser
+
+    def _fill(self, parser: argparse.ArgumentParser, prog: str) -> None:
+        if self.subcommands:
+            sub = parser.add_subparsers(
+                dest=f"_{self.name}_command", required=True, metavar="COMMAND"
+            )
+            for command in self.subcommands:
+                child = sub.add_parser(
+                    command.name,
+                    help=command.help,
+                    description=command.description or command.help,
+                    formatter_class=argparse.RawDescriptionHelpFormatter,
+                )
+                command._fill(child, f"{prog} {command.name}")
+            return
+        if self.args is not None:
+            add_arguments(parser, self.args)
+        parser.set_defaults(_command=self)
+
+
+def _close_progress_bars() -> None:
+    """Close live tqdm bars (an interrupt skips their ``close``; their ``__del__`` would
+    then print "Exception ignored" at exit)."""
+    tqdm_module = sys.modules.get("tqdm")
+    if tqdm_module is None:
+        return
+    for bar in list(getattr(tqdm_module.tqdm, "_instances", ())):
+        try:
+            bar.close()
+        except Exception:
+            continue
+
+
+def guarded(prog: str, work: Callable[[], int | None]) -> int:
+    """Run ``work`` as a command: the exit code, with user errors as one line.
+
+    A :class:`RocketrollError` or an ``OSError`` about a named file prints
+    ``PROG: error: ...`` on stderr and gives 2; Ctrl-C prints ``PROG:
+    interrupted`` and gives 130; a closed output pipe ends quietly.
+    """
+    try:
+        code = work()
+    except RocketrollError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        _close_progress_bars()
+        print(f"\n{prog}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+        sys.stderr.close()
+        return 0
+    except OSError as exc:  # a file the user named cannot be read or written
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"{prog}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
+    return 0 if code is None else int(code)
+
+
+def _check_outputs(cls: type, args: Any) -> None:
+    for f in _fields(cls):
+        value = getattr(args, f.name)
+        if f.spec.flatten:
+            _check_outputs(f.base, value)
+        elif f.spec.output is not None and value is not None:
+            from rocketroll_common.files import check_output
+
+            check_output(value, f.shown, folder=f.spec.output == "folder")
+
+
+def run_command(command: Command, argv: Sequence[str], prog: str) -> int:
+    """Parse ``argv`` for ``command``, check its outputs, run it; the exit code."""
+
+    def work() -> int | None:
+        ns = command.parser(prog).parse_args(list(argv))
+        leaf: Command = ns._command
+        if leaf.args is None or leaf.run is None:
+            return leaf.run(None) if leaf.run is not None else 0
+        args = from_namespace(leaf.args, ns)
+        _check_outputs(leaf.args, args)
+        return leaf.run(args)
+
+    return guarded(prog, work)
