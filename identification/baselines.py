@@ -14,20 +14,22 @@ velocity processing and fin-angle model as the pipeline.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from identification.model import RollParams, damping, simulate
-from identification.pipeline import IdentifyOptions, measurements
+from identification.methods import Context, ModelFit, resimulation_metrics, trace_settings
+from identification.model import RollParams, check_model, damping, simulate
+from identification.pipeline import IdentifyOptions, Measurements, measurements
 from identification.recording import Recording
 from identification.steps import (
     IdentificationError,
 )
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["OutputErrorFit", "output_error"]
+__all__ = ["OutputErrorFit", "output_error", "output_error_method"]
 
 #: Smallest damping the optimiser may visit, 1/s (keeps the simulation stable).
 MIN_DAMPING = 0.01
@@ -89,10 +91,15 @@ def output_error(
     -------
     OutputErrorFit
     """
-    if model not in ("constant", "theta"):
-        raise IdentificationError(f"model must be 'constant' or 'theta', not {model!r}")
+    try:
+        check_model(model)
+    except ValueError as exc:
+        raise IdentificationError(str(exc)) from None
     opts = IdentifyOptions() if options is None else options
-    inputs = measurements(recording, opts)
+    return _output_error(measurements(recording, opts), model, x0)
+
+
+def _output_error(inputs: Measurements, model: str, x0: RollParams | None) -> OutputErrorFit:
     segments, grid, theta_fine = inputs.segments, inputs.grid, inputs.theta_fine
     velocity = inputs.velocity_dps
 
@@ -156,3 +163,36 @@ def output_error(
         success=bool(result.success),
         message=str(result.message),
     )
+
+
+def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
+    """The output-error peer as an identification method (``method="output-error"``).
+
+    Its ``u_d`` is recovered by the paper's step 8 under its own parameters
+    and re-simulated the same way (:meth:`Context.disturbance`), so the
+    traces and metrics of both methods compare like for like.  Metrics: the
+    re-simulation errors, the output error's RMS, the optimiser's work.
+    """
+    inputs = context.measurements
+    fits = []
+    for model in models:
+        found = _output_error(inputs, model, None)
+        dist, resim = context.disturbance(found.params, model)
+        metrics = {
+            "n_steps": inputs.segments.n_steps,
+            "sources": {
+                "fin_steps": inputs.segments.fin_source,
+                "angle": inputs.angle_source,
+                "velocity": inputs.velocity_source,
+                "fin_angle": inputs.theta_source,
+            },
+            **resimulation_metrics(resim),
+            "rate_rmse_dps": found.rate_rmse_dps,
+            "nfev": found.nfev,
+            "converged": found.success,
+            "optimizer_message": found.message,
+        }
+        fits.append(
+            ModelFit("output-error", model, found.params, dist, metrics, trace_settings(dist))
+        )
+    return fits

@@ -11,22 +11,27 @@ Errors name the *input* file and its line.
 
 from __future__ import annotations
 
+import argparse
+import csv
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
 from identification.recording import (
-    SOURCES,
-    FloatArray,
     Recording,
     RecordingError,
     parse_number,
     validate_samples,
 )
+from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import SettingError
+from rocketroll_common.settings import check, setting
 
-__all__ = ["ROLES", "import_csv"]
+__all__ = ["ROLES", "ImportSettings", "import_csv", "read_csv"]
 
 #: Role of an input column -> the format-v1 column it becomes (None: ignored).
 ROLES: dict[str, str | None] = {
@@ -41,11 +46,62 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / np.pi}
 
 
-def _split(line: str, delimiter: str | None) -> list[str]:
-    if delimiter is None:
-        delimiter = next((d for d in (",", ";", "\t") if d in line), None)
-    cells = line.split(delimiter) if delimiter is not None else line.split()
-    return [c.strip() for c in cells]
+def _delimiter(text: str) -> str:
+    """A ``--delimiter`` value: one character, with ``\\t`` (or ``tab``) for a tab."""
+    named = {"tab": "\t", "\\t": "\t", "space": " ", "comma": ",", "semicolon": ";"}
+    value = named.get(text.lower(), text)
+    if len(value) != 1:
+        raise argparse.ArgumentTypeError(
+            f"--delimiter must be one character (or \\t, tab, space), not {text!r}"
+        )
+    return value
+
+
+@dataclass(frozen=True)
+class ImportSettings:
+    """How a foreign delimited text file maps onto a recording (``rocketroll import-csv``)."""
+
+    columns: tuple[str, ...] = setting(
+        (),
+        "comma-separated role of each input column: time, fin_cmd, fin, roll, roll_rate, skip",
+        metavar="ROLES",
+    )
+    header: bool = setting(True, "the first non-comment line is a header row (--no-header: none)")
+    units: Literal["deg", "rad"] = setting("deg", "unit of angles (and of the rate, per second)")
+    rate_hz: float | None = setting(
+        None, "sampling rate when no column holds time", flag="--rate", gt=0.0, le=1e7, unit="Hz"
+    )
+    time_column: str | None = setting(
+        None, "the time column by header name (or 1-based number without header)"
+    )
+    time_unit: Literal["s", "ms", "us"] = setting("s", "unit of the time column")
+    delimiter: str | None = setting(
+        None, "cell separator (default: , ; or tab, else whitespace)", parse=_delimiter
+    )
+    unwrap: bool = setting(False, "unwrap a roll angle that wraps at 360°")
+    name: str | None = setting(None, "recording name (default: the input file's stem)")
+    source: Literal["wind-tunnel", "flight", "synthetic"] = setting(
+        "wind-tunnel", "where the data come from"
+    )
+    notes: str | None = setting(None, "free-text notes stored in the metadata")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "columns", tuple(c.strip() for c in self.columns))
+        check(self)
+        if self.delimiter is not None and len(self.delimiter) != 1:
+            raise SettingError("delimiter", f"must be one character, not {self.delimiter!r}")
+
+
+def _cells(line: str, delimiter: str) -> list[str]:
+    """The cells of one line (quotes as the csv module reads them), stripped."""
+    if delimiter == " ":
+        line = line.replace("\t", " ")
+    row = next(csv.reader([line], delimiter=delimiter, skipinitialspace=True), [])
+    return [c.strip() for c in row]
+
+
+def _guess_delimiter(line: str) -> str:
+    return next((d for d in (",", ";", "\t") if d in line), " ")
 
 
 def import_csv(
@@ -86,8 +142,9 @@ def import_csv(
     time_unit : {"s", "ms", "us"}
         Unit of the time column.
     delimiter : str, optional
-        Cell separator; default: ``,`` ``;`` or tab if the line has one, else
-        whitespace.
+        Cell separator (one character); default: ``,`` ``;`` or tab if the
+        first line has one, else whitespace.  Cells are read by the ``csv``
+        module, so quoted cells (``csv.QUOTE_ALL``) are fine.
     unwrap : bool
         Unwrap a roll angle that wraps around (e.g. at ±180° or 0/360°).
     name, source, notes : str, optional
@@ -102,8 +159,33 @@ def import_csv(
     RecordingError
         Naming the input file, the line and the problem.
     """
+    try:
+        settings = ImportSettings(
+            columns=tuple(columns),
+            header=header,
+            units=units,  # type: ignore[arg-type]
+            rate_hz=rate_hz,
+            time_column=time_column,
+            time_unit=time_unit,  # type: ignore[arg-type]
+            delimiter=delimiter,
+            unwrap=unwrap,
+            name=name,
+            source=source,  # type: ignore[arg-type]
+            notes=notes,
+        )
+    except SettingError as exc:
+        raise RecordingError(os.fspath(path), None, f"{exc.setting}: {exc.problem}") from None
+    return read_csv(path, settings)
+
+
+def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recording:
+    """:func:`import_csv` with its settings as one :class:`ImportSettings`."""
     where = os.fspath(path)
-    roles = [c.strip() for c in columns]
+    roles = list(settings.columns)
+    header, units, rate_hz = settings.header, settings.units, settings.rate_hz
+    time_column, time_unit, delimiter = settings.time_column, settings.time_unit, settings.delimiter
+    if not roles:
+        raise RecordingError(where, None, "--columns is empty: give one role per input column")
     for role in roles:
         if role not in ROLES:
             raise RecordingError(
@@ -112,12 +194,6 @@ def import_csv(
     for role in set(roles) - {"skip"}:
         if roles.count(role) > 1:
             raise RecordingError(where, None, f"column role {role!r} appears more than once")
-    if units not in ANGLE_UNITS:
-        raise RecordingError(where, None, f"units must be deg or rad, not {units!r}")
-    if time_unit not in TIME_UNITS:
-        raise RecordingError(where, None, f"time unit must be s, ms or us, not {time_unit!r}")
-    if source not in SOURCES:
-        raise RecordingError(where, None, f"source must be one of {', '.join(SOURCES)}")
     # A 'time' role names the time column; --time-column may name the same column.
     time_role = "time" in roles and time_column is None
     time_sources = time_role + (rate_hz is not None) + (time_column is not None)
@@ -128,10 +204,6 @@ def import_csv(
             "give time exactly one way: a 'time' entry in --columns, --rate HZ, "
             "or --time-column NAME",
         )
-    if delimiter == "":
-        raise RecordingError(where, None, "--delimiter must not be empty")
-    if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
-        raise RecordingError(where, None, f"--rate must be a positive number, got {rate_hz}")
 
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a BOM (Excel)
@@ -146,7 +218,9 @@ def import_csv(
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
-        cells = _split(line, delimiter)
+        if delimiter is None:
+            delimiter = _guess_delimiter(line)
+        cells = _cells(line, delimiter)
         if len(cells) != len(roles):
             raise RecordingError(
                 where,
@@ -189,7 +263,7 @@ def import_csv(
         target = ROLES[role]
         if target is not None and target != "time_s":
             out[target] = data[:, j] * scale
-    if unwrap and "roll_deg" in out:
+    if settings.unwrap and "roll_deg" in out:
         out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
 
     validate_samples(
@@ -197,9 +271,11 @@ def import_csv(
     )
     meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
     meta["import.units"] = units
-    if notes:
-        meta["notes"] = notes
-    return Recording(name=name or Path(where).stem, source=source, metadata=meta, **out)
+    if settings.notes:
+        meta["notes"] = settings.notes
+    return Recording(
+        name=settings.name or Path(where).stem, source=settings.source, metadata=meta, **out
+    )
 
 
 def _time_index(

@@ -43,21 +43,30 @@ computed for all substeps at once; :func:`simulate` exploits this.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from identification import paper
+
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    "MODELS",
+    "MODEL_NAMES",
     "PAPER_CONSTANT",
     "PAPER_THETA",
+    "DampingModel",
     "RollParams",
     "Servo",
     "SimResult",
+    "check_model",
     "damping",
+    "model_of",
     "piece_coefficients",
     "roll_coefficients",
     "roll_step",
@@ -148,12 +157,70 @@ class RollParams:
         return RollParams(self.alpha, self.theta_bar_deg, a_per_s, 0.0)
 
 
-# Paper values: α, β from eq. 17 and ᾱ, β̄ from eq. 48 (θ-dependent model, eq. 49);
-# the constant-damping model uses a = 1.314 1/s from eq. 46.
+#: The paper's θ-dependent rocket: α, β from eq. 17 and ᾱ, β̄ from eq. 48 (eq. 49).
 PAPER_THETA = RollParams.from_steady_state(
-    alpha=0.6590, beta=2.8856, beta_bar=2.4075, alpha_bar=-0.0289
+    alpha=paper.value("alpha"),
+    beta=paper.value("beta_dps"),
+    beta_bar=paper.value("beta_bar_per_s"),
+    alpha_bar=paper.value("alpha_bar_per_deg_s"),
 )
-PAPER_CONSTANT = RollParams.from_steady_state(alpha=0.6590, beta=2.8856, beta_bar=1.314)
+#: The paper's constant-damping rocket: a = 1.314 1/s from eq. 46.
+PAPER_CONSTANT = RollParams.from_steady_state(
+    alpha=paper.value("alpha"), beta=paper.value("beta_dps"), beta_bar=paper.value("a_per_s")
+)
+
+
+@dataclass(frozen=True)
+class DampingModel:
+    """One of the paper's damping models, under the name the whole system uses.
+
+    Attributes
+    ----------
+    name : str
+        ``constant`` or ``theta``: identification results, database rows,
+        environment options and command lines all say it this way.
+    equation : str
+        Where the paper writes it.
+    description : str
+        One line for help texts.
+    constant : bool
+        The damping does not depend on the fin angle (ᾱ = 0).
+    """
+
+    name: str
+    equation: str
+    description: str
+    constant: bool
+
+    def holds(self, params: RollParams) -> bool:
+        """Whether ``params`` are of this model (ᾱ = 0 for the constant one)."""
+        return params.is_constant_damping if self.constant else True
+
+
+#: The damping models, defined once: constant ``a`` (eq. 29, eq. 46) and
+#: ``a(θ) = ᾱ·|θ + θ̄| + β̄`` (eq. 48-49).  The order is the order of results.
+MODELS: Mapping[str, DampingModel] = MappingProxyType(
+    {
+        "constant": DampingModel("constant", "eq. 29", "constant damping a (eq. 29)", True),
+        "theta": DampingModel(
+            "theta", "eq. 49", "fin-angle-dependent damping a(θ) = ᾱ·|θ + θ̄| + β̄ (eq. 49)", False
+        ),
+    }
+)
+#: Their names, in order.
+MODEL_NAMES: tuple[str, ...] = tuple(MODELS)
+
+
+def check_model(name: object) -> str:
+    """``name`` if it is a damping model of :data:`MODELS`; else a ``ValueError``."""
+    if name not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODEL_NAMES)}, not {name!r}")
+    return str(name)
+
+
+def model_of(params: RollParams) -> str:
+    """The model whose form ``params`` have: ``constant`` if ᾱ = 0, else ``theta``."""
+    return "constant" if params.is_constant_damping else "theta"
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.model import RollParams, damping
+from identification.model import RollParams, check_model, damping
 from identification.noise import NoiseStudy, noise_study
 from identification.recording import Recording
 from identification.statistics import DisturbanceStatistics, disturbance_statistics
@@ -28,7 +28,6 @@ from identification.steps import (
     Disturbance,
     FineGrid,
     IdentificationError,
-    OptionError,
     PiecewiseLinearFit,
     Resimulation,
     Segments,
@@ -48,10 +47,17 @@ from identification.steps import (
     resimulate,
 )
 from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import SettingError
+from rocketroll_common.settings import check, setting
 
-__all__ = ["Identification", "IdentifyOptions", "identify"]
-
-MODELS = ("constant", "theta")
+__all__ = [
+    "Identification",
+    "IdentifyOptions",
+    "Measurements",
+    "identify",
+    "measurements",
+    "recover_disturbance",
+]
 
 
 @dataclass(frozen=True)
@@ -92,46 +98,65 @@ class IdentifyOptions:
         Show a progress bar for the noise study.
     """
 
-    min_step_deg: float = 1.0
-    max_breakpoint_s: float = 4.0
-    breakpoint_resolution_s: float = 0.01
-    servo_rate_dps: float = 60.0 / 0.4
-    outlier_level: float = 0.05
-    smoothing_passes: int = 3
-    smoothing_window_s: float = SMOOTHING_WINDOW_S
-    fine_step_s: float = 0.01
-    ud_interval_s: float = 0.1
-    noise_levels_pct: tuple[float, ...] = (1.0, 2.0, 5.0, 10.0)
-    noise_runs: int = 100
-    noise_seed: int = 0
-    progress: bool = False
+    min_step_deg: float = setting(
+        1.0, "smallest fin change counted as a step", flag="--min-step", gt=0.0, le=90.0, unit="°"
+    )
+    max_breakpoint_s: float = setting(
+        4.0, "ΔT0 of the bi-linear search", flag="--max-breakpoint", gt=0.0, le=600.0, unit="s"
+    )
+    breakpoint_resolution_s: float = setting(0.01, "breakpoint search step", gt=0.0, cli=False)
+    servo_rate_dps: float = setting(
+        60.0 / 0.4,
+        "servo rate limit for the fin-angle ramp (eq. 23: 150)",
+        flag="--servo-rate",
+        gt=0.0,
+        le=10_000.0,
+        unit="°/s",
+    )
+    outlier_level: float = setting(
+        0.05,
+        "Bonferroni p below which one step is left out of a(θ)",
+        flag="--outlier-level",
+        gt=0.0,
+        lt=1.0,
+    )
+    smoothing_passes: int = setting(
+        3,
+        "3-point moving-average passes on the measured velocity",
+        flag="--smoothing-passes",
+        ge=0,
+        le=1000,
+    )
+    smoothing_window_s: float = setting(
+        SMOOTHING_WINDOW_S,
+        "span of one moving-average pass (0.3 s: three points at 10 Hz)",
+        flag="--smoothing-window",
+        gt=0.0,
+        le=600.0,
+        unit="s",
+    )
+    fine_step_s: float = setting(0.01, "δt of the interpolated velocity", gt=0.0, cli=False)
+    ud_interval_s: float = setting(
+        0.1, "Δt over which u_d is constant", flag="--ud-interval", gt=0.0, le=600.0, unit="s"
+    )
+    noise_levels_pct: tuple[float, ...] = setting(
+        (1.0, 2.0, 5.0, 10.0),
+        "noise levels η of the Monte Carlo study",
+        flag="--mc-levels",
+        ge=0.0,
+        le=100.0,
+        unit="%",
+    )
+    noise_runs: int = setting(
+        100, "Monte Carlo runs per noise level; 0 skips the study", flag="--mc-runs", ge=0, le=10**6
+    )
+    noise_seed: int = setting(0, "seed of the noise study", flag="--mc-seed", ge=0, le=2**63 - 1)
+    progress: bool = setting(False, "show a progress bar for the noise study", cli=False)
 
     def __post_init__(self) -> None:
-        positive = (
-            "min_step_deg",
-            "max_breakpoint_s",
-            "breakpoint_resolution_s",
-            "servo_rate_dps",
-            "fine_step_s",
-            "smoothing_window_s",
-            "ud_interval_s",
-        )
-        for name in positive:
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise OptionError(name, f"must be a positive number, got {value!r}")
-        if not 0 < self.outlier_level < 1:
-            raise OptionError("outlier_level", f"must be in (0, 1), got {self.outlier_level!r}")
-        for name in ("smoothing_passes", "noise_runs", "noise_seed"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-                raise OptionError(name, f"must be a non-negative integer, got {value!r}")
-        if not all(np.isfinite(x) and x >= 0 for x in self.noise_levels_pct):
-            raise OptionError(
-                "noise_levels_pct", f"must be non-negative numbers, got {self.noise_levels_pct!r}"
-            )
+        check(self)
         if self.breakpoint_resolution_s > self.max_breakpoint_s:
-            raise OptionError("breakpoint_resolution_s", "must not exceed max_breakpoint_s")
+            raise SettingError("breakpoint_resolution_s", "must not exceed max_breakpoint_s")
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,9 +233,27 @@ class Identification:
 
     def model(self, name: str) -> RollParams:
         """``constant`` or ``theta``."""
-        if name not in MODELS:
-            raise IdentificationError(f"model must be one of {', '.join(MODELS)}, not {name!r}")
+        try:
+            check_model(name)
+        except ValueError as exc:
+            raise IdentificationError(str(exc)) from None
         return self.constant_model if name == "constant" else self.theta_model
+
+    @property
+    def measurements(self) -> Measurements:
+        """What this run started from (steps 1 and 5, §3.2), for other methods."""
+        return Measurements(
+            segments=self.segments,
+            velocity_dps=self.velocity_dps,
+            velocity_source=self.velocity_source,
+            grid=self.grid,
+            theta_fine=self.theta_fine,
+            theta_source=self.theta_source,
+            angle_deg=self.angle_deg,
+            angle_source=self.angle_source,
+            velocity_fine=self.velocity_fine,
+            recording=self.recording,
+        )
 
     def parameters(self) -> dict[str, float]:
         """The intrinsic parameters, flat (names as in :meth:`to_dict`)."""
@@ -312,8 +355,26 @@ class Identification:
 class Measurements:
     """What every estimator on a recording starts from (steps 1 and 5, §3.2).
 
-    Shared by :func:`identify` and :func:`identification.baselines.output_error`
-    so both see the same steps, velocity and fin angle.
+    Shared by :func:`identify` and every other identification method
+    (:mod:`identification.methods`) so all see the same steps, velocity,
+    angle and fin angle.
+
+    Attributes
+    ----------
+    segments : Segments
+        Step 1.
+    velocity_dps, velocity_source
+        The smoothed measured roll rate at the samples and where it came from.
+    grid : FineGrid
+        The 100 Hz grid of §2.7.1.
+    theta_fine, theta_source
+        The fin angle on the grid (step 5) and how it was obtained.
+    angle_deg, angle_source
+        The measured roll angle at the samples and where it came from.
+    velocity_fine : ndarray
+        ``velocity_dps`` interpolated onto the grid.
+    recording : Recording
+        The recording.
     """
 
     segments: Segments
@@ -322,6 +383,10 @@ class Measurements:
     grid: FineGrid
     theta_fine: FloatArray
     theta_source: str
+    angle_deg: FloatArray
+    angle_source: str
+    velocity_fine: FloatArray
+    recording: Recording
 
 
 def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:
@@ -333,7 +398,48 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
     grid = fine_grid(recording, options.fine_step_s)
     servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=options.servo_rate_dps)
     theta_fine, theta_source = fin_angle_model(recording, grid, servo)
-    return Measurements(segments, velocity, velocity_source, grid, theta_fine, theta_source)
+    angle, angle_source = measured_angle(recording)
+    velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
+    return Measurements(
+        segments=segments,
+        velocity_dps=velocity,
+        velocity_source=velocity_source,
+        grid=grid,
+        theta_fine=theta_fine,
+        theta_source=theta_source,
+        angle_deg=angle,
+        angle_source=angle_source,
+        velocity_fine=velocity_fine,
+        recording=recording,
+    )
+
+
+def recover_disturbance(
+    inputs: Measurements, params: RollParams, model: str, options: IdentifyOptions
+) -> tuple[Disturbance, Resimulation]:
+    """Steps 8-9 for given parameters: ``u_d`` (eq. 35-44) and its re-simulation (§3.5).
+
+    Any identification method's parameters get their disturbance this way,
+    so the traces and re-simulation errors of all methods compare like for
+    like.
+    """
+    dist = identify_disturbance(
+        params,
+        model,
+        inputs.grid,
+        inputs.theta_fine,
+        inputs.velocity_fine,
+        interval_s=options.ud_interval_s,
+    )
+    resim = resimulate(
+        dist,
+        inputs.recording,
+        inputs.grid,
+        inputs.theta_fine,
+        inputs.velocity_dps,
+        inputs.angle_deg,
+    )
+    return dist, resim
 
 
 def identify(recording: Recording, options: IdentifyOptions | None = None) -> Identification:
@@ -373,8 +479,8 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
             f"{recording.name}: found {segments.n_steps} fin step; the steady-state fit "
             "(eq. 16) needs at least two"
         )
-    angle, angle_source = measured_angle(recording)
-    velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
+    angle, angle_source = inputs.angle_deg, inputs.angle_source
+    velocity_fine = inputs.velocity_fine
 
     # Steps 2-7 on the data after the first deflection (§2.1).
     piecewise = fit_piecewise_linear(
@@ -403,16 +509,9 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
         "constant": damping_fit.params(),
         "theta": vs_fin.params(steady.alpha, steady.theta_bar_deg),
     }
-    disturbances = {
-        name: identify_disturbance(
-            params, name, grid, theta_fine, velocity_fine, interval_s=opts.ud_interval_s
-        )
-        for name, params in models.items()
-    }
-    resims = {
-        name: resimulate(dist, recording, grid, theta_fine, velocity, angle)
-        for name, dist in disturbances.items()
-    }
+    recovered = {name: recover_disturbance(inputs, p, name, opts) for name, p in models.items()}
+    disturbances = {name: dist for name, (dist, _) in recovered.items()}
+    resims = {name: resim for name, (_, resim) in recovered.items()}
     statistics = disturbance_statistics(disturbances["theta"], disturbances["constant"])
     noise = None
     if opts.noise_runs > 0 and opts.noise_levels_pct:

@@ -50,6 +50,8 @@ from rocketroll_common.files import write_atomic
 __all__ = [
     "COLUMNS",
     "FORMAT",
+    "MAX_ABS",
+    "MAX_RATE_DPS",
     "MIN_FIN_CHANGE_DEG",
     "MIN_SAMPLES",
     "SAMPLING_RTOL",
@@ -84,6 +86,22 @@ SAMPLING_RTOL = 0.01
 MIN_SAMPLES = 50
 #: Smallest fin-angle range (max - min) that gives something to identify, °.
 MIN_FIN_CHANGE_DEG = 0.1
+
+#: Largest plausible roll rate, °/s: beyond what the paper's encoder is rated for
+#: (12 000 °/s, §2.1) and any sounding rocket's roll.  Faster rates -- read by a gyro
+#: or implied by the encoder angle between two samples -- are refused, not fitted.
+MAX_RATE_DPS = 20_000.0
+#: Largest plausible value of each column (absolute), in its unit.
+MAX_ABS: Mapping[str, float] = MappingProxyType(
+    {
+        "time_s": 1e12,
+        "fin_cmd_deg": 90.0,
+        "fin_deg": 90.0,
+        "roll_deg": 1e9,
+        "roll_rate_dps": MAX_RATE_DPS,
+        "ud_true_deg": 1e5,
+    }
+)
 
 #: Decimals written for time_s (values: 6).
 TIME_DECIMALS = 9
@@ -182,6 +200,16 @@ def validate_samples(
             raise RecordingError(
                 path, _where(lines, i), f"{_sample(lines, i)}{name} is {values[i]} (not finite)"
             )
+        limit = MAX_ABS[name]
+        bad = np.flatnonzero(np.abs(values) > limit)
+        if bad.size:
+            i = int(bad[0])
+            raise RecordingError(
+                path,
+                _where(lines, i),
+                f"{_sample(lines, i)}{name} is {values[i]:g}: implausible (beyond ±{limit:g}); "
+                "refused rather than fitted",
+            )
     if n < MIN_SAMPLES:
         raise RecordingError(
             path, None, f"too few samples: {n} (at least {MIN_SAMPLES} are needed)"
@@ -210,6 +238,20 @@ def validate_samples(
             f"(from {time[i - 1]:g} s to {time[i]:g} s) differs from the median interval "
             f"{median:g} s by more than {SAMPLING_RTOL:.0%}",
         )
+
+    if "roll_deg" in columns:
+        jump = np.abs(np.diff(columns["roll_deg"])) / dt
+        bad = np.flatnonzero(jump > MAX_RATE_DPS)
+        if bad.size:
+            i = int(bad[0]) + 1
+            angle = columns["roll_deg"]
+            raise RecordingError(
+                path,
+                _where(lines, i),
+                f"{_sample(lines, i)}roll_deg jumps from {angle[i - 1]:g}° to {angle[i]:g}° in "
+                f"{dt[i - 1]:g} s: implausible (a roll rate above {MAX_RATE_DPS:g} °/s); refused "
+                "rather than fitted",
+            )
 
     fins = [c for c in FIN_COLUMNS if c in columns]
     if all(np.ptp(columns[c]) < MIN_FIN_CHANGE_DEG for c in fins):

@@ -55,6 +55,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from identification import paper
 from identification.model import damping, simulate
 from identification.pipeline import Identification
 from rocketroll_common.arrays import FloatArray
@@ -86,30 +87,12 @@ FIGURES: dict[str, str] = {
     "fig21_angle_error.png": "Fig. 21 — re-simulated minus measured roll angle",
 }
 
-#: The paper's values (eq. 17, 46, 48; Figs. 5, 12).
-PAPER_PARAMETERS: dict[str, str] = {
-    "alpha": "0.6590",
-    "beta_dps": "2.8856",
-    "theta_bar_deg": "4.38",
-    "a_per_s": "1.314",
-    "b_per_s2": "0.8665",
-    "alpha_bar_per_deg_s": "-0.0289",
-    "beta_bar_per_s": "2.4075",
-    "steady_state_r2": "0.9914",
-    "damping_vs_fin_r2": "0.8280",
-}
-#: The paper's re-simulation errors (§3.5): rate MAE, rate SD (°/s), angle MAE, angle SD (°).
-PAPER_RESIMULATION: dict[str, tuple[str, str, str, str]] = {
-    "constant": ("0.094", "0.073", "0.13", "0.11"),
-    "theta": ("0.097", "0.078", "0.18 ¹", "0.14"),
-}
-#: The paper's 90 % intervals of ``u_d`` (§3.2) and histogram-vs-normal MAE (§3.4).
-PAPER_INTERVAL = {"theta": "[-13.38, 14.28]", "constant": "[-14.07, 15.15]"}
-PAPER_HISTOGRAM_MAD = {"theta": "0.0278", "constant": "0.0294"}
-#: The paper's noise study at η = 10 % (§3.3): MAE and P90 of ``u_d``, °.
-PAPER_NOISE_10 = (0.62, 1.49)
-#: The paper's breakpoint of its 8th step (§2.5), s.
-PAPER_T0_LAST_S = 1.61
+PAPER_PARAMETERS = paper.PARAMETERS
+PAPER_RESIMULATION = paper.RESIMULATION
+PAPER_INTERVAL = paper.INTERVAL
+PAPER_HISTOGRAM_MAD = paper.HISTOGRAM_MAD
+PAPER_NOISE_10 = paper.NOISE_10
+PAPER_T0_LAST_S = paper.T0_LAST_S
 
 # (key, label, unit, format) of the parameter table.
 _PARAMETER_ROWS: tuple[tuple[str, str, str, str], ...] = (
@@ -384,11 +367,12 @@ def _fig05(result: Identification) -> Figure:
     else:
         ax.plot(
             f,
-            0.6590 * f + 2.8856,
+            paper.value("alpha") * f + paper.value("beta_dps"),
             ":",
             color="k",
             lw=1.2,
-            label="paper (eq. 17): v = 0.6590·f + 2.8856, R² = 0.9914",
+            label=f"paper (eq. 17): v = {PAPER_PARAMETERS['alpha']}·f + "
+            f"{PAPER_PARAMETERS['beta_dps']}, R² = {PAPER_PARAMETERS['steady_state_r2']}",
         )
     ax.axhline(0.0, color="0.6", lw=0.5)
     ax.axvline(0.0, color="0.6", lw=0.5)
@@ -534,10 +518,11 @@ def _fig12(result: Identification) -> Figure:
     else:
         ax.plot(
             x,
-            -0.0289 * x + 2.4075,
+            paper.value("alpha_bar_per_deg_s") * x + paper.value("beta_bar_per_s"),
             ":",
             color="k",
-            label="paper (eq. 48): a = -0.0289·|θ+θ̄| + 2.4075, R² = 0.8280",
+            label=f"paper (eq. 48): a = {PAPER_PARAMETERS['alpha_bar_per_deg_s']}·|θ+θ̄| + "
+            f"{PAPER_PARAMETERS['beta_bar_per_s']}, R² = {PAPER_PARAMETERS['damping_vs_fin_r2']}",
         )
     ax.set_xlabel(r"$|\theta_{\mathrm{effective}}| = |f_{ss} + \bar{\theta}|$ (°)")
     ax.set_ylabel("damping coefficient $a_i$ (1/s)")

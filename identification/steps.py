@@ -81,15 +81,6 @@ class IdentificationError(RocketrollError, ValueError):
     """A recording that the pipeline cannot identify (too few steps, too short, ...)."""
 
 
-class OptionError(IdentificationError):
-    """An invalid identification option; ``option`` names it."""
-
-    def __init__(self, option: str, problem: str) -> None:
-        super().__init__(f"option {option} {problem}")
-        self.option = option
-        self.problem = problem
-
-
 #: Tolerance when comparing sample times with step and interval boundaries, s.
 _TIME_TOL = 1e-9
 
@@ -921,7 +912,10 @@ def _largest_outlier(x: FloatArray, a: FloatArray) -> tuple[int, float]:
         return 0, 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
         table = result.outlier_test(method="bonf")
-    worst = int(np.nanargmax(np.abs(table[:, 0])))
+    residuals = np.abs(table[:, 0])
+    if not np.any(np.isfinite(residuals)):  # nothing to test (e.g. two points)
+        return 0, 1.0
+    worst = int(np.nanargmax(residuals))
     return worst, float(table[worst, 2])
 
 

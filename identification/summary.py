@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import savgol_filter
 
+from identification import paper
 from identification.recording import Recording
 from rocketroll_common.arrays import FloatArray
 
@@ -81,7 +82,7 @@ class RecordingSummary:
             f"fin angle      {self.fin_min_deg:g} .. {self.fin_max_deg:g} °"
             + ("" if self.fin_changes is None else f", {self.fin_changes} command changes"),
             f"mean |rate|    {self.mean_abs_rate_dps:.2f} °/s  (from {self.rate_source}; "
-            "paper: 16.4 °/s)",
+            f"paper: {paper.MEAN_ABS_RATE_DPS:g} °/s)",
         ]
         if self.roll_total_deg is not None:
             lines.append(f"roll travel    {self.roll_total_deg:.1f} °")

@@ -54,15 +54,25 @@ from __future__ import annotations
 
 import shlex
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import signal, stats
 
-from identification.model import PAPER_CONSTANT, PAPER_THETA, RollParams, Servo, simulate
+from identification import paper
+from identification.model import (
+    MODEL_NAMES,
+    PAPER_CONSTANT,
+    PAPER_THETA,
+    RollParams,
+    Servo,
+    simulate,
+)
 from identification.recording import Recording, metadata_items
+from rocketroll_common.errors import SettingError
+from rocketroll_common.settings import check, parse, setting, to_argv
 
 FloatArray = NDArray[np.float64]
 
@@ -78,17 +88,8 @@ Distribution = Literal["gaussian", "laplace", "student-t"]
 DISTRIBUTIONS: tuple[str, ...] = ("gaussian", "laplace", "student-t")
 
 #: Paper Table 1: (start time s, fin angle °) of each step; 0° before 68.1 s, end 573.0 s.
-PAPER_TABLE1: tuple[tuple[float, float], ...] = (
-    (68.1, 13.33),
-    (131.4, -13.33),
-    (194.7, 26.67),
-    (258.2, -26.67),
-    (321.7, 40.00),
-    (384.7, -40.00),
-    (448.3, 40.00),
-    (511.6, -26.67),
-)
-PAPER_END_S = 573.0
+PAPER_TABLE1 = paper.TABLE1
+PAPER_END_S = paper.TABLE1_END_S
 #: Smallest difference between consecutive staircase levels, °.
 MIN_STEP_DEG = 5.0
 
@@ -255,84 +256,128 @@ def _paper_damping(model: str) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class TunnelSpec:
-    """Everything that defines one virtual tunnel run (each field is a CLI flag).
+    """Everything that defines one virtual tunnel run; each field is a ``rocketroll tunnel`` flag.
 
     The defaults re-create the paper's experiment.  ``alpha_bar``/``beta_bar``
     default (``None``) to the paper's values for the chosen ``model``:
     ᾱ = -0.0289, β̄ = 2.4075 (θ-dependent, eq. 48) or ᾱ = 0, β̄ = a = 1.314
-    (constant, eq. 46).
+    (constant, eq. 46).  Every number is bounded to a physical range; a value
+    outside it is a :class:`~rocketroll_common.errors.SettingError` naming the
+    field (the flag, on the command line).
     """
 
-    seed: int = 0
-    schedule: Literal["paper", "staircase"] = "paper"
-    steps: int = 10
-    fin_range: float = 40.0
-    dwell_min: float = 20.0
-    dwell_max: float = 60.0
-    model: Literal["theta", "constant"] = "theta"
-    alpha: float = PAPER_THETA.alpha
-    beta: float = PAPER_THETA.beta_dps
-    alpha_bar: float | None = None
-    beta_bar: float | None = None
-    servo_rate: float = Servo().rate_limit_dps
-    turbulence: Distribution = "gaussian"
-    turbulence_sd: float = Turbulence().sd_deg
-    turbulence_mean: float = Turbulence().mean_deg
-    correlation_time: float = Turbulence().correlation_time_s
-    dof: float = Turbulence().dof
-    log_dt: float = 0.1
-    substeps: int = 10
-    encoder_counts: int = 1024
-    no_encoder: bool = False
-    gyro_noise: float | None = None
-    measured_fin: bool = False
-    name: str | None = None
-    split: Literal["train", "test"] | None = None
+    seed: int = setting(
+        0, "random seed; the same seed gives a byte-identical file", ge=0, le=2**63 - 1, always=True
+    )
+    schedule: Literal["paper", "staircase"] = setting(
+        "paper", "fin-command schedule: the paper's Table 1, or a random staircase"
+    )
+    steps: int = setting(10, "number of staircase steps", ge=1, le=200)
+    fin_range: float = setting(
+        40.0, "staircase levels are uniform in ±this", gt=MIN_STEP_DEG / 2, le=40.0, unit="°"
+    )
+    dwell_min: float = setting(20.0, "shortest staircase dwell", gt=0.0, le=3600.0, unit="s")
+    dwell_max: float = setting(60.0, "longest staircase dwell", gt=0.0, le=3600.0, unit="s")
+    model: str = setting(
+        "theta", "damping model: theta (eq. 49) or constant (eq. 29)", choices=MODEL_NAMES
+    )
+    alpha: float = setting(
+        PAPER_THETA.alpha, "steady-state gain α (eq. 17: 0.6590)", ge=-10.0, le=10.0, unit="(°/s)/°"
+    )
+    beta: float = setting(
+        PAPER_THETA.beta_dps,
+        "steady-state offset β (eq. 17: 2.8856); θ̄ = β/α",
+        ge=-100.0,
+        le=100.0,
+        unit="°/s",
+    )
+    alpha_bar: float | None = setting(
+        None, "ᾱ (eq. 48: -0.0289; 0 for --model constant)", ge=-1.0, le=1.0, unit="1/(s·°)"
+    )
+    beta_bar: float | None = setting(
+        None,
+        "β̄ (eq. 48: 2.4075), or the constant a (eq. 46: 1.314)",
+        gt=0.0,
+        le=100.0,
+        unit="1/s",
+    )
+    servo_rate: float = setting(
+        Servo().rate_limit_dps,
+        "servo rate limit (eq. 23: 60°/0.4 s = 150)",
+        gt=0.0,
+        le=10_000.0,
+        unit="°/s",
+    )
+    turbulence: Distribution = setting("gaussian", "marginal distribution of u_d")
+    turbulence_sd: float = setting(
+        Turbulence().sd_deg, "standard deviation of u_d", ge=0.0, le=45.0, unit="°"
+    )
+    turbulence_mean: float = setting(
+        Turbulence().mean_deg, "mean of u_d", ge=-45.0, le=45.0, unit="°"
+    )
+    correlation_time: float = setting(
+        Turbulence().correlation_time_s,
+        "correlation time of u_d (0: independent per interval)",
+        ge=0.0,
+        le=600.0,
+        unit="s",
+    )
+    dof: float = setting(
+        Turbulence().dof, "degrees of freedom of the student-t marginal", gt=2.0, le=1000.0
+    )
+    log_dt: float = setting(0.1, "logging interval (the paper: 0.1)", ge=0.001, le=10.0, unit="s")
+    substeps: int = setting(10, "exact-update substeps per logging interval", ge=1, le=1000)
+    encoder_counts: int = setting(
+        1024,
+        "encoder counts per revolution (HEDS-5702: 256 cycles read in 4x quadrature = 1024; "
+        "0: ideal)",
+        ge=0,
+        le=2**24,
+    )
+    no_encoder: bool = setting(False, "omit the encoder angle (needs --gyro-noise)")
+    gyro_noise: float | None = setting(
+        None,
+        "add a rate-gyro column with eq. 52 noise of this many percent",
+        ge=0.0,
+        le=100.0,
+        unit="%",
+    )
+    measured_fin: bool = setting(False, "add the actual (measured) fin angle column fin_deg")
+    name: str | None = setting(None, "recording name (default tunnel-<schedule>-seed<N>)")
+    split: Literal["train", "test"] | None = setting(
+        None,
+        "evaluation split to record in the metadata (default: none; the disturbance database "
+        "then splits by content hash)",
+    )
 
     def __post_init__(self) -> None:
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
-        if self.schedule not in ("paper", "staircase"):
-            raise ValueError(f"schedule must be 'paper' or 'staircase', not {self.schedule!r}")
-        if self.model not in ("theta", "constant"):
-            raise ValueError(f"model must be 'theta' or 'constant', not {self.model!r}")
-        if self.split not in (None, "train", "test"):
-            raise ValueError(f"split must be 'train' or 'test', not {self.split!r}")
+        check(self)
         if self.model == "constant" and self.alpha_bar not in (None, 0.0):
-            raise ValueError("alpha_bar must be 0 for the constant-damping model")
-        for name in ("alpha", "beta", "alpha_bar", "beta_bar"):
-            value = getattr(self, name)
-            if value is not None and not np.isfinite(value):
-                raise ValueError(f"{name} must be finite, got {value!r}")
-        if self.alpha == 0.0:
-            raise ValueError("alpha must be non-zero (the fins must act on roll)")
-        if not (np.isfinite(self.log_dt) and 0 < self.log_dt <= 10.0):
-            raise ValueError(f"log_dt must be in (0, 10] s, got {self.log_dt!r}")
-        if self.substeps < 1:
-            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
-        if self.encoder_counts < 0:
-            raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
+            raise SettingError("alpha_bar", "must be 0 for the constant-damping model")
+        if abs(self.alpha) < 1e-3:
+            raise SettingError("alpha", f"must be at least 0.001 in size, got {self.alpha!r}")
+        if abs(self.beta / self.alpha) > 45.0:
+            raise SettingError(
+                "beta",
+                f"gives an asymmetry θ̄ = β/α = {self.beta / self.alpha:.4g}° beyond ±45°",
+            )
         if self.no_encoder and self.gyro_noise is None:
             raise ValueError("no_encoder needs a rate gyro (set gyro_noise, e.g. 0)")
-        if self.gyro_noise is not None and not (
-            np.isfinite(self.gyro_noise) and self.gyro_noise >= 0
-        ):
-            raise ValueError(f"gyro_noise must be >= 0, got {self.gyro_noise}")
-        limit = Servo().range_deg
-        if not (MIN_STEP_DEG / 2 < self.fin_range <= limit):
+        if not self.log_dt <= self.dwell_min <= self.dwell_max:
             raise ValueError(
-                f"fin_range must be in ({MIN_STEP_DEG / 2:g}, {limit:g}]°, got {self.fin_range}"
+                f"dwell must satisfy log_dt ({self.log_dt:g} s) <= dwell_min <= dwell_max, "
+                f"got {self.dwell_min}, {self.dwell_max}"
             )
-        if self.steps < 1:
-            raise ValueError(f"steps must be >= 1, got {self.steps}")
-        if not (np.isfinite(self.dwell_max) and self.log_dt <= self.dwell_min <= self.dwell_max):
-            raise ValueError(
-                f"dwell must satisfy log_dt ({self.log_dt:g} s) <= dwell_min <= dwell_max "
-                f"(finite), got {self.dwell_min}, {self.dwell_max}"
+        params = self.params()
+        lowest = params.beta_bar_per_s + min(params.alpha_bar_per_deg_s, 0.0) * (
+            Servo().range_deg + abs(params.theta_bar_deg)
+        )
+        if lowest <= 0.0:
+            raise SettingError(
+                "alpha_bar",
+                f"makes the damping a(θ) = ᾱ·|θ + θ̄| + β̄ reach {lowest:.3g} 1/s within the "
+                f"±{Servo().range_deg:g}° fin range; it must stay positive",
             )
-        self.servo()  # validates the servo rate
-        self.turbulence_model()  # validates the turbulence fields
-        self.params()
 
     def params(self) -> RollParams:
         """Ground-truth roll parameters of this run."""
@@ -365,22 +410,10 @@ class TunnelSpec:
     def to_args(self) -> list[str]:
         """The ``rocketroll tunnel`` arguments that reproduce this spec.
 
-        Only fields that differ from their defaults appear, ``--seed`` always.
+        Only fields that differ from their defaults appear, ``--seed`` always
+        (:func:`rocketroll_common.settings.to_argv`).
         """
-        defaults = TunnelSpec()
-        args = ["--seed", str(self.seed)]
-        for f in fields(self):
-            if f.name == "seed":
-                continue
-            value = getattr(self, f.name)
-            if value == getattr(defaults, f.name):
-                continue
-            flag = "--" + f.name.replace("_", "-")
-            if isinstance(value, bool):
-                args.append(flag)
-            else:
-                args += [flag, repr(value) if isinstance(value, float) else str(value)]
-        return args
+        return to_argv(self)
 
     def command(self) -> str:
         """The full shell command, e.g. ``rocketroll tunnel --seed 0``."""
@@ -501,10 +534,12 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
 
 
 def spec_from_command(command: str | Sequence[str]) -> TunnelSpec:
-    """Parse a recorded ``rocketroll tunnel ...`` command back into a spec."""
-    from identification.cli import tunnel_spec_from_argv
+    """Parse a recorded ``rocketroll tunnel ...`` command back into a spec.
 
+    The same code that writes the command (:meth:`TunnelSpec.to_args`) reads it.
+    """
     argv = shlex.split(command) if isinstance(command, str) else list(command)
     if argv[:2] == ["rocketroll", "tunnel"]:
         argv = argv[2:]
-    return tunnel_spec_from_argv(argv)
+    spec: TunnelSpec = parse(TunnelSpec, argv, prog="rocketroll tunnel")
+    return spec

@@ -6,7 +6,7 @@ exit code 2; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
-__all__ = ["RocketrollError", "SettingError", "UsageError"]
+__all__ = ["Interrupted", "RocketrollError", "SettingError", "UsageError"]
 
 
 class RocketrollError(Exception):
@@ -28,3 +28,10 @@ class SettingError(UsageError):
         super().__init__(f"{setting}: {problem}")
         self.setting = setting
         self.problem = problem
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C, with what the interrupted work left behind (e.g. a resumable checkpoint).
+
+    A command line prints ``PROG: interrupted: MESSAGE`` and exits with 130.
+    """

@@ -52,7 +52,7 @@ from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
-from rocketroll_common.errors import RocketrollError, SettingError, UsageError
+from rocketroll_common.errors import Interrupted, RocketrollError, SettingError, UsageError
 
 __all__ = [
     "ArgumentParser",
@@ -255,17 +255,15 @@ def flags(cls: type) -> dict[str, str]:
 
 
 # ----------------------------------------------------------------------------- checks
-def _bounds_text(spec: _Spec) -> str:
-    low = (
-        ""
-        if spec.ge is None and spec.gt is None
-        else f"{spec.ge if spec.gt is None else spec.gt:g}"
-    )
-    high = (
-        ""
-        if spec.le is None and spec.lt is None
-        else f"{spec.le if spec.lt is None else spec.lt:g}"
-    )
+def _bound(x: float | None, integer: bool) -> str:
+    if x is None:
+        return ""
+    return str(int(x)) if integer else f"{x:g}"
+
+
+def _bounds_text(spec: _Spec, integer: bool = False) -> str:
+    low = _bound(spec.ge if spec.gt is None else spec.gt, integer)
+    high = _bound(spec.le if spec.lt is None else spec.lt, integer)
     unit = f" {spec.unit}" if spec.unit else ""
     if low and high:
         left = "[" if spec.gt is None else "("
@@ -298,7 +296,7 @@ def _check_number(f: _Field, kind: Any, value: Any) -> str | None:
     else:
         return None
     if not _in_bounds(f.spec, float(value)):
-        return f"{_bounds_text(f.spec)}, got {value!r}"
+        return f"{_bounds_text(f.spec, kind is int)}, got {value!r}"
     return None
 
 
@@ -363,27 +361,26 @@ def parse_key_value(text: str) -> tuple[str, Any]:
     return key, value
 
 
-def _number_parser(kind: type, shown: str) -> Callable[[str], Any]:
+def _number_parser(kind: type) -> Callable[[str], Any]:
     def parse(text: str) -> Any:
         try:
             return kind(text)
         except ValueError:
             word = "an integer" if kind is int else "a number"
-            raise argparse.ArgumentTypeError(f"{shown} must be {word}, not {text!r}") from None
+            raise argparse.ArgumentTypeError(f"must be {word}, not {text!r}") from None
 
     return parse
 
 
-def _tuple_parser(kind: type, shown: str) -> Callable[[str], tuple[Any, ...]]:
-    one = _number_parser(kind, shown) if kind in (int, float) else kind
+def _tuple_parser(kind: type) -> Callable[[str], tuple[Any, ...]]:
+    one = _number_parser(kind) if kind in (int, float) else kind
 
     def parse(text: str) -> tuple[Any, ...]:
         try:
             return tuple(one(x) for x in text.split(","))
         except argparse.ArgumentTypeError:
             raise argparse.ArgumentTypeError(
-                f"{shown} must be comma-separated {'numbers' if kind is float else 'values'}, "
-                f"not {text!r}"
+                f"must be comma-separated {'numbers' if kind is float else 'values'}, not {text!r}"
             ) from None
 
     return parse
@@ -432,13 +429,13 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
             continue
         if parse is None:
             if f.base in (int, float):
-                parse = _number_parser(f.base, f.shown)
+                parse = _number_parser(f.base)
             elif f.base is tuple:
-                parse = _tuple_parser(f.item, f.shown)
+                parse = _tuple_parser(f.item)
             elif f.base is dict:
                 parse = parse_key_value
             elif f.base is list:
-                parse = f.item if f.item in (str, Path) else _number_parser(f.item, f.shown)
+                parse = f.item if f.item in (str, Path) else _number_parser(f.item)
             else:
                 parse = f.base
         kwargs["type"] = parse
@@ -478,7 +475,9 @@ def _build(cls: type, ns: argparse.Namespace) -> Any:
         value = _build(f.base, ns) if f.spec.flatten else _value(f, ns)
         if value is not MISSING:
             kwargs[f.name] = value
-    return cls(**kwargs)
+    obj = cls(**kwargs)
+    check(obj)  # also for a dataclass whose __post_init__ does not
+    return obj
 
 
 def from_namespace(cls: type, ns: argparse.Namespace) -> Any:
@@ -640,9 +639,10 @@ def guarded(prog: str, work: Callable[[], int | None]) -> int:
     except RocketrollError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         _close_progress_bars()
-        print(f"\n{prog}: interrupted", file=sys.stderr)
+        said = f": {exc}" if isinstance(exc, Interrupted) and str(exc) else ""
+        print(f"\n{prog}: interrupted{said}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
         sys.stderr.close()

@@ -1,0 +1,292 @@
+"""Identification methods: one registry behind one ``method=`` keyword.
+
+A method turns a recording into, for each damping model (:data:`MODELS
+<identification.model.MODELS>`), the rocket's parameters, the disturbance
+``u_d(t)`` that goes with them and fit metrics: a :class:`ModelFit`.  The
+paper's integral least squares (``"paper"``) and the output-error peer
+(``"output-error"``) are registered here; :func:`register_method` adds
+another, and the command line (``rocketroll identify --method``,
+``rocketroll db add --method``), the disturbance database, the default
+database's recipe and the benchmarks find it::
+
+    from identification.methods import ModelFit, register_method
+
+    def my_method(context, models):
+        inputs = context.measurements  # steps 1 and 5: fin steps, velocity, fin angle
+        ...
+        return [ModelFit("mine", model, params, disturbance, metrics) for model in models]
+
+    register_method("mine", my_method, summary="my estimator")
+
+:func:`fit` runs a method by name, as python-control's ``method=`` keywords
+do.  A :class:`Context` is shared by all methods run on one recording, so
+the measurements are prepared, and the paper's pipeline run, at most once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
+
+from identification.model import MODEL_NAMES, RollParams, check_model
+from identification.recording import Recording
+from rocketroll_common.registry import Registry
+
+if TYPE_CHECKING:
+    from identification.pipeline import Identification, IdentifyOptions, Measurements
+    from identification.steps import Disturbance, Resimulation
+
+__all__ = [
+    "METHODS",
+    "Context",
+    "MethodFunction",
+    "ModelFit",
+    "default_methods",
+    "fit",
+    "paper_method",
+    "register_method",
+    "resimulation_metrics",
+    "trace_settings",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class ModelFit:
+    """What a method found for one damping model of one recording.
+
+    Attributes
+    ----------
+    method : str
+        The method's registered name.
+    model : str
+        ``constant`` or ``theta``.
+    params : RollParams
+        The rocket's parameters.
+    disturbance : Disturbance
+        ``u_d(t)`` that goes with them (held over each interval).
+    metrics : mapping
+        Fit metrics, JSON-safe (re-simulation errors, the method's own).
+    trace_settings : mapping
+        How ``u_d`` was obtained, stored with the trace.
+    """
+
+    method: str
+    model: str
+    params: RollParams
+    disturbance: Disturbance
+    metrics: Mapping[str, Any]
+    trace_settings: Mapping[str, Any] = field(default_factory=dict)
+
+
+#: ``method(context, models) -> fits``: one :class:`ModelFit` per model asked for.
+MethodFunction = Callable[["Context", Sequence[str]], Sequence[ModelFit]]
+
+#: Every identification method, by name.
+METHODS: Registry[MethodFunction] = Registry("identification method")
+
+
+def register_method(
+    name: str,
+    method: MethodFunction | str,
+    *,
+    summary: str = "",
+    default: bool = False,
+    models: Sequence[str] = MODEL_NAMES,
+    replace: bool = False,
+) -> None:
+    """Register an identification method.
+
+    Parameters
+    ----------
+    name : str
+        What users type (``--method NAME``, ``method=NAME``).
+    method : callable or str
+        ``method(context, models) -> [ModelFit, ...]``, or ``"module:function"``
+        imported on first use.
+    summary : str
+        One line for ``--help``.
+    default : bool
+        Part of what ``rocketroll identify`` and ``rocketroll db add`` run
+        without ``--method``, and of the default database.
+    models : sequence of str
+        The damping models the method can fit.
+    replace : bool
+        Replace a method registered under ``name``.
+    """
+    for model in models:
+        check_model(model)
+    METHODS.register(
+        name, method, summary=summary, replace=replace, default=default, models=tuple(models)
+    )
+
+
+def default_methods() -> tuple[str, ...]:
+    """The methods run when none is named, in registration order."""
+    return tuple(e.name for e in METHODS.entries() if e.info.get("default"))
+
+
+class Context:
+    """One recording being identified, shared by every method run on it.
+
+    Parameters
+    ----------
+    recording : Recording
+        The data.
+    options : IdentifyOptions, optional
+        Settings (the paper's defaults).
+    paper : Identification, optional
+        The paper's pipeline on this recording and these options, when the
+        caller has it already.
+    """
+
+    def __init__(
+        self,
+        recording: Recording,
+        options: IdentifyOptions | None = None,
+        paper: Identification | None = None,
+    ) -> None:
+        from identification.pipeline import IdentifyOptions
+
+        self.recording = recording
+        self.options = IdentifyOptions() if options is None else options
+        if paper is not None:
+            if paper.recording is not recording or paper.options != self.options:
+                raise ValueError("the given identification is of another recording or options")
+            self.__dict__["paper"] = paper
+
+    @cached_property
+    def paper(self) -> Identification:
+        """The paper's pipeline (steps 1-9 and §3) on this recording."""
+        from identification.pipeline import identify
+
+        return identify(self.recording, self.options)
+
+    @cached_property
+    def measurements(self) -> Measurements:
+        """What every estimator starts from: steps 1 and 5, the smoothed velocity (§3.2)."""
+        if "paper" in self.__dict__:
+            return self.paper.measurements
+        from identification.pipeline import measurements
+
+        return measurements(self.recording, self.options)
+
+    def disturbance(self, params: RollParams, model: str) -> tuple[Disturbance, Resimulation]:
+        """Steps 8-9 for any parameters: ``u_d`` by eq. 35-44, and its re-simulation (§3.5)."""
+        from identification.pipeline import recover_disturbance
+
+        return recover_disturbance(self.measurements, params, model, self.options)
+
+
+def fit(
+    recording: Recording | Context,
+    method: str = "paper",
+    models: Sequence[str] = MODEL_NAMES,
+    options: IdentifyOptions | None = None,
+) -> dict[str, ModelFit]:
+    """Identify ``recording`` with the method registered as ``method``.
+
+    Parameters
+    ----------
+    recording : Recording or Context
+        The data (a :class:`Context` to share work between methods).
+    method : str
+        A name of :data:`METHODS`: ``paper`` (default), ``output-error``, ...
+    models : sequence of str
+        Damping models to fit.
+    options : IdentifyOptions, optional
+        Settings, when ``recording`` is a recording.
+
+    Returns
+    -------
+    dict
+        ``{model: ModelFit}`` in the order of ``models``.
+
+    Examples
+    --------
+    >>> from identification.bundled import load_bundled
+    >>> from identification.pipeline import IdentifyOptions
+    >>> fits = fit(load_bundled("tunnel-paper-seed0"), "output-error", ["constant"],
+    ...            IdentifyOptions(noise_runs=0))
+    >>> round(fits["constant"].params.alpha, 2)
+    0.67
+    """
+    context = recording if isinstance(recording, Context) else Context(recording, options)
+    entry = METHODS.entry(method)
+    supported = entry.info.get("models", MODEL_NAMES)
+    for model in models:
+        check_model(model)
+        if model not in supported:
+            raise ValueError(f"method {method!r} does not fit the {model!r} model")
+    fits = {f.model: f for f in entry.load()(context, list(models))}
+    missing = [m for m in models if m not in fits]
+    if missing:
+        raise RuntimeError(f"method {method!r} returned no fit for model(s) {missing}")
+    return {m: fits[m] for m in models}
+
+
+def paper_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
+    """The paper's pipeline (:func:`identification.pipeline.identify`), a ModelFit per model.
+
+    Its metrics: the steady-state fit (R², β), the piecewise-linear fit, the
+    re-simulation errors and the per-step table; for the constant model also
+    the damping fit and the noise study (§3.3), for the θ model the fit of
+    eq. 48 and its outlier rule.
+    """
+    result = context.paper
+    details = result.to_dict()
+    common = {
+        "n_steps": result.segments.n_steps,
+        "sources": details["sources"],
+        "steady_state_r2": result.steady.r_squared,
+        "beta_dps": result.steady.beta_dps,
+        "piecewise_rms_deg": result.piecewise.rms_deg,
+    }
+    fits = []
+    for model in models:
+        metrics: dict[str, Any] = {
+            **common,
+            **resimulation_metrics(result.resimulations[model]),
+            "steps": details["steps"],
+        }
+        if model == "constant":
+            metrics["damping_fit_rms_dps"] = result.damping.rms_dps
+            metrics["noise_study"] = details["noise_study"]
+        else:
+            metrics["damping_vs_fin_r2"] = result.damping_vs_fin.r_squared
+            metrics["damping_vs_fin"] = details["damping_vs_fin"]
+        dist = result.disturbances[model]
+        fits.append(
+            ModelFit("paper", model, result.model(model), dist, metrics, trace_settings(dist))
+        )
+    return fits
+
+
+def resimulation_metrics(r: Resimulation) -> dict[str, float]:
+    """The re-simulation errors (§3.5) as stored metrics."""
+    return {
+        "resim_rate_mae_dps": r.rate_mae_dps,
+        "resim_rate_sd_dps": r.rate_sd_dps,
+        "resim_angle_mae_deg": r.angle_mae_deg,
+        "resim_angle_sd_deg": r.angle_sd_deg,
+    }
+
+
+def trace_settings(dist: Disturbance) -> dict[str, Any]:
+    """How a step-8 ``u_d`` was made (stored with its trace)."""
+    return {"interval_s": dist.interval_s, "equations": "35-44"}
+
+
+register_method(
+    "paper",
+    paper_method,
+    summary="the paper's integral-based least squares (steps 1-6 of Fig. 9)",
+    default=True,
+)
+register_method(
+    "output-error",
+    "identification.baselines:output_error_method",
+    summary="output-error nonlinear least squares on the simulated roll rate (the peer, §1)",
+    default=True,
+)

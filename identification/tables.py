@@ -1,0 +1,118 @@
+"""Text tables of identification results (what ``rocketroll identify`` prints)."""
+
+from __future__ import annotations
+
+import unicodedata
+from collections.abc import Mapping
+
+import numpy as np
+
+from identification import paper
+from identification.methods import ModelFit
+from identification.pipeline import Identification
+
+__all__ = ["methods_table", "parameter_table"]
+
+
+def _pad(text: str, width: int) -> str:
+    """Left-justify ``text`` to a display width (combining marks take no column)."""
+    shown = sum(not unicodedata.combining(ch) for ch in text)
+    return text + " " * max(0, width - shown)
+
+
+def parameter_table(result: Identification) -> str:
+    """The text ``rocketroll identify`` prints: parameters, fits, disturbance."""
+    rec = result.recording
+    truth = result.truth()
+    reference = {key: paper.value(key) for key in paper.PARAMETERS}
+    labels = {
+        "alpha": "α (°/s)/°          eq. 16",
+        "beta_dps": "β °/s              eq. 16",
+        "theta_bar_deg": "θ̄ °               eq. 30",
+        "steady_state_r2": "steady-state R²    eq. 16",
+        "a_per_s": "a 1/s (constant)   eq. 26",
+        "b_per_s2": "b = aα             eq. 30",
+        "alpha_bar_per_deg_s": "ᾱ 1/(s·°)          eq. 48",
+        "beta_bar_per_s": "β̄ 1/s              eq. 48",
+        "damping_vs_fin_r2": "a(θ) R²            eq. 48",
+    }
+    kind = "synthetic: virtual wind tunnel" if rec.source == "synthetic" else rec.source
+    lines = [
+        f"{rec.name} ({kind}): {rec.n_samples} samples every {rec.dt_s:g} s, "
+        f"{result.segments.n_steps} fin steps",
+        f"  angle: {result.angle_source}; velocity: {result.velocity_source}",
+        f"  fin angle: {result.theta_source}",
+        "",
+        f"{'parameter':<26}{'identified':>12}{'truth' if truth else '':>12}{'paper':>10}",
+    ]
+    for key, value in result.parameters().items():
+        true = "" if truth is None or key not in truth else f"{truth[key]:.4g}"
+        if truth is not None and key in ("a_per_s", "b_per_s2") and true:
+            true += "*"
+        lines.append(f"{_pad(labels[key], 26)}{value:>12.4g}{true:>12}{reference[key]:>10.4g}")
+    if truth is not None and truth["alpha_bar_per_deg_s"] != 0.0:
+        lines.append("  * θ-dependent truth: a(θ) averaged over the step fin levels")
+    dvf = result.damping_vs_fin
+    if dvf.outlier is not None:
+        lines.append(
+            f"  a(θ): step {dvf.outlier + 1} left out as an outlier (Bonferroni p = "
+            f"{dvf.outlier_p:.3g})"
+        )
+    if dvf.excluded:
+        steps = ", ".join(str(i + 1) for i in dvf.excluded)
+        lines.append(f"  a(θ): step(s) {steps} left out, a_i <= 0 is not a damping")
+    lines += ["", "step  start s   fin °    v_ss °/s   t0 s    a_i 1/s"]
+    for i in range(result.segments.n_steps):
+        mark = "  outlier" if dvf.outlier == i else ""
+        lines.append(
+            f"{i + 1:>4}{result.segments.time_s[i]:>9.1f}{result.segments.step_levels_deg[i]:>8.2f}"
+            f"{result.piecewise.slopes_dps[i]:>11.2f}{result.bilinear.t0_s[i]:>7.2f}"
+            f"{result.damping.a_steps_per_s[i]:>10.3f}{mark}"
+        )
+    lines += ["", "re-simulation (§3.5)   rate MAE / SD °/s   angle MAE / SD °"]
+    for name, r in result.resimulations.items():
+        lines.append(
+            f"{name + ' damping':<22}{r.rate_mae_dps:>9.3f} / {r.rate_sd_dps:<9.3f}"
+            f"{r.angle_mae_deg:>7.3f} / {r.angle_sd_deg:.3f}"
+        )
+    st = result.statistics
+    lines += ["", "disturbance u_d (§3.4)  90 % interval °     Lilliefors p   normal"]
+    for name, trace in (("theta", st.theta), ("constant", st.constant)):
+        lines.append(
+            f"{'u_d,' + name:<22}[{trace.q05_deg:6.2f}, {trace.q95_deg:6.2f}]"
+            f"{trace.lilliefors_p:>15.3g}   {'yes' if trace.normal else 'no'}"
+        )
+    lines.append(f"two-sample KS between them: p = {st.ks_p:.3g}")
+    if rec.ud_true_deg is not None:
+        q05, q95 = np.percentile(rec.ud_true_deg, [5, 95])
+        lines.append(f"true u_d (synthetic): 90 % interval [{q05:.2f}, {q95:.2f}]")
+    if result.noise is not None:
+        n = result.noise
+        lines += ["", f"noise study (§3.3): {n.runs} runs per level, seed {n.seed}"]
+        lines.append("η %     u_d MAE °   P90 °")
+        for eta, mae, p90 in zip(n.levels_pct, n.mae_deg, n.p90_deg, strict=True):
+            lines.append(f"{eta:<8g}{mae:>9.3f}{p90:>9.3f}")
+    return "\n".join(lines)
+
+
+def methods_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
+    """Every method's parameters per model, side by side, with its re-simulation errors.
+
+    ``fits`` is ``{method: {model: ModelFit}}`` (:func:`identification.methods.fit`).
+    """
+    lines = [
+        f"{'method':<14}{'model':<10}{'α (°/s)/°':>11}{'θ̄ °':>9}{'β̄ or a 1/s':>13}"
+        f"{'ᾱ 1/(s·°)':>12}{'rate MAE °/s':>14}{'angle MAE °':>13}"
+    ]
+    for method, by_model in fits.items():
+        for model, f in by_model.items():
+            p = f.params
+            rate = f.metrics.get("resim_rate_mae_dps")
+            angle = f.metrics.get("resim_angle_mae_deg")
+            lines.append(
+                f"{method:<14}{model:<10}{p.alpha:>11.4f}{p.theta_bar_deg:>9.3f}"
+                f"{p.beta_bar_per_s:>13.4f}{p.alpha_bar_per_deg_s:>12.4f}"
+                f"{'' if rate is None else f'{rate:.3f}':>14}"
+                f"{'' if angle is None else f'{angle:.3f}':>13}"
+            )
+    return "\n".join(lines)
