@@ -44,8 +44,10 @@ from typing import Any
 import numpy as np
 
 from disturbances.bank import TraceBank
-from disturbances.db import DatabaseError, DisturbanceDB, TraceInfo
+from disturbances.db import DatabaseError
 from disturbances.default import default_path, open_database
+from disturbances.rows import TraceRow
+from disturbances.stores import Store
 from rocketroll_common.arrays import FloatArray
 
 TARGET_US = 100.0
@@ -90,7 +92,7 @@ class Timing:
 class SqlWindows:
     """The reference: the bank's choice of window, but the trace read by SQL each episode."""
 
-    def __init__(self, db: DisturbanceDB, infos: Sequence[TraceInfo], duration_s: float) -> None:
+    def __init__(self, db: Store, infos: Sequence[TraceRow], duration_s: float) -> None:
         self.db = db
         self.uids = [i.uid for i in infos]
         sizes = np.array([i.n_samples for i in infos], dtype=np.int64)
@@ -105,7 +107,7 @@ class SqlWindows:
         i = int(np.searchsorted(self.cum, k, side="right"))
         start = k - (int(self.cum[i - 1]) if i else 0)
         trace = self.db.trace(self.uids[i])
-        return self.uids[i], start, trace.u_d_deg[start : start + int(self.lengths[i])]
+        return self.uids[i], start, trace.samples()[start : start + int(self.lengths[i])]
 
 
 def check_same_windows(bank: TraceBank, sql: SqlWindows, seed: int, n: int = 20) -> None:
@@ -180,14 +182,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         load_ms = (time.perf_counter() - start) * 1e3
         bank.require(WINDOW_S)
         counts = db.counts()
-        sql = SqlWindows(db, [t.info for t in bank.traces], WINDOW_S)
+        sql = SqlWindows(db, list(bank.traces), WINDOW_S)
 
         print(
             f"database {db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
             f"{counts['surrogates']} surrogates"
             + (f" (built now, {open_ms / 1e3:.1f} s)" if built else "")
         )
-        nbytes = sum(t.u_d_deg.nbytes for t in bank.traces)
+        nbytes = sum(t.samples().nbytes for t in bank.traces)
         print(
             f"selection {', '.join(f'{k}={v}' for k, v in SELECTION.items())}: {len(bank)} traces, "
             f"{bank.total_duration_s:.0f} s, {nbytes / 1e6:.2f} MB in memory; "

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from disturbances.db import DisturbanceDB, Trace, TraceInfo
+from disturbances.rows import TraceRow
+from disturbances.stores import Store
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 
@@ -68,30 +69,30 @@ class TraceBank:
 
     Parameters
     ----------
-    traces : sequence of Trace
-        The traces (e.g. ``db.load_traces(db.traces(split="train"))``).
+    traces : sequence of TraceRow
+        The traces with their samples and parameters (e.g.
+        ``db.load_traces(db.traces(split="train"))``).
     description : str
         What was selected, for error messages (e.g. ``split='train'``).
 
     Examples
     --------
     >>> import numpy as np
-    >>> from disturbances.db import Trace, TraceInfo
     >>> bank = TraceBank.from_arrays([np.arange(10.0)], dt_s=0.1)
     >>> w = bank.window(np.random.default_rng(0), 0.5)
     >>> w.u_d_deg.size, float(w.u_d_deg[1] - w.u_d_deg[0])
     (5, 1.0)
     """
 
-    def __init__(self, traces: Sequence[Trace], description: str = "the selection") -> None:
+    def __init__(self, traces: Sequence[TraceRow], description: str = "the selection") -> None:
         if not traces:
             raise ValueError(f"no traces match {description}")
         self.traces = tuple(traces)
         self.description = description
-        self._arrays = [t.u_d_deg for t in self.traces]
-        self._uids = [t.info.uid for t in self.traces]
-        self._dts = np.array([t.info.dt_s for t in self.traces])
-        self._params = [t.info.params for t in self.traces]
+        self._arrays = [t.samples() for t in self.traces]
+        self._uids = [t.uid for t in self.traces]
+        self._dts = np.array([t.dt_s for t in self.traces])
+        self._params = [t.rocket() for t in self.traces]
         self._sizes = np.array([a.size for a in self._arrays], dtype=np.int64)
         self._plans: dict[float, tuple[np.ndarray, np.ndarray, int]] = {}
         self._flat: tuple[FloatArray, np.ndarray] | None = None
@@ -99,7 +100,7 @@ class TraceBank:
     @classmethod
     def from_db(
         cls,
-        db: DisturbanceDB,
+        db: Store,
         split: str,
         *,
         method: str = "paper",
@@ -108,7 +109,8 @@ class TraceBank:
         validated: bool = True,
         **filters: Any,
     ) -> TraceBank:
-        """Load the traces of one split (see :meth:`DisturbanceDB.traces` for ``filters``).
+        """Load the traces of one split (see :meth:`disturbances.db.DisturbanceDB.traces`
+        for ``filters``).
 
         ``split`` is required, so a bank never mixes training and evaluation
         disturbances.  The defaults select each recording once: the paper's
@@ -140,38 +142,43 @@ class TraceBank:
     ) -> TraceBank:
         """A bank of bare arrays (tests, user-made disturbances)."""
         from disturbances.rows import checksum
-        from identification.model import PAPER_THETA
+        from identification.model import PAPER_THETA, model_of
         from rocketroll_common.arrays import readonly_array
 
         p = PAPER_THETA if params is None else params
         traces = []
         for k, values in enumerate(arrays):
             u = readonly_array(values)
-            info = TraceInfo(
-                id=k,
-                uid=f"array-{k}-{checksum(u)[:8]}",
-                kind="identified",
-                source_uid=None,
-                seed=None,
-                recording=f"array-{k}",
-                recording_id=k,
-                source="synthetic",
-                split="train",
-                method="paper",
-                model="constant" if p.is_constant_damping else "theta",
-                params=p,
-                dt_s=float(dt_s),
-                t0_s=0.0,
-                n_samples=int(u.size),
-                mean_deg=float(u.mean()),
-                sd_deg=float(u.std()),
-                q05_deg=float(np.percentile(u, 5)),
-                q95_deg=float(np.percentile(u, 95)),
-                normality_p=None,
-                package_version="",
-                created_at="",
+            digest = checksum(u)
+            traces.append(
+                TraceRow(
+                    uid=f"array-{k}-{digest[:8]}",
+                    recording_hash=digest,
+                    method="given",
+                    model=model_of(p),
+                    kind="identified",
+                    source_uid=None,
+                    seed=None,
+                    settings={},
+                    dt_s=float(dt_s),
+                    t0_s=0.0,
+                    checksum=digest,
+                    statistics={
+                        "mean_deg": float(u.mean()),
+                        "sd_deg": float(u.std()),
+                        "q05_deg": float(np.percentile(u, 5)),
+                        "q95_deg": float(np.percentile(u, 95)),
+                        "normality_p": None,
+                    },
+                    validation=None,
+                    u_d_deg=u,
+                    params=p,
+                    recording=f"array-{k}",
+                    source="synthetic",
+                    split="train",
+                    id=k,
+                )
             )
-            traces.append(Trace(info=info, u_d_deg=u))
         return cls(traces, "the given arrays")
 
     def __len__(self) -> int:

@@ -1,154 +1,308 @@
-"""``rocketroll db ...`` and ``rocketroll identify --db``: the disturbance database from the shell.
+"""``rocketroll identify`` and ``rocketroll db ...``: identification and the database.
 
-Every subcommand takes ``--db PATH``; without it the default database is used
-(``$ROCKETROLL_DB``, else the user's cache folder), built from the bundled
-recordings the first time it is needed.
+Every database command takes ``--db LOCATION``; without it the default
+database is used (``$ROCKETROLL_DB``, else the user's cache folder), built
+from the bundled recordings the first time it is needed.  A database of an
+older schema is upgraded when opened (a copy is kept; ``rocketroll db
+migrate`` does it explicitly).  Each command is a settings dataclass and a
+function (:mod:`rocketroll_common.settings`); no library module imports this
+one.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
+import os
 import sys
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
+from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
+from identification.methods import METHODS, default_methods
+from identification.model import MODEL_NAMES
+from identification.pipeline import IdentifyOptions
+from identification.recording import SOURCES
 from rocketroll_common.errors import UsageError
+from rocketroll_common.settings import Command, check, setting
 
 if TYPE_CHECKING:
-    from disturbances.db import DisturbanceDB, TraceInfo
-    from identification.pipeline import Identification
+    from disturbances.rows import TraceRow
+    from disturbances.stores import Store
 
-__all__ = ["register"]
+__all__ = ["COMMANDS", "TraceFilters"]
 
 _DB_HELP = (
-    "database file (default: $ROCKETROLL_DB, else ~/.cache/rocketroll/disturbances.sqlite, "
-    "built from the bundled recordings when missing)"
+    "database: a file, or SCHEME://... of a registered store (default: $ROCKETROLL_DB, else "
+    "~/.cache/rocketroll/disturbances.sqlite, built from the bundled recordings when missing)"
 )
 
 
-def _open(ns: argparse.Namespace, *, create: bool = False) -> DisturbanceDB:
-    """``--db`` (or the default database), with a version notice as one stderr line."""
-    import warnings
+def _db_setting(new: bool = False) -> Any:
+    return setting(None, _DB_HELP + ("; created if missing" if new else ""), metavar="DB")
 
-    from disturbances.db import DisturbanceDB
+
+def _methods_help(text: str) -> str:
+    return (
+        f"{text} (repeatable; default: {', '.join(default_methods())}; registered: "
+        f"{', '.join(METHODS.names())})"
+    )
+
+
+def _default_methods() -> list[str]:
+    return list(default_methods())
+
+
+def _check_methods(methods: list[str]) -> None:
+    for method in methods:
+        try:
+            METHODS.check(method)
+        except ValueError as exc:
+            raise UsageError(f"--method: {exc}") from None
+    repeated = sorted({m for m in methods if methods.count(m) > 1})
+    if repeated:
+        raise UsageError(f"--method {repeated[0]} is given twice")
+
+
+def _open(db: str | None, *, create: bool = False) -> Store:
+    """``--db`` (or the default database), with version notices as one stderr line each."""
     from disturbances.default import open_database
+    from disturbances.stores import open_store
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
-        if ns.db is not None and create:
-            db = DisturbanceDB(ns.db, create=True)
-            db.check_version()
+        if db is not None and create:
+            store = open_store(db, create=True)
+            store.check_version()
         else:
-            db = open_database(ns.db)
+            store = open_database(db)
     for warning in caught:
         print(f"rocketroll: warning: {warning.message}", file=sys.stderr)
-    return db
+    return store
 
 
 @contextmanager
-def _new_file_removed_on_error(path: Path | None) -> Iterator[None]:
-    """If ``path`` does not exist yet and the block fails, leave no database behind."""
-    new = path is not None and not path.exists()
-    try:
+def _new_database(db: str | None) -> Iterator[None]:
+    """A database file that does not exist yet, with missing folders: if the block fails,
+    leave neither the file nor the folders behind."""
+    if db is None or "://" in db:
         yield
-    except BaseException:
-        if new and path is not None:
-            for suffix in ("", "-wal", "-shm"):
-                Path(f"{path}{suffix}").unlink(missing_ok=True)
-        raise
+        return
+    from rocketroll_common.files import created_folders_removed_on_error
+
+    path = Path(db)
+    new = not path.exists()
+    with created_folders_removed_on_error(path):
+        try:
+            yield
+        except BaseException:
+            if new:
+                for suffix in ("", "-wal", "-shm"):
+                    Path(f"{path}{suffix}").unlink(missing_ok=True)
+            raise
 
 
-def _add_filters(p: argparse.ArgumentParser) -> None:
-    from disturbances.rows import KINDS, METHODS, MODELS, SPLITS
+# --------------------------------------------------------------------------- identify
+@dataclass(frozen=True)
+class IdentifyArgs:
+    """``rocketroll identify``."""
 
-    p.add_argument("--split", choices=SPLITS, help="train or test")
-    p.add_argument("--model", choices=MODELS, help="damping model of the identification")
-    p.add_argument("--method", choices=METHODS, help="identification method")
-    p.add_argument(
-        "--kind", choices=(*KINDS, "surrogate"), help="identified trace or a surrogate kind"
+    recording: Path = setting(help="recording file (CSV, format v1)", positional=True)
+    json: Path | None = setting(
+        None, "also write machine-readable results (JSON) here", output="file"
     )
-    p.add_argument("--source", choices=("synthetic", "wind-tunnel", "flight"))
-    p.add_argument("--recording", help="recording name")
-    p.add_argument(
-        "--meta",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="recording metadata must have KEY equal to VALUE (repeatable)",
+    report: Path | None = setting(
+        None, "also write PNG figures and report.md into this folder", output="folder"
     )
+    method: list[str] = setting(
+        default_factory=_default_methods,
+        help=_methods_help("identification method to run"),
+        metavar="METHOD",
+    )
+    db: str | None = setting(
+        None,
+        "also store the results (every method, both models) in this disturbance database; "
+        "created if missing",
+        metavar="DB",
+    )
+    options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
+
+    def __post_init__(self) -> None:
+        check(self)
+        _check_methods(self.method)
+        if self.report is not None and "paper" not in self.method:
+            raise UsageError("--report is the paper's report: add --method paper")
 
 
-def _filters(ns: argparse.Namespace) -> dict[str, Any]:
-    meta: dict[str, str] = {}
-    for item in ns.meta:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise UsageError(f"--meta {item!r}: give KEY=VALUE")
-        meta[key] = value
-    filters: dict[str, Any] = {
-        "split": ns.split,
-        "model": ns.model,
-        "method": ns.method,
-        "kind": ns.kind,
-        "source": ns.source,
-        "recording": ns.recording,
-    }
-    if meta:
-        filters["metadata"] = meta
-    return {k: v for k, v in filters.items() if v is not None}
+def identify(args: IdentifyArgs) -> int:
+    """Identify a recording by every method asked for; print, write and store the results."""
+    import dataclasses
 
+    from identification.methods import Context, fit
+    from identification.recording import load_recording
+    from identification.tables import methods_table, parameter_table
+    from rocketroll_common.files import write_all_atomic
 
-def _trace_table(infos: list[TraceInfo]) -> str:
-    lines = [
-        f"{'id':>4}  {'uid':<40} {'kind':<10} {'split':<5} {'method':<12} {'model':<8} "
-        f"{'dur s':>6} {'mean °':>7} {'SD °':>6} {'90 % interval °':>17} {'normal p':>8}"
-    ]
-    for i in infos:
-        p = "" if i.normality_p is None else f"{i.normality_p:.3f}"
-        lines.append(
-            f"{i.id:>4}  {i.uid:<40} {i.kind:<10} {i.split:<5} {i.method:<12} {i.model:<8} "
-            f"{i.duration_s:>6.0f} {i.mean_deg:>7.2f} {i.sd_deg:>6.2f} "
-            f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}] {p:>8}"
+    options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
+    recording = load_recording(args.recording)
+    context = Context(recording, options)
+    fits = {method: fit(context, method, _models_of(method)) for method in args.method}
+    result = context.paper if "paper" in args.method else None
+    outputs: dict[str | os.PathLike[str], str | bytes] = {}
+    if args.json is not None:
+        data = {} if result is None else result.to_dict()
+        data["methods"] = {
+            method: {
+                model: {"params": asdict(f.params), "metrics": dict(f.metrics)}
+                for model, f in by_model.items()
+            }
+            for method, by_model in fits.items()
+        }
+        outputs[args.json] = json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n"
+    if args.report is not None and result is not None:
+        from identification.report import render_report
+
+        for name, content in render_report(result).items():
+            outputs[args.report / name] = content
+    stored = None
+    if args.db is not None:  # before any file is written: all or nothing
+        from disturbances.ingest import add_identification
+
+        with _new_database(args.db), _open(args.db, create=True) as db:
+            if result is not None:
+                added = add_identification(db, result, methods=args.method)
+            else:
+                from disturbances.ingest import add_recording
+
+                added = add_recording(db, recording, options, methods=args.method)
+        stored = (
+            f"{args.db}: this recording is already stored (same samples); nothing added"
+            if added.recordings == 0 and added.traces == 0
+            else f"stored in {args.db}: {added.identifications} identifications, "
+            f"{added.traces} traces (ids {', '.join(map(str, added.trace_ids))})"
         )
-    return "\n".join(lines)
+    write_all_atomic(outputs)  # all or nothing
+    if result is not None:
+        print(parameter_table(result))
+    if any(method != "paper" for method in fits):
+        print("\nidentification methods (parameters; re-simulation of each one's u_d, §3.5)")
+        print(methods_table(fits))
+    if stored:
+        print(stored)
+    if args.json is not None:
+        print(f"wrote {args.json}")
+    if args.report is not None:
+        figures = sum(str(path).endswith(".png") for path in outputs)
+        print(f"wrote {args.report / 'report.md'} and {figures} figures")
+    return 0
 
 
-def _cmd_build(ns: argparse.Namespace) -> int:
+def _models_of(method: str) -> tuple[str, ...]:
+    models: tuple[str, ...] = METHODS.entry(method).info["models"]
+    return models
+
+
+def _json_safe(value: Any) -> Any:
+    from disturbances.rows import json_safe
+
+    return json_safe(value)
+
+
+# --------------------------------------------------------------------------- db
+def _key_value(text: str) -> tuple[str, str]:
+    import argparse
+
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"--meta {text!r}: give KEY=VALUE")
+    return key, value
+
+
+@dataclass(frozen=True)
+class TraceFilters:
+    """Which traces a listing or an export selects."""
+
+    split: Literal["train", "test"] | None = setting(None, "train or test", choices=SPLITS)
+    model: str | None = setting(None, "damping model of the identification", choices=MODEL_NAMES)
+    method: str | None = setting(None, "identification method")
+    kind: str | None = setting(
+        None, "identified trace or a surrogate kind", choices=(*KINDS, "surrogate")
+    )
+    source: str | None = setting(None, "where the recording came from", choices=SOURCES)
+    recording: str | None = setting(None, "recording name")
+    meta: dict[str, str] = setting(
+        default_factory=dict,
+        help="recording metadata must have KEY equal to VALUE (repeatable)",
+        metavar="KEY=VALUE",
+        parse=_key_value,
+    )
+
+    def query(self) -> dict[str, Any]:
+        """The filters of :meth:`disturbances.db.DisturbanceDB.traces`."""
+        out: dict[str, Any] = {
+            name: getattr(self, name)
+            for name in ("split", "model", "method", "kind", "source", "recording")
+            if getattr(self, name) is not None
+        }
+        if self.meta:
+            out["metadata"] = dict(self.meta)
+        return out
+
+
+@dataclass(frozen=True)
+class BuildArgs:
+    """``rocketroll db build``."""
+
+    db: str | None = _db_setting()
+    force: bool = setting(False, "rebuild even if up to date")
+    surrogates: int = setting(2, "IAAFT surrogates per paper-method trace", ge=0, le=1000)
+    recordings: list[Path] = setting(
+        default_factory=list,
+        help="recording files (default: the bundled ones)",
+        positional=True,
+        metavar="RECORDING",
+    )
+
+
+def build(args: BuildArgs) -> int:
+    """Build a database from the bundled (or given) recordings."""
     from disturbances.db import DatabaseError, DisturbanceDB
     from disturbances.default import (
         DEFAULT_SURROGATES,
         _expected_fingerprint,
         build_database,
         default_path,
+        peek,
     )
+    from disturbances.schema import SCHEMA_VERSION
 
-    path = ns.db if ns.db is not None else default_path()
-    if ns.surrogates < 0:
-        raise UsageError(f"--surrogates must be >= 0, got {ns.surrogates}")
-    default_recipe = not ns.recordings and ns.surrogates == DEFAULT_SURROGATES
-    if path.exists() and not ns.force:
-        try:
-            with DisturbanceDB(path, create=False) as db:
-                info = db.info()
-        except DatabaseError as exc:
-            raise UsageError(f"{exc}; give --force to replace it") from None
+    path = Path(args.db) if args.db is not None else default_path()
+    default_recipe = not args.recordings and args.surrogates == DEFAULT_SURROGATES
+    if path.exists() and not args.force:
+        found = peek(path)
+        if found is None:  # not a readable database: say why
+            try:
+                DisturbanceDB(path, create=False, upgrade=False).close()
+            except DatabaseError as exc:
+                raise UsageError(f"{exc}; give --force to replace it") from None
+            raise UsageError(f"{path}: not a rocketroll database; give --force to replace it")
+        version, info = found
         if info.get("origin") != "bundled":
             raise UsageError(
                 f"{path}: exists and is not a default build (it holds data added by hand or "
                 "built with other settings); give --force to replace it"
             )
-        if default_recipe and info.get("fingerprint") == _expected_fingerprint():
+        if (
+            default_recipe
+            and version == SCHEMA_VERSION
+            and info.get("fingerprint") == _expected_fingerprint()
+        ):
             print(f"{path}: up to date (built by rocketroll {info.get('created_by')})")
             return 0
-    build_database(
-        path,
-        ns.recordings or None,
-        surrogates=ns.surrogates,
-        progress=True,
-    )
+    build_database(path, args.recordings or None, surrogates=args.surrogates, progress=True)
     with DisturbanceDB(path, create=False) as db:
         counts = db.counts()
     print(
@@ -158,74 +312,123 @@ def _cmd_build(ns: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_list(ns: argparse.Namespace) -> int:
-    with _open(ns) as db:
+@dataclass(frozen=True)
+class ListArgs:
+    """``rocketroll db list``."""
+
+    db: str | None = _db_setting()
+    filters: TraceFilters = setting(default_factory=TraceFilters, flatten=True)
+    json: bool = setting(False, "print JSON instead of a table")
+
+
+def _trace_table(rows: list[TraceRow]) -> str:
+    lines = [
+        f"{'id':>4}  {'uid':<40} {'kind':<10} {'split':<5} {'method':<12} {'model':<8} "
+        f"{'dur s':>6} {'mean °':>7} {'SD °':>6} {'90 % interval °':>17} {'normal p':>8}"
+    ]
+    for i in rows:
+        p = "" if i.normality_p is None else f"{i.normality_p:.3f}"
+        lines.append(
+            f"{i.id:>4}  {i.uid:<40} {i.kind:<10} {i.split:<5} {i.method:<12} {i.model:<8} "
+            f"{i.duration_s:>6.0f} {i.mean_deg:>7.2f} {i.sd_deg:>6.2f} "
+            f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}] {p:>8}"
+        )
+    return "\n".join(lines)
+
+
+def _row_json(row: TraceRow) -> dict[str, Any]:
+    """A listed trace as JSON-ready values."""
+    out: dict[str, Any] = {
+        "id": row.id,
+        "uid": row.uid,
+        "kind": row.kind,
+        "source_uid": row.source_uid,
+        "seed": row.seed,
+        "recording": row.recording,
+        "recording_hash": row.recording_hash,
+        "source": row.source,
+        "split": row.split,
+        "method": row.method,
+        "model": row.model,
+        "params": None if row.params is None else asdict(row.params),
+        "dt_s": row.dt_s,
+        "t0_s": row.t0_s,
+        "n_samples": row.n_samples,
+        "duration_s": row.duration_s,
+        **{key: row.statistics.get(key) for key in row.statistics},
+        "package_version": row.package_version,
+        "created_at": row.created_at,
+        "validation": None if row.validation is None else dict(row.validation),
+    }
+    return out
+
+
+def list_traces(args: ListArgs) -> int:
+    """List traces."""
+    with _open(args.db) as db:
         try:
-            infos = db.traces(**_filters(ns))
+            rows = db.traces(**args.filters.query())
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        if ns.json:
-            print(json.dumps([_info_json(i) for i in infos], indent=2, allow_nan=False))
+        if args.json:
+            print(json.dumps([_row_json(r) for r in rows], indent=2, allow_nan=False))
             return 0
         counts = db.counts()
         print(
             f"{db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
-            f"{counts['surrogates']} surrogates; {len(infos)} shown"
+            f"{counts['surrogates']} surrogates; {len(rows)} shown"
         )
-        print(_trace_table(infos))
+        print(_trace_table(rows))
     return 0
-
-
-def _info_json(info: TraceInfo) -> dict[str, Any]:
-    """A :class:`TraceInfo` as JSON-ready values."""
-    from dataclasses import asdict, fields
-
-    out: dict[str, Any] = {f.name: getattr(info, f.name) for f in fields(info)}
-    out["params"] = asdict(info.params)
-    out["validation"] = None if info.validation is None else dict(info.validation)
-    out["duration_s"] = info.duration_s
-    return out
 
 
 def _key(text: str) -> int | str:
     return int(text) if text.isdigit() else text
 
 
-def _cmd_show(ns: argparse.Namespace) -> int:
-    with _open(ns) as db:
-        trace = db.trace(_key(ns.trace))
-        info = trace.info
-        ident = next(
-            i
-            for i in db.identifications(recording=info.recording)
-            if i.method == info.method
-            and i.model == info.model
-            and i.recording_id == info.recording_id
+@dataclass(frozen=True)
+class ShowArgs:
+    """``rocketroll db show``."""
+
+    trace: str = setting(help="trace id or uid", positional=True)
+    db: str | None = _db_setting()
+    json: bool = setting(False, "print JSON")
+    plot: Path | None = setting(
+        None, "write a PNG: the trace, its histogram and PSD", output="file"
+    )
+
+
+def show(args: ShowArgs) -> int:
+    """Show one trace: provenance, parameters, statistics."""
+    with _open(args.db) as db:
+        trace = db.trace(_key(args.trace))
+        (ident,) = db.identifications(
+            recording_hash=trace.recording_hash, method=trace.method, model=trace.model
         )
-        if ns.plot is not None:
+        if args.plot is not None:
             from disturbances.plots import plot_trace
             from rocketroll_common.files import write_atomic
 
-            source = None if info.source_uid is None else db.trace(info.source_uid)
-            write_atomic(ns.plot, plot_trace(trace, source))
-    if ns.json:
-        d = _info_json(info)
+            source = None if trace.source_uid is None else db.trace(trace.source_uid)
+            write_atomic(args.plot, plot_trace(trace, source))
+    if args.json:
+        d = _row_json(trace)
         d["metrics"] = dict(ident.metrics)
         print(json.dumps(d, indent=2, allow_nan=False))
         return 0
-    p = info.params
+    p = trace.rocket()
     lines = [
-        f"trace {info.id}  {info.uid}",
-        f"  kind         {info.kind}"
-        + (f" of {info.source_uid} (seed {info.seed})" if info.source_uid else ""),
-        f"  recording    {info.recording} ({info.source}), split {info.split}",
-        f"  identified   {info.method} method, {info.model} damping, rocketroll "
-        f"{info.package_version}, {ident.created_at}",
-        f"  samples      {info.n_samples} every {info.dt_s:g} s ({info.duration_s:g} s) from "
-        f"t0 = {info.t0_s:g} s; checksum verified",
-        f"  u_d          mean {info.mean_deg:.3f}°, SD {info.sd_deg:.3f}°, 90 % interval "
-        f"[{info.q05_deg:.2f}, {info.q95_deg:.2f}]°, normality p "
-        + ("n/a" if info.normality_p is None else f"{info.normality_p:.3g}"),
+        f"trace {trace.id}  {trace.uid}",
+        f"  kind         {trace.kind}"
+        + (f" of {trace.source_uid} (seed {trace.seed})" if trace.source_uid else ""),
+        f"  recording    {trace.recording} ({trace.source}), split {trace.split}",
+        f"  identified   {trace.method} method, {trace.model} damping, rocketroll "
+        f"{trace.package_version}, {ident.created_at}",
+        f"  samples      {trace.n_samples} every {trace.dt_s:g} s ({trace.duration_s:g} s) from "
+        f"t0 = {trace.t0_s:g} s; checksum verified",
+        f"  u_d          mean {trace.mean_deg:.3f}°, SD {trace.sd_deg:.3f}°, 90 % interval "
+        f"[{trace.q05_deg:.2f}, {trace.q95_deg:.2f}]°, normality p "
+        + ("n/a" if trace.normality_p is None else f"{trace.normality_p:.3g}"),
         f"  parameters   α = {p.alpha:.4f} (°/s)/°, θ̄ = {p.theta_bar_deg:.3f}°, "
         + (
             f"a = {p.beta_bar_per_s:.4f} 1/s"
@@ -233,8 +436,8 @@ def _cmd_show(ns: argparse.Namespace) -> int:
             else f"ᾱ = {p.alpha_bar_per_deg_s:.4f} 1/(s·°), β̄ = {p.beta_bar_per_s:.4f} 1/s"
         ),
     ]
-    if info.validation is not None:
-        v = info.validation
+    if trace.validation is not None:
+        v = trace.validation
         lines.append(
             f"  validation   KS p = {v['ks_p']:.3g} (thinned every {v['stride']}), PSD "
             f"log-distance {v['psd_log_distance']:.3f} decades (limit "
@@ -247,29 +450,59 @@ def _cmd_show(ns: argparse.Namespace) -> int:
             f"{m['resim_angle_mae_deg']:.3f}°"
         )
     print("\n".join(lines))
-    if ns.plot is not None:
-        print(f"wrote {ns.plot}")
+    if args.plot is not None:
+        print(f"wrote {args.plot}")
     return 0
 
 
-def _cmd_add(ns: argparse.Namespace) -> int:
-    from identification.cli import identify_options
+@dataclass(frozen=True)
+class AddArgs:
+    """``rocketroll db add``."""
+
+    recording: Path = setting(help="recording file (CSV, format v1)", positional=True)
+    db: str | None = _db_setting(new=True)
+    method: list[str] = setting(
+        default_factory=_default_methods,
+        help=_methods_help("identification method to store"),
+        metavar="METHOD",
+    )
+    surrogates: int = setting(
+        0, "surrogates per trace of the paper's method (or the first method)", ge=0, le=1000
+    )
+    surrogate_kind: list[str] = setting(
+        default_factory=list, help="surrogate kind (repeatable; default iaaft)", metavar="KIND"
+    )
+    options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
+
+    def __post_init__(self) -> None:
+        check(self)
+        _check_methods(self.method)
+        for kind in self.surrogate_kind:
+            if kind not in SURROGATE_KINDS:
+                raise UsageError(
+                    f"--surrogate-kind must be one of {', '.join(SURROGATE_KINDS)}, not {kind!r}"
+                )
+        if self.surrogate_kind and self.surrogates == 0:
+            raise UsageError("--surrogate-kind needs --surrogates N (how many of each kind)")
+
+
+def add(args: AddArgs) -> int:
+    """Identify a recording and store everything (one transaction)."""
+    import dataclasses
+
+    from disturbances.ingest import add_recording
     from identification.recording import load_recording
 
-    if ns.surrogates < 0:
-        raise UsageError(f"--surrogates must be >= 0, got {ns.surrogates}")
-    if ns.surrogate_kind and ns.surrogates == 0:
-        raise UsageError("--surrogate-kind needs --surrogates N (how many of each kind)")
-    options = identify_options(ns)
-    recording = load_recording(ns.recording)
-    methods = ("paper",) if ns.no_output_error else ("paper", "output-error")
-    with _new_file_removed_on_error(ns.db), _open(ns, create=True) as db:
-        result = db.add_recording(
+    options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
+    recording = load_recording(args.recording)
+    with _new_database(args.db), _open(args.db, create=True) as db:
+        result = add_recording(
+            db,
             recording,
             options,
-            methods=methods,
-            surrogates=ns.surrogates,
-            surrogate_kinds=tuple(ns.surrogate_kind or ["iaaft"]),
+            methods=args.method,
+            surrogates=args.surrogates,
+            surrogate_kinds=tuple(args.surrogate_kind or ["iaaft"]),
         )
         if result.recordings == 0 and result.traces == 0:
             print(f"{db.path}: {recording.name} is already stored (same samples); nothing added")
@@ -281,165 +514,170 @@ def _cmd_add(ns: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_surrogate(ns: argparse.Namespace) -> int:
-    if ns.count < 1:
-        raise UsageError(f"--count must be >= 1, got {ns.count}")
-    if ns.seed < 0:
-        raise UsageError(f"--seed must be >= 0, got {ns.seed}")
-    with _open(ns) as db:
-        uid = db.trace(_key(ns.trace)).info.uid
-        result = db.add_surrogates(uid, ns.kind, ns.count, ns.seed)
-        added = db.traces_by_uid([db.trace(i).info.uid for i in result.trace_ids])
-    print(f"added {result.traces} {ns.kind} surrogate(s) of {uid} ({result.skipped} existed)")
-    for info in added:
-        v = info.validation or {}
+@dataclass(frozen=True)
+class SurrogateArgs:
+    """``rocketroll db surrogate``."""
+
+    trace: str = setting(help="trace id or uid (an identified trace)", positional=True)
+    db: str | None = _db_setting()
+    kind: Literal["iaaft", "ar"] = setting("iaaft", "surrogate method")
+    count: int = setting(1, "how many", ge=1, le=10_000)
+    seed: int = setting(0, "seed of the first", ge=0, le=2**63 - 1)
+
+
+def surrogate(args: SurrogateArgs) -> int:
+    """Make and store surrogates of a stored trace."""
+    from disturbances.ingest import add_surrogates
+
+    with _open(args.db) as db:
+        uid = db.trace(_key(args.trace)).uid
+        result = add_surrogates(db, uid, args.kind, args.count, args.seed)
+        added = db.traces_by_uid([db.trace(i).uid for i in result.trace_ids])
+    print(f"added {result.traces} {args.kind} surrogate(s) of {uid} ({result.skipped} existed)")
+    for row in added:
+        v = row.validation or {}
         verdict = (
             "check passed"
             if v.get("passed")
             else f"check FAILED (KS p {v.get('ks_p', float('nan')):.3g}, PSD log-distance "
             f"{v.get('psd_log_distance', float('nan')):.3f}); left out of banks by default"
         )
-        print(f"  {info.id:>4}  {info.uid}  {verdict}")
+        print(f"  {row.id:>4}  {row.uid}  {verdict}")
     return 0
 
 
-def _cmd_export(ns: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class ExportArgs:
+    """``rocketroll db export``."""
+
+    format: Literal["csv", "npz", "parquet"] = setting(help="format of the sample files")
+    out: Path = setting(help="folder to create (must not exist, or be empty)", output="folder")
+    db: str | None = _db_setting()
+    filters: TraceFilters = setting(default_factory=TraceFilters, flatten=True)
+
+    def __post_init__(self) -> None:
+        check(self)
+        if self.out.exists() and (not self.out.is_dir() or any(self.out.iterdir())):
+            raise UsageError(f"--out {self.out}: exists and is not an empty folder")
+
+
+def export(args: ExportArgs) -> int:
+    """Export traces, parameters and a manifest to a folder."""
     from disturbances.exchange import write_export
 
-    with _open(ns) as db:
+    with _open(args.db) as db:
         try:
-            counts = write_export(db, ns.out, ns.format, **_filters(ns))
+            counts = write_export(db, args.out, args.format, **args.filters.query())
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     print(
-        f"wrote {ns.out}: {counts['traces']} traces, {counts['identifications']} "
-        f"identifications, {counts['recordings']} recordings ({ns.format})"
+        f"wrote {args.out}: {counts['traces']} traces, {counts['identifications']} "
+        f"identifications, {counts['recordings']} recordings ({args.format})"
     )
     return 0
 
 
-def _cmd_import(ns: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class ImportArgs:
+    """``rocketroll db import``."""
+
+    folder: Path = setting(help="a folder written by `rocketroll db export`", positional=True)
+    db: str | None = _db_setting(new=True)
+
+
+def import_(args: ImportArgs) -> int:
+    """Import an export folder (one transaction)."""
     from disturbances.exchange import import_export, read_export
 
-    read_export(ns.folder)  # every file checked before the database is touched
-    with _new_file_removed_on_error(ns.db), _open(ns, create=True) as db:
+    read_export(args.folder)  # every file checked before the database is touched
+    with _new_database(args.db), _open(args.db, create=True) as db:
         db.check_version(writing=True)
-        result = import_export(db, ns.folder)
+        result = import_export(db, args.folder)
     print(
-        f"imported {ns.folder}: {result.recordings} recordings, {result.identifications} "
+        f"imported {args.folder}: {result.recordings} recordings, {result.identifications} "
         f"identifications, {result.traces} traces added; {result.skipped} already present"
     )
     return 0
 
 
-def _store_result(ns: argparse.Namespace, result: Identification) -> str | None:
-    """``rocketroll identify --db``: keep the result (runs before any file is written)."""
-    if ns.db is None:
-        return None
+@dataclass(frozen=True)
+class MigrateArgs:
+    """``rocketroll db migrate``."""
+
+    db: str | None = _db_setting()
+
+
+def migrate(args: MigrateArgs) -> int:
+    """Upgrade a database to this rocketroll's schema (opening it does; say what happened)."""
     from disturbances.db import DisturbanceDB
+    from disturbances.default import default_path
+    from disturbances.schema import SCHEMA_VERSION
 
-    with _new_file_removed_on_error(ns.db), DisturbanceDB(ns.db, create=True) as db:
-        stored = db.add_identification(result)
-    if stored.recordings == 0 and stored.traces == 0:
-        return f"{ns.db}: this recording is already stored (same samples); nothing added"
-    return (
-        f"stored in {ns.db}: {stored.identifications} identifications, {stored.traces} traces "
-        f"(ids {', '.join(map(str, stored.trace_ids))})"
-    )
+    path = Path(args.db) if args.db is not None else default_path()
+    with DisturbanceDB(path, create=False) as db:
+        version = db.schema_version
+    print(f"{path}: schema version {version} (this rocketroll's: {SCHEMA_VERSION}), up to date")
+    return 0
 
 
-def register(subparsers: Any) -> None:
-    """Add ``rocketroll db`` and ``identify --db`` to the ``rocketroll`` parser."""
-    from identification.cli import add_identify_options
+_DB_COMMANDS = (
+    Command(
+        "build",
+        "build the database from the bundled (or given) recordings",
+        BuildArgs,
+        build,
+        "Identify every bundled recording (every default identification method, both "
+        "models), make surrogates, and write the database atomically.",
+    ),
+    Command("list", "list traces, optionally filtered", ListArgs, list_traces),
+    Command("show", "show one trace: provenance, parameters, statistics", ShowArgs, show),
+    Command(
+        "add",
+        "identify a recording and store everything (one transaction)",
+        AddArgs,
+        add,
+        "Run the identification methods on a recording (format v1) and store the "
+        "recording, parameters and u_d traces.  Nothing is stored if anything fails.",
+    ),
+    Command("surrogate", "make and store surrogates of a stored trace", SurrogateArgs, surrogate),
+    Command(
+        "export",
+        "export traces, parameters (JSON) and a manifest to a folder",
+        ExportArgs,
+        export,
+        "Write the selected traces with their parameters, recordings and a manifest into a "
+        "new folder; `rocketroll db import` reads it back exactly.",
+    ),
+    Command("import", "import an export folder (one transaction)", ImportArgs, import_),
+    Command(
+        "migrate",
+        "upgrade a database to this rocketroll's schema (a backup is kept beside it)",
+        MigrateArgs,
+        migrate,
+        "Upgrade a database written by an older rocketroll to this one's schema, in place "
+        "and in one transaction, after copying it to NAME.schemaN.bak beside it.  Any "
+        "command that opens an old database does the same, with a one-line notice.",
+    ),
+)
 
-    identify = subparsers.choices.get("identify")
-    if identify is not None:
-        identify.add_argument(
-            "--db",
-            type=Path,
-            help="also store the result (both models, and the output-error peer) in this "
-            "disturbance database; created if missing",
-        )
-        identify.set_defaults(store_result=_store_result)
-
-    db = subparsers.add_parser(
+#: The commands of this layer, by name.
+COMMANDS: dict[str, Command] = {
+    "identify": Command(
+        "identify",
+        "identify roll parameters and the disturbance u_d(t) from a recording",
+        IdentifyArgs,
+        identify,
+        "Run the paper's identification (steps 1-6 of Fig. 9, the Monte Carlo noise study and "
+        "the disturbance statistics) and the other identification methods on a recording and "
+        "print the parameters (beside the ground truth of a synthetic recording).  Defaults "
+        "are the paper's.",
+    ),
+    "db": Command(
         "db",
-        help="the disturbance database: build, list, show, add, surrogate, export, import",
+        "the disturbance database: build, list, show, add, surrogate, export, import, migrate",
         description="The disturbance database of recordings, identified parameters and u_d "
         "traces.  Without --db, the default database is used (built from the bundled "
         "recordings when missing).",
-    )
-    sub = db.add_subparsers(dest="db_command", required=True, metavar="DB_COMMAND")
-
-    p = sub.add_parser(
-        "build",
-        help="build the database from the bundled (or given) recordings",
-        description="Identify every bundled recording (paper's method and output-error peer, "
-        "both models), make surrogates, and write the database atomically.",
-    )
-    p.add_argument("--db", type=Path, help=_DB_HELP)
-    p.add_argument("--force", action="store_true", help="rebuild even if up to date")
-    p.add_argument(
-        "--surrogates",
-        type=int,
-        default=2,
-        help="IAAFT surrogates per paper-method trace (default 2)",
-    )
-    p.add_argument(
-        "recordings", nargs="*", type=Path, help="recording files (default: the bundled ones)"
-    )
-    p.set_defaults(handler=_cmd_build)
-
-    p = sub.add_parser("list", help="list traces, optionally filtered")
-    p.add_argument("--db", type=Path, help=_DB_HELP)
-    _add_filters(p)
-    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.set_defaults(handler=_cmd_list)
-
-    p = sub.add_parser("show", help="show one trace: provenance, parameters, statistics")
-    p.add_argument("trace", help="trace id or uid")
-    p.add_argument("--db", type=Path, help=_DB_HELP)
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.add_argument("--plot", type=Path, help="write a PNG: the trace, its histogram and PSD")
-    p.set_defaults(handler=_cmd_show)
-
-    p = sub.add_parser(
-        "add",
-        help="identify a recording and store everything (one transaction)",
-        description="Run the identification on a recording (format v1) and store the "
-        "recording, parameters and u_d traces.  Nothing is stored if anything fails.",
-    )
-    p.add_argument("recording", type=Path, help="recording file (CSV, format v1)")
-    p.add_argument("--db", type=Path, help=_DB_HELP + "; created if missing")
-    p.add_argument("--surrogates", type=int, default=0, help="surrogates per paper trace (0)")
-    p.add_argument(
-        "--surrogate-kind", action="append", choices=("iaaft", "ar"), help="surrogate kind"
-    )
-    p.add_argument("--no-output-error", action="store_true", help="skip the output-error peer")
-    add_identify_options(p)
-    p.set_defaults(handler=_cmd_add)
-
-    p = sub.add_parser("surrogate", help="make and store surrogates of a stored trace")
-    p.add_argument("trace", help="trace id or uid (an identified trace)")
-    p.add_argument("--db", type=Path, help=_DB_HELP)
-    p.add_argument("--kind", choices=("iaaft", "ar"), default="iaaft", help="method (iaaft)")
-    p.add_argument("--count", type=int, default=1, help="how many (1)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first (0)")
-    p.set_defaults(handler=_cmd_surrogate)
-
-    p = sub.add_parser(
-        "export",
-        help="export traces, parameters (JSON) and a manifest to a folder",
-        description="Write the selected traces with their parameters, recordings and a "
-        "manifest into a new folder; `rocketroll db import` reads it back exactly.",
-    )
-    p.add_argument("--format", required=True, choices=("csv", "npz", "parquet"))
-    p.add_argument("--out", required=True, type=Path, help="folder to create (must be empty)")
-    p.add_argument("--db", type=Path, help=_DB_HELP)
-    _add_filters(p)
-    p.set_defaults(handler=_cmd_export)
-
-    p = sub.add_parser("import", help="import an export folder (one transaction)")
-    p.add_argument("folder", type=Path, help="a folder written by `rocketroll db export`")
-    p.add_argument("--db", type=Path, help=_DB_HELP + "; created if missing")
-    p.set_defaults(handler=_cmd_import)
+        subcommands=_DB_COMMANDS,
+    ),
+}

@@ -20,27 +20,36 @@ database (``origin: user``) it is never rebuilt silently: opening one that
 holds another version's identifications warns instead.
 
 Builds are atomic: the new database is written beside the target and renamed
-into place when complete.
+into place when complete.  One process at a time builds into a folder (a lock
+on the folder itself, so no lock file is left behind); a build killed half-way
+leaves its ``.NAME.*.building`` files, which the next build into that folder
+removes.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import glob
 import hashlib
 import json
 import os
+import sqlite3
 import sys
 import tempfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from disturbances.db import SCHEMA_VERSION, DatabaseError, DisturbanceDB, package_version
+from disturbances.db import DatabaseError, DisturbanceDB, package_version
+from disturbances.ingest import add_recording
 from disturbances.rows import SURROGATE_KINDS
+from disturbances.schema import APPLICATION_ID, SCHEMA_VERSION
+from disturbances.stores import Store, open_store
 from identification.bundled import bundled_paths
+from identification.methods import default_methods
 from identification.pipeline import IdentifyOptions
 from identification.recording import load_recording
-from rocketroll_common.files import file_mode
+from rocketroll_common.files import created_folders_removed_on_error, file_mode
 
 __all__ = [
     "BUILD_RECIPE",
@@ -58,7 +67,7 @@ ENV_VAR = "ROCKETROLL_DB"
 #: IAAFT surrogates per paper-method trace in the default database.
 DEFAULT_SURROGATES = 2
 #: Version of the recipe below; bump it when the build changes in any other way.
-BUILD_RECIPE = 1
+BUILD_RECIPE = 2
 
 
 def default_path() -> Path:
@@ -82,6 +91,7 @@ def fingerprint(
         "recipe": BUILD_RECIPE,
         "schema": SCHEMA_VERSION,
         "package": package_version(),
+        "methods": list(default_methods()),
         "options": dataclasses.asdict(dataclasses.replace(options, progress=False)),
         "surrogates": surrogates,
         "surrogate_kinds": list(surrogate_kinds),
@@ -120,10 +130,15 @@ def build_database(
 ) -> Path:
     """Build a database from recordings (default: the bundled ones), atomically.
 
+    Every recording is identified by the default identification methods
+    (:func:`identification.methods.default_methods`), for every model they
+    fit, with ``surrogates`` surrogates of each paper-method trace.
+
     Parameters
     ----------
     path : str or PathLike
-        The database to (re)place.
+        The database to (re)place; missing folders are created (and removed
+        again if the build fails).
     recordings : sequence of paths, optional
         Recording files; the bundled recordings by default.  Built from the
         bundled ones with the default settings, the database is marked
@@ -142,9 +157,22 @@ def build_database(
     Path
         ``path``.
     """
+    target = Path(path)
+    with created_folders_removed_on_error(target), _build_lock(target.parent):
+        return _build(target, recordings, options, surrogates, surrogate_kinds, progress)
+
+
+def _build(
+    target: Path,
+    recordings: Sequence[str | os.PathLike[str]] | None,
+    options: IdentifyOptions | None,
+    surrogates: int,
+    surrogate_kinds: Sequence[str],
+    progress: bool,
+) -> Path:
+    """:func:`build_database` with the folder's build lock held."""
     from tqdm.auto import tqdm
 
-    target = Path(path)
     bundled = recordings is None
     files = bundled_paths() if recordings is None else [Path(p) for p in recordings]
     unknown = [k for k in surrogate_kinds if k not in SURROGATE_KINDS]
@@ -152,8 +180,7 @@ def build_database(
         raise ValueError(f"unknown surrogate kind(s) {unknown}; use {', '.join(SURROGATE_KINDS)}")
     opts = IdentifyOptions() if options is None else options
     loaded = [load_recording(f) for f in files]  # every file is validated before any work
-    if not target.parent.is_dir():
-        target.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_builds(target)
     fd, tmp_name = tempfile.mkstemp(
         prefix=f".{target.name}.", suffix=".building", dir=target.parent
     )
@@ -164,7 +191,8 @@ def build_database(
             for recording in tqdm(
                 loaded, desc="building disturbance database", unit="recording", disable=not progress
             ):
-                db.add_recording(
+                add_recording(
+                    db,
                     recording,
                     opts,
                     surrogates=surrogates,
@@ -189,6 +217,13 @@ def build_database(
     return target
 
 
+def _remove_stale_builds(target: Path) -> None:
+    """Remove what a killed build of ``target`` left (only one build runs: the lock)."""
+    for suffix in ("", "-wal", "-shm"):
+        for leftover in target.parent.glob(f".{glob.escape(target.name)}.*.building{suffix}"):
+            leftover.unlink(missing_ok=True)
+
+
 def _expected_fingerprint() -> str:
     return fingerprint(bundled_paths(), IdentifyOptions(), DEFAULT_SURROGATES, ("iaaft",))
 
@@ -204,37 +239,72 @@ def open_default(*, progress: bool | None = None) -> DisturbanceDB:
     path = default_path()
     show = sys.stderr.isatty() if progress is None else progress
     path.parent.mkdir(parents=True, exist_ok=True)
-    with _build_lock(path):
+    with _build_lock(path.parent):
         return _open_or_build(path, show)
 
 
 @contextmanager
-def _build_lock(path: Path) -> Iterator[None]:
-    """One process at a time checks, builds or replaces the default database.
+def _build_lock(folder: Path) -> Iterator[None]:
+    """One process at a time checks, builds or replaces a database in ``folder``.
 
-    Others wait, then find it built.  (POSIX ``flock``; elsewhere no lock.)
+    Others wait, then find it built.  The lock is on the folder itself (POSIX
+    ``flock``), so it leaves no file behind; elsewhere there is no lock.
     """
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
         yield
         return
-    with open(f"{path}.lock", "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
         try:
             yield
         finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+def peek(path: Path) -> tuple[int, dict[str, str]] | None:
+    """Schema version and ``info`` table of a rocketroll database file, read only and
+    without upgrading it; None if it is not one (opening it then says why)."""
+    if not path.is_file() or path.stat().st_size == 0:
+        return None
+    try:
+        conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        try:
+            version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+            app = int(conn.execute("PRAGMA application_id").fetchone()[0])
+            rows = conn.execute("SELECT key, value FROM info").fetchall()
+        finally:
+            conn.close()
+    except sqlite3.Error:
+        return None
+    if app != APPLICATION_ID:
+        return None
+    return version, {str(k): str(v) for k, v in rows}
 
 
 def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
+    found = peek(path)
+    version, origin = (-1, None) if found is None else (found[0], found[1].get("origin"))
+    if 0 < version < SCHEMA_VERSION and origin == "bundled":
+        # A default build by an older rocketroll: rebuilt below, not upgraded.
+        print(
+            f"rocketroll: the default disturbance database {path} has schema version "
+            f"{version}; rebuilding it with schema {SCHEMA_VERSION}",
+            file=sys.stderr,
+        )
+        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), show)
+        return DisturbanceDB(path, create=False)
     if not path.exists() or path.stat().st_size == 0:
         print(
             f"rocketroll: building the default disturbance database at {path} "
             "from the bundled recordings (once)",
             file=sys.stderr,
         )
-        build_database(path, progress=show)
+        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), show)
         return DisturbanceDB(path, create=False)
     db = DisturbanceDB(path, create=False)
     info = db.info()
@@ -250,16 +320,20 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             f"rocketroll: the default disturbance database {path} {why}; rebuilding it",
             file=sys.stderr,
         )
-        build_database(path, progress=show)
+        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), show)
         return DisturbanceDB(path, create=False)
     db.check_version()
     return db
 
 
-def open_database(path: str | os.PathLike[str] | None = None) -> DisturbanceDB:
-    """``path`` if given (it must exist), else :func:`open_default`."""
-    if path is None:
+def open_database(location: str | os.PathLike[str] | None = None) -> Store:
+    """The store at ``location`` if given (it must exist), else :func:`open_default`.
+
+    ``location`` is an SQLite file or ``scheme://...`` of a registered back end
+    (:mod:`disturbances.stores`).
+    """
+    if location is None:
         return open_default()
-    db = DisturbanceDB(path, create=False)
+    db = open_store(location, create=False)
     db.check_version()
     return db

@@ -41,8 +41,9 @@ from typing import Any
 
 import numpy as np
 
-from disturbances.db import SCHEMA_VERSION, DisturbanceDB, Dump, StoreResult
+from disturbances.db import SCHEMA_VERSION, Dump, StoreResult
 from disturbances.rows import IdentificationRow, RecordingRow, TraceRow
+from disturbances.stores import Store
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError
@@ -86,7 +87,7 @@ def _parameters(dump: Dump) -> dict[str, Any]:
                 "source": r.source,
                 "split": r.split,
                 "columns": list(r.columns),
-                "n_samples": int(r.samples.shape[0]),
+                "n_samples": r.n_samples,
                 "metadata": dict(r.metadata),
                 "added_at": r.added_at,
             }
@@ -117,7 +118,7 @@ def _parameters(dump: Dump) -> dict[str, Any]:
                 "settings": dict(t.settings),
                 "dt_s": t.dt_s,
                 "t0_s": t.t0_s,
-                "n_samples": int(t.u_d_deg.size),
+                "n_samples": t.n_samples,
                 "checksum": t.checksum,
                 "statistics": dict(t.statistics),
                 "validation": None if t.validation is None else dict(t.validation),
@@ -184,27 +185,29 @@ def _sample_files(dump: Dump, fmt: str) -> dict[str, bytes]:
     files: dict[str, bytes] = {}
     if fmt == "csv":
         for r in dump.recordings:
-            text = _csv_text(list(r.columns), [r.samples[:, k] for k in range(len(r.columns))])
+            text = _csv_text(list(r.columns), list(r.column_dict().values()))
             files[f"recordings/{r.content_hash[:16]}.csv"] = text.encode()
         for t in dump.traces:
-            files[f"traces/{t.uid}.csv"] = _csv_text(["u_d_deg"], [t.u_d_deg]).encode()
+            files[f"traces/{t.uid}.csv"] = _csv_text(["u_d_deg"], [t.samples()]).encode()
     elif fmt == "npz":
-        files["recordings.npz"] = _npz_bytes({r.content_hash: r.samples for r in dump.recordings})
-        files["traces.npz"] = _npz_bytes({t.uid: t.u_d_deg for t in dump.traces})
+        files["recordings.npz"] = _npz_bytes(
+            {r.content_hash: r.sample_array() for r in dump.recordings}
+        )
+        files["traces.npz"] = _npz_bytes({t.uid: t.samples() for t in dump.traces})
     elif fmt == "parquet":
         hashes, names, values = [], [], []
         for r in dump.recordings:
             for k, column in enumerate(r.columns):
                 hashes.append(r.content_hash)
                 names.append(column)
-                values.append(r.samples[:, k].tolist())
+                values.append(r.sample_array()[:, k].tolist())
         files["recordings.parquet"] = _parquet_bytes(
             {"content_hash": hashes, "column": names, "values": values}
         )
         files["traces.parquet"] = _parquet_bytes(
             {
                 "uid": [t.uid for t in dump.traces],
-                "u_d_deg": [t.u_d_deg.tolist() for t in dump.traces],
+                "u_d_deg": [t.samples().tolist() for t in dump.traces],
             }
         )
     else:
@@ -241,7 +244,7 @@ def export_dump(dump: Dump, fmt: str, filters: Mapping[str, Any] | None = None) 
 
 
 def write_export(
-    db: DisturbanceDB, out: str | os.PathLike[str], fmt: str, **filters: Any
+    db: Store, out: str | os.PathLike[str], fmt: str, **filters: Any
 ) -> dict[str, int]:
     """Export the traces matching ``filters`` (with what they depend on) into ``out``.
 
@@ -481,7 +484,7 @@ def _parse(root: Path, fmt: str, params: Any, contents: Mapping[str, bytes]) -> 
     return Dump(recordings=recordings, identifications=identifications, traces=traces)
 
 
-def import_export(db: DisturbanceDB, folder: str | os.PathLike[str]) -> StoreResult:
+def import_export(db: Store, folder: str | os.PathLike[str]) -> StoreResult:
     """Import an export folder into ``db`` in one transaction (present rows are skipped)."""
     dump = read_export(folder)
     versions = set(db.versions()) | {i.package_version for i in dump.identifications}
@@ -492,4 +495,4 @@ def import_export(db: DisturbanceDB, folder: str | os.PathLike[str]) -> StoreRes
             f"into {db.path} would mix versions {', '.join(sorted(versions))}; import into a new "
             "database file instead"
         )
-    return db.store(None, dump.identifications, dump.traces, recordings=dump.recordings)
+    return db.store(dump.recordings, dump.identifications, dump.traces)

@@ -1,46 +1,56 @@
-"""From an identification to database rows (no SQL here).
+"""Identifying recordings and making surrogates into a database: the service above the store.
 
-:func:`identification_rows` turns one
-:class:`~identification.pipeline.Identification` into a recording row, one
-identification row per method and model, and one ``u_d`` trace per
-identification:
+:class:`~disturbances.db.DisturbanceDB` only stores rows.  This module makes
+them and hands them over, one transaction per call:
 
-* ``paper``: the pipeline's own parameters and traces (steps 6-8) with its
-  fit metrics (R², re-simulation errors, the noise study, the per-step table);
-* ``output-error``: the peer of :mod:`identification.baselines`, fitted on the
-  same measurements; its ``u_d`` is recovered with the same step 8
-  (eq. 35-44) under its own parameters, and re-simulated the same way, so the
-  two methods' traces and metrics compare like for like.
+* :func:`add_recording` -- identify a recording by the identification methods
+  asked for (:mod:`identification.methods`; by default the registered default
+  ones: the paper's and the output-error peer), each for every damping model
+  it fits, and store the recording, one identification row per method and
+  model and its ``u_d`` trace, plus surrogates;
+* :func:`add_identification` -- the same from the paper's pipeline already
+  run (``rocketroll identify --db``);
+* :func:`add_surrogates` -- surrogates of a stored trace.
 
-:func:`surrogate_rows` makes surrogate traces of a trace
-(:mod:`disturbances.surrogate`), each checked against its source.
+Every method's trace is recovered and re-simulated the same way (steps 8-9,
+:meth:`identification.methods.Context.disturbance`) unless the method makes
+its own, so traces and metrics of all methods compare like for like.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from disturbances.db import now, package_version
+from disturbances.db import DatabaseError, StoreResult, now, package_version
 from disturbances.rows import (
-    METHODS,
-    MODELS,
     SURROGATE_KINDS,
     IdentificationRow,
     RecordingRow,
     TraceRow,
     checksum,
+    content_hash,
     identified_uid,
     surrogate_uid,
 )
-from identification.pipeline import Identification
+from disturbances.stores import Store
+from identification.methods import METHODS, Context, ModelFit, default_methods, fit
+from identification.pipeline import Identification, IdentifyOptions
+from identification.recording import Recording
 from identification.statistics import trace_statistics
-from identification.steps import Disturbance, Resimulation, identify_disturbance, resimulate
 
-__all__ = ["identification_rows", "surrogate_rows", "trace_summary"]
+__all__ = [
+    "add_identification",
+    "add_recording",
+    "add_surrogates",
+    "identification_rows",
+    "surrogate_rows",
+    "trace_summary",
+]
 
 
 def trace_summary(u_d_deg: np.ndarray) -> dict[str, Any]:
@@ -55,138 +65,246 @@ def trace_summary(u_d_deg: np.ndarray) -> dict[str, Any]:
     }
 
 
-def _resimulation_metrics(r: Resimulation) -> dict[str, float]:
-    return {
-        "resim_rate_mae_dps": r.rate_mae_dps,
-        "resim_rate_sd_dps": r.rate_sd_dps,
-        "resim_angle_mae_deg": r.angle_mae_deg,
-        "resim_angle_sd_deg": r.angle_sd_deg,
-    }
-
-
-def _trace_row(recording_hash: str, method: str, dist: Disturbance, created_at: str) -> TraceRow:
+def _trace_row(
+    recording: RecordingRow, fitted: ModelFit, created_at: str, version: str
+) -> TraceRow:
+    dist = fitted.disturbance
     u = np.asarray(dist.u_d_deg, dtype=float)
     return TraceRow(
-        uid=identified_uid(recording_hash, method, dist.model),
-        recording_hash=recording_hash,
-        method=method,
-        model=dist.model,
+        uid=identified_uid(recording.content_hash, fitted.method, fitted.model),
+        recording_hash=recording.content_hash,
+        method=fitted.method,
+        model=fitted.model,
         kind="identified",
         source_uid=None,
         seed=None,
-        settings={"interval_s": dist.interval_s, "equations": "35-44"},
+        settings=dict(fitted.trace_settings),
         dt_s=dist.interval_s,
         t0_s=float(dist.start_s[0]),
-        u_d_deg=u,
         checksum=checksum(u),
         statistics=trace_summary(u),
         validation=None,
         created_at=created_at,
+        u_d_deg=u,
+        params=fitted.params,
+        recording=recording.name,
+        source=recording.source,
+        split=recording.split,
+        package_version=version,
     )
 
 
+def _methods(methods: Sequence[str] | None) -> tuple[str, ...]:
+    chosen = default_methods() if methods is None else tuple(methods)
+    if not chosen:
+        raise ValueError("give at least one identification method")
+    for method in chosen:
+        METHODS.check(method)
+    if len(set(chosen)) < len(chosen):
+        raise ValueError(f"a method is named twice in {list(chosen)}")
+    return chosen
+
+
+def _models_of(method: str) -> tuple[str, ...]:
+    models: tuple[str, ...] = METHODS.entry(method).info["models"]
+    return models
+
+
 def identification_rows(
-    result: Identification, methods: Sequence[str] = METHODS
+    context: Context, methods: Sequence[str] | None = None
 ) -> tuple[RecordingRow, list[IdentificationRow], list[TraceRow]]:
     """Rows for a recording, its identifications by ``methods`` and their traces.
 
     Parameters
     ----------
-    result : Identification
-        The paper's pipeline on one recording.
-    methods : sequence of str
-        ``paper`` (required: it is what the recording was identified with)
-        and optionally ``output-error``.
+    context : Context
+        The recording and the identification options.
+    methods : sequence of str, optional
+        Registered identification methods (default: the default ones); each
+        fits every damping model it supports.
     """
-    unknown = [m for m in methods if m not in METHODS]
-    if unknown:
-        raise ValueError(f"unknown method(s) {unknown}; use {', '.join(METHODS)}")
-    if "paper" not in methods:
-        raise ValueError("methods must include 'paper'")
+    chosen = _methods(methods)
     stamp = now()
     version = package_version()
-    recording = RecordingRow.of(result.recording, added_at=stamp)
-    options = {k: v for k, v in dataclasses.asdict(result.options).items() if k != "progress"}
-    details = result.to_dict()
-    common = {
-        "n_steps": result.segments.n_steps,
-        "sources": details["sources"],
-        "steady_state_r2": result.steady.r_squared,
-        "beta_dps": result.steady.beta_dps,
-        "piecewise_rms_deg": result.piecewise.rms_deg,
-    }
+    recording = RecordingRow.of(context.recording, added_at=stamp)
+    options = {k: v for k, v in dataclasses.asdict(context.options).items() if k != "progress"}
     identifications: list[IdentificationRow] = []
     traces: list[TraceRow] = []
-    for model in MODELS:
-        metrics: dict[str, Any] = {
-            **common,
-            **_resimulation_metrics(result.resimulations[model]),
-            "steps": details["steps"],
-        }
-        if model == "constant":
-            metrics["damping_fit_rms_dps"] = result.damping.rms_dps
-            metrics["noise_study"] = details["noise_study"]
-        else:
-            metrics["damping_vs_fin_r2"] = result.damping_vs_fin.r_squared
-            metrics["damping_vs_fin"] = details["damping_vs_fin"]
-        identifications.append(
-            IdentificationRow(
-                recording.content_hash,
-                "paper",
-                model,
-                result.model(model),
-                metrics,
-                options,
-                version,
-                stamp,
-            )
-        )
-        traces.append(
-            _trace_row(recording.content_hash, "paper", result.disturbances[model], stamp)
-        )
-    if "output-error" in methods:
-        from identification.baselines import output_error
-
-        for model in MODELS:
-            fit = output_error(result.recording, model, options=result.options)
-            dist = identify_disturbance(
-                fit.params,
-                model,
-                result.grid,
-                result.theta_fine,
-                result.velocity_fine,
-                interval_s=result.options.ud_interval_s,
-            )
-            resim = resimulate(
-                dist,
-                result.recording,
-                result.grid,
-                result.theta_fine,
-                result.velocity_dps,
-                result.angle_deg,
-            )
-            metrics = {
-                **common,
-                **_resimulation_metrics(resim),
-                "rate_rmse_dps": fit.rate_rmse_dps,
-                "nfev": fit.nfev,
-                "converged": fit.success,
-                "optimizer_message": fit.message,
-            }
+    for method in chosen:
+        for model, fitted in fit(context, method, _models_of(method)).items():
             identifications.append(
                 IdentificationRow(
                     recording.content_hash,
-                    "output-error",
+                    method,
                     model,
-                    fit.params,
-                    metrics,
+                    fitted.params,
+                    fitted.metrics,
                     options,
                     version,
                     stamp,
                 )
             )
-            traces.append(_trace_row(recording.content_hash, "output-error", dist, stamp))
+            traces.append(_trace_row(recording, fitted, stamp, version))
     return recording, identifications, traces
+
+
+def _surrogate_method(methods: Sequence[str], surrogate_method: str | None) -> str:
+    if surrogate_method is not None:
+        return METHODS.check(surrogate_method)
+    return "paper" if "paper" in methods else methods[0]
+
+
+def add_recording(
+    db: Store,
+    recording: Recording,
+    options: IdentifyOptions | None = None,
+    *,
+    methods: Sequence[str] | None = None,
+    surrogates: int = 0,
+    surrogate_kinds: Sequence[str] = ("iaaft",),
+    surrogate_seed: int = 0,
+    surrogate_method: str | None = None,
+) -> StoreResult:
+    """Identify a recording and store it with all its results, in one transaction.
+
+    Each method in ``methods`` gives, for every model it fits, its parameters,
+    fit metrics and ``u_d`` trace.  ``surrogates`` surrogate traces of each
+    kind in ``surrogate_kinds`` are made from each trace of
+    ``surrogate_method`` (the paper's, when it runs).  Nothing is written
+    unless all of it succeeds.  A recording whose samples are already stored
+    is recognised (``StoreResult.recordings == 0``): it is not stored twice,
+    and identified again only by the methods it lacks.
+
+    Parameters
+    ----------
+    db : DisturbanceDB
+        Where to store.
+    recording : Recording
+        Any recording the pipeline accepts.
+    options : IdentifyOptions, optional
+        Identification settings (the paper's by default).
+    methods : sequence of str, optional
+        Registered identification methods; default: the default ones.
+    surrogates : int
+        Surrogates per kind and per trace of ``surrogate_method``.
+    surrogate_kinds : sequence of str
+        ``iaaft`` and/or ``ar``.
+    surrogate_seed : int
+        Seed of the first surrogate (the next ones count up).
+    surrogate_method : str, optional
+        Whose traces the surrogates are made from.
+    """
+    chosen = _methods(methods)
+    source_method = _surrogate_method(chosen, surrogate_method)
+    recording_hash = content_hash(recording.columns())
+    missing = [
+        m
+        for m in chosen
+        if not all(db.has_identification(recording_hash, m, model) for model in _models_of(m))
+    ]
+    if db.has_recording(recording_hash) and not missing:
+        stored_id = db.recording_row(recording_hash).id
+        if surrogates == 0:
+            return StoreResult(stored_id, 0, 0, 0, 1, ())
+        # Everything identified already: only the surrogates asked for are new.
+        db.check_version(writing=True)
+        made: list[TraceRow] = []
+        for model in _models_of(source_method):
+            source = db.trace(identified_uid(recording_hash, source_method, model))
+            made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
+        stored = db.store(traces=made)
+        return dataclasses.replace(stored, recording_id=stored_id, skipped=stored.skipped + 1)
+    return _store(
+        db,
+        Context(recording, options),
+        missing,
+        surrogates=surrogates,
+        surrogate_kinds=surrogate_kinds,
+        surrogate_seed=surrogate_seed,
+        surrogate_method=source_method,
+    )
+
+
+def add_identification(
+    db: Store,
+    result: Identification,
+    *,
+    methods: Sequence[str] | None = None,
+    surrogates: int = 0,
+    surrogate_kinds: Sequence[str] = ("iaaft",),
+    surrogate_seed: int = 0,
+    surrogate_method: str | None = None,
+) -> StoreResult:
+    """:func:`add_recording` for a recording the paper's pipeline has just identified.
+
+    The pipeline's result is reused for ``method="paper"``; other methods run
+    on the same measurements.
+    """
+    chosen = _methods(methods)
+    return _store(
+        db,
+        Context(result.recording, result.options, paper=result),
+        chosen,
+        surrogates=surrogates,
+        surrogate_kinds=surrogate_kinds,
+        surrogate_seed=surrogate_seed,
+        surrogate_method=_surrogate_method(chosen, surrogate_method),
+    )
+
+
+def _store(
+    db: Store,
+    context: Context,
+    methods: Sequence[str],
+    *,
+    surrogates: int,
+    surrogate_kinds: Sequence[str],
+    surrogate_seed: int,
+    surrogate_method: str,
+) -> StoreResult:
+    db.check_version(writing=True)
+    recording, identifications, traces = identification_rows(context, methods)
+    if db.has_recording(recording.content_hash):
+        # Partly stored already: new identifications must be made like the stored
+        # ones, and surrogates come from the stored traces, never from new twins.
+        stored_options = {
+            _options_key(i.options)
+            for i in db.identifications(recording_hash=recording.content_hash)
+        }
+        if stored_options and stored_options != {_options_key(identifications[0].options)}:
+            raise DatabaseError(
+                f"{db.path}: recording {recording.name} is stored with other identification "
+                "options; add it to a new database to identify it differently"
+            )
+    made: list[TraceRow] = []
+    if surrogates:
+        sources = [t for t in traces if t.method == surrogate_method]
+        if not sources:
+            for model in _models_of(surrogate_method):
+                uid = identified_uid(recording.content_hash, surrogate_method, model)
+                if db.has_trace(uid):
+                    sources.append(db.trace(uid))
+        for trace in sources:
+            source = db.trace(trace.uid) if db.has_trace(trace.uid) else trace
+            made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
+    return db.store([recording], identifications, [*traces, *made])
+
+
+def _options_key(options: Any) -> str:
+    return json.dumps(dict(options), sort_keys=True)
+
+
+def add_surrogates(
+    db: Store, uid: str, kind: str = "iaaft", count: int = 1, seed: int = 0
+) -> StoreResult:
+    """Make ``count`` surrogates of a stored trace and store them (one transaction)."""
+    if kind not in SURROGATE_KINDS:
+        raise ValueError(f"kind must be one of {', '.join(SURROGATE_KINDS)}, not {kind!r}")
+    source = db.trace(uid)
+    if source.kind != "identified":
+        raise DatabaseError(f"{db.path}: trace {uid} is itself a surrogate; use its source")
+    db.check_version(writing=True)
+    return db.store(traces=surrogate_rows(source, (kind,), count, seed))
 
 
 def surrogate_rows(
@@ -207,6 +325,7 @@ def surrogate_rows(
     unknown = [k for k in kinds if k not in SURROGATE_KINDS]
     if unknown:
         raise ValueError(f"unknown surrogate kind(s) {unknown}; use {', '.join(SURROGATE_KINDS)}")
+    samples = source.samples()
     rows: list[TraceRow] = []
     stamp = now()
     entropy = int(source.checksum[:16], 16)
@@ -214,26 +333,23 @@ def surrogate_rows(
         for k in range(count):
             s = seed + k
             rng = np.random.default_rng([s, entropy])
-            made = make_surrogate(source.u_d_deg, kind, rng)
+            made = make_surrogate(samples, kind, rng)
             u = np.asarray(made.u_d_deg, dtype=float)
-            check = check_surrogate(source.u_d_deg, u, source.dt_s)
+            check = check_surrogate(samples, u, source.dt_s)
             rows.append(
-                TraceRow(
+                dataclasses.replace(
+                    source,
                     uid=surrogate_uid(source.uid, kind, s),
-                    recording_hash=source.recording_hash,
-                    method=source.method,
-                    model=source.model,
                     kind=kind,
                     source_uid=source.uid,
                     seed=s,
                     settings=dict(made.settings),
-                    dt_s=source.dt_s,
-                    t0_s=source.t0_s,
-                    u_d_deg=u,
                     checksum=checksum(u),
                     statistics=trace_summary(u),
                     validation=check.to_dict(),
                     created_at=stamp,
+                    u_d_deg=u,
+                    id=None,
                 )
             )
     return rows

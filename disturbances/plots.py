@@ -5,27 +5,27 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal, stats
 
-from disturbances.db import Trace
+from disturbances.rows import TraceRow
 from rocketroll_common.plotting import new_figure, png_bytes
 
 __all__ = ["plot_trace"]
 
 
-def plot_trace(trace: Trace, source: Trace | None = None) -> bytes:
+def plot_trace(trace: TraceRow, source: TraceRow | None = None) -> bytes:
     """A trace over time, its histogram with the fitted normal, and its Welch PSD.
 
     For a surrogate, ``source`` (the trace it was made from) is drawn beside
     it in grey, so a reader sees at once whether the spectrum and the
     distribution were kept.
     """
-    info = trace.info
-    u = trace.u_d_deg
+    info = trace
+    u = trace.samples()
     t = info.t0_s + info.dt_s * np.arange(u.size)
     fig = new_figure(figsize=(11, 6.5), constrained_layout=True)
     grid = fig.add_gridspec(2, 2, height_ratios=(1, 1.1))
     ax = fig.add_subplot(grid[0, :])
     if source is not None:
-        ax.step(t, source.u_d_deg, where="post", lw=0.5, color="0.6", label="source")
+        ax.step(t, source.samples(), where="post", lw=0.5, color="0.6", label="source")
     ax.step(t, u, where="post", lw=0.6, color="C4", label=info.kind)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("u_d (° of fin angle)")
@@ -40,7 +40,7 @@ def plot_trace(trace: Trace, source: Trace | None = None) -> bytes:
     ax = fig.add_subplot(grid[1, 0])
     bins = np.histogram_bin_edges(u, bins="fd").tolist()
     if source is not None:
-        ax.hist(source.u_d_deg, bins=bins, density=True, color="0.75", label="source")
+        ax.hist(source.samples(), bins=bins, density=True, color="0.75", label="source")
     ax.hist(u, bins=bins, density=True, histtype="step", lw=1.5, color="C4", label=info.kind)
     x = np.linspace(bins[0], bins[-1], 200)
     ax.plot(x, stats.norm.pdf(x, info.mean_deg, info.sd_deg), "k--", lw=1, label="fitted normal")
@@ -53,7 +53,7 @@ def plot_trace(trace: Trace, source: Trace | None = None) -> bytes:
     ax = fig.add_subplot(grid[1, 1])
     nperseg = min(256, u.size)
     if source is not None:
-        f, p = signal.welch(source.u_d_deg, fs=1 / info.dt_s, nperseg=nperseg)
+        f, p = signal.welch(source.samples(), fs=1 / info.dt_s, nperseg=nperseg)
         ax.loglog(f[1:], p[1:], color="0.6", lw=1.5, label="source")
     f, p = signal.welch(u, fs=1 / info.dt_s, nperseg=nperseg)
     ax.loglog(f[1:], p[1:], color="C4", lw=1, label=info.kind)

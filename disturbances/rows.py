@@ -1,9 +1,13 @@
 """What the database holds, as plain frozen rows (no SQL here).
 
-The same row types carry data into the database (:mod:`disturbances.ingest`
-makes them from an identification), out of it (:meth:`DisturbanceDB.dump`)
+The same three row types carry data into the database (:mod:`disturbances.ingest`
+makes them from an identification), out of it (listings, :meth:`DisturbanceDB.dump`)
 and through export and import (:mod:`disturbances.exchange`), so there is one
-description of a stored recording, identification and trace.
+description of a stored recording, identification and trace.  Read from a
+database a row also carries its row ``id`` and what its joins give (a trace's
+recording name, split and parameters); a listing leaves the samples out
+(``samples``/``u_d_deg`` is None) and :meth:`DisturbanceDB.trace` reads them,
+checked against their checksum.
 
 Identity is by content, never by row number:
 
@@ -26,21 +30,19 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.model import RollParams
-from identification.recording import Recording
+from identification.model import RollParams, check_model
+from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
     "KINDS",
-    "METHODS",
-    "MODELS",
     "SPLITS",
     "SURROGATE_KINDS",
     "TEST_FRACTION",
@@ -55,10 +57,6 @@ __all__ = [
     "surrogate_uid",
 ]
 
-#: Identification methods: the paper's integral least squares, the output-error peer.
-METHODS = ("paper", "output-error")
-#: Model variants: constant damping (eq. 29) and θ-dependent damping (eq. 49).
-MODELS = ("constant", "theta")
 #: Surrogate generators of :mod:`disturbances.surrogate`.
 SURROGATE_KINDS = ("iaaft", "ar")
 #: A trace is identified from a recording, or a surrogate of another trace.
@@ -112,8 +110,34 @@ def _frozen(mapping: Mapping[str, Any]) -> Mapping[str, Any]:
     return MappingProxyType(dict(mapping))
 
 
+class _Row:
+    """Rows compare by value (sample arrays element by element) and pickle (a bank goes
+    to subprocess vector envs) with their read-only mappings."""
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {k: dict(v) if isinstance(v, MappingProxyType) else v for k, v in vars(self).items()}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        for k, v in state.items():
+            object.__setattr__(self, k, MappingProxyType(v) if isinstance(v, dict) else v)
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        for f in fields(self):  # type: ignore[arg-type]
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+                if a is None or b is None or not np.array_equal(a, b):
+                    return False
+            elif a != b:
+                return False
+        return True
+
+
 @dataclass(frozen=True, eq=False)
-class RecordingRow:
+class RecordingRow(_Row):
     """A recording as stored: its samples, exactly, with name, source and metadata.
 
     Attributes
@@ -126,10 +150,18 @@ class RecordingRow:
         The recording's other ``# key: value`` lines.
     columns : tuple of str
         Column names, ``time_s`` first.
-    samples : ndarray, shape (n, len(columns))
-        The values, float64.
+    samples : ndarray, shape (n, len(columns)), or None
+        The values, float64; None in a listing.
     added_at : str
         When it entered the database (UTC, ISO 8601).
+    n_samples, dt_s, duration_s : int, float, float
+        Length, median sampling interval (s) and span (s); computed from the
+        samples when they are given.
+    split : str
+        ``train`` or ``test``: the recording's ``split`` metadata if it has
+        one, else :func:`split_of` its content hash (computed when not given).
+    id : int or None
+        Row id in the database it was read from.
     """
 
     content_hash: str
@@ -137,22 +169,46 @@ class RecordingRow:
     source: str
     metadata: Mapping[str, str]
     columns: tuple[str, ...]
-    samples: FloatArray
+    samples: FloatArray | None
     added_at: str
+    n_samples: int = 0
+    dt_s: float = 0.0
+    duration_s: float = 0.0
+    split: str = ""
+    id: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "metadata", _frozen(self.metadata))
-        object.__setattr__(self, "samples", readonly_array(self.samples))
-        if self.samples.ndim != 2 or self.samples.shape[1] != len(self.columns):
+        object.__setattr__(self, "columns", tuple(self.columns))
+        if self.source not in SOURCES:
             raise ValueError(
-                f"recording {self.name!r}: samples of shape {self.samples.shape} do not match "
-                f"{len(self.columns)} columns"
+                f"recording {self.name!r}: source must be one of {', '.join(SOURCES)}, "
+                f"not {self.source!r}"
             )
-        actual = content_hash(self.column_dict())
-        if actual != self.content_hash:
+        if self.samples is not None:
+            object.__setattr__(self, "samples", readonly_array(self.samples))
+            if self.samples.ndim != 2 or self.samples.shape[1] != len(self.columns):
+                raise ValueError(
+                    f"recording {self.name!r}: samples of shape {self.samples.shape} do not "
+                    f"match {len(self.columns)} columns"
+                )
+            actual = content_hash(self.column_dict())
+            if actual != self.content_hash:
+                raise ValueError(
+                    f"recording {self.name!r}: content hash {self.content_hash[:12]}… does not "
+                    f"match its samples ({actual[:12]}…)"
+                )
+            time = self.samples[:, 0]
+            object.__setattr__(self, "n_samples", int(self.samples.shape[0]))
+            object.__setattr__(self, "dt_s", float(np.median(np.diff(time))))
+            object.__setattr__(self, "duration_s", float(time[-1] - time[0]))
+        declared = self.metadata.get("split")
+        rule = declared if declared in SPLITS else split_of(self.content_hash)
+        if not self.split:
+            object.__setattr__(self, "split", rule)
+        elif self.split != rule:
             raise ValueError(
-                f"recording {self.name!r}: content hash {self.content_hash[:12]}… does not "
-                f"match its samples ({actual[:12]}…)"
+                f"recording {self.name!r}: split {self.split!r} differs from its rule ({rule!r})"
             )
 
     @classmethod
@@ -169,16 +225,10 @@ class RecordingRow:
             added_at=added_at,
         )
 
-    @property
-    def split(self) -> str:
-        """``train`` or ``test``: the recording's ``split`` metadata if it has one,
-        else :func:`split_of` its content hash."""
-        declared = self.metadata.get("split")
-        return declared if declared in SPLITS else split_of(self.content_hash)
-
     def column_dict(self) -> dict[str, FloatArray]:
-        """``{column: values}``."""
-        return {name: self.samples[:, i] for i, name in enumerate(self.columns)}
+        """``{column: values}`` (the samples must have been read)."""
+        samples = self.sample_array()
+        return {name: samples[:, i] for i, name in enumerate(self.columns)}
 
     def recording(self) -> Recording:
         """The :class:`~identification.recording.Recording` (validated again)."""
@@ -186,9 +236,15 @@ class RecordingRow:
             name=self.name, source=self.source, metadata=self.metadata, **self.column_dict()
         )
 
+    def sample_array(self) -> FloatArray:
+        """``samples``, which must have been read (:meth:`DisturbanceDB.recording_row`)."""
+        if self.samples is None:
+            raise ValueError(f"recording {self.name!r}: its samples were not read")
+        return self.samples
+
 
 @dataclass(frozen=True, eq=False)
-class IdentificationRow:
+class IdentificationRow(_Row):
     """One identified model of one recording.
 
     Attributes
@@ -196,9 +252,9 @@ class IdentificationRow:
     recording_hash : str
         The recording it was identified from.
     method : str
-        ``paper`` or ``output-error``.
+        The identification method (:data:`identification.methods.METHODS`).
     model : str
-        ``constant`` or ``theta``.
+        ``constant`` or ``theta`` (:data:`identification.model.MODELS`).
     params : RollParams
         α, θ̄, β̄ (or the constant ``a``) and ᾱ.
     metrics : mapping
@@ -209,6 +265,10 @@ class IdentificationRow:
         The rocketroll version that identified it.
     created_at : str
         UTC, ISO 8601.
+    recording : str
+        The recording's name (read from a database).
+    id : int or None
+        Row id in the database it was read from.
     """
 
     recording_hash: str
@@ -219,12 +279,13 @@ class IdentificationRow:
     options: Mapping[str, Any]
     package_version: str
     created_at: str
+    recording: str = ""
+    id: int | None = None
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {', '.join(METHODS)}, not {self.method!r}")
-        if self.model not in MODELS:
-            raise ValueError(f"model must be one of {', '.join(MODELS)}, not {self.model!r}")
+        if not self.method:
+            raise ValueError("an identification needs a method name")
+        check_model(self.model)
         object.__setattr__(self, "metrics", _frozen(json_safe(self.metrics)))
         object.__setattr__(self, "options", _frozen(json_safe(self.options)))
 
@@ -244,14 +305,19 @@ def surrogate_uid(source_uid: str, kind: str, seed: int) -> str:
     return f"{source_uid}-{kind}-{seed}"
 
 
+#: Keys of a trace's ``statistics``.
+STATISTICS = ("mean_deg", "sd_deg", "q05_deg", "q95_deg", "normality_p")
+
+
 @dataclass(frozen=True, eq=False)
-class TraceRow:
+class TraceRow(_Row):
     """One ``u_d`` trace: identified from a recording, or a surrogate of another trace.
 
     Attributes
     ----------
     uid : str
-        Stable identity (see the module docstring).
+        Stable identity, the same in every database and export (see the
+        module docstring).
     recording_hash, method, model : str
         The identification whose parameters go with it (for a surrogate:
         its source's).
@@ -267,17 +333,30 @@ class TraceRow:
         Δt over which each sample of ``u_d`` is held, s (eq. 44: 0.1).
     t0_s : float
         Start of the first interval, s (recording time).
-    u_d_deg : ndarray, shape (n,)
-        The trace, ° of equivalent fin angle.
     checksum : str
-        :func:`checksum` of ``u_d_deg`` (checked on construction).
+        :func:`checksum` of the samples (checked whenever they are present).
     statistics : mapping
         ``mean_deg``, ``sd_deg``, ``q05_deg``, ``q95_deg``, ``normality_p``
         (Lilliefors on the thinned trace; ``None`` if it could not be computed).
     validation : mapping or None
-        A surrogate's check against its source (:mod:`disturbances.surrogate`).
+        A surrogate's check against its source (KS p-value, PSD
+        log-distance, ``passed``); ``None`` for an identified trace.
     created_at : str
         UTC, ISO 8601.
+    u_d_deg : ndarray, shape (n,), or None
+        The trace, ° of equivalent fin angle, each sample held for ``dt_s``
+        (read-only); None in a listing.
+    n_samples : int
+        Length (from ``u_d_deg`` when given).
+    params : RollParams or None
+        The parameters identified together with it (its identification's).
+    recording, source, split : str
+        Its recording's name, source and split (for a surrogate: its
+        source's).
+    package_version : str
+        The rocketroll version that identified it.
+    id : int or None
+        Row id in the database it was read from (use ``uid`` across databases).
     """
 
     uid: str
@@ -290,30 +369,41 @@ class TraceRow:
     settings: Mapping[str, Any]
     dt_s: float
     t0_s: float
-    u_d_deg: FloatArray
     checksum: str
     statistics: Mapping[str, Any]
     validation: Mapping[str, Any] | None
-    created_at: str = field(default="")
+    created_at: str = ""
+    u_d_deg: FloatArray | None = None
+    n_samples: int = 0
+    params: RollParams | None = None
+    recording: str = ""
+    source: str = ""
+    split: str = ""
+    package_version: str = ""
+    id: int | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"trace {self.uid}: kind must be one of {', '.join(KINDS)}")
         if (self.kind == "identified") != (self.source_uid is None):
             raise ValueError(f"trace {self.uid}: only a surrogate has a source trace")
-        object.__setattr__(self, "u_d_deg", readonly_array(self.u_d_deg))
-        if self.u_d_deg.ndim != 1 or self.u_d_deg.size < 2:
-            raise ValueError(f"trace {self.uid}: needs a 1-D trace of at least 2 samples")
-        if not np.all(np.isfinite(self.u_d_deg)):
-            raise ValueError(f"trace {self.uid}: has NaN or infinite samples")
+        check_model(self.model)
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise ValueError(f"trace {self.uid}: dt_s must be positive, got {self.dt_s!r}")
-        actual = checksum(self.u_d_deg)
-        if actual != self.checksum:
-            raise ValueError(
-                f"trace {self.uid}: checksum {self.checksum[:12]}… does not match its samples "
-                f"({actual[:12]}…)"
-            )
+        if self.u_d_deg is not None:
+            object.__setattr__(self, "u_d_deg", readonly_array(self.u_d_deg))
+            u = self.u_d_deg
+            if u.ndim != 1 or u.size < 2:
+                raise ValueError(f"trace {self.uid}: needs a 1-D trace of at least 2 samples")
+            if not np.all(np.isfinite(u)):
+                raise ValueError(f"trace {self.uid}: has NaN or infinite samples")
+            actual = checksum(u)
+            if actual != self.checksum:
+                raise ValueError(
+                    f"trace {self.uid}: checksum {self.checksum[:12]}… does not match its "
+                    f"samples ({actual[:12]}…)"
+                )
+            object.__setattr__(self, "n_samples", int(u.size))
         object.__setattr__(self, "settings", _frozen(json_safe(self.settings)))
         object.__setattr__(self, "statistics", _frozen(json_safe(self.statistics)))
         if self.validation is not None:
@@ -323,3 +413,52 @@ class TraceRow:
     def identification_key(self) -> tuple[str, str, str]:
         """``(recording_hash, method, model)`` of its parameters."""
         return (self.recording_hash, self.method, self.model)
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the trace, s."""
+        return self.n_samples * self.dt_s
+
+    @property
+    def mean_deg(self) -> float:
+        """Mean of ``u_d``, °."""
+        return float(self.statistics["mean_deg"])
+
+    @property
+    def sd_deg(self) -> float:
+        """Standard deviation of ``u_d``, °."""
+        return float(self.statistics["sd_deg"])
+
+    @property
+    def q05_deg(self) -> float:
+        """5 % quantile of ``u_d``, °."""
+        return float(self.statistics["q05_deg"])
+
+    @property
+    def q95_deg(self) -> float:
+        """95 % quantile of ``u_d``, °."""
+        return float(self.statistics["q95_deg"])
+
+    @property
+    def normality_p(self) -> float | None:
+        """Lilliefors p-value on the thinned trace (None if it could not be computed)."""
+        p = self.statistics.get("normality_p")
+        return None if p is None else float(p)
+
+    def samples(self) -> FloatArray:
+        """``u_d_deg``, which must have been read (:meth:`DisturbanceDB.trace`)."""
+        if self.u_d_deg is None:
+            raise ValueError(f"trace {self.uid}: its samples were not read")
+        return self.u_d_deg
+
+    def rocket(self) -> RollParams:
+        """``params``, which a row read from a database always has."""
+        if self.params is None:
+            raise ValueError(f"trace {self.uid}: its parameters are not known")
+        return self.params
+
+    def __repr__(self) -> str:
+        return (
+            f"TraceRow(uid={self.uid!r}, kind={self.kind}, {self.method}/{self.model}, "
+            f"split={self.split or '?'}, n={self.n_samples}, dt={self.dt_s:g} s)"
+        )

@@ -1,0 +1,199 @@
+"""The database's schema, and the migrations that bring an older file up to it.
+
+Version :data:`SCHEMA_VERSION` is written to ``PRAGMA user_version``; the
+file is marked with ``PRAGMA application_id`` :data:`APPLICATION_ID`.
+
+Version 2 (this one) validates method, model, kind and source names in
+Python -- against the registries of identification methods
+(:data:`identification.methods.METHODS`), damping models
+(:data:`identification.model.MODELS`), surrogate kinds and recording sources
+-- instead of in ``CHECK`` constraints, so a new identification method needs
+no new schema.  Version 1 (the first release) had those ``CHECK``\\ s.
+
+:func:`migrate` upgrades an older file in place, in one transaction, after
+copying it to a backup beside it: a migration that fails or is killed leaves
+the file as it was (SQLite rolls the transaction back), and the backup is
+kept either way.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from rocketroll_common.files import file_mode
+
+__all__ = ["APPLICATION_ID", "SCHEMA", "SCHEMA_VERSION", "TABLES", "backup_path", "migrate"]
+
+#: Version of the schema this package writes and reads.
+SCHEMA_VERSION = 2
+#: ``PRAGMA application_id`` of a rocketroll disturbance database ("RRDB").
+APPLICATION_ID = 0x52524442
+
+_RECORDINGS = """
+CREATE TABLE recordings (
+    id           INTEGER PRIMARY KEY,
+    content_hash TEXT NOT NULL UNIQUE,
+    name         TEXT NOT NULL,
+    source       TEXT NOT NULL,
+    metadata     TEXT NOT NULL,
+    columns      TEXT NOT NULL,
+    n_samples    INTEGER NOT NULL CHECK (n_samples > 0),
+    dt_s         REAL NOT NULL,
+    duration_s   REAL NOT NULL,
+    samples      BLOB NOT NULL,
+    split        TEXT NOT NULL CHECK (split IN ('train', 'test')),
+    added_at     TEXT NOT NULL
+)"""
+_IDENTIFICATIONS = """
+CREATE TABLE identifications (
+    id                  INTEGER PRIMARY KEY,
+    recording_id        INTEGER NOT NULL REFERENCES recordings(id) ON DELETE CASCADE,
+    method              TEXT NOT NULL,
+    model               TEXT NOT NULL,
+    alpha               REAL NOT NULL,
+    theta_bar_deg       REAL NOT NULL,
+    beta_bar_per_s      REAL NOT NULL,
+    alpha_bar_per_deg_s REAL NOT NULL,
+    metrics             TEXT NOT NULL,
+    options             TEXT NOT NULL,
+    package_version     TEXT NOT NULL,
+    created_at          TEXT NOT NULL,
+    UNIQUE (recording_id, method, model)
+)"""
+_TRACES = """
+CREATE TABLE traces (
+    id                INTEGER PRIMARY KEY,
+    uid               TEXT NOT NULL UNIQUE,
+    identification_id INTEGER NOT NULL REFERENCES identifications(id) ON DELETE CASCADE,
+    kind              TEXT NOT NULL,
+    source_trace_id   INTEGER REFERENCES traces(id) ON DELETE CASCADE,
+    seed              INTEGER,
+    settings          TEXT NOT NULL,
+    dt_s              REAL NOT NULL CHECK (dt_s > 0),
+    t0_s              REAL NOT NULL,
+    n_samples         INTEGER NOT NULL CHECK (n_samples > 1),
+    samples           BLOB NOT NULL,
+    checksum          TEXT NOT NULL,
+    mean_deg          REAL NOT NULL,
+    sd_deg            REAL NOT NULL,
+    q05_deg           REAL NOT NULL,
+    q95_deg           REAL NOT NULL,
+    normality_p       REAL,
+    validation        TEXT,
+    created_at        TEXT NOT NULL,
+    CHECK ((kind = 'identified') = (source_trace_id IS NULL))
+)"""
+_INDEXES = (
+    "CREATE INDEX traces_by_identification ON traces (identification_id)",
+    "CREATE INDEX traces_by_source ON traces (source_trace_id)",
+    "CREATE INDEX identifications_by_recording ON identifications (recording_id)",
+)
+_INFO = "CREATE TABLE info (\n    key   TEXT PRIMARY KEY,\n    value TEXT NOT NULL\n)"
+
+#: The statements that make a new, empty database of :data:`SCHEMA_VERSION`.
+SCHEMA: tuple[str, ...] = (_INFO, _RECORDINGS, _IDENTIFICATIONS, _TRACES, *_INDEXES)
+#: The tables a database of this schema has.
+TABLES = ("identifications", "info", "recordings", "traces")
+
+
+def _rebuild(conn: sqlite3.Connection, table: str, create: str) -> None:
+    """Replace ``table`` by one made with ``create``, keeping every row and row id."""
+    conn.execute(create.replace(f"CREATE TABLE {table} (", f"CREATE TABLE {table}_new (", 1))
+    columns = [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
+    names = ", ".join(columns)
+    conn.execute(f"INSERT INTO {table}_new ({names}) SELECT {names} FROM {table}")
+    conn.execute(f"DROP TABLE {table}")
+    conn.execute(f"ALTER TABLE {table}_new RENAME TO {table}")
+
+
+def _migrate_1_to_2(conn: sqlite3.Connection) -> None:
+    """Version 1 -> 2: drop the ``CHECK``\\ s on names (method, model, kind, source).
+
+    SQLite cannot drop a constraint, so each table is rebuilt (the
+    procedure of SQLite's "ALTER TABLE" page): new table, copy, drop, rename,
+    indexes again.  Row ids are kept, so a trace's ``id`` stays what it was.
+    """
+    for table, create in (
+        ("recordings", _RECORDINGS),
+        ("identifications", _IDENTIFICATIONS),
+        ("traces", _TRACES),
+    ):
+        _rebuild(conn, table, create)
+    for statement in _INDEXES:
+        conn.execute(statement)
+
+
+#: ``version -> migration`` to ``version + 1``, applied in order.
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _migrate_1_to_2}
+
+
+def backup_path(path: Path, version: int) -> Path:
+    """Where the backup of ``path`` at schema ``version`` goes (a free name beside it)."""
+    candidate = Path(f"{path}.schema{version}.bak")
+    k = 1
+    while candidate.exists():
+        k += 1
+        candidate = Path(f"{path}.schema{version}.{k}.bak")
+    return candidate
+
+
+def _backup(conn: sqlite3.Connection, path: Path, version: int) -> Path:
+    """A consistent copy of the database (SQLite's online backup), written atomically."""
+    target = backup_path(path, version)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        copy = sqlite3.connect(tmp)
+        try:
+            conn.backup(copy)
+        finally:
+            copy.close()
+        os.chmod(tmp, file_mode())
+        os.replace(tmp, target)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    return target
+
+
+def migrate(conn: sqlite3.Connection, path: Path, version: int) -> Path:
+    """Upgrade the database on ``conn`` from ``version`` to :data:`SCHEMA_VERSION`.
+
+    The file is first copied to :func:`backup_path`; then every migration
+    runs in one ``BEGIN IMMEDIATE`` transaction with foreign keys off (as a
+    table rebuild needs), the foreign keys are checked, ``user_version`` is
+    set, and only then is it committed.  A failure (or a killed process)
+    leaves the file at ``version``.
+
+    Returns
+    -------
+    Path
+        The backup.
+    """
+    if version not in MIGRATIONS and version != SCHEMA_VERSION:
+        raise ValueError(f"no migration from schema version {version}")
+    backup = _backup(conn, path, version)
+    conn.execute("PRAGMA foreign_keys = OFF")
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            # Another process may have migrated it while this one waited for the lock.
+            current = int(conn.execute("PRAGMA user_version").fetchone()[0])
+            while current < SCHEMA_VERSION:
+                MIGRATIONS[current](conn)
+                current += 1
+            bad = conn.execute("PRAGMA foreign_key_check").fetchall()
+            if bad:
+                raise sqlite3.IntegrityError(f"foreign keys broken by the migration: {bad[:3]}")
+            conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            conn.execute("COMMIT")
+        except BaseException:
+            if conn.in_transaction:
+                conn.execute("ROLLBACK")
+            raise
+    finally:
+        conn.execute("PRAGMA foreign_keys = ON")
+    return backup

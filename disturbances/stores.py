@@ -1,0 +1,132 @@
+"""Storage back ends of the disturbance database: what one must do, and where it registers.
+
+Everything above the store -- identifying and ingesting
+(:mod:`disturbances.ingest`), trace banks (:mod:`disturbances.bank`), export
+and import (:mod:`disturbances.exchange`), the command line -- talks to a
+:class:`Store`: rows of :mod:`disturbances.rows` in, rows out.
+:class:`~disturbances.db.DisturbanceDB` (SQLite, a file) is the one this
+distribution has.  Another back end (a server database, an object store) is
+one module with a class that does what :class:`Store` says, registered once::
+
+    from disturbances.stores import register_store
+
+    register_store("postgresql", "my_package.pg:PostgresStore", summary="a PostgreSQL server")
+
+after which ``--db postgresql://host/name`` (or ``open_store(...)``) opens
+it: the class is called with the rest of the location and ``create=``.
+A location without ``scheme://`` is an SQLite file.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+from disturbances.db import DisturbanceDB, Dump
+from disturbances.rows import IdentificationRow, RecordingRow, TraceRow
+from rocketroll_common.registry import Registry
+
+__all__ = ["STORES", "Store", "open_store", "register_store"]
+
+
+class Store(Protocol):
+    """What a disturbance store does (see :class:`disturbances.db.DisturbanceDB`)."""
+
+    path: Path
+
+    def store(
+        self,
+        recordings: Sequence[RecordingRow] = ...,
+        identifications: Sequence[IdentificationRow] = ...,
+        traces: Sequence[TraceRow] = ...,
+    ) -> Any:
+        """Insert rows in one transaction, skipping those present."""
+
+    def recordings(self) -> list[RecordingRow]:
+        """Every recording, without samples."""
+
+    def recording_row(self, key: int | str) -> RecordingRow:
+        """One recording with its samples."""
+
+    def identifications(self, **filters: Any) -> list[IdentificationRow]:
+        """Stored identifications."""
+
+    def traces(self, **filters: Any) -> list[TraceRow]:
+        """Stored traces, without samples."""
+
+    def trace(self, key: int | str) -> TraceRow:
+        """One trace with its samples, verified."""
+
+    def load_traces(self, rows: Iterable[TraceRow]) -> list[TraceRow]:
+        """Listed traces with their samples, verified."""
+
+    def has_recording(self, recording_hash: str) -> bool:
+        """Whether a recording is stored."""
+
+    def has_identification(self, recording_hash: str, method: str, model: str) -> bool:
+        """Whether an identification is stored."""
+
+    def has_trace(self, uid: str) -> bool:
+        """Whether a trace is stored."""
+
+    def info(self) -> dict[str, str]:
+        """Key/value facts about the store (creator, origin, ...)."""
+
+    def set_info(self, values: Mapping[str, str]) -> None:
+        """Set such facts."""
+
+    def check_version(self, *, writing: bool = False) -> None:
+        """Warn (or, writing, refuse) when another version's results are stored."""
+
+    def versions(self) -> list[str]:
+        """Package versions whose identifications are stored."""
+
+    def counts(self) -> dict[str, int]:
+        """Rows stored: recordings, identifications, traces, surrogates."""
+
+    def traces_by_uid(self, uids: Sequence[str]) -> list[TraceRow]:
+        """Listed traces by uid, in order."""
+
+    def dump(self, **filters: Any) -> Dump:
+        """Traces matching ``filters`` with samples and what they depend on, for export."""
+
+    def close(self) -> None:
+        """Release the store."""
+
+    def __enter__(self) -> Store:
+        """The store itself (``with open_store(...) as db``)."""
+
+    def __exit__(self, *exc: object) -> None:
+        """:meth:`close`."""
+
+
+#: Storage back ends by URL scheme.
+STORES: Registry[Callable[..., Store]] = Registry("storage back end")
+
+
+def register_store(
+    scheme: str, opener: Callable[..., Store] | str, *, summary: str = "", replace: bool = False
+) -> None:
+    """Register a back end for locations ``SCHEME://...`` (``opener(rest, create=...)``)."""
+    STORES.register(scheme, opener, summary=summary, replace=replace)
+
+
+def open_store(location: str | os.PathLike[str], *, create: bool = False) -> Store:
+    """The store at ``location``: ``scheme://rest`` by its back end, else an SQLite file."""
+    text = os.fspath(location)
+    scheme, sep, rest = text.partition("://")
+    if sep and scheme.isidentifier():
+        opener = STORES.get(scheme)
+        return opener(rest, create=create)
+    return STORES.get("sqlite")(Path(text), create=create)
+
+
+register_store("sqlite", "disturbances.db:DisturbanceDB", summary="an SQLite file (the default)")
+
+
+if TYPE_CHECKING:  # the type checker proves the SQLite store is a Store
+
+    def _sqlite_is_a_store(db: DisturbanceDB) -> Store:
+        return db
