@@ -18,15 +18,16 @@ _CACHE: dict[tuple[Any, ...], TraceBank] = {}
 _LOCK = threading.Lock()
 
 
-def make_config(env_id: str, settings: dict[str, Any]) -> RollConfig:
-    """``RollConfig(**settings)``, with an unknown name rejected by name (and a suggestion)."""
+def make_config(owner: str, settings: dict[str, Any]) -> RollConfig:
+    """``RollConfig(**settings)``, with an unknown name rejected by name (and a suggestion);
+    ``owner`` (an environment id or class) starts the message."""
     known = config_fields()
     for name in settings:
         if name not in known:
             close = difflib.get_close_matches(name, known, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ValueError(
-                f"{env_id}: unknown option {name!r}{hint}; the options are: "
+                f"{owner}: unknown option {name!r}{hint}; the options are: "
                 f"{', '.join(known)}, and bank, db, render_mode"
             )
     return RollConfig(**settings)

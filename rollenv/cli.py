@@ -2,37 +2,21 @@
 
 from __future__ import annotations
 
-import argparse
 import io
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from rocketroll_common.errors import UsageError
+from rocketroll_common.settings import Command, check, setting
+from rollenv import task_of
 
-__all__ = ["parse_setting", "register", "rollout"]
+__all__ = ["COMMANDS", "RolloutArgs", "rollout"]
 
 POLICIES = ("zero", "random")
-
-
-def parse_setting(text: str) -> tuple[str, Any]:
-    """``KEY=VALUE`` with VALUE read as a bool, int, float or string."""
-    key, sep, raw = text.partition("=")
-    if not sep or not key:
-        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
-    value: Any = raw
-    if raw.lower() in ("true", "false"):
-        value = raw.lower() == "true"
-    else:
-        for kind in (int, float):
-            try:
-                value = kind(raw)
-                break
-            except ValueError:
-                continue
-    return key, value
 
 
 def rollout(
@@ -43,7 +27,7 @@ def rollout(
     settings: dict[str, Any],
     frames_path: Path | None = None,
     frames: int = 6,
-    db: Path | None = None,
+    db: str | Path | None = None,
 ) -> list[dict[str, float]]:
     """Run ``episodes`` episodes of ``env_id`` under ``policy``; one summary per episode.
 
@@ -136,24 +120,51 @@ def _save_strip(frames: list[np.ndarray], path: Path) -> None:
     write_atomic(path, buffer.getvalue())
 
 
-def _cmd_rollout(ns: argparse.Namespace) -> int:
-    if ns.episodes < 1:
-        raise UsageError(f"--episodes must be >= 1, got {ns.episodes}")
-    if ns.frames_count < 1:
-        raise UsageError(f"--frames-count must be >= 1, got {ns.frames_count}")
-    settings = dict(ns.set or [])
-    summaries = rollout(
-        ns.env_id,
-        ns.policy,
-        ns.episodes,
-        ns.seed,
-        settings,
-        frames_path=ns.frames,
-        frames=ns.frames_count,
-        db=ns.db,
+def _variant_ids() -> tuple[str, ...]:
+    from rollenv import VARIANTS
+
+    return VARIANTS.names()
+
+
+@dataclass(frozen=True)
+class RolloutArgs:
+    """``rocketroll env rollout``."""
+
+    env_id: str = setting(
+        "RocketRoll-v0", "environment id", flag="--id", choices=_variant_ids(), metavar="ID"
     )
-    unit = "°/s" if "Rate" in ns.env_id else "°"
-    print(f"{ns.env_id}, policy {ns.policy}, seed {ns.seed}")
+    policy: Literal["zero", "random"] = setting("random", "policy")
+    episodes: int = setting(3, "episodes", ge=1, le=100_000)
+    seed: int = setting(0, "seed of the env and the policy", ge=0, le=2**63 - 1)
+    frames: Path | None = setting(
+        None, "save frames of the first episode to this PNG", output="file"
+    )
+    frames_count: int = setting(6, "frames in the PNG", ge=1, le=100)
+    db: str | None = setting(None, "database (default: the default database)", metavar="DB")
+    set: dict[str, Any] = setting(
+        default_factory=dict,
+        help="environment option, e.g. --set split=test --set sensors=false (repeatable)",
+        metavar="KEY=VALUE",
+    )
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def run_rollout(args: RolloutArgs) -> int:
+    """Run the episodes, print one line each, save the frames."""
+    summaries = rollout(
+        args.env_id,
+        args.policy,
+        args.episodes,
+        args.seed,
+        dict(args.set),
+        frames_path=args.frames,
+        frames=args.frames_count,
+        db=args.db,
+    )
+    unit = "°/s" if task_of(args.env_id) == "rate" else "°"
+    print(f"{args.env_id}, policy {args.policy}, seed {args.seed}")
     print(
         f"{'episode':>7} {'steps':>6} {'return':>10} {'RMS error':>11} {'fin travel':>12} "
         f"{'mean |u_d|':>11}  trace (start)"
@@ -164,39 +175,24 @@ def _cmd_rollout(ns: argparse.Namespace) -> int:
             f"{s['rms_error']:>8.2f} {unit:<2} {s['fin_travel_dps']:>8.1f} °/s "
             f"{s['mean_abs_u_d_deg']:>9.2f} °  {s['trace']} ({s['start_s']:g} s)"
         )
-    if ns.frames is not None:
-        print(f"frames: {ns.frames}")
+    if args.frames is not None:
+        print(f"frames: {args.frames}")
     return 0
 
 
-def register(subparsers: Any) -> None:
-    """Add ``rocketroll env ...`` to the top-level parser."""
-    env = subparsers.add_parser(
-        "env", help="run RocketRoll-v0 episodes (Gymnasium environment)", description=__doc__
+#: The commands of this layer, by name.
+COMMANDS: dict[str, Command] = {
+    "env": Command(
+        "env",
+        "run RocketRoll episodes (Gymnasium environment)",
+        description=__doc__ or "",
+        subcommands=(
+            Command(
+                "rollout",
+                "run episodes with a zero or random policy; print a summary; save frames",
+                RolloutArgs,
+                run_rollout,
+            ),
+        ),
     )
-    sub = env.add_subparsers(dest="env_command", required=True, metavar="SUBCOMMAND")
-    p = sub.add_parser(
-        "rollout",
-        help="run episodes with a zero or random policy; print a summary; save frames",
-    )
-    p.add_argument(
-        "--id",
-        dest="env_id",
-        default="RocketRoll-v0",
-        choices=("RocketRoll-v0", "RocketRollRate-v0"),
-        help="environment id",
-    )
-    p.add_argument("--policy", choices=POLICIES, default="random", help="policy (random)")
-    p.add_argument("--episodes", type=int, default=3, help="episodes (3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the env and the policy (0)")
-    p.add_argument("--frames", type=Path, help="save frames of the first episode to this PNG")
-    p.add_argument("--frames-count", type=int, default=6, help="frames in the PNG (6)")
-    p.add_argument("--db", type=Path, help="database file (default: the default database)")
-    p.add_argument(
-        "--set",
-        type=parse_setting,
-        action="append",
-        metavar="KEY=VALUE",
-        help="environment option, e.g. --set split=test --set sensors=false (repeatable)",
-    )
-    p.set_defaults(handler=_cmd_rollout)
+}

@@ -46,14 +46,24 @@ from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from identification import model
-from identification.model import RollParams, Servo, piece_coefficients
+from identification.model import MODEL_NAMES, RollParams, Servo, piece_coefficients
+from rollenv.layout import (
+    OBSERVATION_NAMES,
+    Cfg,
+    Obs,
+    Param,
+    Scale,
+    State,
+    params_of_row,
+    row_of_params,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 __all__ = [
     "DISTURBANCES",
-    "OBSERVATION_NAMES",
+    "OBSERVATION_NAMES",  # re-exported from rollenv.layout
     "SETPOINTS",
     "TASKS",
     "RollBatch",
@@ -63,17 +73,8 @@ __all__ = [
 
 TASKS = ("angle", "rate")
 DISTURBANCES = ("replay", "surrogate", "none")
-MODELS = ("theta", "constant")
 SETPOINTS = ("steps", "zero")
 SPLITS = ("train", "test")
-
-#: Names and units of the observation's entries, in order.
-OBSERVATION_NAMES = (
-    "tracking_error",  # ° (angle task, wrapped to ±180°) or °/s (rate task)
-    "roll_rate_dps",  # measured roll rate, °/s
-    "fin_deg",  # actual fin angle, °
-    "fin_cmd_deg",  # last fin command, °
-)
 
 
 @dataclass(frozen=True)
@@ -173,7 +174,7 @@ class RollConfig:
         for name, allowed in (
             ("task", TASKS),
             ("disturbance", DISTURBANCES),
-            ("model", MODELS),
+            ("model", MODEL_NAMES),
             ("setpoint", SETPOINTS),
             ("split", SPLITS),
         ):
@@ -273,61 +274,35 @@ class RollConfig:
         return Servo(self.rate_limit_dps, self.fin_range_deg)
 
     def kernel_settings(self) -> FloatArray:
-        """The scalars the kernels read, packed in one array (see :data:`_CFG`)."""
-        cfg = np.zeros(len(_CFG))
-        cfg[_CFG["substeps"]] = self.substeps
-        cfg[_CFG["h"]] = self.substep_s
-        cfg[_CFG["max_move"]] = self.rate_limit_dps * self.substep_s
-        cfg[_CFG["fin_range"]] = self.fin_range_deg
-        cfg[_CFG["task_rate"]] = 1.0 if self.task == "rate" else 0.0
-        cfg[_CFG["enc_res"]] = self.encoder_resolution_deg
-        cfg[_CFG["gyro_eta"]] = self.gyro_noise_pct / 100.0 if self.sensors else 0.0
-        cfg[_CFG["gyro_range"]] = self.gyro_range_dps
-        cfg[_CFG["err_norm"]] = self.error_norm
-        cfg[_CFG["rate_norm"]] = self.rate_scale_dps
-        cfg[_CFG["rate_w"]] = self.rate_weight if self.task == "angle" else 0.0
-        cfg[_CFG["fin_w"]] = self.fin_weight
-        cfg[_CFG["travel_norm"]] = self.rate_limit_dps * self.dt_s
-        cfg[_CFG["scale"]] = 0.0 if self.disturbance == "none" else self.disturbance_scale
-        cfg[_CFG["sp_period"]] = self.setpoint_period_steps
-        cfg[_CFG["error_max"]] = observation_bounds(self)[0][0]
+        """The scalars the kernels read, packed in one array (see :class:`rollenv.layout.Cfg`)."""
+        cfg = np.zeros(len(Cfg))
+        cfg[Cfg.SUBSTEPS] = self.substeps
+        cfg[Cfg.H] = self.substep_s
+        cfg[Cfg.MAX_MOVE] = self.rate_limit_dps * self.substep_s
+        cfg[Cfg.FIN_RANGE] = self.fin_range_deg
+        cfg[Cfg.TASK_RATE] = 1.0 if self.task == "rate" else 0.0
+        cfg[Cfg.ENCODER_RES] = self.encoder_resolution_deg
+        cfg[Cfg.GYRO_ETA] = self.gyro_noise_pct / 100.0 if self.sensors else 0.0
+        cfg[Cfg.GYRO_RANGE] = self.gyro_range_dps
+        cfg[Cfg.ERROR_NORM] = self.error_norm
+        cfg[Cfg.RATE_NORM] = self.rate_scale_dps
+        cfg[Cfg.RATE_WEIGHT] = self.rate_weight if self.task == "angle" else 0.0
+        cfg[Cfg.FIN_WEIGHT] = self.fin_weight
+        cfg[Cfg.TRAVEL_NORM] = self.rate_limit_dps * self.dt_s
+        cfg[Cfg.U_SCALE] = 0.0 if self.disturbance == "none" else self.disturbance_scale
+        cfg[Cfg.SETPOINT_PERIOD] = self.setpoint_period_steps
+        cfg[Cfg.ERROR_MAX] = observation_bounds(self)[0][Obs.ERROR]
+        cfg[Cfg.U_PER] = 1.0  # set by RollBatch from the bank's Δt
         return cfg
-
-
-#: Positions of the settings in the array the kernels read.
-_CFG = {
-    name: k
-    for k, name in enumerate(
-        (
-            "substeps",
-            "h",
-            "max_move",
-            "fin_range",
-            "task_rate",
-            "enc_res",
-            "gyro_eta",
-            "gyro_range",
-            "err_norm",
-            "rate_norm",
-            "rate_w",
-            "fin_w",
-            "travel_norm",
-            "scale",
-            "sp_period",
-            "error_max",
-            "u_per",
-        )
-    )
-}
 
 
 def observation_bounds(config: RollConfig) -> tuple[FloatArray, FloatArray]:
     """Finite ``(high, low)`` of the observation: error, rate, fin, command."""
-    error = 180.0 if config.task == "angle" else 2.0 * config.gyro_range_dps
-    high = np.array(
-        [error, config.gyro_range_dps, config.fin_range_deg, config.fin_range_deg],
-        dtype=np.float64,
-    )
+    high = np.zeros(len(Obs))
+    high[Obs.ERROR] = 180.0 if config.task == "angle" else 2.0 * config.gyro_range_dps
+    high[Obs.RATE] = config.gyro_range_dps
+    high[Obs.FIN] = config.fin_range_deg
+    high[Obs.COMMAND] = config.fin_range_deg
     return high, -high
 
 
@@ -365,10 +340,6 @@ def _phi_functions_scalar(z: Any) -> Any:
 
 _piece = numba.njit(cache=True, nogil=True)(piece_coefficients)
 
-# Kernel settings as compile-time-free indices (numba reads module globals as constants).
-_I_SUB, _I_H, _I_MOVE, _I_RANGE, _I_TASK, _I_ENC, _I_ETA, _I_GYRO = range(8)
-_I_ERRN, _I_RATEN, _I_RATEW, _I_FINW, _I_TRAV, _I_SCALE, _I_SPP, _I_ERRMAX, _I_UPER = range(8, 17)
-
 
 @numba.njit(cache=True, nogil=True)
 def _wrap(angle_deg: float) -> float:
@@ -386,26 +357,26 @@ def _observe_one(
     obs: NDArray[np.float32],
 ) -> float:
     """Sensor readings of env ``i`` into ``obs[i]``; returns the true tracking error."""
-    rate = state[i, 0]
-    angle = state[i, 1]
-    res = cfg[_I_ENC]
+    rate = state[i, State.RATE]
+    angle = state[i, State.ANGLE]
+    res = cfg[Cfg.ENCODER_RES]
     measured_angle = angle
     if res > 0.0:
         measured_angle = math.floor(angle / res + 1e-9) * res
-    measured_rate = (1.0 + cfg[_I_ETA] * eps) * rate
-    gyro = cfg[_I_GYRO]
+    measured_rate = (1.0 + cfg[Cfg.GYRO_ETA] * eps) * rate
+    gyro = cfg[Cfg.GYRO_RANGE]
     measured_rate = min(max(measured_rate, -gyro), gyro)
-    if cfg[_I_TASK] > 0.0:
+    if cfg[Cfg.TASK_RATE] > 0.0:
         error = setpoint - rate
         measured_error = setpoint - measured_rate
     else:
         error = _wrap(setpoint - angle)
         measured_error = _wrap(setpoint - measured_angle)
-    emax = cfg[_I_ERRMAX]
-    obs[i, 0] = min(max(measured_error, -emax), emax)
-    obs[i, 1] = measured_rate
-    obs[i, 2] = state[i, 2]
-    obs[i, 3] = state[i, 3]
+    emax = cfg[Cfg.ERROR_MAX]
+    obs[i, Obs.ERROR] = min(max(measured_error, -emax), emax)
+    obs[i, Obs.RATE] = measured_rate
+    obs[i, Obs.FIN] = state[i, State.FIN]
+    obs[i, Obs.COMMAND] = state[i, State.COMMAND]
     return error
 
 
@@ -421,7 +392,7 @@ def observe_kernel(
     error: FloatArray,
 ) -> None:
     """Observations of the envs in ``index`` (``eps[k]`` is the gyro draw of ``index[k]``)."""
-    period = int(cfg[_I_SPP])
+    period = int(cfg[Cfg.SETPOINT_PERIOD])
     last = setpoints.shape[1] - 1
     for k in range(index.size):
         i = index[k]
@@ -435,6 +406,9 @@ def _step_envs(
     state: FloatArray,
     step: IntArray,
     params: FloatArray,
+    scales: FloatArray,
+    scale_start: IntArray,
+    scale_stride: IntArray,
     u_flat: FloatArray,
     u_start: IntArray,
     setpoints: FloatArray,
@@ -448,28 +422,34 @@ def _step_envs(
     """Advance the envs in ``index`` by one control step.
 
     ``action`` holds fin commands in [-1, 1] (already checked and clipped),
-    ``state[i] = (rate °/s, angle °, fin °, last command °)``, ``params[i] =
-    (α, θ̄, β̄, ᾱ)``, ``u_flat[u_start[i] + m]`` is env ``i``'s ``m``-th
+    ``state[i]`` env ``i``'s :class:`~rollenv.layout.State`, ``params[i]``
+    its rocket (:class:`~rollenv.layout.Param`), multiplied over this step by
+    ``scales[scale_start[i] + step[i]·scale_stride[i]]``
+    (:class:`~rollenv.layout.Scale`: a stride of 0 holds one row, the
+    constant rocket), ``u_flat[u_start[i] + m]`` is env ``i``'s ``m``-th
     ``u_d`` sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new
     state, ``step + 1``, observation, reward, true error and the last ``u_d``.
     """
-    n_sub = int(cfg[_I_SUB])
-    h = cfg[_I_H]
-    max_move = cfg[_I_MOVE]
-    fin_range = cfg[_I_RANGE]
-    scale = cfg[_I_SCALE]
-    u_per = int(cfg[_I_UPER])
-    period = int(cfg[_I_SPP])
+    n_sub = int(cfg[Cfg.SUBSTEPS])
+    h = cfg[Cfg.H]
+    max_move = cfg[Cfg.MAX_MOVE]
+    fin_range = cfg[Cfg.FIN_RANGE]
+    scale = cfg[Cfg.U_SCALE]
+    u_per = int(cfg[Cfg.U_PER])
+    period = int(cfg[Cfg.SETPOINT_PERIOD])
     last_sp = setpoints.shape[1] - 1
     for k in numba.prange(index.size):
         i = index[k]
-        alpha = params[i, 0]
-        theta_bar = params[i, 1]
-        beta_bar = params[i, 2]
-        alpha_bar = params[i, 3]
-        v = state[i, 0]
-        phi = state[i, 1]
-        theta = state[i, 2]
+        row = scale_start[i] + step[i] * scale_stride[i]
+        gain = scales[row, Scale.GAIN]
+        damp = scales[row, Scale.DAMPING]
+        alpha = params[i, Param.ALPHA] * gain
+        theta_bar = params[i, Param.THETA_BAR]
+        beta_bar = params[i, Param.BETA_BAR] * damp
+        alpha_bar = params[i, Param.ALPHA_BAR] * damp
+        v = state[i, State.RATE]
+        phi = state[i, State.ANGLE]
+        theta = state[i, State.FIN]
         previous_theta = theta
         command = min(max(action[i] * fin_range, -fin_range), fin_range)
         first = step[i] * n_sub
@@ -507,19 +487,21 @@ def _step_envs(
             phi = phi + a_ * v + b_
             v = e * v + c
         travel = abs(theta - previous_theta)
-        state[i, 0] = v
-        state[i, 1] = phi
-        state[i, 2] = theta
-        state[i, 3] = command
+        state[i, State.RATE] = v
+        state[i, State.ANGLE] = phi
+        state[i, State.FIN] = theta
+        state[i, State.COMMAND] = command
         step[i] += 1
         u_now[i] = u
         sp = setpoints[i, min(step[i] // period, last_sp)]
         err = _observe_one(i, state, sp, eps[k], cfg, obs)
         error[i] = err
-        e_n = err / cfg[_I_ERRN]
-        v_n = v / cfg[_I_RATEN]
-        t_n = travel / cfg[_I_TRAV]
-        reward[i] = -(e_n * e_n + cfg[_I_RATEW] * v_n * v_n + cfg[_I_FINW] * t_n * t_n)
+        e_n = err / cfg[Cfg.ERROR_NORM]
+        v_n = v / cfg[Cfg.RATE_NORM]
+        t_n = travel / cfg[Cfg.TRAVEL_NORM]
+        reward[i] = -(
+            e_n * e_n + cfg[Cfg.RATE_WEIGHT] * v_n * v_n + cfg[Cfg.FIN_WEIGHT] * t_n * t_n
+        )
 
 
 #: The step kernel, one env after the other (small batches, the single env).
@@ -592,31 +574,31 @@ class RollBatch:
             raise ValueError("all traces of a bank must share one Δt")
         self.u_flat, self.u_offsets = bank.concatenated()
         self.cfg = config.kernel_settings()
-        self.cfg[_CFG["u_per"]] = float(np.round(per[0]))
-        self.bank_params = np.array(
-            [
-                [p.alpha, p.theta_bar_deg, p.beta_bar_per_s, p.alpha_bar_per_deg_s]
-                for p in bank.params
-            ]
-        )
+        self.cfg[Cfg.U_PER] = float(np.round(per[0]))
+        self.bank_params = np.array([row_of_params(p) for p in bank.params])
         self.param_low = self.bank_params.min(axis=0)
         self.param_high = self.bank_params.max(axis=0)
         if config.domain_randomization:
             _check_damping_box(self.param_low, self.param_high, config.fin_range_deg)
         self.all = np.arange(n, dtype=np.int64)
-        self.state = np.zeros((n, 4))
+        self.state = np.zeros((n, len(State)))
         self.step_count = np.zeros(n, dtype=np.int64)
-        self.params = np.zeros((n, 4))
+        self.params = np.zeros((n, len(Param)))
+        # Multipliers of the rocket's parameters (Scale columns): row 0 is the constant
+        # rocket (all ones, stride 0); a per-step schedule gets a block of its own.
+        self.scales = np.ones((1, len(Scale)))
+        self.scale_start = np.zeros(n, dtype=np.int64)
+        self.scale_stride = np.zeros(n, dtype=np.int64)
         self.trace = np.zeros(n, dtype=np.int64)
         self.start = np.zeros(n, dtype=np.int64)
         self.u_start = np.zeros(n, dtype=np.int64)
         self.setpoints = np.zeros((n, config.setpoint_segments))
-        self.obs = np.zeros((n, 4), dtype=np.float32)
+        self.obs = np.zeros((n, len(Obs)), dtype=np.float32)
         self.reward = np.zeros(n)
         self.error = np.zeros(n)
         self.u_now = np.zeros(n)
         self.parallel = bool(parallel)
-        self._noisy = bool(self.cfg[_CFG["gyro_eta"]] > 0.0)
+        self._noisy = bool(self.cfg[Cfg.GYRO_ETA] > 0.0)
         self._no_noise = np.zeros(n)
 
     # ------------------------------------------------------------------ reset
@@ -632,6 +614,7 @@ class RollBatch:
         fin_deg: float | None = None,
         setpoint: float | None = None,
         setpoints: FloatArray | None = None,
+        scales: FloatArray | None = None,
     ) -> None:
         """Start new episodes for the envs in ``index``.
 
@@ -639,7 +622,11 @@ class RollBatch:
         evaluation episodes): the trace index in the bank, the start sample,
         the initial rate, angle and fin angle, a constant setpoint or the
         whole schedule (one value per ``setpoint_period_s``, length
-        ``config.setpoint_segments``).
+        ``config.setpoint_segments``).  ``scales`` makes the rocket change
+        during the episode: multipliers of its parameters
+        (:class:`~rollenv.layout.Scale` columns), one row per control step
+        (shape ``(max_episode_steps, 2)``) or one row for the whole episode
+        (shape ``(2,)``); without it the rocket is the database's.
         """
         cfg = self.config
         m = index.size
@@ -681,15 +668,19 @@ class RollBatch:
         fin = np.clip(
             0.0 if fin_deg is None else float(fin_deg), -cfg.fin_range_deg, cfg.fin_range_deg
         )
+        self._set_scales(index, scales)
         p = self.params[index]
-        u0 = self.cfg[_CFG["scale"]] * self.u_flat[self.u_start[index]]
+        gain = self.scales[self.scale_start[index], Scale.GAIN]
+        u0 = self.cfg[Cfg.U_SCALE] * self.u_flat[self.u_start[index]]
         if rate_dps is None:  # the steady rate for the initial fin angle (eq. 16, 36)
-            self.state[index, 0] = p[:, 0] * (fin + p[:, 1] + u0)
+            self.state[index, State.RATE] = (
+                p[:, Param.ALPHA] * gain * (fin + p[:, Param.THETA_BAR] + u0)
+            )
         else:
-            self.state[index, 0] = float(rate_dps)
-        self.state[index, 1] = angles
-        self.state[index, 2] = fin
-        self.state[index, 3] = fin
+            self.state[index, State.RATE] = float(rate_dps)
+        self.state[index, State.ANGLE] = angles
+        self.state[index, State.FIN] = fin
+        self.state[index, State.COMMAND] = fin
         self.step_count[index] = 0
         self.u_now[index] = u0
         eps = self._gyro_draws(rng, m)
@@ -707,6 +698,9 @@ class RollBatch:
             self.state,
             self.step_count,
             self.params,
+            self.scales,
+            self.scale_start,
+            self.scale_stride,
             self.u_flat,
             self.u_start,
             self.setpoints,
@@ -725,12 +719,12 @@ class RollBatch:
         again (the corners of the box can be rockets that do not exist).
         """
         span = self.param_high - self.param_low
-        out = self.param_low + rng.uniform(size=(m, 4)) * span
+        out = self.param_low + rng.uniform(size=(m, len(Param))) * span
         for _ in range(_MAX_REDRAWS):
             bad = np.flatnonzero(_min_damping(out, self.config.fin_range_deg) <= 0.0)
             if bad.size == 0:
                 return out
-            out[bad] = self.param_low + rng.uniform(size=(bad.size, 4)) * span
+            out[bad] = self.param_low + rng.uniform(size=(bad.size, len(Param))) * span
         raise RuntimeError("domain randomisation found no damped rocket in the parameter box")
 
     def _gyro_draws(self, rng: np.random.Generator, m: int) -> FloatArray:
@@ -763,14 +757,76 @@ class RollBatch:
         if not 0 <= steps <= left:
             raise ValueError(f"env {i} has {left} steps left, asked for {steps}")
         k = self.step_count[i] + np.arange(steps)
-        per = int(self.cfg[_CFG["u_per"]])
+        per = int(self.cfg[Cfg.U_PER])
         samples = self.u_flat[self.u_start[i] + (k * self.config.substeps) // per]
-        return np.asarray(self.cfg[_CFG["scale"]] * samples)
+        return np.asarray(self.cfg[Cfg.U_SCALE] * samples)
 
     def roll_params(self, i: int) -> RollParams:
-        """The model parameters env ``i`` runs with."""
-        alpha, theta_bar, beta_bar, alpha_bar = (float(x) for x in self.params[i])
-        return RollParams(alpha, theta_bar, beta_bar, alpha_bar)
+        """The model parameters env ``i`` runs with (at its current step's multipliers)."""
+        row = self.params[i].copy()
+        gain, damping = self.scales[self._scale_row(i)]
+        row[Param.ALPHA] *= gain
+        row[Param.BETA_BAR] *= damping
+        row[Param.ALPHA_BAR] *= damping
+        return params_of_row(row)
+
+    def _scale_row(self, i: int) -> int:
+        return int(self.scale_start[i] + self.step_count[i] * self.scale_stride[i])
+
+    def _set_scales(self, index: IntArray, scales: FloatArray | None) -> None:
+        """Give the envs in ``index`` the constant rocket, or the multipliers ``scales``."""
+        if scales is None:
+            self.scale_start[index] = 0
+            self.scale_stride[index] = 0
+            return
+        values = np.asarray(scales, dtype=np.float64)
+        steps = self.config.max_episode_steps
+        if values.shape == (len(Scale),):
+            values = np.broadcast_to(values, (steps, len(Scale)))
+        if values.shape != (steps, len(Scale)):
+            raise ValueError(
+                f"scales must have shape ({len(Scale)},) or ({steps}, {len(Scale)}) "
+                f"(one row of {', '.join(m.name.lower() for m in Scale)} per control step), "
+                f"got {values.shape}"
+            )
+        if not np.all(np.isfinite(values)) or np.any(values <= 0.0):
+            raise ValueError("scales must be finite and positive")
+        if self.scales.shape[0] == 1:  # the first schedule: one block of rows per env
+            grown = np.ones((1 + self.n * steps, len(Scale)))
+            self.scales = grown
+        for i in np.asarray(index).tolist():
+            first = 1 + i * steps
+            self.scales[first : first + steps] = values
+            self.scale_start[i] = first
+            self.scale_stride[i] = 1
+
+    def episode_scales(self, i: int) -> FloatArray:
+        """Env ``i``'s multipliers over its whole episode, one row per control step."""
+        k = np.arange(self.config.max_episode_steps)
+        return np.asarray(self.scales[self.scale_start[i] + k * self.scale_stride[i]])
+
+    def scales_ahead(self, i: int, steps: int) -> FloatArray:
+        """Env ``i``'s multipliers (:class:`~rollenv.layout.Scale` columns) over its next
+        ``steps`` control steps."""
+        k = self.step_count[i] + np.arange(steps)
+        return np.asarray(self.scales[self.scale_start[i] + k * self.scale_stride[i]])
+
+    def copy_env(self, source: RollBatch, i: int, index: IntArray) -> None:
+        """Make the envs in ``index`` exact copies of env ``i`` of ``source`` (same bank):
+        state, rocket and its multipliers, disturbance, step and setpoints -- for
+        predictors that simulate ahead of an episode (the oracle bound)."""
+        if source.bank is not self.bank:
+            raise ValueError("copy_env needs two batches over the same bank")
+        self.state[index] = source.state[i]
+        self.params[index] = source.params[i]
+        self.trace[index] = source.trace[i]
+        self.start[index] = source.start[i]
+        self.u_start[index] = source.u_start[i]
+        self.step_count[index] = source.step_count[i]
+        self.setpoints[index] = source.setpoints[i]
+        self.scales = source.scales  # read only here: shared, not copied
+        self.scale_start[index] = source.scale_start[i]
+        self.scale_stride[index] = source.scale_stride[i]
 
 
 #: Rounds of redrawing undamped rockets before domain randomisation gives up.
@@ -779,13 +835,15 @@ _MAX_REDRAWS = 200
 
 def _min_damping(params: FloatArray, fin_range: float) -> FloatArray:
     """Smallest a(θ) = ᾱ·|θ + θ̄| + β̄ over θ in ±fin_range, per row (α, θ̄, β̄, ᾱ)."""
-    reach = fin_range + np.abs(params[:, 1])
-    return np.asarray(params[:, 2] + np.minimum(params[:, 3], 0.0) * reach)
+    reach = fin_range + np.abs(params[:, Param.THETA_BAR])
+    return np.asarray(
+        params[:, Param.BETA_BAR] + np.minimum(params[:, Param.ALPHA_BAR], 0.0) * reach
+    )
 
 
 def _check_damping_box(low: FloatArray, high: FloatArray, fin_range: float) -> None:
     """Refuse a randomisation box in which (almost) no rocket is damped over the fin range."""
-    probe = low + np.random.default_rng(0).uniform(size=(4096, 4)) * (high - low)
+    probe = low + np.random.default_rng(0).uniform(size=(4096, len(Param))) * (high - low)
     accepted = float(np.mean(_min_damping(probe, fin_range) > 0.0))
     if accepted < 0.01:
         raise ValueError(

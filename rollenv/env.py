@@ -2,24 +2,36 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
-from collections import deque
 from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config
 from rollenv.core import RollBatch, RollConfig, observation_bounds
+from rollenv.history import EpisodeHistory, HistoryRecorder
+from rollenv.layout import State
 
 __all__ = ["RESET_OPTIONS", "RocketRollEnv", "check_action", "make_spaces"]
 
 #: Keys ``reset(options=...)`` accepts.
-RESET_OPTIONS = ("trace", "start", "rate_dps", "angle_deg", "fin_deg", "setpoint", "setpoints")
+RESET_OPTIONS = (
+    "trace",
+    "start",
+    "rate_dps",
+    "angle_deg",
+    "fin_deg",
+    "setpoint",
+    "setpoints",
+    "scales",
+)
 
 #: Seconds of history a rendered frame shows.
 RENDER_HISTORY_S = 10.0
@@ -28,7 +40,30 @@ ObsType = NDArray[np.float32]
 ActType = NDArray[np.float32]
 
 
-class RocketRollEnv(gym.Env[ObsType, ActType]):
+class EpisodeLengthSpec:
+    """``spec.max_episode_steps`` that tells the truth: the environment's own length.
+
+    The environment truncates itself (``episode_s / dt_s`` steps), so it is
+    registered without a ``TimeLimit``; its spec reports that length all the
+    same, for tools that read it (``gym.make(...).spec.max_episode_steps``).
+    """
+
+    config: RollConfig
+    _spec: EnvSpec | None = None
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        spec = self._spec
+        if spec is None or spec.max_episode_steps == self.config.max_episode_steps:
+            return spec
+        return dataclasses.replace(spec, max_episode_steps=self.config.max_episode_steps)
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        self._spec = value
+
+
+class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
     """Roll control of a 5-kg sounding rocket in a turbulent vertical wind tunnel.
 
     ## Description
@@ -190,8 +225,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         db: str | os.PathLike[str] | None = None,
         **settings: Any,
     ) -> None:
-        env_id = "RocketRollRate-v0" if settings.get("task") == "rate" else "RocketRoll-v0"
-        self.config = make_config(env_id, settings)
+        self.config = make_config(type(self).__name__, settings)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
@@ -207,9 +241,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         self._started = False
         self._max_steps = self.config.max_episode_steps
         self._episode: dict[str, Any] = {}
-        self._history: deque[tuple[float, ...]] = deque(
-            maxlen=max(2, round(RENDER_HISTORY_S / self.config.dt_s) + 1)
-        )
+        self._history = HistoryRecorder(self.config.max_episode_steps + 1)
         self._renderer: Any = None
 
     # ------------------------------------------------------------------- gym API
@@ -223,7 +255,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         self._started = True
         self._history.clear()
         if self.render_mode is not None:
-            self._record()
+            self._history.record(self._batch, 0)
         if self.render_mode == "human":
             self.render()
         return self._batch.obs[0].copy(), self._info()
@@ -238,7 +270,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
         self._action[0] = _one_action(action)
         self._batch.step(self._action, self.np_random, self._index)
         if self.render_mode is not None:
-            self._record()
+            self._history.record(self._batch, 0, float(self._batch.reward[0]))
         if self.render_mode == "human":
             self.render()
         truncated = bool(self._batch.step_count[0] >= self._max_steps)
@@ -261,11 +293,11 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
 
         if self._renderer is None:
             self._renderer = Renderer(self.render_mode, self.metadata["render_fps"])
-        snapshot = self._snapshot()
+        recent = self.history().tail(round(RENDER_HISTORY_S / self.config.dt_s) + 1)
         if self.render_mode == "rgb_array":
-            frame: NDArray[np.uint8] = self._renderer.frame(snapshot)
+            frame: NDArray[np.uint8] = self._renderer.frame(recent)
             return frame
-        self._renderer.show(snapshot)
+        self._renderer.show(recent)
         return None
 
     def close(self) -> None:
@@ -285,11 +317,27 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
             raise RuntimeError("call reset() before replay_options()")
         b = self._batch
         trace = b.bank.traces[int(b.trace[0])]
-        return {
-            "trace": trace.info.uid,
+        options: dict[str, Any] = {
+            "trace": trace.uid,
             "start": int(b.start[0]),
             "setpoints": b.setpoints[0].tolist(),
         }
+        if b.scale_stride[0]:
+            options["scales"] = b.episode_scales(0).tolist()
+        return options
+
+    def history(self) -> EpisodeHistory:
+        """The episode so far, one row per control step (recorded when rendering)."""
+        if not self._started or len(self._history) == 0:
+            raise RuntimeError(
+                "no history: call reset() first, with a render_mode (only rendering records it)"
+            )
+        info = self.bank.traces[int(self._batch.trace[0])]
+        return self._history.history(
+            self.config.task,
+            self.config.fin_range_deg,
+            f"{info.uid} ({info.split}, {self.config.disturbance})",
+        )
 
     @property
     def core(self) -> RollBatch:
@@ -300,13 +348,13 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
     # ------------------------------------------------------------------ helpers
     def _info(self) -> dict[str, Any]:
         b = self._batch
-        rate, angle, fin, command = b.state[0].tolist()
+        state = b.state[0].tolist()
         step = int(b.step_count[0])
         return {
-            "roll_deg": angle,
-            "roll_rate_dps": rate,
-            "fin_deg": fin,
-            "fin_cmd_deg": command,
+            "roll_deg": state[State.ANGLE],
+            "roll_rate_dps": state[State.RATE],
+            "fin_deg": state[State.FIN],
+            "fin_cmd_deg": state[State.COMMAND],
             "u_d_deg": float(b.u_now[0]),
             "setpoint": b.setpoint_of(0),
             "tracking_error": float(b.error[0]),
@@ -317,42 +365,7 @@ class RocketRollEnv(gym.Env[ObsType, ActType]):
     def _episode_info(self) -> dict[str, Any]:
         b = self._batch
         trace = b.bank.traces[int(b.trace[0])]
-        return {"trace": trace.info.uid, "start_s": float(b.start[0]) * trace.dt_s}
-
-    def _record(self) -> None:
-        b = self._batch
-        s = b.state[0]
-        self._history.append(
-            (
-                float(b.step_count[0]) * self.config.dt_s,
-                float(s[1]),
-                float(s[0]),
-                float(s[2]),
-                float(s[3]),
-                float(b.u_now[0]),
-                b.setpoint_of(0),
-            )
-        )
-
-    def _snapshot(self) -> Any:
-        from rollenv.render import Snapshot
-
-        if not self._history:
-            raise RuntimeError("call reset() before render()")
-        cols = np.array(self._history, dtype=float).T
-        info = self.bank.traces[int(self._batch.trace[0])].info
-        return Snapshot(
-            time_s=cols[0],
-            angle_deg=cols[1],
-            rate_dps=cols[2],
-            fin_deg=cols[3],
-            command_deg=cols[4],
-            u_d_deg=cols[5],
-            setpoint=cols[6],
-            task=self.config.task,
-            fin_range_deg=self.config.fin_range_deg,
-            label=f"{info.uid} ({info.split}, {self.config.disturbance})",
-        )
+        return {"trace": trace.uid, "start_s": float(b.start[0]) * trace.dt_s}
 
 
 def make_spaces(config: RollConfig) -> tuple[spaces.Space[ActType], spaces.Space[ObsType]]:
@@ -408,7 +421,7 @@ def reset_arguments(
     trace = options.get("trace")
     if trace is not None:
         if isinstance(trace, str):
-            uids = [t.info.uid for t in bank.traces]
+            uids = [t.uid for t in bank.traces]
             if trace not in uids:
                 raise ValueError(f"reset option trace={trace!r} is not in {bank.description}")
             fixed["trace"] = uids.index(trace)
@@ -441,6 +454,15 @@ def reset_arguments(
         if not np.all(np.isfinite(values)):
             raise ValueError("reset option setpoints must be finite")
         fixed["setpoints"] = values
+    scales = options.get("scales")
+    if scales is not None:
+        try:
+            values = np.asarray(scales, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"reset option scales must be numbers, got {scales!r}") from exc
+        if not np.all(np.isfinite(values)) or np.any(values <= 0):
+            raise ValueError("reset option scales must be finite and positive")
+        fixed["scales"] = values
     for name in ("rate_dps", "angle_deg", "fin_deg", "setpoint"):
         value = options.get(name)
         if value is None:

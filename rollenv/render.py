@@ -1,6 +1,6 @@
 """Pictures of RocketRoll-v0: the rocket seen from its tail beside strip charts.
 
-:class:`Renderer` turns a :class:`Snapshot` (the last few seconds of one
+:class:`Renderer` turns a :class:`EpisodeHistory` (the last few seconds of one
 episode) into an RGB frame a person understands at a glance:
 
 * left, the rocket seen from its tail, looking forward along the flight axis:
@@ -18,8 +18,8 @@ never through pyplot, so ``render_mode="rgb_array"`` leaves the process-wide
 matplotlib backend alone.  The figure and its artists are made once and only
 their data change afterwards, which keeps a frame at a few tens of
 milliseconds.  ``render_mode="human"`` shows the same frame in a pyplot window
-when a display and an interactive matplotlib backend exist; otherwise it logs
-one line on the ``"rollenv"`` logger and draws offscreen.
+when a display and an interactive matplotlib backend exist; otherwise it warns
+once (a ``UserWarning``) that nothing is shown, and draws offscreen.
 
 A fin deflected by θ > 0 rolls the rocket the positive way (counter-clockwise
 in this view); seen from the tail its trailing edge moves the other way,
@@ -35,7 +35,6 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass
 from typing import Any, Final
 
 import numpy as np
@@ -50,7 +49,9 @@ from matplotlib.patches import Circle, Polygon, Wedge
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
-__all__ = ["RENDER_MODES", "Renderer", "Snapshot"]
+from rollenv.history import EpisodeHistory
+
+__all__ = ["RENDER_MODES", "Renderer"]
 
 logger = logging.getLogger("rollenv")
 
@@ -59,16 +60,6 @@ FloatArray = NDArray[np.float64]
 #: The render modes :class:`Renderer` accepts.
 RENDER_MODES: Final = ("human", "rgb_array")
 
-_TASKS: Final = ("angle", "rate")
-_ARRAY_FIELDS: Final = (
-    "time_s",
-    "angle_deg",
-    "rate_dps",
-    "fin_deg",
-    "command_deg",
-    "u_d_deg",
-    "setpoint",
-)
 
 # Tail-view geometry, in body radii.
 _BODY_R: Final = 1.0
@@ -116,82 +107,6 @@ def wrap_deg(angle_deg: Any) -> Any:
     (10.0, 170.0)
     """
     return np.mod(np.asarray(angle_deg, dtype=float) + 180.0, 360.0) - 180.0
-
-
-@dataclass(frozen=True, eq=False)
-class Snapshot:
-    """What one frame shows: the last few seconds of one episode.
-
-    The arrays hold one sample per control step, oldest first, all of the same
-    length ≥ 1; they are converted to 1-D float arrays on construction.
-
-    Attributes
-    ----------
-    time_s : numpy.ndarray
-        Episode time of each sample, s.
-    angle_deg : numpy.ndarray
-        True roll angle, ° (unwrapped, may exceed 360°).
-    rate_dps : numpy.ndarray
-        True roll rate, °/s.
-    fin_deg : numpy.ndarray
-        Actual fin deflection, ° (within ±``fin_range_deg``).
-    command_deg : numpy.ndarray
-        Fin command, °.
-    u_d_deg : numpy.ndarray
-        Turbulence as an equivalent fin angle, °.
-    setpoint : numpy.ndarray
-        Setpoint: roll angle in ° (task ``"angle"``) or roll rate in °/s
-        (task ``"rate"``).
-    task : str
-        ``"angle"`` or ``"rate"``.
-    fin_range_deg : float
-        Fin deflection limit, ° (40° in the tunnel).
-    label : str
-        Short text shown small in a corner, e.g. the trace uid and split.
-
-    Raises
-    ------
-    ValueError
-        If the arrays are not 1-D of one length ≥ 1, the task is unknown or
-        the fin range is not positive.
-    """
-
-    time_s: np.ndarray
-    angle_deg: np.ndarray
-    rate_dps: np.ndarray
-    fin_deg: np.ndarray
-    command_deg: np.ndarray
-    u_d_deg: np.ndarray
-    setpoint: np.ndarray
-    task: str
-    fin_range_deg: float = 40.0
-    label: str = ""
-
-    def __post_init__(self) -> None:
-        lengths = set()
-        for name in _ARRAY_FIELDS:
-            value = np.asarray(getattr(self, name), dtype=float)
-            if value.ndim != 1:
-                raise ValueError(f"Snapshot.{name} must be 1-D, got shape {value.shape}")
-            lengths.add(value.size)
-            object.__setattr__(self, name, value)
-        if len(lengths) != 1 or 0 in lengths:
-            sizes = {name: getattr(self, name).size for name in _ARRAY_FIELDS}
-            raise ValueError(f"Snapshot arrays must have one length >= 1, got {sizes}")
-        if self.task not in _TASKS:
-            raise ValueError(f"Snapshot.task must be one of {_TASKS}, got {self.task!r}")
-        if not self.fin_range_deg > 0.0:
-            raise ValueError(f"Snapshot.fin_range_deg must be > 0, got {self.fin_range_deg}")
-
-    def __len__(self) -> int:
-        return int(self.time_s.size)
-
-    def __repr__(self) -> str:
-        return (
-            f"Snapshot(task={self.task!r}, samples={len(self)}, "
-            f"time_s={self.time_s[0]:.2f}..{self.time_s[-1]:.2f}, "
-            f"fin_range_deg={self.fin_range_deg}, label={self.label!r})"
-        )
 
 
 def _nice_ceil(x: float) -> float:
@@ -502,7 +417,7 @@ class _Scene:
         else:
             self.axes[name].set_ylim(low, high)
 
-    def update(self, snap: Snapshot) -> None:
+    def update(self, snap: EpisodeHistory) -> None:
         """Move every artist to the state ``snap`` shows."""
         now = float(snap.time_s[-1])
         if now < self.last_time_s:  # a new episode: let the axes start over
@@ -513,7 +428,7 @@ class _Scene:
         self._update_tail(snap)
         self._update_text(snap)
 
-    def _update_strips(self, snap: Snapshot) -> None:
+    def _update_strips(self, snap: EpisodeHistory) -> None:
         t = snap.time_s - snap.time_s[-1]
         width = max(self.window_s, -float(t[0])) if math.isfinite(t[0]) else self.window_s
         self._set_limits("x", -width, 0.0)
@@ -544,7 +459,7 @@ class _Scene:
         self._set_limits("ud", -limit, limit)
         self.ud_line.set_data(t, snap.u_d_deg)
 
-    def _update_tail(self, snap: Snapshot) -> None:
+    def _update_tail(self, snap: EpisodeHistory) -> None:
         roll = _finite(float(snap.angle_deg[-1]))
         fin = _finite(float(snap.fin_deg[-1]))
         fin_range = snap.fin_range_deg
@@ -592,7 +507,7 @@ class _Scene:
                 self.rate_set_arc, self.rate_set_head, _RATE_SET_R, _clip_arc(setpoint * scale), 0.2
             )
 
-    def _update_text(self, snap: Snapshot) -> None:
+    def _update_text(self, snap: EpisodeHistory) -> None:
         self.clock.set_text(f"t = {float(snap.time_s[-1]):.1f} s")
         words, columns = _readout(snap)
         for text, column in zip(self.readout_numbers, columns, strict=True):
@@ -622,7 +537,7 @@ def _finite(value: float) -> float:
     return value if math.isfinite(value) else 0.0
 
 
-def _readout(snap: Snapshot) -> tuple[str, tuple[str, str]]:
+def _readout(snap: EpisodeHistory) -> tuple[str, tuple[str, str]]:
     """The readout under the tail view: its words and its two columns of numbers.
 
     The words keep a blank of ``_NUMBER_WIDTH`` characters where each number
@@ -692,6 +607,14 @@ def _ring_marker(angle_deg: float, radius: float, size: float) -> FloatArray:
     return np.stack([tip, base + 0.5 * size * tangential, base - 0.5 * size * tangential])
 
 
+def _warn_once(message: str) -> None:
+    """A ``UserWarning`` through Gymnasium's logger (a renderer says it once: it then
+    draws offscreen without opening a window again)."""
+    from gymnasium import logger as gym_logger
+
+    gym_logger.warn(message)
+
+
 def _display_available() -> bool:
     """Whether a window could open: a display on Linux/BSD, always on macOS and Windows."""
     if sys.platform.startswith(("win", "darwin")):
@@ -711,7 +634,7 @@ def _interactive_backends() -> set[str]:
 
 
 class Renderer:
-    """Draws :class:`Snapshot` frames of RocketRoll-v0 for ``rgb_array`` or a window.
+    """Draws :class:`EpisodeHistory` frames of RocketRoll-v0 for ``rgb_array`` or a window.
 
     Parameters
     ----------
@@ -740,15 +663,17 @@ class Renderer:
     data change afterwards (a task change rebuilds them).  ``rgb_array``
     never touches pyplot; ``human`` imports pyplot on the first :meth:`show`
     and uses whatever backend matplotlib resolves: without a display or with
-    a non-interactive backend it logs one INFO line on the ``"rollenv"``
-    logger and draws offscreen only.
+    a non-interactive backend it warns once (``UserWarning``) and draws
+    offscreen only.
 
     Examples
     --------
     >>> import numpy as np
     >>> t = np.arange(0.0, 10.0, 0.1)
-    >>> snap = Snapshot(t, 30 + 5 * np.sin(t), 5 * np.cos(t), 10 * np.sin(t), 10 * np.sin(t),
-    ...                 np.zeros_like(t), np.full_like(t, 30.0), "angle", 40.0, "demo")
+    >>> from rollenv.history import EpisodeHistory
+    >>> zero = np.zeros_like(t)
+    >>> snap = EpisodeHistory(t, 30 + 5 * np.sin(t), 5 * np.cos(t), 10 * np.sin(t),
+    ...                       10 * np.sin(t), zero, np.full_like(t, 30.0), zero, zero, "angle")
     >>> renderer = Renderer("rgb_array", fps=10)
     >>> renderer.frame(snap).shape
     (480, 720, 3)
@@ -796,12 +721,12 @@ class Renderer:
             f"window_s={self.window_s})"
         )
 
-    def frame(self, snap: Snapshot) -> NDArray[np.uint8]:
+    def frame(self, snap: EpisodeHistory) -> NDArray[np.uint8]:
         """Draw one frame.
 
         Parameters
         ----------
-        snap : Snapshot
+        snap : EpisodeHistory
             The episode's recent history to show.
 
         Returns
@@ -822,17 +747,17 @@ class Renderer:
             pixels = fixed
         return pixels
 
-    def show(self, snap: Snapshot) -> None:
+    def show(self, snap: EpisodeHistory) -> None:
         """Draw one frame and show it in a window, paced to ``fps``.
 
         Without a usable display (or with a non-interactive matplotlib
-        backend) this logs one INFO line on the ``"rollenv"`` logger on the
-        first call and then only draws offscreen.  Closing the window stops
+        backend) this warns once (``UserWarning``) on the first call and then
+        only draws offscreen.  Closing the window stops
         the showing; the episode goes on.
 
         Parameters
         ----------
-        snap : Snapshot
+        snap : EpisodeHistory
             The episode's recent history to show.
         """
         pixels = self.frame(snap)
@@ -859,7 +784,7 @@ class Renderer:
         """Open the pyplot window, or note (once) that none can open."""
         if not _display_available():
             self._window_state = "offscreen"
-            logger.info(
+            _warn_once(
                 'render_mode="human": no display (DISPLAY/WAYLAND_DISPLAY unset), nothing is '
                 'shown; use render_mode="rgb_array" for frames'
             )
@@ -870,10 +795,9 @@ class Renderer:
         backend = str(matplotlib.get_backend()).lower()
         if backend not in _interactive_backends():
             self._window_state = "offscreen"
-            logger.info(
-                'render_mode="human": matplotlib backend %r cannot open a window, nothing is '
-                'shown; use render_mode="rgb_array" for frames or set MPLBACKEND',
-                backend,
+            _warn_once(
+                f'render_mode="human": matplotlib backend {backend!r} cannot open a window, '
+                'nothing is shown; use render_mode="rgb_array" for frames or set MPLBACKEND'
             )
             return
         width, height = self.size

@@ -13,15 +13,27 @@ from numpy.typing import NDArray
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config
 from rollenv.core import RollBatch
-from rollenv.env import check_action, make_spaces, reset_arguments
+from rollenv.env import EpisodeLengthSpec, check_action, make_spaces, reset_arguments
+from rollenv.history import HistoryRecorder
+from rollenv.layout import State
 
 __all__ = ["INFO_KEYS", "RocketRollVectorEnv"]
 
 #: Arrays in every step's and reset's ``info`` (true state; see RocketRollEnv).
-INFO_KEYS = ("roll_deg", "roll_rate_dps", "fin_deg", "u_d_deg", "setpoint", "tracking_error")
+INFO_KEYS = (
+    "roll_deg",
+    "roll_rate_dps",
+    "fin_deg",
+    "fin_cmd_deg",
+    "u_d_deg",
+    "setpoint",
+    "tracking_error",
+)
 
 
-class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray[Any]]):
+class RocketRollVectorEnv(
+    EpisodeLengthSpec, VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray[Any]]
+):
     """``num_envs`` copies of :class:`rollenv.env.RocketRollEnv` in one batch.
 
     The same pure core (:class:`rollenv.core.RollBatch`) steps all of them in
@@ -46,8 +58,9 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         Batch size.
     bank, db, **settings
         As for :class:`rollenv.env.RocketRollEnv`.
-    render_mode : None
-        Vector rendering is not provided; render a single environment.
+    render_mode : None or "rgb_array"
+        ``"rgb_array"``: :meth:`render` returns one frame per env (each env's
+        history is recorded, which costs time; for a window use a single env).
     parallel : bool
         Spread the batch over numba's threads (``NUMBA_NUM_THREADS``, default
         all cores).  Off by default: it pays only when nothing else runs on
@@ -57,7 +70,7 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 (Gymnasium's convention; copied per instance)
-        "render_modes": [],
+        "render_modes": ["rgb_array"],
         "autoreset_mode": AutoresetMode.NEXT_STEP,
     }
 
@@ -75,15 +88,14 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs}")
-        if render_mode is not None:
+        if render_mode not in (None, "rgb_array"):
             raise ValueError(
-                "RocketRollVectorEnv does not render; make a single RocketRoll-v0 with "
-                "render_mode='rgb_array'"
+                f"RocketRollVectorEnv renders 'rgb_array' frames (one per env), not "
+                f"{render_mode!r}; for a window make a single env with render_mode='human'"
             )
-        env_id = "RocketRollRate-v0" if settings.get("task") == "rate" else "RocketRoll-v0"
-        self.config = make_config(env_id, settings)
+        self.config = make_config(type(self).__name__, settings)
         self.num_envs = int(num_envs)
-        self.render_mode = None
+        self.render_mode = render_mode
         self.bank = load_bank(self.config, db) if bank is None else bank
         self._batch = RollBatch(self.config, self.bank, self.num_envs, parallel=parallel)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.dt_s}
@@ -95,6 +107,11 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         mask = np.ones(self.num_envs, dtype=np.bool_)
         mask.flags.writeable = False
         self._mask = mask
+        capacity = self.config.max_episode_steps + 1
+        self._recorders = (
+            [HistoryRecorder(capacity) for _ in range(self.num_envs)] if render_mode else []
+        )
+        self._renderer: Any = None
 
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
@@ -107,6 +124,9 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
         self._batch.reset(self._batch.all, self.np_random, **fixed)
         self._prev_done[:] = False
         self._started = True
+        for i, recorder in enumerate(self._recorders):
+            recorder.clear()
+            recorder.record(self._batch, i)
         return self._batch.obs.copy(), self._info()
 
     def step(
@@ -139,14 +159,51 @@ class RocketRollVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], ND
             truncated[done] = False
         terminated = np.zeros(self.num_envs, dtype=np.bool_)
         self._prev_done = truncated.copy()
+        for i, recorder in enumerate(self._recorders):
+            if any_done and done[i]:
+                recorder.clear()
+            recorder.record(b, i, float(reward[i]))
         return b.obs.copy(), reward, terminated, truncated, self._info()
+
+    def render(self) -> tuple[NDArray[np.uint8], ...] | None:
+        """One RGB frame per env (``render_mode="rgb_array"``), as the single env draws it."""
+        if self.render_mode is None:
+            from gymnasium import logger as gym_logger
+
+            gym_logger.warn(
+                "render() was called without a render_mode; pass render_mode='rgb_array' to "
+                "gym.make_vec"
+            )
+            return None
+        if not self._started:
+            raise RuntimeError("call reset() before render()")
+        from rollenv.env import RENDER_HISTORY_S
+        from rollenv.render import Renderer
+
+        if self._renderer is None:
+            self._renderer = Renderer("rgb_array", self.metadata["render_fps"])
+        samples = round(RENDER_HISTORY_S / self.config.dt_s) + 1
+        frames = []
+        for i, recorder in enumerate(self._recorders):
+            info = self.bank.traces[int(self._batch.trace[i])]
+            label = f"env {i}: {info.uid} ({info.split}, {self.config.disturbance})"
+            history = recorder.history(self.config.task, self.config.fin_range_deg, label)
+            frames.append(self._renderer.frame(history.tail(samples)))
+        return tuple(frames)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Free the renderer's figure."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
     def _info(self) -> dict[str, Any]:
         b = self._batch
         values = {
-            "roll_deg": b.state[:, 1].copy(),
-            "roll_rate_dps": b.state[:, 0].copy(),
-            "fin_deg": b.state[:, 2].copy(),
+            "roll_deg": b.state[:, State.ANGLE].copy(),
+            "roll_rate_dps": b.state[:, State.RATE].copy(),
+            "fin_deg": b.state[:, State.FIN].copy(),
+            "fin_cmd_deg": b.state[:, State.COMMAND].copy(),
             "u_d_deg": b.u_now.copy(),
             "setpoint": b.setpoint_now(),
             "tracking_error": b.error.copy(),
