@@ -9,43 +9,47 @@ and aggregated (mean ± SD and worst case) go to a Markdown table, a JSON
 file and PNG plots.
 
 ``rocketroll eval --policy pid|ppo[:PATH]|oracle|trim [--policy ...]``, or
-``python -m agents.evaluate`` with the same arguments.
+``python -m agents.evaluate`` with the same arguments.  Controllers come from
+the registry of :mod:`agents.registry`.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
+import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import Controller
+from agents.registry import default_policies, make_controller, policy_help
 from disturbances.bank import TraceBank
-from rollenv import ENV_IDS
+from rocketroll_common.errors import UsageError
+from rocketroll_common.settings import Command, check, run_command, setting, to_argv
+from rollenv import VARIANTS, task_of
 from rollenv.bank import load_bank, make_config
-from rollenv.cli import parse_setting
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
+from rollenv.history import EpisodeHistory, HistoryRecorder
 
 __all__ = [
+    "COMMAND",
     "METRICS",
+    "Args",
     "EpisodeSpec",
     "Evaluation",
-    "Rollout",
     "evaluate",
-    "main",
     "markdown_table",
     "metrics",
     "protocol_episodes",
-    "register",
+    "run",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -77,24 +81,6 @@ class EpisodeSpec:
         return {"trace": self.trace, "start": self.start, "setpoints": list(self.setpoints)}
 
 
-@dataclass(frozen=True)
-class Rollout:
-    """What happened in one episode, per control step (index 0: after reset).
-
-    Angles in °, rates in °/s, the error in the task's unit.
-    """
-
-    time_s: FloatArray
-    angle_deg: FloatArray
-    rate_dps: FloatArray
-    fin_deg: FloatArray
-    command_deg: FloatArray
-    u_d_deg: FloatArray
-    setpoint: FloatArray
-    error: FloatArray
-    reward: FloatArray
-
-
 @dataclass
 class Evaluation:
     """A controller's protocol result."""
@@ -102,7 +88,7 @@ class Evaluation:
     name: str
     episodes: list[dict[str, float]]
     aggregate: dict[str, dict[str, float]]
-    rollouts: list[Rollout] = field(repr=False)
+    rollouts: list[EpisodeHistory] = field(repr=False)
     seconds: float = 0.0
 
 
@@ -144,38 +130,21 @@ def protocol_episodes(
     return specs
 
 
-def run_episode(env: RocketRollEnv, controller: Controller, spec: EpisodeSpec) -> Rollout:
-    """Run ``controller`` through episode ``spec`` of ``env``."""
-    obs, info = env.reset(seed=spec.seed, options=spec.options())
+def run_episode(env: RocketRollEnv, controller: Controller, spec: EpisodeSpec) -> EpisodeHistory:
+    """Run ``controller`` through episode ``spec`` of ``env``; its history, step by step."""
+    obs, _ = env.reset(seed=spec.seed, options=spec.options())
     controller.reset(env)
-    n = env.config.max_episode_steps + 1
-    rows = np.empty((n, 9))
-    rows[0] = _row(info, 0.0)
+    recorder = HistoryRecorder(env.config.max_episode_steps + 1)
+    core = env.core
+    recorder.record(core, 0)
     truncated = False
-    k = 0
     while not truncated:
-        obs, reward, _, truncated, info = env.step(controller.act(obs, env))
-        k += 1
-        rows[k] = _row(info, float(reward))
-    cols = rows[: k + 1].T
-    return Rollout(*(np.ascontiguousarray(c) for c in cols))
+        obs, reward, _, truncated, _ = env.step(controller.act(obs, env))
+        recorder.record(core, 0, float(reward))
+    return recorder.history(env.config.task, env.config.fin_range_deg, spec.trace)
 
 
-def _row(info: dict[str, Any], reward: float) -> tuple[float, ...]:
-    return (
-        info["time_s"],
-        info["roll_deg"],
-        info["roll_rate_dps"],
-        info["fin_deg"],
-        info["fin_cmd_deg"],
-        info["u_d_deg"],
-        info["setpoint"],
-        info["tracking_error"],
-        reward,
-    )
-
-
-def metrics(rollout: Rollout, config: RollConfig) -> dict[str, float]:
+def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     """The protocol's metrics of one episode (see :data:`METRICS`).
 
     Over the steps after reset: RMS and largest |error|; the settled RMS over
@@ -296,134 +265,72 @@ def to_json(
     }
 
 
-# ----------------------------------------------------------------------- policies
-POLICY_HELP = (
-    "trim | pid[:OMEGA] | oracle | ppo[:DIR] (DIR: a `rocketroll train ppo` output; "
-    "default: the committed policy agents/policies/ENV_ID)"
-)
-
-
-def make_controller(
-    text: str, config: RollConfig, *, db: str | os.PathLike[str] | None = None
-) -> Controller:
-    """The controller a ``--policy`` value names (designs use the *train* split only)."""
-    from agents.nominal import NominalModel, TrimController
-
-    kind, _, arg = text.partition(":")
-    train = replace(config, split="train")
-    if kind in ("trim", "pid"):
-        model = NominalModel.from_bank(load_bank(train, db))
-        if kind == "trim":
-            if arg:
-                raise ValueError(f"--policy trim takes no argument, got {text!r}")
-            return TrimController(model, config.fin_range_deg)
-        from agents.pid import PIDController
-
-        try:
-            omega = float(arg) if arg else None
-        except ValueError:
-            raise ValueError(f"--policy pid:OMEGA needs a number, got {text!r}") from None
-        pid = PIDController.for_env(config, model, omega)
-        if arg:
-            pid.name = f"PID ω={omega:g}"
-        return pid
-    if kind == "oracle":
-        from agents.oracle import OracleController
-
-        if arg:
-            raise ValueError(f"--policy oracle takes no argument, got {text!r}")
-        return OracleController(config)
-    if kind == "ppo":
-        from agents.ppo import PPOController
-
-        env_id = next(i for i, task in ENV_IDS.items() if task == config.task)
-        path = Path(arg) if arg else Path(__file__).parent / "policies" / env_id
-        ppo = PPOController.load(path)
-        try:
-            ppo.require_task(config.task)
-        except ValueError as exc:
-            raise ValueError(f"--policy {text}: {exc} ({env_id})") from None
-        if arg:
-            ppo.name = f"PPO {path.name}"
-        return ppo
-    raise ValueError(f"unknown --policy {text!r}; use {POLICY_HELP}")
-
-
 # ---------------------------------------------------------------------------- CLI
-@dataclass
+def _variant_ids() -> tuple[str, ...]:
+    return VARIANTS.names()
+
+
+@dataclass(frozen=True)
 class Args:
     """``rocketroll eval`` / ``python -m agents.evaluate``."""
 
-    env_id: str = "RocketRoll-v0"
-    """RocketRoll-v0 (angle task) or RocketRollRate-v0 (rate task)."""
-    policy: list[str] = field(default_factory=lambda: ["trim", "pid", "ppo", "oracle"])
-    """Controllers to evaluate, in table order."""
-    split: str = "test"
-    """Database split the episodes come from (the held-out test split)."""
-    episodes: int = 20
-    """Number of protocol episodes."""
-    seed: int = 0
-    """Seed of the protocol's episodes (trace windows, setpoints, gyro noise)."""
-    out: Path | None = None
-    """Directory for table.md, results.json, episode.png, errors.png (none: print only)."""
-    db: Path | None = None
-    """Database file (default: $ROCKETROLL_DB or the default database)."""
-    settings: dict[str, Any] = field(default_factory=dict)
-    """Environment options for every episode (``--set setpoint=zero``), as for gym.make."""
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The :class:`Args` fields as options."""
-    d = Args()
-    parser.add_argument(
-        "--env-id", default=d.env_id, help="RocketRoll-v0 (angle) or RocketRollRate-v0 (rate)"
+    env_id: str = setting(
+        "RocketRoll-v0",
+        "environment id: RocketRoll-v0 (angle task), RocketRollRate-v0 (rate task), ...",
+        choices=_variant_ids(),
+        always=True,
     )
-    parser.add_argument(
-        "--policy",
-        action="append",
-        default=None,
+    policy: list[str] = setting(
+        default_factory=default_policies,
+        help=f"controller to evaluate, in table order (repeatable): {policy_help()}",
         metavar="POLICY",
-        help=f"{POLICY_HELP}; repeat for several (default: trim, pid, ppo, oracle)",
+        always=True,
     )
-    parser.add_argument("--split", default=d.split, choices=("train", "test"))
-    parser.add_argument("--episodes", type=int, default=d.episodes)
-    parser.add_argument("--seed", type=int, default=d.seed)
-    parser.add_argument("--out", type=Path, default=None, help="output directory")
-    parser.add_argument("--db", type=Path, default=None, help="database file")
-    parser.add_argument(
-        "--set",
-        dest="settings",
-        type=parse_setting,
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
+    split: Literal["train", "test"] = setting(
+        "test", "database split the episodes come from (the held-out test split)", always=True
+    )
+    episodes: int = setting(20, "number of protocol episodes", ge=1, le=100_000, always=True)
+    seed: int = setting(
+        0,
+        "seed of the protocol's episodes (trace windows, setpoints, gyro noise)",
+        ge=0,
+        le=2**31 - 1,
+        always=True,
+    )
+    out: Path | None = setting(
+        None,
+        "folder for table.md, results.json, episode.png, errors.png (none: print only)",
+        output="folder",
+    )
+    db: str | None = setting(
+        None, "database (default: $ROCKETROLL_DB or the default database)", metavar="DB"
+    )
+    settings: dict[str, Any] = setting(
+        default_factory=dict,
         help="an environment option for every episode, e.g. setpoint=zero (repeatable)",
+        flag="--set",
+        metavar="KEY=VALUE",
     )
+
+    def __post_init__(self) -> None:
+        check(self)
+        repeated = sorted({p for p in self.policy if self.policy.count(p) > 1})
+        if repeated:
+            raise UsageError(f"--policy {repeated[0]} is given twice")
+        fixed = sorted({"task", "split"} & set(self.settings))
+        if fixed:
+            raise UsageError(
+                f"--set {fixed[0]}=... is not allowed: the task follows --env-id, the split --split"
+            )
 
 
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
-    from rocketroll_common.errors import UsageError
-
-    if args.env_id not in ENV_IDS:
-        raise UsageError(f"--env-id must be one of {', '.join(ENV_IDS)}, not {args.env_id!r}")
-    if args.episodes < 1:
-        raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.seed < 0:
-        raise UsageError(f"--seed must be >= 0, got {args.seed}")
-    repeated = sorted({p for p in args.policy if args.policy.count(p) > 1})
-    if repeated:
-        raise UsageError(f"--policy {repeated[0]} is given twice")
-    task = ENV_IDS[args.env_id]
-    fixed = sorted({"task", "split"} & set(args.settings))
-    if fixed:
-        raise UsageError(
-            f"--set {fixed[0]}=... is not allowed: the task follows --env-id, the split --split"
-        )
+    task = task_of(args.env_id)
     try:
         config = make_config(args.env_id, {**args.settings, "task": task, "split": args.split})
-        controllers = [make_controller(p, config, db=args.db) for p in args.policy]
-    except (ValueError, FileNotFoundError) as exc:
+        controllers = [make_controller(p, config, args.env_id, db=args.db) for p in args.policy]
+    except ValueError as exc:
         raise UsageError(str(exc)) from exc
     names = [c.name for c in controllers]
     if len(set(names)) < len(names):
@@ -465,62 +372,23 @@ def run(args: Args) -> list[Evaluation]:
 
 
 def command_of(args: Args) -> str:
-    """The ``rocketroll eval`` command line that repeats ``args``."""
-    parts = ["rocketroll eval", f"--env-id {args.env_id}"]
-    parts += [f"--policy {p}" for p in args.policy]
-    parts += [f"--split {args.split}", f"--episodes {args.episodes}", f"--seed {args.seed}"]
-    parts += [f"--set {k}={v}" for k, v in args.settings.items()]
-    if args.db is not None:
-        parts.append(f"--db {args.db}")
-    if args.out is not None:
-        parts.append(f"--out {args.out}")
-    return " ".join(parts)
+    """The ``rocketroll eval`` command line that repeats ``args`` (the parser reads it back)."""
+    return shlex.join(["rocketroll", "eval", *to_argv(args)])
 
 
-def parse_args(argv: Sequence[str] | None = None) -> Args:
-    """Command-line arguments as :class:`Args`."""
-    parser = argparse.ArgumentParser(prog="python -m agents.evaluate", description=__doc__)
-    add_arguments(parser)
-    return _args(parser.parse_args(argv))
-
-
-def _args(ns: argparse.Namespace) -> Args:
-    d = Args()
-    return Args(
-        env_id=ns.env_id,
-        policy=ns.policy or d.policy,
-        split=ns.split,
-        episodes=ns.episodes,
-        seed=ns.seed,
-        out=ns.out,
-        db=ns.db,
-        settings=dict(ns.settings),
-    )
-
-
-def register(subparsers: Any) -> None:
-    """``rocketroll eval``."""
-    parser = subparsers.add_parser(
-        "eval",
-        help="evaluate controllers on held-out episodes (table, JSON, plots)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    add_arguments(parser)
-    parser.set_defaults(handler=lambda ns: (run(_args(ns)), 0)[1])
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m agents.evaluate``."""
-    from rocketroll_common.errors import RocketrollError
-
-    try:
-        run(parse_args(argv))
-    except RocketrollError as exc:
-        print(f"python -m agents.evaluate: error: {exc}", file=sys.stderr)
-        return 2
+def _run(args: Args) -> int:
+    run(args)
     return 0
 
 
+#: ``rocketroll eval``.
+COMMAND = Command(
+    "eval",
+    "evaluate controllers on held-out episodes (table, JSON, plots)",
+    Args,
+    _run,
+    __doc__ or "",
+)
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_command(COMMAND, sys.argv[1:], "python -m agents.evaluate"))

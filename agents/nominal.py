@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -10,7 +11,10 @@ from numpy.typing import NDArray
 from disturbances.bank import TraceBank
 from rollenv.env import RocketRollEnv
 
-__all__ = ["NominalModel", "TrimController"]
+if TYPE_CHECKING:
+    from agents.registry import Design
+
+__all__ = ["NominalModel", "TrimController", "make_trim"]
 
 
 @dataclass(frozen=True)
@@ -79,3 +83,9 @@ class TrimController:
     def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
         """The trim command, whatever ``obs`` says."""
         return self._action.copy()
+
+
+def make_trim(design: Design) -> TrimController:
+    """``--policy trim``: the trim floor of the train split's nominal rocket."""
+    design.no_argument("trim")
+    return TrimController(design.nominal(), design.config.fin_range_deg)

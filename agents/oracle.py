@@ -7,6 +7,7 @@ this servo could achieve against this turbulence at all.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,8 +16,12 @@ from agents.nominal import NominalModel
 from agents.pid import PIDGains
 from rollenv.core import RollBatch, RollConfig
 from rollenv.env import RocketRollEnv
+from rollenv.layout import State
 
-__all__ = ["DEFAULT_HORIZON", "OracleController"]
+if TYPE_CHECKING:
+    from agents.registry import Design
+
+__all__ = ["DEFAULT_HORIZON", "OracleController", "make_oracle"]
 
 #: Planning horizon (steps) and the bandwidth (rad/s) of the loop that finishes each
 #: plan after its first step (None: the first move is held), per task.  Picked on 30
@@ -124,8 +129,13 @@ class OracleController:
             n = max(self._grid, self._refine)
             self._predictor = RollBatch(self._planning, core.bank, n)
             self._bank_id = id(core.bank)
-        alpha, theta_bar, beta_bar, _ = (float(x) for x in core.params[0])
-        rocket = NominalModel(max(beta_bar, 0.1), alpha, theta_bar, "the episode's true rocket")
+        true = core.roll_params(0)
+        rocket = NominalModel(
+            max(true.beta_bar_per_s, 0.1),
+            true.alpha,
+            true.theta_bar_deg,
+            "the episode's true rocket",
+        )
         if self.tail_omega is not None:
             self.tail = PIDGains.place(rocket, self.config.task, float(self.tail_omega))
 
@@ -152,13 +162,9 @@ class OracleController:
         assert p is not None
         m = w.size
         index = p.all[:m]
-        p.state[:m] = core.state[0]
-        p.params[:m] = core.params[0]
-        p.trace[:m] = core.trace[0]
-        p.u_start[:m] = core.u_start[0]
-        p.step_count[:m] = core.step_count[0]
+        p.copy_env(core, 0, index)
         setpoint = core.setpoint_of(0)
-        p.setpoints[:m] = setpoint
+        p.setpoints[:m] = setpoint  # the current setpoint held: no preview of the schedule
         command = np.zeros(p.n)
         total = np.zeros(m)
         g = self.tail
@@ -167,7 +173,7 @@ class OracleController:
             if j == 0 or g is None:
                 command[:m] = np.clip(w - u_j, -1.0, 1.0)
             else:  # the tail: the disturbance cancelled, the rocket's own loop on its true state
-                rate = p.state[:m, 0]
+                rate = p.state[:m, State.RATE]
                 if self._angle:
                     error = p.error[:m]
                     fin = g.trim_deg + g.kp * error - g.kd * rate
@@ -177,3 +183,9 @@ class OracleController:
             p.step(command, self._rng, index)
             total -= p.reward[:m]
         return total
+
+
+def make_oracle(design: Design) -> OracleController:
+    """``--policy oracle``: the bound, on the environment's own settings."""
+    design.no_argument("oracle")
+    return OracleController(design.config)

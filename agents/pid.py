@@ -1,29 +1,30 @@
 """A discrete PID roll controller with gains placed on the identified roll model.
 
-Re-tuning for another database (``python -m agents.pid --db FILE``) takes the
-nominal rocket of that database's train split, sweeps the closed-loop
-bandwidth ω over train-split episodes of the evaluation protocol and prints
-the gains of the best ω; pass it back with ``rocketroll eval --policy
-pid:OMEGA``.
+Re-tuning for another database (``rocketroll tune pid --db FILE``,
+:mod:`agents.tune`) takes the nominal rocket of that database's train split,
+sweeps the closed-loop bandwidth ω over train-split episodes of the
+evaluation protocol and prints the gains of the best ω; pass it back with
+``rocketroll eval --policy pid:OMEGA``.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
-import sys
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from agents.nominal import NominalModel
-from rollenv import ENV_IDS
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
+from rollenv.layout import Obs
 
-__all__ = ["DEFAULT_BANDWIDTH", "PIDController", "PIDGains", "tune_bandwidth"]
+if TYPE_CHECKING:
+    from agents.registry import Design
+
+__all__ = ["DEFAULT_BANDWIDTH", "PIDController", "PIDGains", "make_pid"]
 
 #: Closed-loop bandwidth ω (rad/s) per task, chosen by :func:`tune_bandwidth`
 #: on the default database's train split (see the README's baselines section).
@@ -208,9 +209,9 @@ class PIDController:
     ) -> NDArray[np.float32]:
         """The fin command for observation ``(error, rate, fin, last command)``."""
         g = self.gains
-        error = float(obs[0]) - self._offset
-        rate = float(obs[1])
-        fin = float(obs[2])
+        error = float(obs[Obs.ERROR]) - self._offset
+        rate = float(obs[Obs.RATE])
+        fin = float(obs[Obs.FIN])
         if math.isnan(self._rate):
             self._rate = rate
         else:
@@ -219,7 +220,7 @@ class PIDController:
         if self._angle:
             raw = g.trim_deg + g.kp * error + g.ki * self._integral - g.kd * self._rate
         else:
-            setpoint = float(obs[0]) + rate  # e = r - v_meas
+            setpoint = float(obs[Obs.ERROR]) + rate  # e = r - v_meas
             error = setpoint - self._rate
             raw = g.trim_deg + g.k_ff * setpoint + g.kp * error + g.ki * self._integral
         command = min(max(raw, -self._range), self._range)
@@ -228,76 +229,13 @@ class PIDController:
         return np.array([command / self._range], dtype=np.float32)
 
 
-def tune_bandwidth(
-    config: RollConfig,
-    model: NominalModel,
-    omegas: Sequence[float],
-    *,
-    episodes: int = 30,
-    seed: int = 0,
-    db: str | None = None,
-    zeta: float = 1.0,
-    tf_s: float = 0.0,
-) -> list[tuple[float, dict[str, float]]]:
-    """``(ω, mean of each protocol metric)`` for each ``ω`` on train-split protocol episodes.
-
-    The evaluation protocol's episodes are drawn with ``split`` forced to
-    ``"train"``, so tuning never sees the test split.
-    """
-    from agents.evaluate import evaluate, protocol_episodes
-
-    config = replace(config, split="train")
-    specs = protocol_episodes(config, episodes=episodes, seed=seed, db=db)
-    out = []
-    for omega in omegas:
-        pid = PIDController.for_env(config, model, omega, zeta, tf_s)
-        result = evaluate(config, pid, specs, db=db)
-        out.append((float(omega), {k: v["mean"] for k, v in result.aggregate.items()}))
-    return out
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m agents.pid``: re-tune the PID for a database and print the gains."""
-    from rollenv.bank import load_bank, make_config
-
-    parser = argparse.ArgumentParser(prog="python -m agents.pid", description=__doc__)
-    parser.add_argument("--env-id", default="RocketRoll-v0", choices=list(ENV_IDS))
-    parser.add_argument("--db", default=None, help="database file (default: the default one)")
-    parser.add_argument("--episodes", type=int, default=30, help="train episodes per ω")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--omegas", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0, 8.0, 10.0]
-    )
-    parser.add_argument(
-        "--metric",
-        default="rms_error",
-        choices=("rms_error", "settled_rms_error", "return"),
-        help="what the best ω optimises (default: the protocol's headline, the RMS error)",
-    )
-    ns = parser.parse_args(argv)
-    task = ENV_IDS[ns.env_id]
-    config = make_config(ns.env_id, {"task": task, "split": "train"})
-    model = NominalModel.from_bank(load_bank(config, ns.db))
-    print(f"nominal model: {model.source}")
-    print(f"  a = {model.a_per_s:.4g} 1/s, α = {model.alpha:.4g}, θ̄ = {model.theta_bar_deg:.4g}°")
-    results = tune_bandwidth(config, model, ns.omegas, episodes=ns.episodes, seed=ns.seed, db=ns.db)
-    unit = "°" if task == "angle" else "°/s"
-    print(f"  ω (rad/s)  RMS error ({unit})  settled RMS ({unit})  return")
-    for omega, m in results:
-        print(
-            f"  {omega:9.2f}  {m['rms_error']:14.4f}  {m['settled_rms_error']:18.4f}  "
-            f"{m['return']:8.1f}"
-        )
-    sign = -1.0 if ns.metric == "return" else 1.0
-    best = min(results, key=lambda r: sign * r[1][ns.metric])[0]
-    gains = PIDGains.place(model, task, best)
-    print(
-        f"best ω by {ns.metric} = {best:g} rad/s: kp = {gains.kp:.4g}, ki = {gains.ki:.4g}, "
-        f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°"
-    )
-    print(f"use it with: rocketroll eval --env-id {ns.env_id} --policy pid:{best:g}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def make_pid(design: Design) -> PIDController:
+    """``--policy pid[:OMEGA]``: gains placed on the train split's nominal rocket."""
+    try:
+        omega = float(design.arg) if design.arg else None
+    except ValueError:
+        raise ValueError(f"--policy pid:OMEGA needs a number, got pid:{design.arg}") from None
+    pid = PIDController.for_env(design.config, design.nominal(), omega)
+    if design.arg:
+        pid.name = f"PID ω={omega:g}"
+    return pid

@@ -5,14 +5,22 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from rollenv.env import RocketRollEnv
+from rollenv.layout import Obs
 
-__all__ = ["ObservationNormalizer", "PPOController"]
+if TYPE_CHECKING:
+    from agents.registry import Design
+
+__all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_ppo"]
+
+
+#: Where the committed policies are: one folder per environment id.
+COMMITTED = Path(__file__).resolve().parent / "policies"
 
 
 class ObservationNormalizer:
@@ -42,15 +50,16 @@ class ObservationNormalizer:
                 self.epsilon = float(record["epsilon"])
             except KeyError as exc:
                 raise ValueError(f"normalize.json lacks {exc.args[0]!r}") from exc
-            if self.mean.shape != (4,) or self.var.shape != (4,):
+            n = len(Obs)
+            if self.mean.shape != (n,) or self.var.shape != (n,):
                 raise ValueError(
-                    f"normalize.json: mean and var must hold 4 values, got {self.mean.shape} "
+                    f"normalize.json: mean and var must hold {n} values, got {self.mean.shape} "
                     f"and {self.var.shape}"
                 )
             self._scale = np.sqrt(self.var + self.epsilon)
 
     def __call__(self, obs: NDArray[Any]) -> NDArray[np.float32]:
-        """``obs`` (shape ``(..., 4)``) normalised as in training, float32."""
+        """``obs`` (shape ``(..., len(Obs))``) normalised as in training, float32."""
         if not self.enabled:
             return np.asarray(obs, dtype=np.float32)
         normalized = np.clip((obs - self.mean) / self._scale, -self.clip_obs, self.clip_obs)
@@ -109,7 +118,7 @@ class PPOController:
         # mean); anything else goes through predict().
         gaussian = (DiagGaussianDistribution, StateDependentNoiseDistribution)
         self._direct = isinstance(policy.action_dist, gaussian) and not policy.squash_output
-        self._obs = torch.zeros((1, 4), dtype=torch.float32)
+        self._obs = torch.zeros((1, len(Obs)), dtype=torch.float32)
         low = np.asarray(model.action_space.low, dtype=np.float32)
         high = np.asarray(model.action_space.high, dtype=np.float32)
         self._low, self._high = low, high
@@ -156,7 +165,7 @@ class PPOController:
         """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""
         if not self._direct:
             return self.predict(obs)
-        normalized = self.normalizer(np.asarray(obs).reshape(1, 4))
+        normalized = self.normalizer(np.asarray(obs).reshape(1, len(Obs)))
         torch = self._torch
         policy = self._policy
         with torch.no_grad():
@@ -172,10 +181,26 @@ class PPOController:
 
     def predict(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches)."""
-        normalized = self.normalizer(np.asarray(obs).reshape(1, 4))
+        normalized = self.normalizer(np.asarray(obs).reshape(1, len(Obs)))
         action, _ = self.model.predict(normalized, deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(1)
 
 
 def _zero(_: float) -> float:
     return 0.0
+
+
+def make_ppo(design: Design) -> PPOController:
+    """``--policy ppo[:DIR]``: a training output, or the committed policy of the env id."""
+    path = Path(design.arg) if design.arg else COMMITTED / design.env_id
+    try:
+        ppo = PPOController.load(path)
+    except FileNotFoundError as exc:
+        raise ValueError(str(exc)) from None
+    try:
+        ppo.require_task(design.config.task)
+    except ValueError as exc:
+        raise ValueError(f"--policy ppo:{path}: {exc} ({design.env_id})") from None
+    if design.arg:
+        ppo.name = f"PPO {path.name}"
+    return ppo

@@ -1,7 +1,7 @@
 """Train Stable-Baselines3 PPO on RocketRoll-v0 / RocketRollRate-v0.
 
 Read top to bottom, as CleanRL's ``ppo_continuous_action.py``: the arguments
-(a dataclass, one docstring per field), the hyperparameters of the YAML file
+(a dataclass, help and bounds on each field), the hyperparameters of the YAML file
 keyed by environment id (rl-baselines3-zoo's layout), then the work:
 
 1. seed everything (SB3's ``seed=``, ``torch.manual_seed``, the adapter's
@@ -22,54 +22,54 @@ Output directory::
 
     model.zip         the final PPO model
     normalize.json    observation normalisation (mean, var, clip, epsilon), portable
+    vecnormalize.pkl  the same as SB3's VecNormalize.load(path, venv) reads it
     settings.json     arguments, resolved hyperparameters, command line, versions,
                       wall time, env-steps/s, the final model's test-split evaluation
-    checkpoints/      periodic models and VecNormalize pickles
+    checkpoints/      periodic models and VecNormalize pickles (and the one Ctrl-C
+                      saves; continue with --resume checkpoints/ppo_N_steps.zip)
     eval/             evaluations.npz (SB3) and tracking_error.csv
     logs/             SB3's progress.csv
 
 Run::
 
-    python -m agents.train --env-id RocketRoll-v0 --seed 0 --out runs/ppo-angle
-    rocketroll train ppo --env-id RocketRollRate-v0 --timesteps 2000000
+    rocketroll train ppo --env-id RocketRoll-v0 --seed 0 --out runs/ppo-angle
+    python -m agents.train --env-id RocketRollRate-v0 --timesteps 2000000   # the same
 """
 
 from __future__ import annotations
 
-import argparse
-import ast
 import dataclasses
 import inspect
-import itertools
 import json
 import math
 import os
 import platform
 import shlex
 import sys
-import textwrap
 import time
-import types
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Union, get_args, get_origin, get_type_hints
+from typing import Any
 
 import numpy as np
 
-from rocketroll_common.errors import RocketrollError, UsageError
+from rocketroll_common.errors import Interrupted, SettingError, UsageError
+from rocketroll_common.settings import Command, check, parse, run_command, setting, to_argv
 
 __all__ = [
+    "COMMAND",
     "DEFAULT_HYPERPARAMS",
+    "VECNORMALIZE_FILE",
     "Args",
     "Hyperparameters",
+    "command_of",
     "load_hyperparameters",
-    "main",
     "make_env",
     "parse_args",
     "ppo_arguments",
-    "register",
+    "ppo_keywords",
     "train",
 ]
 
@@ -78,63 +78,106 @@ DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml
 
 #: Keys of a YAML entry that are not PPO keywords.
 SCRIPT_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
-#: PPO keywords a YAML entry may set.
-PPO_KEYS = (
-    "n_steps",
-    "batch_size",
-    "gamma",
-    "gae_lambda",
-    "n_epochs",
-    "learning_rate",
-    "ent_coef",
-    "vf_coef",
-    "clip_range",
-    "clip_range_vf",
-    "max_grad_norm",
-    "normalize_advantage",
-    "use_sde",
-    "sde_sample_freq",
-    "target_kl",
-    "policy_kwargs",
-)
+#: PPO keywords the script sets itself (from the command line), not the YAML file.
+SCRIPT_SET = ("seed", "verbose")
+
+
+def ppo_keywords() -> tuple[str, ...]:
+    """Every keyword of Stable-Baselines3's ``PPO`` a YAML entry may set (its signature,
+    less what the script sets: ``seed``, ``verbose``, ``env``)."""
+    from stable_baselines3 import PPO
+
+    names = inspect.signature(PPO.__init__).parameters
+    given = ("self", "policy", "env", "_init_setup_model", *SCRIPT_SET)  # policy: a script key
+    return tuple(n for n in names if n not in given)
+
+
 #: ``VecNormalize`` arguments a YAML ``normalize`` mapping may set.
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
 #: ``policy_kwargs.activation_fn`` names.
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
-@dataclass
-class Args:
-    """Arguments of a training run (``python -m agents.train --help``)."""
+def _variant_ids() -> tuple[str, ...]:
+    from rollenv import VARIANTS
 
-    env_id: str = "RocketRoll-v0"
-    """environment: RocketRoll-v0 (hold the roll angle) or RocketRollRate-v0 (track a roll rate)"""
-    timesteps: int | None = None
-    """environment steps to train for (default: n_timesteps of the hyperparameter file)"""
-    seed: int = 0
-    """seed of torch, SB3 and the environments' generator"""
-    envs: int | None = None
-    """environments stepped side by side (default: n_envs of the hyperparameter file)"""
-    out: Path | None = None
-    """output directory (default: runs/ppo/<env-id>/seed<seed>)"""
-    db: Path | None = None
-    """disturbance database (default: $ROCKETROLL_DB or the default database)"""
-    hyperparams: Path = DEFAULT_HYPERPARAMS
-    """YAML file of hyperparameters keyed by environment id"""
-    eval_freq: int = 100_000
-    """evaluate on the test split every this many environment steps (0: only at the end)"""
-    eval_episodes: int = 20
-    """test-split episodes per evaluation (run side by side)"""
-    eval_seed: int = 1000
-    """seed of the evaluation episodes: every evaluation runs the same ones"""
-    checkpoint_freq: int = 250_000
-    """save a checkpoint every this many environment steps (0: never)"""
-    progress_bar: bool = True
-    """show SB3's progress bar (rich)"""
-    torch_threads: int = 1
-    """torch's intra-op threads (1 was faster than 2 on a 2-core machine, with the env on one)"""
-    verbose: int = 0
-    """SB3's verbosity: 0 quiet, 1 its training table after each update"""
+    return VARIANTS.names()
+
+
+@dataclass(frozen=True)
+class Args:
+    """Arguments of a training run (``rocketroll train ppo --help``)."""
+
+    env_id: str = setting(
+        "RocketRoll-v0",
+        "environment: RocketRoll-v0 (hold the roll angle), RocketRollRate-v0 (track a roll "
+        "rate), ...",
+        choices=_variant_ids(),
+        always=True,
+    )
+    timesteps: int | None = setting(
+        None,
+        "environment steps to train for (default: n_timesteps of the hyperparameter file)",
+        ge=1,
+        le=10**12,
+    )
+    seed: int = setting(
+        0, "seed of torch, SB3 and the environments' generator", ge=0, le=2**32 - 1, always=True
+    )
+    envs: int | None = setting(
+        None,
+        "environments stepped side by side (default: n_envs of the hyperparameter file)",
+        ge=1,
+        le=1_000_000,
+    )
+    out: Path | None = setting(
+        None, "output folder (default: runs/ppo/<env-id>/seed<seed>)", output="folder"
+    )
+    db: str | None = setting(
+        None,
+        "disturbance database (default: $ROCKETROLL_DB or the default database)",
+        metavar="DB",
+    )
+    hyperparams: Path = setting(
+        DEFAULT_HYPERPARAMS, "YAML file of hyperparameters keyed by environment id"
+    )
+    eval_freq: int = setting(
+        100_000,
+        "evaluate on the test split every this many environment steps (0: only at the end)",
+        ge=0,
+        le=10**12,
+    )
+    eval_episodes: int = setting(
+        20, "test-split episodes per evaluation (run side by side)", ge=1, le=100_000
+    )
+    eval_seed: int = setting(
+        1000, "seed of the evaluation episodes: every evaluation runs the same ones", ge=0
+    )
+    checkpoint_freq: int = setting(
+        250_000, "save a checkpoint every this many environment steps (0: never)", ge=0
+    )
+    resume: Path | None = setting(
+        None,
+        "continue from this checkpoint (model zip; its VecNormalize pickle is found beside it), "
+        "e.g. the one an interrupted run saved",
+    )
+    progress_bar: bool = setting(True, "show SB3's progress bar (rich)")
+    torch_threads: int = setting(
+        1,
+        "torch's intra-op threads (1 was faster than 2 on a 2-core machine, with the env on one)",
+        ge=1,
+        le=1024,
+    )
+    verbose: int = setting(
+        0, "SB3's verbosity: 0 quiet, 1 its training table after each update", ge=0, le=2
+    )
+
+    def __post_init__(self) -> None:
+        check(self)
+        if self.db is not None and "://" not in self.db and not Path(self.db).is_file():
+            raise SettingError("db", f"{self.db}: no such file")
+        if self.resume is not None and not Path(self.resume).is_file():
+            raise SettingError("resume", f"{self.resume}: no such file")
 
 
 @dataclass(frozen=True)
@@ -173,97 +216,15 @@ class Hyperparameters:
 
 
 # ----------------------------------------------------------------------------- arguments
-def _field_docs(cls: type) -> dict[str, str]:
-    """The docstring under each field of dataclass ``cls`` (for ``--help``)."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    body = tree.body[0].body  # type: ignore[attr-defined]
-    docs: dict[str, str] = {}
-    for node, after in itertools.pairwise(body):
-        if (
-            isinstance(node, ast.AnnAssign)
-            and isinstance(node.target, ast.Name)
-            and isinstance(after, ast.Expr)
-            and isinstance(after.value, ast.Constant)
-            and isinstance(after.value.value, str)
-        ):
-            docs[node.target.id] = " ".join(after.value.value.split())
-    return docs
+def parse_args(argv: Sequence[str]) -> Args:
+    """:class:`Args` from command-line words (as ``rocketroll train ppo`` reads them)."""
+    args: Args = parse(Args, argv, prog="rocketroll train ppo")
+    return args
 
 
-def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    """One option per field of :class:`Args`, typed and documented from the dataclass."""
-    docs = _field_docs(Args)
-    hints = get_type_hints(Args)
-    for f in dataclasses.fields(Args):
-        kind = hints[f.name]
-        if get_origin(kind) in (Union, types.UnionType):
-            kind = next(a for a in get_args(kind) if a is not type(None))
-        option = "--" + f.name.replace("_", "-")
-        default = f.default
-        shown = "" if default is None else f" ({default})"
-        if kind is bool:
-            parser.add_argument(
-                option,
-                action=argparse.BooleanOptionalAction,
-                default=default,
-                help=docs[f.name],
-            )
-        else:
-            parser.add_argument(
-                option,
-                type=kind,
-                default=default,
-                help=docs[f.name] + shown,
-                metavar=f.name.upper(),
-            )
-
-
-def parse_args(argv: Sequence[str] | None = None) -> Args:
-    """:class:`Args` from the command line (``argv`` without the program name)."""
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.train", description=__doc__.split("\n\n")[0]
-    )
-    _add_arguments(parser)
-    return _args_from(parser.parse_args(argv))
-
-
-def _args_from(ns: argparse.Namespace) -> Args:
-    return Args(**{f.name: getattr(ns, f.name) for f in dataclasses.fields(Args)})
-
-
-def _command_of(args: Args) -> str:
-    """The ``python -m agents.train`` command line that reproduces ``args``."""
-    words = ["python", "-m", "agents.train"]
-    for f in dataclasses.fields(Args):
-        value = getattr(args, f.name)
-        option = "--" + f.name.replace("_", "-")
-        if isinstance(value, bool):
-            words.append(option if value else "--no-" + option[2:])
-        elif value is not None:
-            words += [option, str(value)]
-    return shlex.join(words)
-
-
-def check_args(args: Args) -> None:
-    """Raise :class:`UsageError` naming the option of the first bad argument."""
-    from rollenv import ENV_IDS
-
-    if args.env_id not in ENV_IDS:
-        raise UsageError(f"--env-id must be one of {', '.join(ENV_IDS)}, not {args.env_id!r}")
-    for name in ("timesteps", "envs"):
-        value = getattr(args, name)
-        if value is not None and value < 1:
-            raise UsageError(f"--{name} must be a positive integer, got {value}")
-    for name in ("eval_freq", "checkpoint_freq"):
-        value = getattr(args, name)
-        if value < 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be >= 0, got {value}")
-    for name in ("eval_episodes", "torch_threads"):
-        value = getattr(args, name)
-        if value < 1:
-            raise UsageError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
-    if args.db is not None and not Path(args.db).is_file():
-        raise UsageError(f"--db {args.db}: no such file")
+def command_of(args: Args) -> str:
+    """The ``rocketroll train ppo`` command line that reproduces ``args``."""
+    return shlex.join(["rocketroll", "train", "ppo", *to_argv(args)])
 
 
 # ------------------------------------------------------------------------ hyperparameters
@@ -282,9 +243,18 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
     if not path.is_file():
         raise UsageError(f"--hyperparams {path}: no such file")
     try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise UsageError(
+            f"--hyperparams {path}: not UTF-8 text (byte {exc.start} is "
+            f"0x{exc.object[exc.start]:02x})"
+        ) from None
+    try:
+        document = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise UsageError(f"--hyperparams {path}: not valid YAML ({exc})") from exc
+        raise UsageError(
+            f"--hyperparams {path}: not valid YAML ({exc})".replace("\n", " ")
+        ) from None
     if not isinstance(document, dict):
         raise UsageError(f"--hyperparams {path}: expected a mapping keyed by environment id")
     if env_id not in document:
@@ -296,11 +266,18 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
     where = f"{path}, {env_id}"
     if not isinstance(entry, dict):
         raise UsageError(f"{where}: expected a mapping of hyperparameters")
-    unknown = sorted(set(entry) - set(SCRIPT_KEYS) - set(PPO_KEYS))
+    set_here = sorted(set(entry) & set(SCRIPT_SET))
+    if set_here:
+        raise UsageError(
+            f"{where}: {set_here[0]!r} is set by the command line (--{set_here[0]}), not the "
+            "hyperparameter file"
+        )
+    keywords = ppo_keywords()
+    unknown = sorted(set(entry) - set(SCRIPT_KEYS) - set(keywords))
     if unknown:
         raise UsageError(
             f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; known: "
-            f"{', '.join(SCRIPT_KEYS + PPO_KEYS)}"
+            f"{', '.join(SCRIPT_KEYS + keywords)}"
         )
     for key in ("n_envs", "n_timesteps", "policy"):
         if key not in entry:
@@ -330,7 +307,7 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
     env_kwargs = entry.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
         raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
-    ppo = {key: entry[key] for key in PPO_KEYS if key in entry}
+    ppo = {key: entry[key] for key in keywords if key in entry}
     _ppo_arguments(ppo, where)  # fail now on a bad schedule or activation
     return Hyperparameters(
         env_id=env_id,
@@ -395,6 +372,14 @@ def _ppo_arguments(ppo: dict[str, Any], where: str) -> dict[str, Any]:
         policy_kwargs["activation_fn"] = table[activation]
     if "policy_kwargs" in out:
         out["policy_kwargs"] = policy_kwargs
+    if out.get("tensorboard_log") is not None:
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise UsageError(
+                f"{where}: tensorboard_log needs the tensorboard package (pip install tensorboard)"
+            )
+        out["tensorboard_log"] = str(out["tensorboard_log"])
     return out
 
 
@@ -537,7 +522,7 @@ def evaluate_held_out(model: Any, eval_env: Any, adapter: Any, seed: int) -> dic
 # ----------------------------------------------------------------------------- outputs
 def normalization_record(venv: Any) -> dict[str, Any]:
     """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
-    from rollenv.core import OBSERVATION_NAMES
+    from rollenv.layout import OBSERVATION_NAMES
 
     if venv is None or not venv.norm_obs:
         return {"norm_obs": False, "observation_names": list(OBSERVATION_NAMES)}
@@ -602,7 +587,12 @@ def _print_table(rows: list[tuple[str, Any]]) -> None:
 
 # ----------------------------------------------------------------------------- training
 def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, Any]:
-    """Train PPO as ``args`` says; write the output directory; return ``settings.json``'s data.
+    """Train PPO as ``args`` says; write the output folder; return ``settings.json``'s data.
+
+    Ctrl-C saves a resumable checkpoint (the model and its ``VecNormalize``
+    statistics, under ``checkpoints/``) and raises
+    :class:`~rocketroll_common.errors.Interrupted` naming it; ``--resume`` it
+    to go on.  No ``model.zip`` is written unless training finished.
 
     Raises
     ------
@@ -610,11 +600,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         A bad argument or hyperparameter (named).
     """
     started = time.perf_counter()
-    check_args(args)
     hp = load_hyperparameters(args.hyperparams, args.env_id)
     n_envs = args.envs if args.envs is not None else hp.n_envs
     timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
     ppo_kwargs = ppo_arguments(hp)
+    ppo_kwargs.setdefault("device", "cpu")
     n_steps = int(ppo_kwargs.get("n_steps", 2048))
     batch_size = int(ppo_kwargs.get("batch_size", 64))
     if (n_steps * n_envs) % batch_size != 0 or n_steps * n_envs < 2:
@@ -632,7 +622,6 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.logger import configure
 
     # Seeding: torch and SB3 (python, numpy, torch, the action space, the env) and the
     # adapters' generators; PPO(seed=...) reseeds the training adapter before its first reset.
@@ -654,6 +643,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("torch threads", args.torch_threads),
         ("eval", f"{args.eval_episodes} test-split episodes every {args.eval_freq:,} steps"),
         ("checkpoints", f"every {args.checkpoint_freq:,} steps" if args.checkpoint_freq else "off"),
+        ("resume", args.resume if args.resume is not None else "-"),
         ("policy", hp.policy),
         ("normalize", hp.normalize if hp.normalize is not None else "off"),
         *((k, hp.ppo[k]) for k in hp.ppo),
@@ -665,10 +655,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
 
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval").mkdir(exist_ok=True)
-    model = PPO(
-        hp.policy, train_env, seed=args.seed, device="cpu", verbose=args.verbose, **ppo_kwargs
-    )
-    model.set_logger(configure(str(out / "logs"), ["csv", "stdout"] if args.verbose else ["csv"]))
+    if args.resume is not None:
+        model = _resume(args.resume, train_env, normalize, ppo_kwargs["device"])
+    else:
+        model = PPO(hp.policy, train_env, seed=args.seed, verbose=args.verbose, **ppo_kwargs)
+    model.set_logger(_logger(out, args, ppo_kwargs.get("tensorboard_log")))
     callbacks: list[Any] = [
         _make_eval_callback_class()(
             eval_env,
@@ -691,25 +682,36 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             )
         )
     learn_started = time.perf_counter()
-    with warnings.catch_warnings():
-        if args.progress_bar:  # tqdm's rich bar announces itself as experimental
-            from tqdm import TqdmExperimentalWarning
+    try:
+        with warnings.catch_warnings():
+            if args.progress_bar:  # tqdm's rich bar announces itself as experimental
+                from tqdm import TqdmExperimentalWarning
 
-            warnings.filterwarnings("ignore", category=TqdmExperimentalWarning)
-        model.learn(
-            total_timesteps=timesteps,
-            callback=CallbackList(callbacks),
-            progress_bar=args.progress_bar,
-        )
+                warnings.filterwarnings("ignore", category=TqdmExperimentalWarning)
+            model.learn(
+                total_timesteps=max(timesteps - model.num_timesteps, 0),
+                callback=CallbackList(callbacks),
+                progress_bar=args.progress_bar,
+                reset_num_timesteps=args.resume is None,
+            )
+    except KeyboardInterrupt:
+        saved = _checkpoint(model, normalize, out / "checkpoints")
+        again = to_argv(dataclasses.replace(args, resume=saved, out=out))
+        raise Interrupted(
+            f"after {model.num_timesteps:,} env-steps; saved the resumable checkpoint {saved} "
+            f"(go on with: {shlex.join(['rocketroll', 'train', 'ppo', *again])})"
+        ) from None
     train_s = time.perf_counter() - learn_started
 
-    # The result: the final model and its observation statistics.
+    # The result: the final model and its observation statistics (as JSON, and as SB3's
+    # VecNormalize pickle for `VecNormalize.load`).
     model.save(out / "model.zip")
     norm_record = normalization_record(normalize)
     (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
     if normalize is not None:
         from stable_baselines3.common.vec_env import sync_envs_normalization
 
+        normalize.save(str(out / VECNORMALIZE_FILE))
         sync_envs_normalization(train_env, eval_env)
     final = evaluate_held_out(model, eval_env, eval_adapter, args.eval_seed)
     wall_s = time.perf_counter() - started
@@ -731,7 +733,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         "env_settings": _jsonable(dataclasses.asdict(adapter.config)),
         "database": adapter.bank.description,
         "command_line": shlex.join(sys.argv if command_line is None else command_line),
-        "equivalent_command": _command_of(args),
+        "equivalent_command": command_of(args),
         "versions": _versions(),
         "torch_threads": args.torch_threads,
         "env_steps": int(model.num_timesteps),
@@ -758,42 +760,80 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         f"final model on {int(final['episodes'])} test-split episodes: mean return "
         f"{final['mean_reward']:.1f}, RMS tracking error {final['rms_tracking_error']:.3f}"
     )
-    print(f"wrote {out}/model.zip, normalize.json, settings.json")
+    written = ["model.zip", "normalize.json", "settings.json"]
+    if normalize is not None:
+        written.insert(2, VECNORMALIZE_FILE)
+    print(f"wrote {out}/{', '.join(written)}")
     return settings
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m agents.train``: parse, train, exit code (2 and one line for a user error)."""
-    args = parse_args(argv)
-    words = sys.argv[1:] if argv is None else list(argv)
-    try:
-        train(args, command_line=[sys.executable, "-m", "agents.train", *words])
-    except RocketrollError as exc:
-        print(f"agents.train: error: {exc}", file=sys.stderr)
-        return 2
+#: SB3's ``VecNormalize`` statistics of the final model (``VecNormalize.load(path, venv)``).
+VECNORMALIZE_FILE = "vecnormalize.pkl"
+
+
+def _logger(out: Path, args: Args, tensorboard_log: str | None) -> Any:
+    """SB3's logger: CSV under ``out/logs``, stdout when verbose, TensorBoard when asked."""
+    from stable_baselines3.common.logger import Logger, make_output_format
+
+    formats = [make_output_format("csv", str(out / "logs"))]
+    if args.verbose:
+        formats.append(make_output_format("stdout", str(out / "logs")))
+    if tensorboard_log is not None:
+        run = f"PPO_{args.env_id}_seed{args.seed}"
+        formats.append(make_output_format("tensorboard", str(Path(tensorboard_log) / run)))
+    return Logger(folder=str(out / "logs"), output_formats=formats)
+
+
+def _normalization_file(checkpoint: Path) -> Path:
+    """The ``VecNormalize`` pickle SB3's ``CheckpointCallback`` saves beside ``checkpoint``."""
+    return checkpoint.with_name(
+        checkpoint.name.replace("ppo_", "ppo_vecnormalize_", 1)
+    ).with_suffix(".pkl")
+
+
+def _checkpoint(model: Any, normalize: Any, folder: Path) -> Path:
+    """Save a resumable checkpoint as SB3's ``CheckpointCallback`` names them."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"ppo_{model.num_timesteps}_steps.zip"
+    model.save(path)
+    if normalize is not None:
+        normalize.save(str(_normalization_file(path)))
+    return path
+
+
+def _resume(checkpoint: Path, train_env: Any, normalize: Any, device: str) -> Any:
+    """The model of ``checkpoint`` on ``train_env``, with its normalisation statistics."""
+    import pickle
+
+    from stable_baselines3 import PPO
+
+    model = PPO.load(checkpoint, env=train_env, device=device)
+    if normalize is not None:
+        stats = _normalization_file(Path(checkpoint))
+        if not stats.is_file():
+            raise UsageError(
+                f"--resume {checkpoint}: its VecNormalize statistics {stats.name} are not beside it"
+            )
+        with stats.open("rb") as handle:
+            saved = pickle.load(handle)
+        normalize.obs_rms = saved.obs_rms
+        normalize.ret_rms = saved.ret_rms
+    return model
+
+
+def _train(args: Args) -> int:
+    train(args)
     return 0
 
 
-# ----------------------------------------------------------------------------- CLI
-def _cmd_train_ppo(ns: argparse.Namespace) -> int:
-    train(_args_from(ns))
-    return 0
-
-
-def register(subparsers: Any) -> None:
-    """Add ``rocketroll train ppo ...`` to the top-level parser's ``subparsers``."""
-    parser = subparsers.add_parser(
-        "train", help="train a controller (PPO, Stable-Baselines3)", description=__doc__
-    )
-    sub = parser.add_subparsers(dest="train_command", required=True, metavar="ALGORITHM")
-    ppo = sub.add_parser(
-        "ppo",
-        help="train PPO on RocketRoll-v0 or RocketRollRate-v0",
-        description=__doc__.split("\n\n")[0],
-    )
-    _add_arguments(ppo)
-    ppo.set_defaults(handler=_cmd_train_ppo)
-
+#: ``rocketroll train ppo``.
+COMMAND = Command(
+    "ppo",
+    "train PPO on a RocketRoll environment (Stable-Baselines3)",
+    Args,
+    _train,
+    __doc__ or "",
+)
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_command(COMMAND, sys.argv[1:], "python -m agents.train"))

@@ -24,7 +24,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from disturbances.bank import TraceBank
-from rollenv import ENV_IDS
+from rollenv import task_of
 from rollenv.bank import load_bank, make_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
@@ -118,9 +118,10 @@ class RollVecEnv(VecEnv):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs}")
-        if env_id not in ENV_IDS:
-            raise ValueError(f"env_id must be one of {', '.join(ENV_IDS)}, not {env_id!r}")
-        task = ENV_IDS[env_id]
+        try:
+            task = task_of(env_id)
+        except ValueError as exc:
+            raise ValueError(f"env_id: {exc}") from None
         if settings.setdefault("task", task) != task:
             raise ValueError(f"{env_id} is the {task!r} task; task={settings['task']!r} conflicts")
         if "render_mode" in settings:
@@ -136,7 +137,7 @@ class RollVecEnv(VecEnv):
         super().__init__(int(num_envs), observation_space, action_space)
         self._actions: NDArray[np.float64] | None = None
         self._started = False
-        self._uids = [t.info.uid for t in self.bank.traces]
+        self._uids = [t.uid for t in self.bank.traces]
 
     # ------------------------------------------------------------------ VecEnv
     def seed(self, seed: int | None = None) -> Sequence[int | None]:

@@ -1,0 +1,31 @@
+"""``rocketroll`` commands of the agents layer: ``train``, ``eval``, ``tune``.
+
+The commands themselves live beside what they run (:data:`agents.train.COMMAND`,
+:data:`agents.evaluate.COMMAND`, :data:`agents.tune.COMMAND`, each a settings
+dataclass and a function), so ``python -m agents.train`` and ``rocketroll
+train ppo`` are one command; this module only groups them.
+"""
+
+from __future__ import annotations
+
+from agents import evaluate, train, tune
+from rocketroll_common.settings import Command
+
+__all__ = ["COMMANDS"]
+
+#: The commands of this layer, by name.
+COMMANDS: dict[str, Command] = {
+    "train": Command(
+        "train",
+        "train a controller (PPO, Stable-Baselines3)",
+        description=train.__doc__ or "",
+        subcommands=(train.COMMAND,),
+    ),
+    "eval": evaluate.COMMAND,
+    "tune": Command(
+        "tune",
+        "re-tune a controller's design on train episodes (the PID's bandwidth)",
+        description=tune.__doc__ or "",
+        subcommands=(tune.COMMAND,),
+    ),
+}

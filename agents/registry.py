@@ -1,0 +1,164 @@
+"""Controllers by name: one registry behind ``--policy NAME[:ARG]``.
+
+A controller joins the evaluation protocol by one call::
+
+    from agents.registry import register_controller
+
+    def make_mine(design):                  # design: what the controller may know
+        return MyController(design.config, design.nominal())
+
+    register_controller("mine", make_mine, usage="mine", summary="my controller")
+
+after which ``rocketroll eval --policy mine`` (and ``--policy mine:ARG``, the
+text after the colon in ``design.arg``) runs it, its ``--help`` lists it,
+and the evaluation's tables and plots include it.  The factory gets a
+:class:`Design`: the environment's settings and id, and -- for controllers
+designed on data -- the *train* split of the database, never the test split
+the protocol evaluates on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+from rocketroll_common.registry import Registry
+
+if TYPE_CHECKING:
+    from agents.base import Controller
+    from agents.nominal import NominalModel
+    from disturbances.bank import TraceBank
+    from rollenv.core import RollConfig
+
+__all__ = [
+    "CONTROLLERS",
+    "Design",
+    "default_policies",
+    "make_controller",
+    "policy_help",
+    "register_controller",
+]
+
+
+@dataclass
+class Design:
+    """What a controller factory gets.
+
+    Attributes
+    ----------
+    config : RollConfig
+        The environment's settings (task, sensors, servo, ...).
+    env_id : str
+        The environment id (``RocketRoll-v0``, ...).
+    arg : str or None
+        The text after ``NAME:`` in ``--policy NAME:ARG``.
+    db : str or None
+        The database the protocol uses (None: the default one).
+    """
+
+    config: RollConfig
+    env_id: str
+    arg: str | None = None
+    db: str | None = None
+    _bank: TraceBank | None = field(default=None, repr=False)
+
+    @cached_property
+    def train_bank(self) -> TraceBank:
+        """The traces of the *train* split (what designs may look at)."""
+        from rollenv.bank import load_bank
+
+        return load_bank(replace(self.config, split="train"), self.db)
+
+    def nominal(self) -> NominalModel:
+        """The median rocket of the train split (:class:`agents.nominal.NominalModel`)."""
+        from agents.nominal import NominalModel
+
+        return NominalModel.from_bank(self.train_bank)
+
+    def no_argument(self, name: str) -> None:
+        """Refuse an argument for a controller that takes none."""
+        if self.arg:
+            raise ValueError(f"--policy {name} takes no argument, got {name}:{self.arg}")
+
+
+#: ``factory(design) -> controller``.
+Factory = Callable[[Design], "Controller"]
+
+#: Every controller, by the name ``--policy`` takes.
+CONTROLLERS: Registry[Factory] = Registry("controller")
+
+
+def register_controller(
+    name: str,
+    factory: Factory | str,
+    *,
+    usage: str | None = None,
+    summary: str = "",
+    default: bool = False,
+    replace: bool = False,
+) -> None:
+    """Register a controller for ``--policy NAME`` (``factory`` or ``"module:function"``).
+
+    ``usage`` shows its argument in ``--help`` (``pid[:OMEGA]``); ``default``
+    puts it among the controllers ``rocketroll eval`` runs without
+    ``--policy``.
+    """
+    CONTROLLERS.register(
+        name, factory, summary=summary, replace=replace, usage=usage or name, default=default
+    )
+
+
+def default_policies() -> list[str]:
+    """The controllers ``rocketroll eval`` runs when none is named, in table order."""
+    return [e.name for e in CONTROLLERS.entries() if e.info.get("default")]
+
+
+def policy_help() -> str:
+    """``trim | pid[:OMEGA] | ...`` with a word on each, for ``--help``."""
+    return "; ".join(
+        f"{e.info['usage']}: {e.summary}" if e.summary else str(e.info["usage"])
+        for e in CONTROLLERS.entries()
+    )
+
+
+def make_controller(
+    text: str, config: RollConfig, env_id: str, *, db: str | None = None
+) -> Controller:
+    """The controller a ``--policy NAME[:ARG]`` value names (``ValueError`` if unknown)."""
+    name, _, arg = text.partition(":")
+    try:
+        factory = CONTROLLERS.get(name)
+    except ValueError as exc:
+        raise ValueError(f"--policy {text}: {exc}") from None
+    return factory(Design(config, env_id, arg or None, db))
+
+
+register_controller(
+    "trim",
+    "agents.nominal:make_trim",
+    summary="fins held at the nominal trim -θ̄ (the floor)",
+    default=True,
+)
+register_controller(
+    "pid",
+    "agents.pid:make_pid",
+    usage="pid[:OMEGA]",
+    summary="PID placed on the nominal rocket (OMEGA: bandwidth, rad/s)",
+    default=True,
+)
+register_controller(
+    "ppo",
+    "agents.ppo:make_ppo",
+    usage="ppo[:DIR]",
+    summary="a trained PPO policy (DIR: a `rocketroll train ppo` output; default: the "
+    "committed policy agents/policies/ENV_ID)",
+    default=True,
+)
+register_controller(
+    "oracle",
+    "agents.oracle:make_oracle",
+    summary="perfect preview of u_d on the true rocket (a bound, not deployable)",
+    default=True,
+)
