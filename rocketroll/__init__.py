@@ -1,19 +1,17 @@
-"""rocketroll: rocket roll dynamics under turbulence.
+"""rocketroll: rocket roll dynamics under turbulence -- the command line.
 
-The distribution's top-level packages, lowest layer first::
+The distribution's packages, lowest layer first::
 
-    identification  the paper's pipeline, recording format, roll model, virtual tunnel
-    disturbances    database of identified parameters and u_d traces
-    rollenv         Gymnasium environment RocketRoll-v0
-    agents          PID and PPO baselines, evaluation
+    rocketroll_common  errors, atomic files, headless figures, settings, registries
+    identification     the paper's pipeline, recording format, roll model, virtual tunnel
+    disturbances       database of identified parameters and u_d traces
+    rollenv            Gymnasium environments RocketRoll-v0 and its variants
+    agents             controllers, training and the evaluation protocol
 
-This package holds only the ``rocketroll`` command line, which sits above all
-of them.
+This package holds only the ``rocketroll`` command line (``rocketroll`` or
+``python -m rocketroll``), which sits above all of them.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from rocketroll_common import __version__
 
-try:
-    __version__ = version("rocketroll")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0+unknown"
+__all__ = ["__version__"]

@@ -1,63 +1,76 @@
-"""The ``rocketroll`` command line.
+"""The ``rocketroll`` command line: one table of commands, each defined by its layer.
 
-Each layer registers its own subcommands; handlers import their heavy
-dependencies lazily so ``rocketroll --help`` stays fast.  Errors a user can
-cause (:class:`identification.errors.RocketrollError`) become one line on
-stderr and exit code 2.
+``rocketroll --help`` imports nothing but this module and the standard
+library, so it answers at once.  ``rocketroll COMMAND ...`` imports the
+command's module, builds its parser from the command's settings dataclass
+(:mod:`rocketroll_common.settings`) and runs it: errors a user can cause
+become one line on stderr and exit code 2, Ctrl-C one line and 130.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
 
-from agents import evaluate as agents_evaluate
-from agents import train as agents_train
-from disturbances import cli as disturbances_cli
-from identification import cli as identification_cli
-from rocketroll import __version__
-from rocketroll_common.errors import RocketrollError
-from rollenv import cli as rollenv_cli
+from rocketroll_common import __version__
+from rocketroll_common.settings import Command, run_command
 
-__all__ = ["build_parser", "main"]
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+#: Command -> (module defining it in its ``COMMANDS``, one line of help).
+COMMANDS: dict[str, tuple[str, str]] = {
+    "tunnel": ("identification.cli", "run the virtual wind tunnel and write a synthetic recording"),
+    "import-csv": ("identification.cli", "convert a foreign CSV/text log into a recording"),
+    "info": ("identification.cli", "validate a recording and print its summary"),
+    "identify": (
+        "disturbances.cli",
+        "identify roll parameters and the disturbance u_d(t) from a recording",
+    ),
+    "db": (
+        "disturbances.cli",
+        "the disturbance database: build, list, show, add, surrogate, export, import, migrate",
+    ),
+    "env": ("rollenv.cli", "run RocketRoll episodes (Gymnasium environment)"),
+    "train": ("agents.cli", "train a controller (PPO, Stable-Baselines3)"),
+    "eval": ("agents.cli", "evaluate controllers on held-out episodes (table, JSON, plots)"),
+    "tune": (
+        "agents.cli",
+        "re-tune a controller's design on train episodes (the PID's bandwidth)",
+    ),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The full ``rocketroll`` argument parser."""
+    """The top-level parser: ``--version`` and the list of commands (their options are
+    parsed by the command's own parser)."""
     parser = argparse.ArgumentParser(
         prog="rocketroll",
         description="Rocket roll dynamics under turbulence: virtual wind tunnel, recordings, "
         "identification (Minimal modelling approach ..., eq. 36/49), disturbance database, "
-        "RocketRoll-v0 environment, PID/PPO/oracle baselines and their evaluation.",
+        "RocketRoll environments, controllers and their evaluation.  "
+        "`rocketroll COMMAND --help` lists a command's options.",
     )
     parser.add_argument("--version", action="version", version=f"rocketroll {__version__}")
-    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    identification_cli.register(subparsers)
-    disturbances_cli.register(subparsers)
-    rollenv_cli.register(subparsers)
-    agents_train.register(subparsers)
-    agents_evaluate.register(subparsers)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (_, text) in COMMANDS.items():
+        sub.add_parser(name, help=text, add_help=False)
     return parser
+
+
+def command(name: str) -> Command:
+    """The :class:`Command` called ``name`` (imports its module)."""
+    module, _ = COMMANDS[name]
+    found: Command = importlib.import_module(module).COMMANDS[name]
+    return found
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
-    parser = build_parser()
-    ns = parser.parse_args(argv)
-    try:
-        code: int = ns.handler(ns)
-    except RocketrollError as exc:
-        print(f"rocketroll {ns.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
-        sys.stderr.close()
-        return 0
-    except OSError as exc:  # a file the user named cannot be read or written
-        where = f": {exc.filename}" if exc.filename else ""
-        print(f"rocketroll {ns.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return 2
-    return code
+    words = list(sys.argv[1:] if argv is None else argv)
+    ns, rest = build_parser().parse_known_args(words)
+    return run_command(command(ns.command), rest, prog=f"rocketroll {ns.command}")
 
 
 if __name__ == "__main__":

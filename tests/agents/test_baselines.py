@@ -98,7 +98,7 @@ def test_pid_holds_a_setpoint_to_the_encoder_resolution(setpoint, train_model, d
     env = _env(cfg, bank)
     for trace in range(len(bank)):
         pid = PIDController.for_env(cfg, train_model)
-        spec = EpisodeSpec(0, 7 + trace, bank.traces[trace].info.uid, 0, (setpoint,) * 6)
+        spec = EpisodeSpec(0, 7 + trace, bank.traces[trace].uid, 0, (setpoint,) * 6)
         rollout = run_episode(env, pid, spec)
         held = np.abs(rollout.error[100:])
         assert held.max() <= cfg.encoder_resolution_deg, (trace, held.max())
@@ -110,7 +110,7 @@ def test_pid_holds_a_rate_setpoint_to_the_gyro_noise(train_model, default_db):
     bank = load_bank(cfg, None)
     pid = PIDController.for_env(cfg, train_model)
     rollout = run_episode(
-        _env(cfg, bank), pid, EpisodeSpec(0, 3, bank.traces[0].info.uid, 0, (8.0,) * 6)
+        _env(cfg, bank), pid, EpisodeSpec(0, 3, bank.traces[0].uid, 0, (8.0,) * 6)
     )
     # 2 % gyro noise on 8 °/s is 0.16 °/s (1 SD); at ω = 8 rad/s the loop passes it on
     # (measured: RMS 0.162 °/s), so the error is of the order of the noise, no more.
@@ -125,7 +125,7 @@ def test_back_calculation_limits_the_overshoot_after_a_saturated_slew(train_mode
     cfg = config(split="test", disturbance="none")
     bank = load_bank(cfg, None)
     env = _env(cfg, bank)
-    spec = EpisodeSpec(0, 1, bank.traces[0].info.uid, 0, (0.0, 90.0, 90.0, 90.0, 90.0, 90.0))
+    spec = EpisodeSpec(0, 1, bank.traces[0].uid, 0, (0.0, 90.0, 90.0, 90.0, 90.0, 90.0))
 
     def overshoot(pid: PIDController) -> float:
         rollout = run_episode(env, pid, spec)

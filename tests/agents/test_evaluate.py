@@ -9,18 +9,24 @@ import numpy as np
 import pytest
 
 from agents.evaluate import (
+    COMMAND,
     METRICS,
-    Rollout,
     _env,
     evaluate,
-    main,
-    make_controller,
     markdown_table,
     metrics,
     protocol_episodes,
 )
+from agents.registry import make_controller
 from rocketroll.cli import main as rocketroll
+from rocketroll_common.settings import run_command
 from rollenv.bank import load_bank, make_config
+from rollenv.history import EpisodeHistory
+
+
+def main(argv: list[str]) -> int:
+    """``python -m agents.evaluate ARGV`` in this process."""
+    return run_command(COMMAND, argv, "python -m agents.evaluate")
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +39,7 @@ def test_protocol_episodes_are_fixed_by_the_seed(angle_config):
     assert protocol_episodes(angle_config, 5, seed=4) == first
     other = protocol_episodes(angle_config, 5, seed=5)
     assert [e.seed for e in other] != [e.seed for e in first]
-    test_uids = {t.info.uid for t in load_bank(angle_config, None).traces}
+    test_uids = {t.uid for t in load_bank(angle_config, None).traces}
     for spec in first:
         assert spec.trace in test_uids  # held-out traces only
         assert len(spec.setpoints) == 6 and spec.setpoints[0] == 0.0
@@ -48,7 +54,7 @@ def test_protocol_episodes_are_fixed_by_the_seed(angle_config):
 def test_every_controller_meets_the_same_episodes(angle_config):
     specs = protocol_episodes(angle_config, 2, seed=8)
     runs = [
-        evaluate(angle_config, make_controller(p, angle_config), specs).rollouts
+        evaluate(angle_config, make_controller(p, angle_config, "RocketRoll-v0"), specs).rollouts
         for p in ("trim", "pid", "oracle")
     ]
     for other in runs[1:]:
@@ -62,16 +68,20 @@ def test_every_controller_meets_the_same_episodes(angle_config):
 def test_the_same_seed_gives_identical_numbers(policy, angle_config):
     specs = protocol_episodes(angle_config, 3, seed=1)
     runs = [
-        evaluate(angle_config, make_controller(policy, angle_config), specs).episodes
+        evaluate(
+            angle_config, make_controller(policy, angle_config, "RocketRoll-v0"), specs
+        ).episodes
         for _ in range(2)
     ]
     assert runs[0] == runs[1]
     again = protocol_episodes(angle_config, 3, seed=1)
-    third = evaluate(angle_config, make_controller(policy, angle_config), again).episodes
+    third = evaluate(
+        angle_config, make_controller(policy, angle_config, "RocketRoll-v0"), again
+    ).episodes
     assert third == runs[0]
     different = evaluate(
         angle_config,
-        make_controller(policy, angle_config),
+        make_controller(policy, angle_config, "RocketRoll-v0"),
         protocol_episodes(angle_config, 3, seed=2),
     ).episodes
     assert different != runs[0]
@@ -80,7 +90,7 @@ def test_the_same_seed_gives_identical_numbers(policy, angle_config):
 def test_metrics_of_a_hand_made_episode(angle_config):
     # 4 steps of 0.1 s; the fin moves 0 → 15 → 15 → 25 → 40 (at most 15° a step).
     n = 5
-    rollout = Rollout(
+    rollout = EpisodeHistory(
         time_s=np.linspace(0.0, 0.4, n),
         angle_deg=np.zeros(n),
         rate_dps=np.zeros(n),
@@ -90,6 +100,7 @@ def test_metrics_of_a_hand_made_episode(angle_config):
         setpoint=np.zeros(n),
         error=np.array([9.0, 3.0, -4.0, 5.0, 12.0]),
         reward=np.array([0.0, -1.0, -2.0, -3.0, -4.0]),
+        task="angle",
     )
     cfg = make_config("RocketRoll-v0", {"setpoint_period_s": 0.4})  # 4 steps per period
     m = metrics(rollout, cfg)
@@ -139,17 +150,17 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--policy", "lqr"], "unknown --policy 'lqr'"),
+        (["--policy", "lqr"], "--policy lqr: unknown controller 'lqr'"),
         (["--policy", "pid:fast"], "pid:OMEGA needs a number"),
         (["--policy", "trim:1"], "takes no argument"),
-        (["--episodes", "0"], "--episodes must be >= 1"),
+        (["--episodes", "0"], "--episodes: must be in [1, 100000], got 0"),
         (["--env-id", "CartPole-v1"], "--env-id"),
         (["--set", "split=train"], "--set split=... is not allowed"),
         (["--set", "setpiont=zero"], "did you mean 'setpoint'"),
         (["--policy", "ppo:/nonexistent/run"], "/nonexistent/run"),
         (["--policy", "pid", "--policy", "pid"], "--policy pid is given twice"),
         (["--policy", "pid:2.5", "--policy", "pid:2.50"], "one name"),
-        (["--seed", "-1"], "--seed must be >= 0"),
+        (["--seed", "-1"], "--seed: must be in [0, 2147483647], got -1"),
         (["--policy", "ppo:agents/policies/RocketRollRate-v0"], "trained on the 'rate' task"),
     ],
 )
@@ -162,7 +173,9 @@ def test_bad_arguments_exit_2_and_write_nothing(argv, message, tmp_path, capsys,
 
 def test_the_table_marks_the_units_of_the_rate_task(default_db):
     cfg = make_config("RocketRollRate-v0", {"task": "rate", "split": "test"})
-    result = evaluate(cfg, make_controller("trim", cfg), protocol_episodes(cfg, 2))
+    result = evaluate(
+        cfg, make_controller("trim", cfg, "RocketRollRate-v0"), protocol_episodes(cfg, 2)
+    )
     table = markdown_table([result], cfg)
     assert "RMS error (°/s)" in table and "| trim |" in table
 

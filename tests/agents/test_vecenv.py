@@ -179,7 +179,7 @@ def test_same_step_reset_with_terminal_observation_matches_the_vector_env():
         np.testing.assert_array_equal(obs, vobs)
         assert not np.array_equal(obs, np.stack([i["terminal_observation"] for i in infos]))
         assert [r["trace"] for r in venv.reset_infos] == [
-            array_bank().traces[t].info.uid for t in vector._batch.trace
+            array_bank().traces[t].uid for t in vector._batch.trace
         ]
     assert ended == 2
 
@@ -240,7 +240,7 @@ def test_per_env_options_and_equal_options_for_all():
     venv = adapter(3, seed=0)
     venv.set_options([{"trace": 0}, {"trace": 2}, {"trace": 3, "start": 5}])
     venv.reset()
-    uids = [t.info.uid for t in array_bank().traces]
+    uids = [t.uid for t in array_bank().traces]
     assert [i["trace"] for i in venv.reset_infos] == [uids[0], uids[2], uids[3]]
     assert venv.reset_infos[2]["start_s"] == pytest.approx(0.5)
     venv.set_options({"trace": uids[1], "setpoints": [10.0, 20.0, 30.0, 40.0]})

@@ -18,7 +18,8 @@ import pytest
 from scipy import stats
 
 from disturbances.bank import TraceBank, Window
-from disturbances.db import DisturbanceDB, Trace
+from disturbances.db import DisturbanceDB
+from disturbances.rows import TraceRow
 from identification.model import PAPER_THETA, RollParams
 
 WINDOW_S = 60.0
@@ -37,42 +38,42 @@ def bank(small_db: Path) -> TraceBank:
 
 
 @pytest.fixture(scope="module")
-def stored(small_db: Path) -> Trace:
+def stored(small_db: Path) -> TraceRow:
     """The one trace of the selection, read again from the database."""
     with DisturbanceDB(small_db, create=False) as db:
         (info,) = db.traces(**TRAIN_THETA)
         return db.trace(info.uid)
 
 
-def test_from_db_selects_and_describes(bank: TraceBank, stored: Trace) -> None:
+def test_from_db_selects_and_describes(bank: TraceBank, stored: TraceRow) -> None:
     assert len(bank) == 1
     (trace,) = bank.traces
-    assert trace.info == stored.info
-    assert np.array_equal(trace.u_d_deg, stored.u_d_deg)
-    assert (trace.info.split, trace.info.method, trace.info.model, trace.info.kind) == (
+    assert trace == stored
+    assert np.array_equal(trace.samples(), stored.samples())
+    assert (trace.split, trace.method, trace.model, trace.kind) == (
         "train",
         "paper",
         "theta",
         "identified",
     )
-    assert bank.total_duration_s == pytest.approx(stored.info.n_samples * 0.1)
+    assert bank.total_duration_s == pytest.approx(stored.n_samples * 0.1)
     assert bank.longest_s == pytest.approx(573.0)
     assert bank.params == (stored.params,)
     assert "split='train'" in bank.description and "model='theta'" in bank.description
     assert repr(bank).startswith("TraceBank(1 traces, 573 s, split='train'")
 
 
-def test_window_is_a_readonly_view_of_the_trace(bank: TraceBank, stored: Trace) -> None:
+def test_window_is_a_readonly_view_of_the_trace(bank: TraceBank, stored: TraceRow) -> None:
     rng = np.random.default_rng(1)
-    n_offsets = stored.info.n_samples - 600 + 1
+    n_offsets = stored.n_samples - 600 + 1
     for _ in range(200):
         w = bank.window(rng, WINDOW_S)
         assert isinstance(w, Window)
         assert w.u_d_deg.shape == (600,)  # 60 s at Δt = 0.1 s
-        assert w.dt_s == 0.1 and w.trace == 0 and w.uid == stored.info.uid
+        assert w.dt_s == 0.1 and w.trace == 0 and w.uid == stored.uid
         assert 0 <= w.start < n_offsets
         assert w.start_s == pytest.approx(w.start * 0.1)
-        assert np.array_equal(w.u_d_deg, stored.u_d_deg[w.start : w.start + 600])
+        assert np.array_equal(w.u_d_deg, stored.samples()[w.start : w.start + 600])
         assert np.shares_memory(w.u_d_deg, bank.traces[0].u_d_deg)  # a view, not a copy
         assert not w.u_d_deg.flags.writeable
         assert w.params == stored.params
@@ -95,7 +96,7 @@ def test_window_carries_the_identified_parameters(small_db: Path) -> None:
     for bank in banks:
         for _ in range(20):
             w = bank.window(rng, WINDOW_S)
-            info = bank.traces[w.trace].info
+            info = bank.traces[w.trace]
             assert w.uid == info.uid
             assert w.params == idents[(info.recording, info.model)]
             seen.add(info.uid)
@@ -150,8 +151,8 @@ def test_traces_too_short_for_the_window_are_never_drawn() -> None:
 
 def test_window_length_on_each_traces_own_grid() -> None:
     base = TraceBank.from_arrays([np.zeros(100), np.ones(100)], dt_s=0.1)
-    coarse = dataclasses.replace(base.traces[1].info, dt_s=0.2)
-    bank = TraceBank([base.traces[0], Trace(info=coarse, u_d_deg=base.traces[1].u_d_deg)])
+    coarse = dataclasses.replace(base.traces[1], dt_s=0.2)
+    bank = TraceBank([base.traces[0], coarse])
     assert bank.samples_for(1.0).tolist() == [10, 5]
     assert bank.samples_for(0.25).tolist() == [3, 2]  # rounded up to whole samples
     rng = np.random.default_rng(0)
@@ -170,7 +171,7 @@ def test_from_arrays_params_and_copies() -> None:
     values[:] = -1.0  # the bank holds its own copy
     w = bank.window(np.random.default_rng(0), 2.0)
     assert w.params == params and w.u_d_deg.size == 4 and w.u_d_deg[0] >= 0
-    assert bank.traces[0].info.model == "constant"
+    assert bank.traces[0].model == "constant"
     assert TraceBank.from_arrays([np.arange(5.0)], dt_s=1.0).params == (PAPER_THETA,)
 
 
@@ -182,7 +183,7 @@ def test_window_longer_than_every_trace(bank: TraceBank) -> None:
         bank.require(573.1)
     bank.require(573.0)  # the whole trace is one window
     w = bank.window(rng, 573.0)
-    assert w.start == 0 and w.u_d_deg.size == bank.traces[0].u_d_deg.size
+    assert w.start == 0 and w.u_d_deg.size == bank.traces[0].samples().size
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="must be positive"):
             bank.window(rng, bad)
@@ -200,16 +201,16 @@ def test_filters_with_no_match(small_db: Path) -> None:
             TraceBank.from_db(db, "train", colour="red")
         # A split is never mixed with the other; surrogates on request.
         both = TraceBank.from_db(db, "train", kind=["identified", "iaaft"])
-        assert {t.info.split for t in both.traces} == {"train"} and len(both) == 2
+        assert {t.split for t in both.traces} == {"train"} and len(both) == 2
     with pytest.raises(ValueError, match="no traces match"):
         TraceBank([])
 
 
-def test_at(bank: TraceBank, stored: Trace) -> None:
-    n = stored.info.n_samples
+def test_at(bank: TraceBank, stored: TraceRow) -> None:
+    n = stored.n_samples
     w = bank.at(0, n - 600, WINDOW_S)
-    assert w.start == n - 600 and np.array_equal(w.u_d_deg, stored.u_d_deg[-600:])
-    assert bank.at(0, 0, WINDOW_S).u_d_deg[0] == stored.u_d_deg[0]
+    assert w.start == n - 600 and np.array_equal(w.u_d_deg, stored.samples()[-600:])
+    assert bank.at(0, 0, WINDOW_S).u_d_deg[0] == stored.samples()[0]
     with pytest.raises(IndexError, match=r"trace index 1 out of range 0\.\.0"):
         bank.at(1, 0, WINDOW_S)
     with pytest.raises(IndexError, match="out of range"):
@@ -234,7 +235,7 @@ def test_a_bank_pickles_and_deep_copies_with_surrogates(small_db: Path) -> None:
 
     with DisturbanceDB(small_db, create=False) as db:
         bank = TraceBank.from_db(db, "train", kind=["identified", "iaaft"])
-    assert any(t.info.validation is not None for t in bank.traces)
+    assert any(t.validation is not None for t in bank.traces)
     for clone in (pickle.loads(pickle.dumps(bank)), copy.deepcopy(bank)):
         a = clone.window(np.random.default_rng(5), WINDOW_S)
         b = bank.window(np.random.default_rng(5), WINDOW_S)

@@ -19,6 +19,7 @@ import pytest
 
 from disturbances import default as default_db
 from disturbances.db import DatabaseError, DisturbanceDB
+from disturbances.ingest import add_recording
 from disturbances.rows import TEST_FRACTION, RecordingRow, checksum, content_hash, split_of
 from identification.bundled import bundled_path, load_bundled
 from identification.pipeline import identify
@@ -50,7 +51,7 @@ def one_step_recording() -> Recording:
 def test_add_recording_stores_every_result(tmp_path: Path) -> None:
     rec = load_bundled("tunnel-paper-seed0")
     with DisturbanceDB(tmp_path / "db.sqlite") as db:
-        added = db.add_recording(rec, FAST)
+        added = add_recording(db, rec, FAST)
         assert (added.recordings, added.identifications, added.traces) == (1, 4, 4)
         expected = identify(rec, FAST)
         for model in ("constant", "theta"):
@@ -61,7 +62,7 @@ def test_add_recording_stores_every_result(tmp_path: Path) -> None:
             assert trace.params == expected.model(model)
             assert trace.dt_s == 0.1 and info.t0_s == 0.0
             assert info.kind == "identified" and info.source_uid is None
-            assert info.mean_deg == pytest.approx(float(np.mean(trace.u_d_deg)))
+            assert info.mean_deg == pytest.approx(float(np.mean(trace.samples())))
             assert info.q05_deg < 0 < info.q95_deg
             assert 0 <= (info.normality_p or 0) <= 1
         (oe,) = db.traces(method="output-error", model="theta")
@@ -87,9 +88,9 @@ def test_same_samples_are_recognised_not_duplicated(tmp_path: Path) -> None:
     rec = load_bundled("tunnel-paper-seed0")
     renamed = dataclasses.replace(rec, name="same-data-other-name")
     with DisturbanceDB(tmp_path / "db.sqlite") as db:
-        db.add_recording(rec, FAST)
+        add_recording(db, rec, FAST)
         before = db.counts()
-        again = db.add_recording(renamed, FAST)
+        again = add_recording(db, renamed, FAST)
         assert (again.recordings, again.traces, again.skipped) == (0, 0, 1)
         assert db.counts() == before
 
@@ -100,30 +101,30 @@ def test_surrogates_are_linked_to_their_source_and_validated(small_db: Path) -> 
         assert surrogates and all(s.kind == "iaaft" for s in surrogates)
         for s in surrogates:
             source = db.trace(s.source_uid or "")
-            assert source.info.kind == "identified" and source.info.method == "paper"
+            assert source.kind == "identified" and source.method == "paper"
             assert (s.split, s.model, s.params) == (
-                source.info.split,
-                source.info.model,
+                source.split,
+                source.model,
                 source.params,
             )
             trace = db.trace(s.uid)
             # IAAFT keeps the amplitude distribution exactly.
-            np.testing.assert_array_equal(np.sort(trace.u_d_deg), np.sort(source.u_d_deg))
-            assert not np.array_equal(trace.u_d_deg, source.u_d_deg)
-        row = db.dump_trace(surrogates[0].uid)
+            np.testing.assert_array_equal(np.sort(trace.samples()), np.sort(source.samples()))
+            assert not np.array_equal(trace.samples(), source.samples())
+        row = db.trace(surrogates[0].uid)
         assert row.validation is not None and row.validation["passed"] is True
 
 
 def test_adding_again_fills_in_only_the_missing_methods(tmp_path: Path) -> None:
     rec = load_bundled("tunnel-paper-seed0")
     with DisturbanceDB(tmp_path / "db.sqlite") as db:
-        db.add_recording(rec, FAST, methods=("paper",))
+        add_recording(db, rec, FAST, methods=("paper",))
         paper = [t.uid for t in db.traces()]
-        more = db.add_recording(rec, FAST)  # now with the output-error peer too
+        more = add_recording(db, rec, FAST)  # now with the output-error peer too
         assert (more.recordings, more.identifications, more.traces) == (0, 2, 2)
         assert [t.uid for t in db.traces(method="paper")] == paper
         assert len(db.recordings()) == 1
-        assert db.add_recording(rec, FAST).skipped == 1
+        assert add_recording(db, rec, FAST).skipped == 1
 
 
 # --------------------------------------------------------------------------- split
@@ -141,9 +142,9 @@ def test_split_is_a_function_of_content_and_declared_split_wins(tmp_path: Path) 
     assert RecordingRow.of(rec, "").split == split_of(h)
     # A recording keeps its split whatever else the database holds.
     with DisturbanceDB(tmp_path / "a.sqlite") as a, DisturbanceDB(tmp_path / "b.sqlite") as b:
-        a.add_recording(rec, FAST, methods=("paper",))
-        b.add_recording(load_bundled("tunnel-paper-seed4"), FAST, methods=("paper",))
-        b.add_recording(rec, FAST, methods=("paper",))
+        add_recording(a, rec, FAST, methods=("paper",))
+        add_recording(b, load_bundled("tunnel-paper-seed4"), FAST, methods=("paper",))
+        add_recording(b, rec, FAST, methods=("paper",))
         split_a = {t.split for t in a.traces()}
         split_b = {t.split for t in b.traces(recording=rec.name)}
         assert len(split_a) == 1 and split_a == split_b
@@ -151,9 +152,9 @@ def test_split_is_a_function_of_content_and_declared_split_wins(tmp_path: Path) 
 
 def test_every_trace_of_a_recording_shares_its_split(small_db: Path) -> None:
     with DisturbanceDB(small_db, create=False) as db:
-        by_recording: dict[int, set[str]] = {}
+        by_recording: dict[str, set[str]] = {}
         for info in db.traces():
-            by_recording.setdefault(info.recording_id, set()).add(info.split)
+            by_recording.setdefault(info.recording_hash, set()).add(info.split)
         assert all(len(s) == 1 for s in by_recording.values())
         assert {s for v in by_recording.values() for s in v} == {"train", "test"}
 
@@ -187,7 +188,7 @@ def test_queries_filter_and_reject_unknown_filters(small_db: Path) -> None:
 def test_failed_identification_leaves_the_file_byte_for_byte(db_copy: Path) -> None:
     before = file_digest(db_copy)
     with DisturbanceDB(db_copy, create=False) as db, pytest.raises(IdentificationError):
-        db.add_recording(one_step_recording(), FAST)
+        add_recording(db, one_step_recording(), FAST)
     assert file_digest(db_copy) == before
 
 
@@ -207,7 +208,7 @@ def test_failure_inside_the_transaction_rolls_everything_back(
     monkeypatch.setattr(DisturbanceDB, "_insert_trace", fail_on_third)
     with DisturbanceDB(db_copy, create=False) as db:
         with pytest.raises(OSError, match="simulated"):
-            db.add_recording(load_bundled("tunnel-paper-seed1"), FAST)
+            add_recording(db, load_bundled("tunnel-paper-seed1"), FAST)
         # Rows of the recording and its identifications went with the rollback.
         assert [r.name for r in db.recordings()] == list(SMALL)
     assert len(calls) == 3
@@ -218,12 +219,13 @@ WRITER = textwrap.dedent(
     """
     import sys, time
     from disturbances.db import DisturbanceDB
+    from disturbances.ingest import add_recording
     from identification.bundled import load_bundled
     from identification.pipeline import IdentifyOptions
 
     fast = IdentifyOptions(noise_runs=0)
     db = DisturbanceDB(sys.argv[1], create=False)
-    db.add_recording(load_bundled("tunnel-paper-seed1"), fast, methods=("paper",))
+    add_recording(db, load_bundled("tunnel-paper-seed1"), fast, methods=("paper",))
     print("committed", flush=True)
     original = DisturbanceDB._insert_trace
 
@@ -234,7 +236,7 @@ WRITER = textwrap.dedent(
         return result
 
     DisturbanceDB._insert_trace = slow
-    db.add_recording(load_bundled("tunnel-paper-seed2"), fast, methods=("paper",))
+    add_recording(db, load_bundled("tunnel-paper-seed2"), fast, methods=("paper",))
     print("finished", flush=True)
     """
 )
@@ -283,7 +285,7 @@ def test_killed_writer_loses_nothing_committed(db_copy: Path) -> None:
         with db._errors():
             assert db._conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         for info in db.traces():
-            db.trace(info.id)  # every checksum still holds
+            db.trace(info.uid)  # every checksum still holds
 
 
 def test_a_reader_queries_while_another_process_writes(db_copy: Path) -> None:
@@ -368,7 +370,7 @@ def test_altered_trace_bytes_are_caught_by_the_checksum(db_copy: Path) -> None:
         with pytest.raises(DatabaseError, match="corrupt"):
             db.load_traces(db.traces(split="train"))
         other = db.traces(split="test")[0]
-        assert checksum(db.trace(other.id).u_d_deg)  # the others still read
+        assert checksum(db.trace(other.uid).samples())  # the others still read
 
 
 # --------------------------------------------------------------------------- versions
@@ -389,7 +391,7 @@ def test_another_versions_database_is_said_so_and_never_mixed(db_copy: Path) -> 
         with pytest.warns(UserWarning, match=r"rocketroll 0\.0\.1; this is"):
             db.check_version()
         with pytest.raises(DatabaseError, match="would mix two versions"):
-            db.add_recording(load_bundled("tunnel-paper-seed1"), FAST)
+            add_recording(db, load_bundled("tunnel-paper-seed1"), FAST)
     assert file_digest(db_copy) == before
 
 
@@ -406,14 +408,14 @@ def test_default_database_is_rebuilt_when_built_by_another_version(
         db.set_info({"origin": "bundled", "fingerprint": "made-by-an-old-version"})
     monkeypatch.setenv("ROCKETROLL_DB", str(path))
     built: list[Path] = []
-    real_build = default_db.build_database
+    real_build = default_db._build  # what open_default runs, under the folder's build lock
 
     def fake_build(target: Path, *args: object, **kwargs: object) -> Path:
         built.append(Path(target))
-        real_build(target, [bundled_path("tunnel-paper-seed0")], options=FAST, surrogates=0)
+        real_build(target, [bundled_path("tunnel-paper-seed0")], FAST, 0, ("iaaft",), False)
         return Path(target)
 
-    monkeypatch.setattr(default_db, "build_database", fake_build)
+    monkeypatch.setattr(default_db, "_build", fake_build)
     with default_db.open_default(progress=False) as db:
         assert db.versions() == [db.created_by]  # nothing of 0.0.1 left
     assert built == [path]
@@ -434,7 +436,7 @@ def test_default_build_is_atomic_and_marked(
     path = tmp_path / "db.sqlite"
     path.write_bytes(b"")  # an existing (empty) target is replaced only when the build is done
     monkeypatch.setattr(
-        "disturbances.db.DisturbanceDB.add_recording",
+        "disturbances.default.add_recording",
         lambda *a, **k: (_ for _ in ()).throw(RuntimeError("interrupted")),
     )
     with pytest.raises(RuntimeError, match="interrupted"):
@@ -457,22 +459,22 @@ def test_info_records_the_recipe(small_db: Path) -> None:
 def test_adding_again_never_pairs_a_surrogate_with_a_new_twin(tmp_path: Path) -> None:
     rec = load_bundled("tunnel-paper-seed0")
     with DisturbanceDB(tmp_path / "db.sqlite") as db:
-        db.add_recording(rec, FAST, methods=("paper",))
+        add_recording(db, rec, FAST, methods=("paper",))
         before = file_digest_open(db)
         other = dataclasses.replace(FAST, ud_interval_s=0.2)
         with pytest.raises(DatabaseError, match="stored with other identification options"):
-            db.add_recording(rec, other, surrogates=1)
+            add_recording(db, rec, other, surrogates=1)
         assert file_digest_open(db) == before
         # With the same options, surrogates come from the stored traces.
-        added = db.add_recording(rec, FAST, surrogates=1)
+        added = add_recording(db, rec, FAST, surrogates=1)
         assert added.identifications == 2  # the output-error peer was missing
         for info in db.traces(kind="iaaft"):
             source = db.trace(info.source_uid or "")
             trace = db.trace(info.uid)
             assert trace.dt_s == source.dt_s
-            np.testing.assert_array_equal(np.sort(trace.u_d_deg), np.sort(source.u_d_deg))
+            np.testing.assert_array_equal(np.sort(trace.samples()), np.sort(source.samples()))
         # Everything stored: asking for more surrogates makes only those.
-        more = db.add_recording(rec, FAST, surrogates=2)
+        more = add_recording(db, rec, FAST, surrogates=2)
         assert (more.recordings, more.identifications, more.traces) == (0, 0, 2)
 
 
@@ -547,7 +549,7 @@ def test_import_refuses_to_mix_versions(db_copy: Path, tmp_path: Path) -> None:
     mark_old(db_copy)
     target = tmp_path / "target.sqlite"
     with DisturbanceDB(target) as db:
-        db.add_recording(load_bundled("tunnel-paper-seed1"), FAST, methods=("paper",))
+        add_recording(db, load_bundled("tunnel-paper-seed1"), FAST, methods=("paper",))
         mark_old(target)  # the target now holds 0.0.1 results only
     before = file_digest(target)
     with DisturbanceDB(target, create=False) as db, pytest.raises(ExchangeError, match="mix"):

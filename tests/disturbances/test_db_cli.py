@@ -320,7 +320,7 @@ def test_add_invalid_recording_changes_nothing(
 
 def test_add_with_ar_surrogates(db_copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rec = str(bundled_path(NEW))
-    argv = ["db", "add", rec, "--db", str(db_copy), "--mc-runs", "0", "--no-output-error"]
+    argv = ["db", "add", rec, "--db", str(db_copy), "--mc-runs", "0", "--method", "paper"]
     out = ok([*argv, "--surrogates", "1", "--surrogate-kind", "ar"], capsys)
     # 2 paper traces and one AR surrogate of each.
     assert f"added {NEW}: 2 identifications, 4 traces" in out

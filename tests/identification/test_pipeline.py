@@ -19,6 +19,7 @@ from identification.pipeline import Identification, IdentifyOptions, identify
 from identification.recording import Recording
 from identification.steps import IdentificationError
 from identification.tunnel import PAPER_TABLE1, TunnelSpec, run_tunnel
+from rocketroll_common.errors import SettingError
 
 OPTS = IdentifyOptions(noise_runs=0)
 PAPER_ALPHA, PAPER_BETA = 0.6590, 2.8856  # eq. 17
@@ -313,8 +314,9 @@ def test_a_recording_without_steps_is_refused() -> None:
     ],
 )
 def test_bad_options_are_refused_naming_the_option(option: str, value: object) -> None:
-    with pytest.raises(IdentificationError, match=f"option {option}"):
+    with pytest.raises(SettingError, match=f"^{option}: ") as caught:
         IdentifyOptions(**{option: value})  # type: ignore[arg-type]
+    assert caught.value.setting == option
 
 
 def test_an_interval_off_the_fine_grid_is_refused() -> None:

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from disturbances.bank import TraceBank
-from disturbances.db import Trace
 from identification.model import RollParams
 
 #: Distinct θ-model parameters, one per trace of :func:`array_bank` (a(θ) > 0 over the
@@ -41,8 +40,7 @@ def array_bank(model: str = "theta") -> TraceBank:
     for k, (n, p) in enumerate(zip(LENGTHS, params, strict=True)):
         u = np.cumsum(rng.normal(0.0, 0.3, n)) * 0.2 + rng.normal(0.0, 1.5, n)
         one = TraceBank.from_arrays([u], dt_s=0.1, params=p).traces[0]
-        info = dataclasses.replace(one.info, id=k, uid=f"{one.info.uid}-{k}", recording_id=k)
-        traces.append(Trace(info=info, u_d_deg=one.u_d_deg))
+        traces.append(dataclasses.replace(one, id=k, uid=f"{one.uid}-{k}"))
     return TraceBank(traces, f"array bank ({model})")
 
 

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
-import logging
 import sys
 import warnings
 
 import numpy as np
 import pytest
 
-from rollenv.render import _FIN_TIP_R, Renderer, Snapshot, _fin_polygons, wrap_deg
+from rollenv.history import EpisodeHistory
+from rollenv.render import _FIN_TIP_R, Renderer, _fin_polygons, wrap_deg
 
 WIDTH, HEIGHT = 720, 480
 
@@ -21,12 +21,12 @@ def snapshot(
     roll_deg: float = 20.0,
     fin_deg: float = 10.0,
     t_end_s: float = 12.3,
-) -> Snapshot:
+) -> EpisodeHistory:
     """A plausible 10-s history ending at ``roll_deg`` and ``fin_deg``."""
     t = t_end_s - 0.1 * np.arange(n)[::-1]
     wave = np.sin(1.3 * t)
     setpoint = np.full(n, 30.0 if task == "angle" else 60.0)
-    return Snapshot(
+    return EpisodeHistory(
         time_s=t,
         angle_deg=roll_deg + 8.0 * (wave - wave[-1]),
         rate_dps=10.4 * np.cos(1.3 * t),
@@ -34,6 +34,8 @@ def snapshot(
         command_deg=15.0 * wave,
         u_d_deg=2.0 * np.cos(3.1 * t),
         setpoint=setpoint,
+        error=setpoint - roll_deg,
+        reward=np.zeros(n),
         task=task,
         fin_range_deg=40.0,
         label="trace test-0 · test",
@@ -108,24 +110,23 @@ def test_rate_task(renderer: Renderer) -> None:
 def test_other_size_and_no_finite_data() -> None:
     r = Renderer("rgb_array", fps=30.0, size=(496, 320))
     nan = np.full(3, np.nan)
-    snap = Snapshot(nan, nan, nan, nan, nan, nan, nan, "rate", 40.0, "")
+    snap = EpisodeHistory(nan, nan, nan, nan, nan, nan, nan, nan, nan, "rate", 40.0, "")
     assert r.frame(snap).shape == (320, 496, 3)
     r.close()
 
 
-def test_human_mode_without_display(monkeypatch, caplog) -> None:
+def test_human_mode_without_display_warns_once(monkeypatch) -> None:
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     monkeypatch.setattr(sys, "platform", "linux")
     r = Renderer("human", fps=1000.0)
-    with warnings.catch_warnings(), caplog.at_level(logging.INFO, logger="rollenv"):
-        warnings.simplefilter("error")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         r.show(snapshot())
         r.show(snapshot(roll_deg=40.0))
         r.close()
-    lines = [rec for rec in caplog.records if rec.name == "rollenv"]
-    assert len(lines) == 1
-    assert "rgb_array" in lines[0].getMessage()
+    assert len(caught) == 1 and caught[0].category is UserWarning
+    assert "no display" in str(caught[0].message) and "rgb_array" in str(caught[0].message)
 
 
 def test_bad_arguments() -> None:

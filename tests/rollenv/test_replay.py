@@ -190,7 +190,7 @@ def test_replay_through_the_default_database(default_db, name, model, split):
         assert stored.params == dist.params
         assert stored.dt_s == 0.1
         one = TraceBank.from_db(db, split, model=model, recording=name)
-    assert [t.info.uid for t in one.traces] == [info.uid]
+    assert [t.uid for t in one.traces] == [info.uid]
 
     # Through a bank of that one trace ...
     env = RocketRollEnv(

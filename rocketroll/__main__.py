@@ -1,0 +1,7 @@
+"""``python -m rocketroll``: the ``rocketroll`` command line."""
+
+import sys
+
+from rocketroll.cli import main
+
+sys.exit(main())
