@@ -1,15 +1,32 @@
-"""What every controller the evaluation protocol runs looks like."""
+"""What every controller looks like, what designing one may use, and what evaluating gives.
+
+* :class:`Controller` -- what the evaluation protocol runs;
+* :class:`Design` -- what a controller factory (:mod:`agents.registry`) gets:
+  the environment's settings and id, an argument, and the *train* split;
+* :class:`EpisodeSpec`, :class:`Evaluation` -- a protocol episode and a
+  controller's result (:mod:`agents.evaluate`, :mod:`agents.plots`).
+
+Every other module of this package imports from here; this module imports no
+other module of it.
+"""
 
 from __future__ import annotations
 
-from typing import Protocol
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
+from rollenv.history import EpisodeHistory
 
-__all__ = ["Controller"]
+if TYPE_CHECKING:
+    from disturbances.bank import TraceBank
+
+__all__ = ["Controller", "Design", "EpisodeSpec", "Evaluation"]
 
 
 class Controller(Protocol):
@@ -30,3 +47,64 @@ class Controller(Protocol):
     def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
         """The action, shape (1,) in [-1, 1], for observation ``obs``."""
         ...
+
+
+@dataclass
+class Design:
+    """What a controller factory gets (``--policy NAME[:ARG]``).
+
+    Attributes
+    ----------
+    config : RollConfig
+        The environment's settings (task, sensors, servo, ...).
+    env_id : str
+        The environment id (``RocketRoll-v0``, ...).
+    arg : str or None
+        The text after ``NAME:`` in ``--policy NAME:ARG``.
+    db : str or None
+        The database the protocol uses (None: the default one).
+    """
+
+    config: RollConfig
+    env_id: str
+    arg: str | None = None
+    db: str | None = None
+
+    @cached_property
+    def train_bank(self) -> TraceBank:
+        """The traces of the *train* split: what a design may look at (never the test split
+        the protocol evaluates on)."""
+        from rollenv.bank import load_bank
+
+        return load_bank(replace(self.config, split="train"), self.db)
+
+    def no_argument(self, name: str) -> None:
+        """Refuse an argument for a controller that takes none."""
+        if self.arg:
+            raise ValueError(f"--policy {name} takes no argument, got {name}:{self.arg}")
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """One protocol episode: the reset seed and the options that fix its draw."""
+
+    index: int
+    seed: int
+    trace: str
+    start: int
+    setpoints: tuple[float, ...]
+
+    def options(self) -> dict[str, Any]:
+        """``reset(options=...)`` for this episode."""
+        return {"trace": self.trace, "start": self.start, "setpoints": list(self.setpoints)}
+
+
+@dataclass
+class Evaluation:
+    """A controller's protocol result."""
+
+    name: str
+    episodes: list[dict[str, float]]
+    aggregate: dict[str, dict[str, float]]
+    rollouts: list[EpisodeHistory] = field(repr=False)
+    seconds: float = 0.0

@@ -21,14 +21,14 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import Controller
+from agents.base import Controller, EpisodeSpec, Evaluation
 from agents.registry import default_policies, make_controller, policy_help
 from disturbances.bank import TraceBank
 from rocketroll_common.errors import UsageError
@@ -64,32 +64,6 @@ METRICS: dict[str, tuple[str, str]] = {
     "range_limit_pct": ("% of steps ending with the fin at its range limit", "max"),
     "return": ("sum of rewards", "min"),
 }
-
-
-@dataclass(frozen=True)
-class EpisodeSpec:
-    """One protocol episode: the reset seed and the options that fix its draw."""
-
-    index: int
-    seed: int
-    trace: str
-    start: int
-    setpoints: tuple[float, ...]
-
-    def options(self) -> dict[str, Any]:
-        """``reset(options=...)`` for this episode."""
-        return {"trace": self.trace, "start": self.start, "setpoints": list(self.setpoints)}
-
-
-@dataclass
-class Evaluation:
-    """A controller's protocol result."""
-
-    name: str
-    episodes: list[dict[str, float]]
-    aggregate: dict[str, dict[str, float]]
-    rollouts: list[EpisodeHistory] = field(repr=False)
-    seconds: float = 0.0
 
 
 def _env(config: RollConfig, bank: TraceBank) -> RocketRollEnv:

@@ -3,16 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.base import Design
 from disturbances.bank import TraceBank
 from rollenv.env import RocketRollEnv
-
-if TYPE_CHECKING:
-    from agents.registry import Design
 
 __all__ = ["NominalModel", "TrimController", "make_trim"]
 
@@ -88,4 +85,4 @@ class TrimController:
 def make_trim(design: Design) -> TrimController:
     """``--policy trim``: the trim floor of the train split's nominal rocket."""
     design.no_argument("trim")
-    return TrimController(design.nominal(), design.config.fin_range_deg)
+    return TrimController(NominalModel.from_bank(design.train_bank), design.config.fin_range_deg)

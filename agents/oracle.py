@@ -7,19 +7,16 @@ this servo could achieve against this turbulence at all.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.base import Design
 from agents.nominal import NominalModel
 from agents.pid import PIDGains
 from rollenv.core import RollBatch, RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.layout import State
-
-if TYPE_CHECKING:
-    from agents.registry import Design
 
 __all__ = ["DEFAULT_HORIZON", "OracleController", "make_oracle"]
 

@@ -11,18 +11,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.base import Design
 from agents.nominal import NominalModel
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs
-
-if TYPE_CHECKING:
-    from agents.registry import Design
 
 __all__ = ["DEFAULT_BANDWIDTH", "PIDController", "PIDGains", "make_pid"]
 
@@ -235,7 +232,7 @@ def make_pid(design: Design) -> PIDController:
         omega = float(design.arg) if design.arg else None
     except ValueError:
         raise ValueError(f"--policy pid:OMEGA needs a number, got pid:{design.arg}") from None
-    pid = PIDController.for_env(design.config, design.nominal(), omega)
+    pid = PIDController.for_env(design.config, NominalModel.from_bank(design.train_bank), omega)
     if design.arg:
         pid.name = f"PID ω={omega:g}"
     return pid

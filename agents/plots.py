@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from agents.base import Evaluation
 from rocketroll_common.plotting import new_figure, png_bytes
 from rollenv.core import RollConfig
-
-if TYPE_CHECKING:
-    from agents.evaluate import Evaluation
 
 __all__ = ["plot_episode", "plot_errors", "typical_episode"]
 

@@ -5,16 +5,14 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.base import Design
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs
-
-if TYPE_CHECKING:
-    from agents.registry import Design
 
 __all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_ppo"]
 

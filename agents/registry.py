@@ -5,36 +5,28 @@ A controller joins the evaluation protocol by one call::
     from agents.registry import register_controller
 
     def make_mine(design):                  # design: what the controller may know
-        return MyController(design.config, design.nominal())
+        return MyController(design.config, NominalModel.from_bank(design.train_bank))
 
     register_controller("mine", make_mine, usage="mine", summary="my controller")
 
 after which ``rocketroll eval --policy mine`` (and ``--policy mine:ARG``, the
 text after the colon in ``design.arg``) runs it, its ``--help`` lists it,
 and the evaluation's tables and plots include it.  The factory gets a
-:class:`Design`: the environment's settings and id, and -- for controllers
-designed on data -- the *train* split of the database, never the test split
-the protocol evaluates on.
+:class:`~agents.base.Design`: the environment's settings and id, and -- for
+controllers designed on data -- the *train* split of the database, never the
+test split the protocol evaluates on.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from functools import cached_property
-from typing import TYPE_CHECKING
 
+from agents.base import Controller, Design
 from rocketroll_common.registry import Registry
-
-if TYPE_CHECKING:
-    from agents.base import Controller
-    from agents.nominal import NominalModel
-    from disturbances.bank import TraceBank
-    from rollenv.core import RollConfig
+from rollenv.core import RollConfig
 
 __all__ = [
     "CONTROLLERS",
-    "Design",
     "default_policies",
     "make_controller",
     "policy_help",
@@ -42,49 +34,8 @@ __all__ = [
 ]
 
 
-@dataclass
-class Design:
-    """What a controller factory gets.
-
-    Attributes
-    ----------
-    config : RollConfig
-        The environment's settings (task, sensors, servo, ...).
-    env_id : str
-        The environment id (``RocketRoll-v0``, ...).
-    arg : str or None
-        The text after ``NAME:`` in ``--policy NAME:ARG``.
-    db : str or None
-        The database the protocol uses (None: the default one).
-    """
-
-    config: RollConfig
-    env_id: str
-    arg: str | None = None
-    db: str | None = None
-    _bank: TraceBank | None = field(default=None, repr=False)
-
-    @cached_property
-    def train_bank(self) -> TraceBank:
-        """The traces of the *train* split (what designs may look at)."""
-        from rollenv.bank import load_bank
-
-        return load_bank(replace(self.config, split="train"), self.db)
-
-    def nominal(self) -> NominalModel:
-        """The median rocket of the train split (:class:`agents.nominal.NominalModel`)."""
-        from agents.nominal import NominalModel
-
-        return NominalModel.from_bank(self.train_bank)
-
-    def no_argument(self, name: str) -> None:
-        """Refuse an argument for a controller that takes none."""
-        if self.arg:
-            raise ValueError(f"--policy {name} takes no argument, got {name}:{self.arg}")
-
-
 #: ``factory(design) -> controller``.
-Factory = Callable[[Design], "Controller"]
+Factory = Callable[[Design], Controller]
 
 #: Every controller, by the name ``--policy`` takes.
 CONTROLLERS: Registry[Factory] = Registry("controller")

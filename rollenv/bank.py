@@ -38,7 +38,8 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
 
     Identified traces for ``disturbance="replay"`` (and ``"none"``, which
     still takes the rocket's parameters from them), validated surrogates for
-    ``"surrogate"``; the paper's method; ``config.model``; ``config.split``.
+    ``"surrogate"``; ``config.method`` (the paper's by default); ``config.model``;
+    ``config.split``.
     Banks are cached per file state and selection, so a vector of
     environments in one process loads the traces once.
     """
@@ -47,11 +48,21 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     try:
         path = Path(database.path).resolve()
         stat = path.stat()
-        key = (str(path), stat.st_mtime_ns, stat.st_size, config.split, config.model, kind)
+        key = (
+            str(path),
+            stat.st_mtime_ns,
+            stat.st_size,
+            config.split,
+            config.method,
+            config.model,
+            kind,
+        )
         with _LOCK:
             bank = _CACHE.get(key)
             if bank is None:
-                bank = TraceBank.from_db(database, config.split, model=config.model, kind=kind)
+                bank = TraceBank.from_db(
+                    database, config.split, method=config.method, model=config.model, kind=kind
+                )
                 if len(_CACHE) >= 16:
                     _CACHE.clear()
                 _CACHE[key] = bank

@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from identification import model
+from identification.methods import METHODS
 from identification.model import MODEL_NAMES, RollParams, Servo, piece_coefficients
 from rollenv.layout import (
     OBSERVATION_NAMES,
@@ -114,6 +115,10 @@ class RollConfig:
         Factor on ``u_d``.
     model : str
         ``"theta"`` (eq. 49, a(θ)) or ``"constant"`` damping (eq. 29).
+    method : str
+        The identification method whose parameters and ``u_d`` traces are
+        replayed (``"paper"``, ``"output-error"``, or any registered one,
+        :data:`identification.methods.METHODS`).
     split : str
         Database split the traces come from: ``"train"`` or ``"test"``.
     domain_randomization : bool
@@ -150,6 +155,7 @@ class RollConfig:
     disturbance: str = "replay"
     disturbance_scale: float = 1.0
     model: str = "theta"
+    method: str = "paper"
     split: str = "train"
     domain_randomization: bool = False
     setpoint: str = "steps"
@@ -216,6 +222,10 @@ class RollConfig:
             raise TypeError(f"encoder_counts must be an int, got {self.encoder_counts!r}")
         if self.encoder_counts < 0:
             raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
+        try:
+            METHODS.check(self.method)
+        except ValueError as exc:
+            raise ValueError(f"method: {exc}") from None
         substeps = self.dt_s / self.substep_s
         if abs(substeps - round(substeps)) > 1e-9 * substeps or round(substeps) < 1:
             raise ValueError(

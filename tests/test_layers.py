@@ -1,0 +1,51 @@
+"""The packages form layers: no module imports a higher layer, and no import cycle exists.
+
+``python -m tests.import_graph`` prints the graph these tests check.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from tests.import_graph import LAYERS, ROOT, cycles, module_graph, package_graph, upward_edges
+
+
+def test_no_module_imports_a_higher_layer() -> None:
+    graph = module_graph()
+    assert upward_edges(graph) == []
+    packages = package_graph(graph)
+    for package, imported in packages.items():
+        assert all(LAYERS.index(p) < LAYERS.index(package) for p in imported), package
+
+
+def test_the_modules_import_one_another_without_a_cycle() -> None:
+    assert cycles(module_graph()) == []
+
+
+def test_the_checks_can_fail() -> None:
+    """The checks see a cycle and an upward edge when there is one."""
+    graph = {"identification.a": {"agents.b"}, "agents.b": {"identification.a"}}
+    assert cycles(graph) == [["agents.b", "identification.a", "agents.b"]]
+    assert upward_edges(graph) == [("identification.a", "agents.b")]
+
+
+def test_the_graph_sees_lazy_and_type_checking_imports() -> None:
+    graph = module_graph()
+    assert "rollenv.render" in graph["rollenv.env"]  # imported inside render()
+    assert "rollenv.core" in graph["rollenv.history"]
+    assert graph["rocketroll_common.errors"] == set()  # the bottom imports nothing of ours
+
+
+def test_the_script_prints_the_graph_and_the_verdict() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "tests.import_graph"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "identification     -> rocketroll_common" in done.stdout
+    assert done.stdout.rstrip().endswith("0 cycles, 0 upward edges")
