@@ -21,12 +21,16 @@ recordings if missing; ``--db`` for another file), this measures:
   ``x bank`` column is the ratio of medians.  The first windows of both are
   compared to check that they are the same windows.
 
+With ``--against REF`` the batches, the SQL draws and a load are also timed
+in a worktree of ``REF`` on its own default database (``benchmarks/_against.py``),
+alternating with this checkout's, and the change is printed.
+
 Wall-clock times by :func:`time.perf_counter`.  The exit status is 0 whatever
 the timings unless ``--strict`` is given, when a missed target gives 1.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/db_windows.py
+    .venv/bin/python benchmarks/db_windows.py [--against REF]
 """
 
 from __future__ import annotations
@@ -39,16 +43,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from _against import SERVE, Remote, checkout, serve
 
 from disturbances.bank import TraceBank
 from disturbances.db import DatabaseError
 from disturbances.default import default_path, open_database
-from disturbances.rows import TraceRow
-from disturbances.stores import Store
-from rocketroll_common.arrays import FloatArray
+
+if TYPE_CHECKING:  # older checkouts (--against) have neither module
+    from disturbances.rows import TraceRow
+    from disturbances.stores import Store
 
 TARGET_US = 100.0
 WINDOW_S = 60.0
@@ -92,8 +98,9 @@ class Timing:
 class SqlWindows:
     """The reference: the bank's choice of window, but the trace read by SQL each episode."""
 
-    def __init__(self, db: Store, infos: Sequence[TraceRow], duration_s: float) -> None:
+    def __init__(self, db: Store, traces: Sequence[TraceRow], duration_s: float) -> None:
         self.db = db
+        infos = [getattr(t, "info", t) for t in traces]  # older checkouts: Trace.info
         self.uids = [i.uid for i in infos]
         sizes = np.array([i.n_samples for i in infos], dtype=np.int64)
         dts = np.array([i.dt_s for i in infos])
@@ -102,12 +109,12 @@ class SqlWindows:
         self.cum = np.cumsum(np.maximum(sizes - self.lengths + 1, 0))
         self.total = int(self.cum[-1])
 
-    def window(self, rng: np.random.Generator) -> tuple[str, int, FloatArray]:
+    def window(self, rng: np.random.Generator) -> tuple[str, int, np.ndarray]:
         k = int(rng.integers(self.total))
         i = int(np.searchsorted(self.cum, k, side="right"))
         start = k - (int(self.cum[i - 1]) if i else 0)
-        trace = self.db.trace(self.uids[i])
-        return self.uids[i], start, trace.samples()[start : start + int(self.lengths[i])]
+        samples = np.asarray(self.db.trace(self.uids[i]).u_d_deg)
+        return self.uids[i], start, samples[start : start + int(self.lengths[i])]
 
 
 def check_same_windows(bank: TraceBank, sql: SqlWindows, seed: int, n: int = 20) -> None:
@@ -150,19 +157,61 @@ def build_parser() -> argparse.ArgumentParser:
         help="database file (default: the default database, built from the bundled recordings "
         "if missing)",
     )
+    parser.add_argument("--against", metavar="REF", help="also time the draws in a checkout of REF")
     parser.add_argument(
         "--strict", action="store_true", help="exit with status 1 when the target is missed"
     )
     return parser
 
 
+def _serve(ns: argparse.Namespace) -> int:
+    """The other checkout's side of --against: a batch, an SQL draw, a load, on request."""
+    db = open_database(ns.db)
+    bank = TraceBank.from_db(db, **SELECTION)
+    sql = SqlWindows(db, list(bank.traces), WINDOW_S)
+    rng, sql_rng = np.random.default_rng(ns.seed), np.random.default_rng(ns.seed + 1)
+    bank.window(rng, WINDOW_S)
+    sql.window(sql_rng)
+
+    def batch() -> float:
+        t0 = time.perf_counter()
+        for _ in range(ns.batch):
+            bank.window(rng, WINDOW_S)
+        return time.perf_counter() - t0
+
+    def one_sql() -> float:
+        t0 = time.perf_counter()
+        sql.window(sql_rng)
+        return time.perf_counter() - t0
+
+    def load() -> float:
+        t0 = time.perf_counter()
+        TraceBank.from_db(db, **SELECTION)
+        return time.perf_counter() - t0
+
+    return serve({"batch": batch, "sql": one_sql, "load": load})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    ns = build_parser().parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    serving = SERVE in words
+    if serving:
+        words.remove(SERVE)
+    ns = build_parser().parse_args(words)
     for name in ("draws", "batch", "single", "sql_draws"):
         if getattr(ns, name) < 1:
             raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
     if ns.draws < ns.batch:
         raise SystemExit(f"--draws ({ns.draws}) must be at least --batch ({ns.batch})")
+    if serving:
+        return _serve(ns)
+    remote, commit = None, ""
+    if ns.against:
+        tree, commit = checkout(ns.against)
+        print(f"against {ns.against} ({commit[:12]}), checked out at {tree}: starting it")
+        rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
+        remote = Remote(__file__, [w for w in rest if not w.startswith("--against=")], tree)
+    before: dict[str, list[float]] = {"batch": [], "sql": [], "load": []}
 
     path = ns.db if ns.db is not None else default_path()
     built = ns.db is None and not path.exists()
@@ -190,6 +239,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             + (f" (built now, {open_ms / 1e3:.1f} s)" if built else "")
         )
         nbytes = sum(t.samples().nbytes for t in bank.traces)
+        if remote is not None:
+            for _ in range(3):
+                start = time.perf_counter()
+                TraceBank.from_db(db, **SELECTION)
+                before.setdefault("load_here", []).append(time.perf_counter() - start)
+                before["load"].append(remote.block("load"))
         print(
             f"selection {', '.join(f'{k}={v}' for k, v in SELECTION.items())}: {len(bank)} traces, "
             f"{bank.total_duration_s:.0f} s, {nbytes / 1e6:.2f} MB in memory; "
@@ -223,11 +278,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             for _ in range(ns.batch):
                 window(rng, WINDOW_S)
             batch_us.append((time.perf_counter() - t0) * 1e6 / ns.batch)
+            if remote is not None:
+                before["batch"].append(remote.block("batch") * 1e6 / ns.batch)
             while sql_done < ns.sql_draws * (b + 1) // n_batches:
                 t0 = time.perf_counter()
                 sql.window(sql_rng)
                 sql_us.append((time.perf_counter() - t0) * 1e6)
                 sql_done += 1
+                if remote is not None:
+                    before["sql"].append(remote.block("sql") * 1e6)
         single_us: list[float] = []
         for _ in range(ns.single):
             t0 = time.perf_counter()
@@ -277,6 +336,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     missed = batches.p99_us > TARGET_US
     print(f"missed target: {batches.name}" if missed else "target met")
+    if remote is not None:
+        remote.close()
+        print(f"\nthis checkout against {ns.against} ({commit[:12]}), the same work alternating:")
+        print(f"{'task':34s} {'this median':>12s} {'REF median':>12s} {'change':>8s}")
+        pairs = (
+            (batches.name + " (µs/draw)", batches.median_us, before["batch"]),
+            (reference.name + " (µs)", reference.median_us, before["sql"]),
+            (
+                "TraceBank.from_db (ms)",
+                1e3 * float(np.median(before["load_here"])),
+                [1e3 * x for x in before["load"]],
+            ),
+        )
+        for name, here, there in pairs:
+            old = float(np.median(there))
+            print(f"{name:34s} {here:12.2f} {old:12.2f} {here / old - 1:+8.1%}")
     return 1 if ns.strict and missed else 0
 
 

@@ -13,6 +13,11 @@ update), this measures:
   **target: >= 10 M env-steps/s**; the CartPole row shows what this machine
   does with a numpy-batched classic-control env.
 
+With ``--against REF`` the RocketRoll rows are also timed in a worktree of
+``REF`` (e.g. the last landed commit), block by block alternating with this
+checkout (``benchmarks/_against.py``), and the change is printed with its
+verdict against the target of no slowdown beyond 5 %.
+
 Episodes reset as they end (single envs: ``reset()`` on truncation; vector
 envs: their own NEXT_STEP autoreset), so resets are part of the cost.  Each
 task runs ``--repeats`` timed blocks, interleaved task by task so that a busy
@@ -23,7 +28,7 @@ Exit status 0 whatever the timings unless ``--strict``.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/env_speed.py
+    .venv/bin/python benchmarks/env_speed.py [--against REF]
 """
 
 from __future__ import annotations
@@ -40,12 +45,15 @@ from typing import Any
 import gymnasium as gym
 import numba
 import numpy as np
+from _against import SERVE, Remote, checkout, serve
 from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
 import rollenv  # noqa: F401  (registers RocketRoll-v0)
 
 SINGLE_TARGET = 1.0  # RocketRoll-v0 / Pendulum-v1
 VECTOR_TARGET = 10e6  # env-steps/s at 4096 envs
+#: Largest slowdown against --against REF that still passes, as a fraction.
+AGAINST_TOLERANCE = 0.05
 
 
 def _single_runner(env_id: str, steps: int, seed: int) -> Callable[[], float]:
@@ -94,20 +102,28 @@ def _vector_runner(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    serving = SERVE in words
+    if serving:
+        words.remove(SERVE)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--single-steps", type=int, default=20000, help="steps per timed block")
     parser.add_argument("--vector-steps", type=int, default=100, help="batched steps per block")
     parser.add_argument("--num-envs", type=int, default=4096, help="batch size (4096)")
     parser.add_argument("--repeats", type=int, default=5, help="timed blocks per task (5)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--strict", action="store_true", help="exit 1 when a target is missed")
-    ns = parser.parse_args(argv)
-
-    print(
-        f"python {platform.python_version()}, numpy {np.__version__}, gymnasium "
-        f"{gym.__version__}, numba {numba.__version__} ({numba.get_num_threads()} threads), "
-        f"{os.cpu_count()} CPU(s), {platform.machine()}"
+    parser.add_argument(
+        "--against", metavar="REF", help="also time the RocketRoll rows in a checkout of REF"
     )
+    parser.add_argument("--strict", action="store_true", help="exit 1 when a target is missed")
+    ns = parser.parse_args(words)
+
+    if not serving:
+        print(
+            f"python {platform.python_version()}, numpy {np.__version__}, gymnasium "
+            f"{gym.__version__}, numba {numba.__version__} ({numba.get_num_threads()} threads), "
+            f"{os.cpu_count()} CPU(s), {platform.machine()}"
+        )
     t0 = time.perf_counter()
     single = _single_runner("RocketRoll-v0", ns.single_steps, ns.seed)
     vector = _vector_runner(
@@ -141,10 +157,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     for run, _ in tasks.values():  # first calls: numba compile or cache load, page faults
         run()
     warmup = time.perf_counter() - warm
+    if serving:
+        return serve({name: run for name, (run, _) in tasks.items()})
+    ours = [name for name in tasks if name.lstrip().startswith(("RocketRoll", "same"))]
+    remote, commit = None, ""
+    if ns.against:
+        tree, commit = checkout(ns.against)
+        print(f"against {ns.against} ({commit[:12]}), checked out at {tree}: starting it")
+        rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
+        remote = Remote(__file__, [w for w in rest if not w.startswith("--against=")], tree)
     rates: dict[str, list[float]] = {name: [] for name in tasks}
+    before: dict[str, list[float]] = {name: [] for name in ours}
     for _ in range(ns.repeats):
         for name, (run, count) in tasks.items():
             rates[name].append(count / run())
+            if remote is not None and name in ours:
+                before[name].append(count / remote.block(name))
+    if remote is not None:
+        remote.close()
 
     names = list(tasks)
     med = {name: statistics.median(r) for name, r in rates.items()}
@@ -177,8 +207,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"({vec_parallel / vec:.2f} x serial): "
         f"{'PASS' if vec_parallel >= VECTOR_TARGET else 'FAIL'}"
     )
+    ok_against = True
+    if remote is not None:
+        print(f"\nthis checkout against {ns.against} ({commit[:12]}), same blocks alternating:")
+        print(f"{'task':<36} {'this steps/s':>14} {'REF steps/s':>13} {'change':>8}  verdict")
+        for name in ours:
+            old = statistics.median(before[name])
+            change = med[name] / old - 1.0
+            ok = change >= -AGAINST_TOLERANCE
+            ok_against &= ok
+            print(
+                f"{name:<36} {med[name]:>14,.0f} {old:>13,.0f} {change:>+7.1%}  "
+                f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})"
+            )
     print("spread: (best - worst) / median over the blocks; a large spread means a busy machine")
-    return 1 if ns.strict and not (ok_single and ok_vector) else 0
+    return 1 if ns.strict and not (ok_single and ok_vector and ok_against) else 0
 
 
 if __name__ == "__main__":

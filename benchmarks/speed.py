@@ -11,7 +11,15 @@ paper's Table 1 experiment, 5731 samples at 10 Hz):
   ``"theta"``) on the same recording, with its ratio to the pipeline;
 * the §3.3 Monte Carlo (4 noise levels x 100 runs = 400 runs) timed by
   calling :func:`identification.noise.noise_study` directly with the pieces of
-  one identification, median of ``--mc-repeats`` against the 5 s target.
+  one identification, median of ``--mc-repeats`` against the 5 s target;
+* every other registered identification method
+  (:data:`identification.methods.METHODS`) through
+  ``methods.fit(recording, method, [model])`` -- its parameters *and* its
+  ``u_d`` with the re-simulation (steps 8-9), from a fresh context each call.
+
+With ``--against REF`` the pipeline, the output-error peer and the Monte Carlo
+are also timed in a worktree of ``REF`` (``benchmarks/_against.py``), their
+calls alternating with this checkout's, and the change is printed.
 
 The timed calls of the four tasks are interleaved over one schedule, so that
 a busy spell of a shared machine slows them alike.  Wall-clock times by
@@ -20,7 +28,7 @@ the timings unless ``--strict`` is given, when a missed target gives 1.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/speed.py
+    .venv/bin/python benchmarks/speed.py [--against REF]
 """
 
 from __future__ import annotations
@@ -29,11 +37,13 @@ import argparse
 import functools
 import os
 import platform
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from _against import SERVE, Remote, checkout, serve
 
 from identification.baselines import output_error
 from identification.bundled import load_bundled
@@ -68,13 +78,19 @@ class Timing:
         return float(np.min(self.samples_ms))
 
 
-def time_interleaved(tasks: Sequence[tuple[str, Callable[[], object], int]]) -> list[Timing]:
+def time_interleaved(
+    tasks: Sequence[tuple[str, Callable[[], object], int]],
+    remote: Remote | None = None,
+    common: Sequence[str] = (),
+) -> tuple[list[Timing], dict[str, list[float]]]:
     """Time several tasks with their calls interleaved.
 
     Each task ``(name, func, repeats)`` is called once untimed (warm-up), then
     ``repeats`` times; the timed calls of all tasks are spread evenly over one
     schedule, so that a slow spell of the machine hits every task alike and
-    the ratios between them stay meaningful.
+    the ratios between them stay meaningful.  With ``remote``, each timed call
+    of a task in ``common`` is followed by the same call in the other
+    checkout; its times (ms) are returned by name.
     """
     first: list[float] = []
     for _, func, _ in tasks:
@@ -85,15 +101,28 @@ def time_interleaved(tasks: Sequence[tuple[str, Callable[[], object], int]]) -> 
         ((k + 0.5) / repeats, i) for i, (_, _, repeats) in enumerate(tasks) for k in range(repeats)
     )
     samples: list[list[float]] = [[] for _ in tasks]
+    other: dict[str, list[float]] = {name: [] for name in common}
     for _, i in events:
-        func = tasks[i][1]
+        name, func, _ = tasks[i]
         start = time.perf_counter()
         func()
         samples[i].append((time.perf_counter() - start) * 1e3)
-    return [
+        if remote is not None and name in other:
+            other[name].append(remote.block(name) * 1e3)
+    timings = [
         Timing(name, tuple(times), first_ms)
         for (name, _, _), times, first_ms in zip(tasks, samples, first, strict=True)
     ]
+    return timings, other
+
+
+def _timed(func: Callable[[], object]) -> Callable[[], float]:
+    def run() -> float:
+        start = time.perf_counter()
+        func()
+        return time.perf_counter() - start
+
+    return run
 
 
 def run_monte_carlo(result: Identification, runs: int) -> None:
@@ -133,19 +162,43 @@ def build_parser() -> argparse.ArgumentParser:
         "--mc-repeats", type=int, default=3, help="timed Monte Carlo studies (default 3)"
     )
     parser.add_argument(
+        "--against", metavar="REF", help="also time the common tasks in a checkout of REF"
+    )
+    parser.add_argument(
         "--strict", action="store_true", help="exit with status 1 when a target is missed"
     )
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ns = build_parser().parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    serving = SERVE in words
+    if serving:
+        words.remove(SERVE)
+    ns = build_parser().parse_args(words)
     for name in ("repeats", "peer_repeats", "mc_repeats"):
         if getattr(ns, name) < 1:
             raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
 
     rec = load_bundled(RECORDING)
     options = IdentifyOptions(noise_runs=0)
+    # Tasks every checkout has (the named reference included), by the name they are asked for.
+    common: dict[str, Callable[[], object]] = {
+        "identify(noise_runs=0)": lambda: identify(rec, options),
+        **{
+            f'output_error("{model}")': functools.partial(output_error, rec, model)
+            for model in ("constant", "theta")
+        },
+    }
+    if serving:
+        result = identify(rec, options)
+        n_levels = len(result.options.noise_levels_pct)
+        common[f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"] = lambda: run_monte_carlo(
+            result, MONTE_CARLO_RUNS
+        )
+        for func in common.values():
+            func()
+        return serve({name: _timed(func) for name, func in common.items()})
     print(
         f"recording {rec.name}: {rec.n_samples} samples, {rec.duration_s:.1f} s; "
         f"python {platform.python_version()}, numpy {np.__version__}, "
@@ -156,25 +209,43 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = time.perf_counter()
     result = identify(rec, options)
     first_call_ms = (time.perf_counter() - start) * 1e3
+    from identification.methods import METHODS, fit  # this checkout's (not in older ones)
+
     n_levels = len(result.options.noise_levels_pct)
-    pipeline, *peers, monte_carlo = time_interleaved(
+    mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
+    others = [m for m in METHODS.names() if m != "paper"]
+    remote, commit = None, ""
+    if ns.against:
+        tree, commit = checkout(ns.against)
+        print(f"against {ns.against} ({commit[:12]}), checked out at {tree}: starting it")
+        rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
+        remote = Remote(__file__, [w for w in rest if not w.startswith("--against=")], tree)
+    timings, before = time_interleaved(
         [
-            ("identify(noise_runs=0)", lambda: identify(rec, options), ns.repeats),
+            ("identify(noise_runs=0)", common["identify(noise_runs=0)"], ns.repeats),
             *(
-                (
-                    f'output_error("{model}")',
-                    functools.partial(output_error, rec, model),
-                    ns.peer_repeats,
-                )
+                (f'output_error("{model}")', common[f'output_error("{model}")'], ns.peer_repeats)
                 for model in ("constant", "theta")
             ),
-            (
-                f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)",
-                lambda: run_monte_carlo(result, MONTE_CARLO_RUNS),
-                ns.mc_repeats,
+            (mc_name, lambda: run_monte_carlo(result, MONTE_CARLO_RUNS), ns.mc_repeats),
+            *(
+                (
+                    f'fit(method="{method}", "{model}")',
+                    functools.partial(fit, rec, method, [model], options),
+                    ns.peer_repeats,
+                )
+                for method in others
+                for model in METHODS.entry(method).info["models"]
             ),
-        ]
+        ],
+        remote,
+        [*common, mc_name],
     )
+    if remote is not None:
+        remote.close()
+    pipeline, *peers = timings[:3]
+    monte_carlo = timings[3]
+    registered = timings[4:]
 
     header = (
         f"{'task':30s} {'n':>3s} {'median ms':>10s} {'IQR ms':>8s} {'min ms':>8s} {'1st ms':>8s} "
@@ -197,6 +268,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for peer in peers:
         row(peer, None)
     row(monte_carlo, MONTE_CARLO_TARGET_MS)
+    for method in registered:
+        row(method, None)
     print()
     peer_total = sum(p.median_ms for p in peers)
     print(
@@ -226,6 +299,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"missed targets: {', '.join(missed)}")
     else:
         print("all targets met")
+    if before:
+        print(f"\nthis checkout against {ns.against} ({commit[:12]}), the same calls alternating:")
+        print(f"{'task':30s} {'this median ms':>15s} {'REF median ms':>14s} {'change':>8s}")
+        for t in (pipeline, *peers, monte_carlo):
+            old = float(np.median(before[t.name]))
+            print(f"{t.name:30s} {t.median_ms:15.1f} {old:14.1f} {t.median_ms / old - 1:+8.1%}")
     return 1 if ns.strict and missed else 0
 
 

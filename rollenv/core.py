@@ -51,6 +51,7 @@ from identification.model import MODEL_NAMES, RollParams, Servo, piece_coefficie
 from rollenv.layout import (
     OBSERVATION_NAMES,
     Cfg,
+    Cursor,
     Obs,
     Param,
     Scale,
@@ -394,7 +395,7 @@ def _observe_one(
 def observe_kernel(
     index: IntArray,
     state: FloatArray,
-    step: IntArray,
+    cursor: IntArray,
     setpoints: FloatArray,
     eps: FloatArray,
     cfg: FloatArray,
@@ -406,7 +407,7 @@ def observe_kernel(
     last = setpoints.shape[1] - 1
     for k in range(index.size):
         i = index[k]
-        sp = setpoints[i, min(step[i] // period, last)]
+        sp = setpoints[i, min(cursor[i, Cursor.STEP] // period, last)]
         error[i] = _observe_one(i, state, sp, eps[k], cfg, obs)
 
 
@@ -414,13 +415,10 @@ def _step_envs(
     index: IntArray,
     action: FloatArray,
     state: FloatArray,
-    step: IntArray,
+    cursor: IntArray,
     params: FloatArray,
     scales: FloatArray,
-    scale_start: IntArray,
-    scale_stride: IntArray,
     u_flat: FloatArray,
-    u_start: IntArray,
     setpoints: FloatArray,
     eps: FloatArray,
     cfg: FloatArray,
@@ -432,13 +430,14 @@ def _step_envs(
     """Advance the envs in ``index`` by one control step.
 
     ``action`` holds fin commands in [-1, 1] (already checked and clipped),
-    ``state[i]`` env ``i``'s :class:`~rollenv.layout.State`, ``params[i]``
-    its rocket (:class:`~rollenv.layout.Param`), multiplied over this step by
-    ``scales[scale_start[i] + step[i]·scale_stride[i]]``
+    ``state[i]`` env ``i``'s :class:`~rollenv.layout.State`, ``cursor[i]``
+    its :class:`~rollenv.layout.Cursor` (step, u_d start, multiplier row and
+    stride), ``params[i]`` its rocket (:class:`~rollenv.layout.Param`),
+    multiplied over this step by ``scales[start + step·stride]``
     (:class:`~rollenv.layout.Scale`: a stride of 0 holds one row, the
-    constant rocket), ``u_flat[u_start[i] + m]`` is env ``i``'s ``m``-th
-    ``u_d`` sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new
-    state, ``step + 1``, observation, reward, true error and the last ``u_d``.
+    constant rocket), ``u_flat[u_start + m]`` is env ``i``'s ``m``-th ``u_d``
+    sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new state,
+    the step plus one, observation, reward, true error and the last ``u_d``.
     """
     n_sub = int(cfg[Cfg.SUBSTEPS])
     h = cfg[Cfg.H]
@@ -450,7 +449,8 @@ def _step_envs(
     last_sp = setpoints.shape[1] - 1
     for k in numba.prange(index.size):
         i = index[k]
-        row = scale_start[i] + step[i] * scale_stride[i]
+        step = cursor[i, Cursor.STEP]
+        row = cursor[i, Cursor.SCALE_START] + step * cursor[i, Cursor.SCALE_STRIDE]
         gain = scales[row, Scale.GAIN]
         damp = scales[row, Scale.DAMPING]
         alpha = params[i, Param.ALPHA] * gain
@@ -462,8 +462,8 @@ def _step_envs(
         theta = state[i, State.FIN]
         previous_theta = theta
         command = min(max(action[i] * fin_range, -fin_range), fin_range)
-        first = step[i] * n_sub
-        u_index = u_start[i] + first // u_per  # u_d sample of the current substep
+        first = step * n_sub
+        u_index = cursor[i, Cursor.U_START] + first // u_per  # u_d sample of the current substep
         u_phase = first % u_per
         held = 0  # fin-at-rest substeps with the same u_d, not yet applied (merged: exact)
         held_u = 0.0
@@ -501,9 +501,9 @@ def _step_envs(
         state[i, State.ANGLE] = phi
         state[i, State.FIN] = theta
         state[i, State.COMMAND] = command
-        step[i] += 1
+        cursor[i, Cursor.STEP] = step + 1
         u_now[i] = u
-        sp = setpoints[i, min(step[i] // period, last_sp)]
+        sp = setpoints[i, min((step + 1) // period, last_sp)]
         err = _observe_one(i, state, sp, eps[k], cfg, obs)
         error[i] = err
         e_n = err / cfg[Cfg.ERROR_NORM]
@@ -592,16 +592,18 @@ class RollBatch:
             _check_damping_box(self.param_low, self.param_high, config.fin_range_deg)
         self.all = np.arange(n, dtype=np.int64)
         self.state = np.zeros((n, len(State)))
-        self.step_count = np.zeros(n, dtype=np.int64)
+        # Where each env is (Cursor columns); the attributes below are views of it.
+        self.cursor = np.zeros((n, len(Cursor)), dtype=np.int64)
+        self.step_count = self.cursor[:, Cursor.STEP]
         self.params = np.zeros((n, len(Param)))
         # Multipliers of the rocket's parameters (Scale columns): row 0 is the constant
         # rocket (all ones, stride 0); a per-step schedule gets a block of its own.
         self.scales = np.ones((1, len(Scale)))
-        self.scale_start = np.zeros(n, dtype=np.int64)
-        self.scale_stride = np.zeros(n, dtype=np.int64)
+        self.scale_start = self.cursor[:, Cursor.SCALE_START]
+        self.scale_stride = self.cursor[:, Cursor.SCALE_STRIDE]
         self.trace = np.zeros(n, dtype=np.int64)
         self.start = np.zeros(n, dtype=np.int64)
-        self.u_start = np.zeros(n, dtype=np.int64)
+        self.u_start = self.cursor[:, Cursor.U_START]
         self.setpoints = np.zeros((n, config.setpoint_segments))
         self.obs = np.zeros((n, len(Obs)), dtype=np.float32)
         self.reward = np.zeros(n)
@@ -695,7 +697,7 @@ class RollBatch:
         self.u_now[index] = u0
         eps = self._gyro_draws(rng, m)
         observe_kernel(
-            index, self.state, self.step_count, self.setpoints, eps, self.cfg, self.obs, self.error
+            index, self.state, self.cursor, self.setpoints, eps, self.cfg, self.obs, self.error
         )
 
     # ------------------------------------------------------------------- step
@@ -706,13 +708,10 @@ class RollBatch:
             index,
             action,
             self.state,
-            self.step_count,
+            self.cursor,
             self.params,
             self.scales,
-            self.scale_start,
-            self.scale_stride,
             self.u_flat,
-            self.u_start,
             self.setpoints,
             eps,
             self.cfg,
@@ -831,12 +830,9 @@ class RollBatch:
         self.params[index] = source.params[i]
         self.trace[index] = source.trace[i]
         self.start[index] = source.start[i]
-        self.u_start[index] = source.u_start[i]
-        self.step_count[index] = source.step_count[i]
+        self.cursor[index] = source.cursor[i]
         self.setpoints[index] = source.setpoints[i]
         self.scales = source.scales  # read only here: shared, not copied
-        self.scale_start[index] = source.scale_start[i]
-        self.scale_stride[index] = source.scale_stride[i]
 
 
 #: Rounds of redrawing undamped rockets before domain randomisation gives up.

@@ -33,6 +33,12 @@ RESET_OPTIONS = (
     "scales",
 )
 
+# The state's columns as plain ints for the per-step info (an IntEnum member costs about
+# 0.1 µs a lookup; the env steps in a few µs).
+_RATE, _ANGLE, _FIN, _COMMAND = (
+    int(c) for c in (State.RATE, State.ANGLE, State.FIN, State.COMMAND)
+)
+
 #: Seconds of history a rendered frame shows.
 RENDER_HISTORY_S = 10.0
 
@@ -351,10 +357,10 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
         state = b.state[0].tolist()
         step = int(b.step_count[0])
         return {
-            "roll_deg": state[State.ANGLE],
-            "roll_rate_dps": state[State.RATE],
-            "fin_deg": state[State.FIN],
-            "fin_cmd_deg": state[State.COMMAND],
+            "roll_deg": state[_ANGLE],
+            "roll_rate_dps": state[_RATE],
+            "fin_deg": state[_FIN],
+            "fin_cmd_deg": state[_COMMAND],
             "u_d_deg": float(b.u_now[0]),
             "setpoint": b.setpoint_of(0),
             "tracking_error": float(b.error[0]),

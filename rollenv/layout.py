@@ -12,6 +12,8 @@ checks that they agree.
   (the fields of :class:`identification.model.RollParams`, in order);
 * :class:`Scale` -- columns of the per-step multipliers of the rocket's
   parameters (a rocket that changes during an episode, e.g. with airspeed);
+* :class:`Cursor` -- columns of :attr:`RollBatch.cursor`: where each env is
+  in its episode and in its ``u_d`` and multiplier sequences;
 * :class:`Cfg` -- the scalars of :meth:`RollConfig.kernel_settings
   <rollenv.core.RollConfig.kernel_settings>`.
 """
@@ -31,6 +33,7 @@ __all__ = [
     "OBSERVATION_NAMES",
     "PARAM_FIELDS",
     "Cfg",
+    "Cursor",
     "Obs",
     "Param",
     "Scale",
@@ -111,6 +114,15 @@ class Scale(IntEnum):
 
     GAIN = 0  #: multiplies α
     DAMPING = 1  #: multiplies a(θ)
+
+
+class Cursor(IntEnum):
+    """Columns of the per-env integers (``RollBatch.step_count`` and friends are views)."""
+
+    STEP = 0  #: control steps taken in this episode
+    U_START = 1  #: index in the concatenated u_d samples of the episode's first sample
+    SCALE_START = 2  #: row of the multipliers table at step 0
+    SCALE_STRIDE = 3  #: rows per step: 0 (the constant rocket) or 1 (a per-step schedule)
 
 
 class Cfg(IntEnum):

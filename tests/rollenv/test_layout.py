@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -42,7 +43,7 @@ from tests.rollenv.conftest import array_bank, wrap
 STEPS = 60
 
 
-def quiet(task: str = "angle", **settings: object) -> RocketRollEnv:
+def quiet(task: str = "angle", **settings: Any) -> RocketRollEnv:
     """An env on the array bank with the truth observed (no sensor noise)."""
     return RocketRollEnv(bank=array_bank(), task=task, sensors=False, **settings)
 
@@ -91,7 +92,7 @@ def test_a_state_written_by_name_is_observed_by_name() -> None:
     observe_kernel(
         batch.all,
         batch.state,
-        batch.step_count,
+        batch.cursor,
         batch.setpoints,
         np.zeros(1),
         batch.cfg,
@@ -194,11 +195,11 @@ def test_a_switch_mid_episode_follows_eq_29_after_it() -> None:
     scales[k:, Scale.GAIN] = 2.0
     scales[k:, Scale.DAMPING] = 0.5
     env.reset(seed=0, options={"scales": scales, "fin_deg": 10.0})
-    rates = [env.core.state[0, State.RATE]]
+    seen = [env.core.state[0, State.RATE]]
     for _ in range(steps):
         env.step(np.array([10.0 / 40.0], dtype=np.float32))
-        rates.append(env.core.state[0, State.RATE])
-    rates = np.array(rates)
+        seen.append(env.core.state[0, State.RATE])
+    rates = np.array(seen)
     before, after = alpha * (10.0 + theta_bar), 2.0 * alpha * (10.0 + theta_bar)
     assert rates[:k] == pytest.approx(before, rel=1e-12)  # steady from the start
     t = 0.1 * np.arange(1, 40)
