@@ -251,12 +251,12 @@ class Args:
     env_id: str = setting(
         "RocketRoll-v0",
         "environment id: RocketRoll-v0 (angle task), RocketRollRate-v0 (rate task), ...",
-        choices=_variant_ids(),
+        choices=_variant_ids,
         always=True,
     )
     policy: list[str] = setting(
         default_factory=default_policies,
-        help=f"controller to evaluate, in table order (repeatable): {policy_help()}",
+        help=lambda: f"controller to evaluate, in table order (repeatable): {policy_help()}",
         metavar="POLICY",
         always=True,
     )

@@ -112,7 +112,7 @@ class Args:
         "RocketRoll-v0",
         "environment: RocketRoll-v0 (hold the roll angle), RocketRollRate-v0 (track a roll "
         "rate), ...",
-        choices=_variant_ids(),
+        choices=_variant_ids,
         always=True,
     )
     timesteps: int | None = setting(
@@ -151,10 +151,16 @@ class Args:
         20, "test-split episodes per evaluation (run side by side)", ge=1, le=100_000
     )
     eval_seed: int = setting(
-        1000, "seed of the evaluation episodes: every evaluation runs the same ones", ge=0
+        1000,
+        "seed of the evaluation episodes: every evaluation runs the same ones",
+        ge=0,
+        le=2**32 - 1,
     )
     checkpoint_freq: int = setting(
-        250_000, "save a checkpoint every this many environment steps (0: never)", ge=0
+        250_000,
+        "save a checkpoint every this many environment steps (0: never)",
+        ge=0,
+        le=10**12,
     )
     resume: Path | None = setting(
         None,

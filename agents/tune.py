@@ -55,9 +55,7 @@ def tune_bandwidth(
 class TuneArgs:
     """``rocketroll tune pid`` / ``python -m agents.tune``."""
 
-    env_id: str = setting(
-        "RocketRoll-v0", "environment id", choices=tuple(VARIANTS.names()), always=True
-    )
+    env_id: str = setting("RocketRoll-v0", "environment id", choices=VARIANTS.names, always=True)
     db: str | None = setting(None, "database (default: the default one)", metavar="DB")
     episodes: int = setting(30, "train episodes per ω", ge=1, le=100_000)
     seed: int = setting(0, "seed of the train episodes", ge=0, le=2**63 - 1)

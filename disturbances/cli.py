@@ -15,7 +15,7 @@ import json
 import os
 import sys
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -45,11 +45,16 @@ def _db_setting(new: bool = False) -> Any:
     return setting(None, _DB_HELP + ("; created if missing" if new else ""), metavar="DB")
 
 
-def _methods_help(text: str) -> str:
-    return (
-        f"{text} (repeatable; default: {', '.join(default_methods())}; registered: "
-        f"{', '.join(METHODS.names())})"
-    )
+def _methods_help(text: str) -> Callable[[], str]:
+    """Help listing the registered methods when the parser is made (plugins included)."""
+
+    def help_text() -> str:
+        return (
+            f"{text} (repeatable; default: {', '.join(default_methods())}; registered: "
+            f"{', '.join(METHODS.names())})"
+        )
+
+    return help_text
 
 
 def _default_methods() -> list[str]:

@@ -75,9 +75,9 @@ _KEY = "rocketroll.setting"
 
 @dataclass(frozen=True)
 class _Spec:
-    help: str
+    help: str | Callable[[], str]
     flag: str | None
-    choices: tuple[Any, ...] | None
+    choices: tuple[Any, ...] | Callable[[], Sequence[Any]] | None
     ge: float | None
     gt: float | None
     le: float | None
@@ -95,11 +95,11 @@ class _Spec:
 
 def setting(
     default: Any = MISSING,
-    help: str = "",
+    help: str | Callable[[], str] = "",
     *,
     default_factory: Callable[[], Any] | Any = MISSING,
     flag: str | None = None,
-    choices: Sequence[Any] | None = None,
+    choices: Sequence[Any] | Callable[[], Sequence[Any]] | None = None,
     ge: float | None = None,
     gt: float | None = None,
     le: float | None = None,
@@ -120,13 +120,15 @@ def setting(
     ----------
     default, default_factory
         As for :func:`dataclasses.field`; neither makes the option required.
-    help : str
-        One line for ``--help``.
+    help : str or callable
+        One line for ``--help``; a function is called when the parser is made
+        (help that lists a registry, which may grow after import).
     flag : str, optional
         The option (``--min-step``); default ``--`` plus the field name with
         dashes.
-    choices : sequence, optional
-        Allowed values (a ``Literal`` annotation gives them too).
+    choices : sequence or callable, optional
+        Allowed values (a ``Literal`` annotation gives them too); a function
+        is called whenever they are needed (the names of a registry).
     ge, gt, le, lt : float, optional
         Bounds (``>=``, ``>``, ``<=``, ``<``), for numbers and for each item
         of a tuple of numbers.  Floats must also be finite.
@@ -152,7 +154,7 @@ def setting(
     spec = _Spec(
         help=help,
         flag=flag,
-        choices=None if choices is None else tuple(choices),
+        choices=None if choices is None or callable(choices) else tuple(choices),
         ge=ge,
         gt=gt,
         le=le,
@@ -181,8 +183,16 @@ class _Field:
     base: Any  # int, float, str, bool, Path, tuple, list, dict or a dataclass
     item: Any  # the item type of a tuple or list
     optional: bool
-    choices: tuple[Any, ...] | None
+    literal: tuple[Any, ...] | None  # the choices of a Literal annotation
     default: Any  # MISSING when required
+
+    @property
+    def choices(self) -> tuple[Any, ...] | None:
+        """Allowed values, read now (a registry may have grown since import)."""
+        given = self.spec.choices
+        if callable(given):
+            return tuple(given())
+        return given if given is not None else self.literal
 
     @property
     def flag(self) -> str:
@@ -216,10 +226,10 @@ def _fields(cls: type) -> tuple[_Field, ...]:
             args = [a for a in get_args(kind) if a is not type(None)]
             optional = len(args) < len(get_args(kind))
             kind = args[0] if len(args) == 1 else kind
-        choices = spec.choices
+        literal = None
         if get_origin(kind) is Literal:
-            choices = choices or get_args(kind)
-            kind = type(get_args(kind)[0])
+            literal = get_args(kind)
+            kind = type(literal[0])
         item: Any = None
         origin = get_origin(kind)
         if origin in (tuple, list):
@@ -233,7 +243,7 @@ def _fields(cls: type) -> tuple[_Field, ...]:
             default = f.default_factory()
         else:
             default = MISSING
-        out.append(_Field(f.name, spec, kind, item, optional, choices, default))
+        out.append(_Field(f.name, spec, kind, item, optional, literal, default))
     _FIELDS[cls] = tuple(out)
     return _FIELDS[cls]
 
@@ -315,8 +325,9 @@ def check(obj: Any) -> None:
             if f.optional:
                 continue
             raise SettingError(f.name, "is required")
-        if f.choices is not None and value not in f.choices:
-            allowed = ", ".join(map(str, f.choices))
+        choices = f.choices
+        if choices is not None and value not in choices:
+            allowed = ", ".join(map(str, choices))
             raise SettingError(f.name, f"must be one of {allowed}, not {value!r}")
         if f.base is bool and not isinstance(value, bool):
             raise SettingError(f.name, f"must be True or False, got {value!r}")
@@ -387,7 +398,7 @@ def _tuple_parser(kind: type) -> Callable[[str], tuple[Any, ...]]:
 
 
 def _help(f: _Field) -> str:
-    text = f.spec.help
+    text = f.spec.help() if callable(f.spec.help) else f.spec.help
     shown = f.default
     if (
         shown is not MISSING
@@ -416,8 +427,9 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
         kwargs: dict[str, Any] = {"help": _help(f)}
         if f.spec.metavar:
             kwargs["metavar"] = f.spec.metavar
-        if f.choices is not None:
-            kwargs["choices"] = f.choices
+        choices = f.choices
+        if choices is not None:
+            kwargs["choices"] = choices
         parse = f.spec.parse
         if f.base is bool:
             if f.default is True:

@@ -131,7 +131,7 @@ class RolloutArgs:
     """``rocketroll env rollout``."""
 
     env_id: str = setting(
-        "RocketRoll-v0", "environment id", flag="--id", choices=_variant_ids(), metavar="ID"
+        "RocketRoll-v0", "environment id", flag="--id", choices=_variant_ids, metavar="ID"
     )
     policy: Literal["zero", "random"] = setting("random", "policy")
     episodes: int = setting(3, "episodes", ge=1, le=100_000)

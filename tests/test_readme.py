@@ -1,0 +1,114 @@
+"""The README's figures are what the code computes: its tables, reproduced.
+
+A change that moves a number the README shows fails here until the README says
+so.  The committed PPO policies are reproduced from their recorded commands by
+the slow tests at the end (``pytest -m slow``; minutes each).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from identification.bundled import load_bundled
+from identification.pipeline import identify
+from rocketroll.cli import main as rocketroll
+
+REPO = Path(__file__).resolve().parents[1]
+README = (REPO / "README.md").read_text(encoding="utf-8")
+
+
+def readme_rows(first: str, count: int) -> list[str]:
+    """``count`` table rows of the README starting with the row that starts with ``first``."""
+    lines = README.splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith(first))
+    return lines[start : start + count]
+
+
+def test_the_identification_table_of_the_bundled_reconstruction() -> None:
+    result = identify(load_bundled("tunnel-paper-seed0"))
+    p = result.parameters()
+    resim = result.resimulations
+    theta = result.statistics.theta
+    noise = result.noise
+    assert noise is not None
+    i10 = list(noise.levels_pct).index(10.0)
+    rows = readme_rows("| α (°/s)/° |", 7)
+    truth = result.truth()
+    assert truth is not None
+    alpha_error = 100 * (p["alpha"] / truth["alpha"] - 1)
+    assert rows[0].startswith(f"| α (°/s)/° | {p['alpha']:.4f} ({alpha_error:+.1f} %) |")
+    assert rows[1].startswith(f"| β °/s | {p['beta_dps']:.3f} |")
+    assert rows[2].startswith(f"| steady-state R² | {p['steady_state_r2']:.4f} |")
+    rate = f"{resim['constant'].rate_mae_dps:.3f} / {resim['theta'].rate_mae_dps:.3f} °/s"
+    angle = f"{resim['constant'].angle_mae_deg:.3f} / {resim['theta'].angle_mae_deg:.3f} °"
+    assert f"| {rate} |" in rows[3] and f"| {angle} |" in rows[4]
+    interval = f"[{theta.q05_deg:.2f}, {theta.q95_deg:.2f}]°".replace("-", "−")
+    assert f"| {interval} |" in rows[5]
+    assert f"| {noise.mae_deg[i10]:.2f} / {noise.p90_deg[i10]:.2f} ° |" in rows[6]
+
+
+@pytest.mark.parametrize(
+    ("env_id", "table"), [("RocketRoll-v0", 0), ("RocketRollRate-v0", 1)], ids=["angle", "rate"]
+)
+def test_the_evaluation_tables(
+    env_id: str, table: int, default_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`make demo`'s tables, 20 held-out episodes, seed 0, every default controller."""
+    assert rocketroll(["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0"]) == 0
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    starts = [k for k, line in enumerate(README.splitlines()) if line.startswith("| trim |")]
+    shown = README.splitlines()[starts[table] : starts[table] + 4]
+    assert printed[1:] == shown
+
+
+def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert rocketroll(["db", "list", "--kind", "identified", "--method", "paper"]) == 0
+    out = capsys.readouterr().out
+    assert "9 recordings, 36 traces, 36 surrogates; 18 shown" in out
+    assert re.search(r"2d68d98ae09b-paper-theta .* 7\.91 \[-12\.48,  13\.58\]", out)
+    assert "36 identified traces and 36 surrogates, 6 train and 3 test recordings" in README
+
+
+# ------------------------------------------------------------------ slow: the committed policies
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ["RocketRoll-v0", "RocketRollRate-v0"])
+def test_a_committed_policy_is_reproduced_by_its_recorded_command(
+    env_id: str, default_db: Path, tmp_path: Path
+) -> None:
+    """README: "re-running them reproduces the policy bit for bit on this machine"
+    (2.5 min for the angle policy, 10 min for the rate policy, one torch thread)."""
+    from stable_baselines3 import PPO
+
+    from agents.ppo import COMMITTED
+    from agents.train import DEFAULT_HYPERPARAMS, Args, train
+
+    folder = COMMITTED / env_id
+    recorded = json.loads((folder / "settings.json").read_text(encoding="utf-8"))["args"]
+    args = Args(
+        env_id=env_id,
+        seed=recorded["seed"],
+        out=tmp_path / "run",
+        hyperparams=DEFAULT_HYPERPARAMS,
+        eval_freq=recorded["eval_freq"],
+        eval_episodes=recorded["eval_episodes"],
+        eval_seed=recorded["eval_seed"],
+        checkpoint_freq=recorded["checkpoint_freq"],
+        progress_bar=False,
+        torch_threads=recorded["torch_threads"],
+    )
+    train(args)
+    again = PPO.load(tmp_path / "run" / "model.zip", device="cpu").policy.state_dict()
+    committed = PPO.load(folder / "model.zip", device="cpu").policy.state_dict()
+    assert again.keys() == committed.keys()
+    for name, tensor in committed.items():
+        assert torch.equal(again[name], tensor), name
+    ours = json.loads((tmp_path / "run" / "normalize.json").read_text(encoding="utf-8"))
+    theirs = json.loads((folder / "normalize.json").read_text(encoding="utf-8"))
+    np.testing.assert_array_equal(ours["mean"], theirs["mean"])
+    np.testing.assert_array_equal(ours["var"], theirs["var"])
