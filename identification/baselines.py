@@ -100,6 +100,7 @@ def output_error(
 
 
 def _output_error(inputs: Measurements, model: str, x0: RollParams | None) -> OutputErrorFit:
+    inputs.require_steps()
     segments, grid, theta_fine = inputs.segments, inputs.grid, inputs.theta_fine
     velocity = inputs.velocity_dps
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,7 +64,8 @@ class ImportSettings:
 
     columns: tuple[str, ...] = setting(
         (),
-        "comma-separated role of each input column: time, fin_cmd, fin, roll, roll_rate, skip",
+        "comma-separated role of each input column: time, fin_cmd, fin, roll, roll_rate, "
+        "skip (required)",
         metavar="ROLES",
     )
     header: bool = setting(True, "the first non-comment line is a header row (--no-header: none)")
@@ -76,7 +78,9 @@ class ImportSettings:
     )
     time_unit: Literal["s", "ms", "us"] = setting("s", "unit of the time column")
     delimiter: str | None = setting(
-        None, "cell separator (default: , ; or tab, else whitespace)", parse=_delimiter
+        None,
+        "cell separator (default: each line's comma, semicolon or tab, else whitespace)",
+        parse=_delimiter,
     )
     unwrap: bool = setting(False, "unwrap a roll angle that wraps at 360°")
     name: str | None = setting(None, "recording name (default: the input file's stem)")
@@ -101,7 +105,9 @@ def _cells(line: str, delimiter: str) -> list[str]:
 
 
 def _guess_delimiter(line: str) -> str:
-    return next((d for d in (",", ";", "\t") if d in line), " ")
+    """Comma, semicolon or tab -- the first found outside quotes -- else whitespace."""
+    bare = re.sub(r'"[^"]*"', "", line)
+    return next((d for d in (",", ";", "\t") if d in bare), " ")
 
 
 def import_csv(
@@ -218,9 +224,10 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
-        if delimiter is None:
-            delimiter = _guess_delimiter(line)
-        cells = _cells(line, delimiter)
+        try:  # without --delimiter, each line's own separator (as before the csv module)
+            cells = _cells(line, delimiter or _guess_delimiter(line))
+        except csv.Error as exc:
+            raise RecordingError(where, lineno, f"unreadable cells ({exc})") from None
         if len(cells) != len(roles):
             raise RecordingError(
                 where,

@@ -156,7 +156,10 @@ class IdentifyOptions:
     def __post_init__(self) -> None:
         check(self)
         if self.breakpoint_resolution_s > self.max_breakpoint_s:
-            raise SettingError("breakpoint_resolution_s", "must not exceed max_breakpoint_s")
+            raise SettingError(
+                "max_breakpoint_s",
+                f"must be at least the breakpoint search step ({self.breakpoint_resolution_s:g} s)",
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -388,6 +391,14 @@ class Measurements:
     velocity_fine: FloatArray
     recording: Recording
 
+    def require_steps(self) -> None:
+        """Refuse a recording with fewer than two fin steps: nothing to fit α and θ̄ on."""
+        if self.segments.n_steps < 2:
+            raise IdentificationError(
+                f"{self.recording.name}: found {self.segments.n_steps} fin step; the "
+                "steady-state fit (eq. 16) needs at least two"
+            )
+
 
 def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:
     """Fin steps (step 1), smoothed velocity (§3.2), 100 Hz grid and fin angle (step 5)."""
@@ -474,11 +485,7 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
     inputs = measurements(recording, opts)
     segments, grid, theta_fine = inputs.segments, inputs.grid, inputs.theta_fine
     velocity = inputs.velocity_dps
-    if segments.n_steps < 2:
-        raise IdentificationError(
-            f"{recording.name}: found {segments.n_steps} fin step; the steady-state fit "
-            "(eq. 16) needs at least two"
-        )
+    inputs.require_steps()
     angle, angle_source = inputs.angle_deg, inputs.angle_source
     velocity_fine = inputs.velocity_fine
 

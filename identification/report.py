@@ -125,7 +125,7 @@ def write_report(result: Identification, directory: str | os.PathLike[str]) -> l
     """Write the figures and ``report.md`` of an identification into ``directory``.
 
     All files are rendered first and then written all or nothing
-    (:func:`identification.recording.write_all_atomic`); the directory is
+    (:func:`rocketroll_common.files.write_all_atomic`); the directory is
     created if missing.
 
     Parameters

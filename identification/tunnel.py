@@ -282,21 +282,30 @@ class TunnelSpec:
         "theta", "damping model: theta (eq. 49) or constant (eq. 29)", choices=MODEL_NAMES
     )
     alpha: float = setting(
-        PAPER_THETA.alpha, "steady-state gain α (eq. 17: 0.6590)", ge=-10.0, le=10.0, unit="(°/s)/°"
+        PAPER_THETA.alpha,
+        f"steady-state gain α (eq. 17: {paper.PARAMETERS['alpha']})",
+        ge=-10.0,
+        le=10.0,
+        unit="(°/s)/°",
     )
     beta: float = setting(
         PAPER_THETA.beta_dps,
-        "steady-state offset β (eq. 17: 2.8856); θ̄ = β/α",
+        f"steady-state offset β (eq. 17: {paper.PARAMETERS['beta_dps']}); θ̄ = β/α",
         ge=-100.0,
         le=100.0,
         unit="°/s",
     )
     alpha_bar: float | None = setting(
-        None, "ᾱ (eq. 48: -0.0289; 0 for --model constant)", ge=-1.0, le=1.0, unit="1/(s·°)"
+        None,
+        f"ᾱ (eq. 48: {paper.PARAMETERS['alpha_bar_per_deg_s']}; 0 for --model constant)",
+        ge=-1.0,
+        le=1.0,
+        unit="1/(s·°)",
     )
     beta_bar: float | None = setting(
         None,
-        "β̄ (eq. 48: 2.4075), or the constant a (eq. 46: 1.314)",
+        f"β̄ (eq. 48: {paper.PARAMETERS['beta_bar_per_s']}), or the constant a "
+        f"(eq. 46: {paper.PARAMETERS['a_per_s']})",
         gt=0.0,
         le=100.0,
         unit="1/s",
@@ -362,11 +371,12 @@ class TunnelSpec:
                 f"gives an asymmetry θ̄ = β/α = {self.beta / self.alpha:.4g}° beyond ±45°",
             )
         if self.no_encoder and self.gyro_noise is None:
-            raise ValueError("no_encoder needs a rate gyro (set gyro_noise, e.g. 0)")
+            raise SettingError("no_encoder", "needs a rate gyro (give --gyro-noise, e.g. 0)")
         if not self.log_dt <= self.dwell_min <= self.dwell_max:
-            raise ValueError(
-                f"dwell must satisfy log_dt ({self.log_dt:g} s) <= dwell_min <= dwell_max, "
-                f"got {self.dwell_min}, {self.dwell_max}"
+            raise SettingError(
+                "dwell_min",
+                f"must be at least --log-dt ({self.log_dt:g} s) and at most --dwell-max "
+                f"({self.dwell_max:g} s), got {self.dwell_min:g} s",
             )
         params = self.params()
         lowest = params.beta_bar_per_s + min(params.alpha_bar_per_deg_s, 0.0) * (

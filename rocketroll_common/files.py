@@ -3,9 +3,9 @@
 Every file a rocketroll command writes is staged in a temporary file beside
 its target and renamed into place only when all of the command's outputs are
 complete, so a reader never sees a half-written file and a failure leaves
-every target as it was.  Staged files get the permissions a plain ``open()``
-would give (``mkstemp`` makes them private).  Errors name the user's path,
-never the temporary one.
+every target as it was.  A new file gets the permissions a plain ``open()``
+would give (``mkstemp`` makes them private), a replaced one keeps its own.
+Errors name the user's path, never the temporary one.
 
 Before a command starts its work it checks that each output can be written
 (:func:`check_output`): a long run must not end in "File exists".
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import errno
 import os
-import shutil
+import stat
 import tempfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -29,14 +29,21 @@ __all__ = [
     "check_output",
     "created_folders_removed_on_error",
     "file_mode",
-    "folder_mode",
-    "staged_directory",
     "write_all_atomic",
     "write_atomic",
 ]
 
 
 def _umask() -> int:
+    """The process's umask, read without changing it where the system tells it (Linux);
+    elsewhere set and restored at once."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
     mask = os.umask(0)
     os.umask(mask)
     return mask
@@ -45,11 +52,6 @@ def _umask() -> int:
 def file_mode() -> int:
     """The permissions a plain ``open()`` gives a new file (0o666 less the umask)."""
     return 0o666 & ~_umask()
-
-
-def folder_mode() -> int:
-    """The permissions a plain ``mkdir()`` gives a new folder (0o777 less the umask)."""
-    return 0o777 & ~_umask()
 
 
 def _named(exc: OSError, target: Path) -> OSError:
@@ -144,11 +146,14 @@ def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> N
     """Write several files all or nothing.
 
     Every file is first written in full to a temporary file beside its target
-    (missing folders are created); only when all of them are staged are they
-    renamed into place.  Any error while staging (a folder as target, an
-    unwritable folder, a full disk) leaves every target as it was and removes
-    the folders it created.  An ``OSError`` names the target, not the
-    temporary file.
+    (missing folders are created) and flushed to disk; only when all of them
+    are staged are they renamed into place.  Any error while staging (a folder
+    as target, an unwritable folder, a full disk) leaves every target as it
+    was and removes the folders it created.  The renames stay within each
+    target's folder and need no space, so only a failure between them (the
+    disk removed mid-way) could leave some targets replaced.  A replaced file
+    keeps its permissions; a new one gets those a plain ``open()`` would.  An
+    ``OSError`` names the target, not the temporary file.
     """
     staged: list[tuple[str, Path]] = []
     made: list[Path] = []
@@ -166,8 +171,11 @@ def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> N
                 staged.append((tmp, target))
                 with os.fdopen(fd, "wb") as handle:
                     handle.write(data.encode("utf-8") if isinstance(data, str) else data)
-                # mkstemp makes 0600 files; give the permissions a plain open() would.
-                os.chmod(tmp, file_mode())
+                    handle.flush()
+                    os.fsync(handle.fileno())
+                # mkstemp makes 0600 files: the target's own permissions, or a new file's.
+                mode = stat.S_IMODE(target.stat().st_mode) if target.exists() else file_mode()
+                os.chmod(tmp, mode)
             except OSError as exc:
                 raise _named(exc, target) from None
         for tmp, target in staged:
@@ -181,31 +189,6 @@ def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> N
             Path(tmp).unlink(missing_ok=True)
         if not done:
             _remove_folders(made)
-
-
-@contextmanager
-def staged_directory(target: str | os.PathLike[str]) -> Iterator[Path]:
-    """A new folder ``target`` that appears whole or not at all.
-
-    Yields a temporary folder beside ``target`` to fill; when the block ends
-    without an error it is renamed to ``target`` (which must not exist, or be
-    an empty folder), otherwise it is removed with everything in it.
-    """
-    final = Path(target)
-    if final.exists() and (not final.is_dir() or any(final.iterdir())):
-        raise UsageError(f"{final}: exists and is not an empty folder")
-    made = _make_parents(final.parent)
-    staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=final.parent))
-    try:
-        os.chmod(staging, folder_mode())  # mkdtemp made it private
-        yield staging
-        if final.exists():
-            final.rmdir()
-        os.replace(staging, final)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        _remove_folders(made)
-        raise
 
 
 @contextmanager

@@ -3,8 +3,9 @@
 Gymnasium's ``register``/``make`` is the model.  A :class:`Registry` maps a
 name to an entry -- an object, or a ``"module:attribute"`` string loaded on
 first use, so listing the names (for ``--help`` and error messages) imports
-nothing heavy.  Identification methods, roll models, controllers, environment
-variants and storage back ends are each one registry; a new one joins by one
+nothing heavy.  Identification methods, controllers, environment variants and
+storage back ends are each one registry (the two damping models, fixed by the
+paper, are one table: ``identification.model.MODELS``); a new one joins by one
 ``register`` call, and the command line, the database and the evaluation
 find it.
 
@@ -23,8 +24,11 @@ import importlib
 import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from types import MappingProxyType
 from typing import Any, Generic, TypeVar
+
+from rocketroll_common.errors import UsageError
 
 __all__ = ["PLUGIN_GROUP", "PLUGIN_VARIABLE", "Entry", "Registry", "load_plugins"]
 
@@ -43,14 +47,28 @@ def load_plugins() -> None:
     global _plugins_loaded
     if _plugins_loaded:
         return
-    _plugins_loaded = True
+    _plugins_loaded = True  # first: a plugin's own registrations come back here
     from importlib.metadata import entry_points
 
-    for point in entry_points(group=PLUGIN_GROUP):
-        point.load()
+    modules = [
+        (f"entry point {p.name!r} ({p.value})", p.load) for p in entry_points(group=PLUGIN_GROUP)
+    ]
     for name in os.environ.get(PLUGIN_VARIABLE, "").split(","):
         if name.strip():
-            importlib.import_module(name.strip())
+            modules.append(
+                (
+                    f"${PLUGIN_VARIABLE} module {name.strip()!r}",
+                    partial(importlib.import_module, name.strip()),
+                )
+            )
+    for what, load in modules:
+        try:
+            load()
+        except Exception as exc:
+            _plugins_loaded = False
+            raise UsageError(
+                f"rocketroll plugin {what} cannot be loaded: {type(exc).__name__}: {exc}"
+            ) from exc
 
 
 def _load(reference: str) -> Any:

@@ -45,6 +45,7 @@ import argparse
 import dataclasses
 import math
 import numbers
+import re
 import sys
 import types
 from collections.abc import Callable, Sequence
@@ -154,7 +155,7 @@ def setting(
     spec = _Spec(
         help=help,
         flag=flag,
-        choices=None if choices is None or callable(choices) else tuple(choices),
+        choices=choices if choices is None or callable(choices) else tuple(choices),
         ge=ge,
         gt=gt,
         le=le,
@@ -184,7 +185,15 @@ class _Field:
     item: Any  # the item type of a tuple or list
     optional: bool
     literal: tuple[Any, ...] | None  # the choices of a Literal annotation
-    default: Any  # MISSING when required
+    given_default: Any  # MISSING when required or made by a factory
+    factory: Any  # the dataclass field's default_factory, or MISSING
+
+    @property
+    def default(self) -> Any:
+        """The default, made now (a factory may read a registry that has grown)."""
+        if self.factory is not MISSING:
+            return self.factory()
+        return self.given_default
 
     @property
     def choices(self) -> tuple[Any, ...] | None:
@@ -200,9 +209,12 @@ class _Field:
 
     @property
     def shown(self) -> str:
-        """How the user names it: the flag, or a positional's metavar."""
+        """How the user names it: the flag, a positional's metavar, or (a setting with no
+        option) the field's name."""
         if self.spec.positional:
             return self.spec.metavar or self.name.upper()
+        if not self.spec.cli:
+            return self.name
         return self.flag
 
 
@@ -237,13 +249,9 @@ def _fields(cls: type) -> tuple[_Field, ...]:
             kind = origin
         elif origin is dict:
             kind = dict
-        if f.default is not MISSING:
-            default = f.default
-        elif f.default_factory is not MISSING:
-            default = f.default_factory()
-        else:
-            default = MISSING
-        out.append(_Field(f.name, spec, kind, item, optional, literal, default))
+        out.append(
+            _Field(f.name, spec, kind, item, optional, literal, f.default, f.default_factory)
+        )
     _FIELDS[cls] = tuple(out)
     return _FIELDS[cls]
 
@@ -326,21 +334,24 @@ def check(obj: Any) -> None:
                 continue
             raise SettingError(f.name, "is required")
         choices = f.choices
-        if choices is not None and value not in choices:
-            allowed = ", ".join(map(str, choices))
-            raise SettingError(f.name, f"must be one of {allowed}, not {value!r}")
         if f.base is bool and not isinstance(value, bool):
             raise SettingError(f.name, f"must be True or False, got {value!r}")
-        if f.base is tuple:
+        if f.base in (tuple, list):
             try:
                 items = tuple(value)
             except TypeError:
                 raise SettingError(f.name, f"must be a sequence, got {value!r}") from None
             for item in items:
+                if choices is not None and item not in choices:
+                    allowed = ", ".join(map(str, choices))
+                    raise SettingError(f.name, f"must be one of {allowed}, not {item!r}")
                 problem = _check_number(f, f.item, item)
                 if problem:
                     raise SettingError(f.name, problem)
             continue
+        if choices is not None and value not in choices:
+            allowed = ", ".join(map(str, choices))
+            raise SettingError(f.name, f"must be one of {allowed}, not {value!r}")
         problem = _check_number(f, f.base, value)
         if problem:
             raise SettingError(f.name, problem)
@@ -403,7 +414,7 @@ def _help(f: _Field) -> str:
     if (
         shown is not MISSING
         and shown is not None
-        and not (isinstance(shown, bool) or shown == [] or shown == {})
+        and not (isinstance(shown, bool) or shown in ([], {}, ()))
         and "default" not in text
         and not f.spec.positional
     ):
@@ -411,7 +422,10 @@ def _help(f: _Field) -> str:
             shown = ",".join(map(str, shown))
         elif f.base is list:
             shown = " ".join(map(str, shown))
-        text = f"{text} (default: {shown})"
+        unit = f" {f.spec.unit}" if f.spec.unit else ""
+        text = f"{text} (default: {shown}{unit})"
+    elif f.spec.unit and f.spec.unit not in text:
+        text = f"{text} ({f.spec.unit})"
     return text.replace("%", "%%")
 
 
@@ -428,7 +442,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
         if f.spec.metavar:
             kwargs["metavar"] = f.spec.metavar
         choices = f.choices
-        if choices is not None:
+        if choices is not None and f.base is not tuple:  # a tuple's items: check() does it
             kwargs["choices"] = choices
         parse = f.spec.parse
         if f.base is bool:
@@ -570,6 +584,16 @@ def to_argv(obj: Any) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- commands
+_ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
+_LITERAL = re.compile(r"``([^`]+)``")
+
+
+def plain(docstring: str) -> str:
+    """A docstring as ``--help`` shows it: Sphinx roles and double backquotes dropped
+    (``:func:`x``` and ````x```` read as ``x``)."""
+    return _LITERAL.sub(r"\1", _ROLE.sub(r"\1", docstring))
+
+
 @dataclass(frozen=True)
 class Command:
     """A command: its settings dataclass, the function it runs, its help.
@@ -601,7 +625,7 @@ class Command:
         """The full parser of this command (and of its subcommands)."""
         parser = ArgumentParser(
             prog=prog,
-            description=self.description or self.help,
+            description=plain(self.description or self.help),
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         self._fill(parser, prog)
@@ -616,7 +640,7 @@ class Command:
                 child = sub.add_parser(
                     command.name,
                     help=command.help,
-                    description=command.description or command.help,
+                    description=plain(command.description or command.help),
                     formatter_class=argparse.RawDescriptionHelpFormatter,
                 )
                 command._fill(child, f"{prog} {command.name}")

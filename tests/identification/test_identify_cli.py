@@ -94,6 +94,7 @@ def test_real_recording_has_no_truth_column(
         (["--mc-levels", "1,x"], "--mc-levels: must be comma-separated numbers"),
         (["--mc-levels", "1,-2"], "--mc-levels: must be in [0, 100] %, got -2.0"),
         (["--min-step", "500"], "--min-step: must be in (0, 90] °, got 500.0"),
+        (["--max-breakpoint", "0.001"], "--max-breakpoint: must be at least the breakpoint"),
     ],
 )
 def test_bad_options_exit_2_and_write_nothing(
@@ -147,6 +148,20 @@ def test_report_path_that_is_a_file(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert not out_json.exists()
 
 
+def test_a_database_path_that_is_a_folder_is_refused_first(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def no_work(*args: object, **kwargs: object) -> None:
+        raise AssertionError("identified before checking --db")
+
+    monkeypatch.setattr("identification.methods.fit", no_work)
+    out_json = tmp_path / "r.json"
+    argv = ["identify", str(PAPER), "--db", str(tmp_path), "--json", str(out_json)]
+    assert main(argv) == 2
+    assert f"--db {tmp_path}: is a folder" in capsys.readouterr().err
+    assert not out_json.exists()
+
+
 def test_single_step_recording_is_a_clear_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -164,6 +179,11 @@ def test_single_step_recording_is_a_clear_error(
     )
     path = tmp_path / "one.csv"
     save_recording(rec, path)
-    assert main(["identify", str(path), "--mc-runs", "0"]) == 2
-    err = capsys.readouterr().err
-    assert "one-step" in err and "at least two" in err
+    # Every method refuses it in one line (output error alone once met a NaN start point).
+    for method in ("paper", "output-error"):
+        assert main(["identify", str(path), "--mc-runs", "0", "--method", method]) == 2
+        err = capsys.readouterr().err
+        assert "one-step" in err and "at least two" in err and err.count("\n") == 1
+    db = tmp_path / "x.sqlite"
+    assert main(["db", "add", str(path), "--db", str(db), "--method", "output-error"]) == 2
+    assert "at least two" in capsys.readouterr().err and not db.exists()

@@ -154,6 +154,28 @@ def test_header_time_column_in_ms_semicolons_and_text_column(
     assert loaded.metadata["import.columns"] == "skip,skip,skip,fin,roll"
 
 
+def test_each_line_is_split_on_its_own_separator_outside_quotes(tmp_path: Path) -> None:
+    """Without --delimiter every line is guessed alone (a space-separated header over comma
+    data imports), and a separator inside quotes does not count."""
+    t = np.arange(200) * 0.1
+    fin = np.where(t < 10, 0.0, 10.0)
+    body = "".join(
+        f'"{a:.1f}";"{b:g}";"{3 * a:.3f}";"ok, logged"\n' for a, b in zip(t, fin, strict=True)
+    )
+    src = tmp_path / "quoted.csv"
+    src.write_text("t fin roll status\n" + body, encoding="utf-8")
+    rec = import_csv(src, ["time", "fin_cmd", "roll", "skip"], source="wind-tunnel")
+    np.testing.assert_allclose(rec.fin_cmd_deg, fin)
+    np.testing.assert_allclose(rec.roll_deg, np.round(3 * t, 3))
+
+
+def test_a_cell_the_csv_module_cannot_read_is_one_error_naming_its_line(tmp_path: Path) -> None:
+    src = tmp_path / "binary.csv"
+    src.write_text("time,fin,roll\n0,0,0\n" + "1," * 3 + "x" * 200_000 + "\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"binary.csv:3: unreadable cells"):
+        import_csv(src, ["time", "fin_cmd", "roll"], source="wind-tunnel")
+
+
 def test_time_column_may_have_role_time(tmp_path: Path) -> None:
     text, time_ms, _, _ = daq_export("ok")
     src = tmp_path / "daq.csv"

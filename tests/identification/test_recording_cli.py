@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from identification.importer import import_csv
 from identification.recording import (
     MIN_FIN_CHANGE_DEG,
     MIN_SAMPLES,
@@ -729,6 +730,23 @@ def test_import_csv_rejects_bad_input(
         assert files_in(out_dir) == []
 
 
+def test_import_csv_rejects_a_zero_rate_before_reading(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = write_lines(tmp_path / "run.txt", headerless_input())
+    rec = tmp_path / "rec.csv"
+    code, out, err = run_cli(
+        capsys, "import-csv", src, "--out", rec, "--columns", "fin,roll", "--no-header",
+        "--rate", "0",
+    )  # fmt: skip
+    assert (code, out) == (2, "")
+    assert err == "rocketroll import-csv: error: --rate: must be in (0, 1e+07] Hz, got 0.0\n"
+    assert files_in(tmp_path) == ["run.txt"]
+    # The Python API names the file and the setting.
+    with pytest.raises(RecordingError, match=r"run.txt: rate_hz: must be in \(0, "):
+        import_csv(src, ["fin", "roll"], header=False, rate_hz=0.0)
+
+
 def test_import_csv_rejects_missing_input(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -777,7 +795,7 @@ def test_import_csv_subprocess_exit_code(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "keywords"),
     [
-        pytest.param(["--no-encoder"], ["no_encoder needs a rate gyro"], id="no-sensor"),
+        pytest.param(["--no-encoder"], ["--no-encoder: needs a rate gyro"], id="no-sensor"),
         pytest.param(["--seed", "-1"], ["--seed: must be in [0, ", "got -1"], id="negative-seed"),
         pytest.param(
             ["--fin-range", "50"], ["--fin-range: must be in (2.5, 40] °"], id="fin-range"
@@ -799,7 +817,7 @@ def test_import_csv_subprocess_exit_code(tmp_path: Path) -> None:
         ),
         pytest.param(
             ["--schedule", "staircase", "--dwell-min", "5", "--dwell-max", "1"],
-            ["dwell must satisfy"],
+            ["--dwell-min: must be at least --log-dt"],
             id="dwell-reversed",
         ),
         pytest.param(
@@ -809,7 +827,7 @@ def test_import_csv_subprocess_exit_code(tmp_path: Path) -> None:
         ),
         pytest.param(
             ["--dwell-min", "0.01", "--dwell-max", "0.01"],
-            ["dwell must satisfy"],
+            ["--dwell-min: must be at least --log-dt"],
             id="dwell-below-log-dt",
         ),
         pytest.param(["--fin-range", "1"], ["--fin-range: must be in"], id="fin-range-small"),
@@ -836,7 +854,7 @@ def test_tunnel_subprocess_exit_code(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1
     assert proc.stderr.startswith("rocketroll tunnel: error: ")
-    assert "no_encoder needs a rate gyro" in proc.stderr
+    assert "--no-encoder: needs a rate gyro" in proc.stderr
     assert proc.stdout == ""
     assert files_in(tmp_path) == []
 
