@@ -151,6 +151,10 @@ def identify(args: IdentifyArgs) -> int:
     from identification.tables import methods_table, parameter_table
     from rocketroll_common.files import write_all_atomic
 
+    if args.db is not None and "://" not in args.db:
+        from rocketroll_common.files import check_output
+
+        check_output(args.db, "--db")  # before the work, as every output
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
     context = Context(recording, options)
@@ -350,7 +354,7 @@ def _row_json(row: TraceRow) -> dict[str, Any]:
         "source_uid": row.source_uid,
         "seed": row.seed,
         "recording": row.recording,
-        "recording_hash": row.recording_hash,
+        "recording_id": row.recording_id,
         "source": row.source,
         "split": row.split,
         "method": row.method,
@@ -359,11 +363,12 @@ def _row_json(row: TraceRow) -> dict[str, Any]:
         "dt_s": row.dt_s,
         "t0_s": row.t0_s,
         "n_samples": row.n_samples,
-        "duration_s": row.duration_s,
         **{key: row.statistics.get(key) for key in row.statistics},
         "package_version": row.package_version,
         "created_at": row.created_at,
         "validation": None if row.validation is None else dict(row.validation),
+        "duration_s": row.duration_s,
+        "recording_hash": row.recording_hash,  # (new: the recording across databases)
     }
     return out
 
@@ -614,13 +619,13 @@ class MigrateArgs:
 
 def migrate(args: MigrateArgs) -> int:
     """Upgrade a database to this rocketroll's schema (opening it does; say what happened)."""
-    from disturbances.db import DisturbanceDB
-    from disturbances.default import default_path
     from disturbances.schema import SCHEMA_VERSION
 
-    path = Path(args.db) if args.db is not None else default_path()
-    with DisturbanceDB(path, create=False) as db:
+    # As every command opens it: the default database by its rules (one built from the
+    # bundled recordings by an older rocketroll is rebuilt), any other upgraded in place.
+    with _open(args.db) as db:
         version = db.schema_version
+        path = db.path
     print(f"{path}: schema version {version} (this rocketroll's: {SCHEMA_VERSION}), up to date")
     return 0
 

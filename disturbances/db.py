@@ -124,7 +124,7 @@ class StoreResult:
     Attributes
     ----------
     recording_id : int or None
-        The recording the change was about (``None`` for an import).
+        Row id of the first recording given (``None`` when none was).
     recordings, identifications, traces : int
         Rows added.
     skipped : int
@@ -336,6 +336,10 @@ class DisturbanceDB:
             )
         try:
             backup = migrate(conn, self.path, version)
+        except ValueError as exc:
+            raise self._fail(f"cannot be upgraded: {exc}") from None
+        except sqlite3.IntegrityError as exc:
+            raise self._fail(f"cannot be upgraded from schema {version}: {exc}") from None
         except sqlite3.OperationalError as exc:
             raise self._fail(
                 f"upgrading schema {version} to {SCHEMA_VERSION} failed: {exc}"
@@ -345,11 +349,12 @@ class DisturbanceDB:
                 f"upgrading schema {version} to {SCHEMA_VERSION} failed: cannot write the "
                 f"backup ({exc.strerror or exc})"
             ) from None
-        print(
-            f"rocketroll: upgraded {self.path} from schema {version} to {SCHEMA_VERSION} "
-            f"(the old file is kept as {backup})",
-            file=sys.stderr,
-        )
+        if backup is not None:  # None: another process upgraded it first
+            print(
+                f"rocketroll: upgraded {self.path} from schema {version} to {SCHEMA_VERSION} "
+                f"(the old file is kept as {backup})",
+                file=sys.stderr,
+            )
 
     @property
     def schema_version(self) -> int:
@@ -734,7 +739,8 @@ class DisturbanceDB:
 
     _TRACE_SELECT = (
         "SELECT t.id, t.uid, t.kind, s.uid AS source_uid, t.seed, t.settings, "
-        "r.name AS recording, r.content_hash AS recording_hash, r.source, r.split, i.method, "
+        "r.id AS recording_id, r.name AS recording, r.content_hash AS recording_hash, r.source, "
+        "r.split, i.method, "
         "i.model, i.alpha, i.theta_bar_deg, i.beta_bar_per_s, i.alpha_bar_per_deg_s, t.dt_s, "
         "t.t0_s, t.n_samples, t.checksum, t.mean_deg, t.sd_deg, t.q05_deg, t.q95_deg, "
         "t.normality_p, i.package_version, t.created_at, t.validation "
@@ -773,6 +779,7 @@ class DisturbanceDB:
                 split=r["split"],
                 package_version=r["package_version"],
                 id=r["id"],
+                recording_id=r["recording_id"],
             )
         except ValueError as exc:
             raise self._fail(f"corrupt trace {r['uid']}: {exc}") from None

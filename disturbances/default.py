@@ -40,7 +40,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from disturbances.db import DatabaseError, DisturbanceDB, package_version
+from disturbances.db import BUSY_TIMEOUT_S, DisturbanceDB, package_version
 from disturbances.ingest import add_recording
 from disturbances.rows import SURROGATE_KINDS
 from disturbances.schema import APPLICATION_ID, SCHEMA_VERSION
@@ -110,10 +110,13 @@ def _discard_journal(path: Path) -> None:
     """
     wal = Path(f"{path}-wal")
     if path.exists() and wal.exists():
-        try:
-            with DisturbanceDB(path, create=False) as old, old._errors():
-                old._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        except DatabaseError:
+        try:  # a plain connection: the old file is checkpointed, not checked or upgraded
+            old = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S)
+            try:
+                old.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            finally:
+                old.close()
+        except sqlite3.Error:
             pass
     for suffix in ("-wal", "-shm"):
         Path(f"{path}{suffix}").unlink(missing_ok=True)
@@ -272,7 +275,7 @@ def peek(path: Path) -> tuple[int, dict[str, str]] | None:
     if not path.is_file() or path.stat().st_size == 0:
         return None
     try:
-        conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        conn = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True)
         try:
             version = int(conn.execute("PRAGMA user_version").fetchone()[0])
             app = int(conn.execute("PRAGMA application_id").fetchone()[0])

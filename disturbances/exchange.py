@@ -495,4 +495,7 @@ def import_export(db: Store, folder: str | os.PathLike[str]) -> StoreResult:
             f"into {db.path} would mix versions {', '.join(sorted(versions))}; import into a new "
             "database file instead"
         )
-    return db.store(dump.recordings, dump.identifications, dump.traces)
+    try:
+        return db.store(dump.recordings, dump.identifications, dump.traces)
+    except ValueError as exc:  # a name this rocketroll does not know (a method not registered)
+        raise ExchangeError(f"{folder}: {exc}") from None

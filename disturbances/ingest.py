@@ -177,8 +177,8 @@ def add_recording(
 
     Parameters
     ----------
-    db : DisturbanceDB
-        Where to store.
+    db : Store
+        Where to store (:class:`~disturbances.db.DisturbanceDB` or another back end).
     recording : Recording
         Any recording the pipeline accepts.
     options : IdentifyOptions, optional

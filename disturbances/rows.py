@@ -357,6 +357,8 @@ class TraceRow(_Row):
         The rocketroll version that identified it.
     id : int or None
         Row id in the database it was read from (use ``uid`` across databases).
+    recording_id : int or None
+        Its recording's row id there (use ``recording_hash`` across databases).
     """
 
     uid: str
@@ -381,6 +383,7 @@ class TraceRow(_Row):
     split: str = ""
     package_version: str = ""
     id: int | None = None
+    recording_id: int | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -404,6 +407,9 @@ class TraceRow(_Row):
                     f"samples ({actual[:12]}…)"
                 )
             object.__setattr__(self, "n_samples", int(u.size))
+        missing = [k for k in STATISTICS if k not in self.statistics]
+        if missing:
+            raise ValueError(f"trace {self.uid}: statistics lack {', '.join(missing)}")
         object.__setattr__(self, "settings", _frozen(json_safe(self.settings)))
         object.__setattr__(self, "statistics", _frozen(json_safe(self.statistics)))
         if self.validation is not None:

@@ -20,11 +20,10 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-
-from rocketroll_common.files import file_mode
 
 __all__ = ["APPLICATION_ID", "SCHEMA", "SCHEMA_VERSION", "TABLES", "backup_path", "migrate"]
 
@@ -132,7 +131,8 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _migrate_1_to_
 
 
 def backup_path(path: Path, version: int) -> Path:
-    """Where the backup of ``path`` at schema ``version`` goes (a free name beside it)."""
+    """Where the backup of ``path`` at schema ``version`` goes: ``NAME.schemaN.bak``, or
+    ``NAME.schemaN.K.bak`` when that is taken (see :func:`migrate` for how it is claimed)."""
     candidate = Path(f"{path}.schema{version}.bak")
     k = 1
     while candidate.exists():
@@ -141,47 +141,79 @@ def backup_path(path: Path, version: int) -> Path:
     return candidate
 
 
-def _backup(conn: sqlite3.Connection, path: Path, version: int) -> Path:
-    """A consistent copy of the database (SQLite's online backup), written atomically."""
-    target = backup_path(path, version)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=path.parent)
+def _claim(path: Path, version: int) -> Path:
+    """A backup name beside ``path`` that no other file has, created empty (``O_EXCL``)."""
+    while True:
+        target = backup_path(path, version)
+        try:
+            os.close(os.open(target, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        except FileExistsError:
+            continue
+        return target
+
+
+def _backup(path: Path, version: int) -> Path:
+    """A consistent copy of the database file (SQLite's online backup, read through a
+    connection of its own), with the file's own permissions, under a name of its own."""
+    for stale in path.parent.glob(f".{path.name}.schema*.bak.*.tmp"):  # a killed backup's
+        stale.unlink(missing_ok=True)
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.name}.schema{version}.bak.", suffix=".tmp", dir=path.parent
+    )
     os.close(fd)
     try:
+        source = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True, timeout=30.0)
         copy = sqlite3.connect(tmp)
         try:
-            conn.backup(copy)
+            source.backup(copy)
         finally:
             copy.close()
-        os.chmod(tmp, file_mode())
+            source.close()
+        os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
+        target = _claim(path, version)
         os.replace(tmp, target)
     finally:
         Path(tmp).unlink(missing_ok=True)
     return target
 
 
-def migrate(conn: sqlite3.Connection, path: Path, version: int) -> Path:
+def migrate(conn: sqlite3.Connection, path: Path, version: int) -> Path | None:
     """Upgrade the database on ``conn`` from ``version`` to :data:`SCHEMA_VERSION`.
 
-    The file is first copied to :func:`backup_path`; then every migration
-    runs in one ``BEGIN IMMEDIATE`` transaction with foreign keys off (as a
-    table rebuild needs), the foreign keys are checked, ``user_version`` is
-    set, and only then is it committed.  A failure (or a killed process)
-    leaves the file at ``version``.
+    Under the write lock (``BEGIN IMMEDIATE``) the version is read again: a
+    file another process has upgraded meanwhile is left alone (``None`` is
+    returned: no backup, nothing to say).  Otherwise the file is copied to a
+    backup beside it (:func:`backup_path`, a name no other file has), every
+    migration runs in that one transaction with foreign keys off (as a table
+    rebuild needs), the foreign keys are checked, ``user_version`` is set, and
+    only then is it committed.  A failure (or a killed process) leaves the
+    file at ``version``; the backup is kept either way.
 
     Returns
     -------
-    Path
-        The backup.
+    Path or None
+        The backup, or None when there was nothing left to upgrade.
+
+    Raises
+    ------
+    ValueError
+        No migration leads from ``version``.
     """
     if version not in MIGRATIONS and version != SCHEMA_VERSION:
         raise ValueError(f"no migration from schema version {version}")
-    backup = _backup(conn, path, version)
-    conn.execute("PRAGMA foreign_keys = OFF")
+    conn.execute("PRAGMA foreign_keys = OFF")  # (outside a transaction, or it is ignored)
     try:
         conn.execute("BEGIN IMMEDIATE")
         try:
-            # Another process may have migrated it while this one waited for the lock.
             current = int(conn.execute("PRAGMA user_version").fetchone()[0])
+            if current >= SCHEMA_VERSION:  # another process upgraded it while this one waited
+                conn.execute("COMMIT")
+                return None
+            if conn.execute("PRAGMA foreign_key_check").fetchall():
+                raise sqlite3.IntegrityError(
+                    f"its foreign keys are broken (schema {current}); nothing was changed"
+                )
+            backup = _backup(path, current)
             while current < SCHEMA_VERSION:
                 MIGRATIONS[current](conn)
                 current += 1

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from disturbances.db import DisturbanceDB, Dump
+from disturbances.db import DatabaseError, DisturbanceDB, Dump
 from disturbances.rows import IdentificationRow, RecordingRow, TraceRow
 from rocketroll_common.registry import Registry
 
@@ -35,6 +35,10 @@ class Store(Protocol):
     """What a disturbance store does (see :class:`disturbances.db.DisturbanceDB`)."""
 
     path: Path
+
+    @property
+    def schema_version(self) -> int:
+        """The store's schema version (after any upgrade opening it made)."""
 
     def store(
         self,
@@ -118,7 +122,10 @@ def open_store(location: str | os.PathLike[str], *, create: bool = False) -> Sto
     text = os.fspath(location)
     scheme, sep, rest = text.partition("://")
     if sep and scheme.isidentifier():
-        opener = STORES.get(scheme)
+        try:
+            opener = STORES.get(scheme)
+        except ValueError as exc:
+            raise DatabaseError(f"{text}: {exc}") from None
         return opener(rest, create=create)
     return STORES.get("sqlite")(Path(text), create=create)
 

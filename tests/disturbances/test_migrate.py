@@ -20,9 +20,11 @@ import os
 import shutil
 import signal
 import sqlite3
+import stat
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 from typing import Any
 
@@ -41,22 +43,43 @@ def digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def raw(path: Path) -> dict[str, Any]:
-    """Schema version and every row of every table, read without rocketroll (read-only)."""
-    conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+TABLES = ("info", "recordings", "identifications", "traces")
+
+
+def raw(path: Path, *, immutable: bool = False) -> dict[str, Any]:
+    """Schema version, every row of every table and the shape of each table (columns,
+    foreign keys, indexes), read without rocketroll and read-only (``immutable``: not even
+    a ``-shm`` file is made, for the committed fixture)."""
+    flags = "mode=ro&immutable=1" if immutable else "mode=ro"
+    conn = sqlite3.connect(f"{path.absolute().as_uri()}?{flags}", uri=True)
     try:
         out: dict[str, Any] = {"version": conn.execute("PRAGMA user_version").fetchone()[0]}
-        for table in ("info", "recordings", "identifications", "traces"):
+        for table in TABLES:
             out[table] = conn.execute(f"SELECT * FROM {table} ORDER BY 1").fetchall()
         out["integrity"] = conn.execute("PRAGMA integrity_check").fetchone()[0]
-        out["checks"] = [
-            r[0]
+        out["checks"] = [  # (a renamed table's name comes back quoted)
+            r[0].replace('"', "")
             for r in conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table'")
-            if "method IN" in r[0] or "model IN" in r[0]
+            if " IN (" in r[0]
         ]
+        out["shape"] = {
+            table: (
+                conn.execute(f"PRAGMA table_info({table})").fetchall(),
+                conn.execute(f"PRAGMA foreign_key_list({table})").fetchall(),
+                sorted(r[1:] for r in conn.execute(f"PRAGMA index_list({table})")),
+            )
+            for table in TABLES
+        }
+        out["indexes"] = sorted(
+            r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'index'")
+        )
     finally:
         conn.close()
     return out
+
+
+def rows(snapshot: dict[str, Any]) -> dict[str, Any]:
+    return {table: snapshot[table] for table in TABLES}
 
 
 @pytest.fixture
@@ -68,9 +91,9 @@ def v1(tmp_path: Path) -> Path:
 
 
 def test_the_fixture_is_a_version_1_database() -> None:
-    before = raw(V1)
+    before = raw(V1, immutable=True)
     assert before["version"] == 1 and before["integrity"] == "ok"
-    assert len(before["checks"]) == 1  # the identifications table's CHECK on names
+    assert any("method IN" in sql for sql in before["checks"])  # names checked by SQL
     assert len(before["recordings"]) == 2 and len(before["traces"]) == 12
 
 
@@ -90,9 +113,16 @@ def test_opening_upgrades_in_place_keeping_every_row_and_a_backup(
     assert digest(v1) != original
     assert raw(backup) == before  # the old database, kept as it was (SQLite's online backup)
     after = raw(v1)
-    assert after["version"] == 2 and after["integrity"] == "ok" and after["checks"] == []
-    for table in ("info", "recordings", "identifications", "traces"):
+    assert after["version"] == 2 and after["integrity"] == "ok"
+    assert not any("method IN" in sql or "model IN" in sql for sql in after["checks"])
+    for table in TABLES:
         assert after[table] == before[table], table  # same rows, same row ids
+    # The upgraded file has exactly the tables, columns, keys and indexes of a new one.
+    with DisturbanceDB(v1.parent / "fresh.sqlite"):
+        pass
+    fresh = raw(v1.parent / "fresh.sqlite")
+    assert after["shape"] == fresh["shape"] and after["indexes"] == fresh["indexes"]
+    assert after["checks"] == fresh["checks"]
     assert [r.uid for r in listed] == [r[1] for r in before["traces"]]
     with DisturbanceDB(v1, create=False):
         pass
@@ -178,6 +208,80 @@ MIGRATOR = textwrap.dedent(
     print("finished", flush=True)
     """
 )
+
+
+def test_a_migration_that_fails_half_way_is_one_error_and_leaves_the_old_file(
+    v1: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from disturbances import schema
+
+    before, rebuild = raw(v1), schema._rebuild
+
+    def full_disk(conn: sqlite3.Connection, table: str, create: str) -> None:
+        rebuild(conn, table, create)
+        raise sqlite3.OperationalError("database or disk is full")
+
+    monkeypatch.setattr(schema, "_rebuild", full_disk)
+    with pytest.raises(DatabaseError, match=rf"{v1}: upgrading schema 1 to 2 failed: .*full"):
+        DisturbanceDB(v1, create=False)
+    assert rows(raw(v1)) == rows(before) and raw(v1)["version"] == 1
+    assert Path(f"{v1}.schema1.bak").is_file()  # kept, as the message's notice would say
+
+
+def test_the_backup_keeps_the_files_permissions(v1: Path) -> None:
+    v1.chmod(0o600)
+    with DisturbanceDB(v1, create=False):
+        pass
+    assert stat.S_IMODE(Path(f"{v1}.schema1.bak").stat().st_mode) == 0o600
+
+
+def test_db_migrate_without_db_upgrades_the_default_database_a_user_added_to(
+    v1: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("ROCKETROLL_DB", str(v1))  # origin "user": upgraded, never rebuilt
+    assert rocketroll(["db", "migrate"]) == 0
+    out, err = capsys.readouterr()
+    assert "upgraded" in err and f"{v1}: schema version 2" in out
+    assert len(raw(v1)["traces"]) == 12
+
+
+OPENER = textwrap.dedent(
+    """
+    import sys
+    from pathlib import Path
+    from disturbances.db import DisturbanceDB
+
+    go = Path(sys.argv[2])
+    while not go.exists():
+        pass
+    with DisturbanceDB(sys.argv[1], create=False) as db:
+        print(db.schema_version, len(db.traces()))
+    """
+)
+
+
+def test_processes_opening_an_old_file_at_once_upgrade_it_once(v1: Path, tmp_path: Path) -> None:
+    go = tmp_path / "go"
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", OPENER, str(v1), str(go)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(REPO)},
+            cwd=REPO,
+        )
+        for _ in range(4)
+    ]
+    time.sleep(3.0)  # let every one of them import and wait
+    go.touch()
+    results = [proc.communicate(timeout=120) for proc in procs]
+    assert [proc.returncode for proc in procs] == [0, 0, 0, 0], results
+    assert [out for out, _ in results] == ["2 12\n"] * 4
+    notices = [err for _, err in results if "upgraded" in err]
+    assert len(notices) == 1, results  # one process upgraded it; the others found it done
+    assert sorted(p.name for p in tmp_path.glob("*.bak")) == ["old.sqlite.schema1.bak"]
+    assert not list(tmp_path.glob(".*.tmp"))
 
 
 def test_a_migration_killed_half_way_leaves_the_old_file(v1: Path) -> None:
