@@ -26,15 +26,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation
 from agents.registry import default_policies, make_controller, policy_help
 from disturbances.bank import TraceBank
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting, to_argv
-from rollenv import VARIANTS, task_of
-from rollenv.bank import load_bank, make_config
+from rollenv import VARIANTS
+from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.history import EpisodeHistory, HistoryRecorder
@@ -52,7 +51,6 @@ __all__ = [
     "run",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: Metric name → (description, "max" if larger is worse else "min").
 METRICS: dict[str, tuple[str, str]] = {
@@ -300,9 +298,8 @@ class Args:
 
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
-    task = task_of(args.env_id)
     try:
-        config = make_config(args.env_id, {**args.settings, "task": task, "split": args.split})
+        config = variant_config(args.env_id, {**args.settings, "split": args.split})
         controllers = [make_controller(p, config, args.env_id, db=args.db) for p in args.policy]
     except ValueError as exc:
         raise UsageError(str(exc)) from exc

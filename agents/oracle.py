@@ -126,6 +126,10 @@ class OracleController:
             n = max(self._grid, self._refine)
             self._predictor = RollBatch(self._planning, core.bank, n)
             self._bank_id = id(core.bank)
+        self._place_tail(core)
+
+    def _place_tail(self, core: RollBatch) -> None:
+        """The tail's gains, placed on the rocket as it is at this step."""
         true = core.roll_params(0)
         rocket = NominalModel(
             max(true.beta_bar_per_s, 0.1),
@@ -141,6 +145,8 @@ class OracleController:
         core = env.core
         if self._predictor is None or int(core.step_count[0]) == 0:
             self.reset(env)
+        elif core.scale_stride[0] and self.tail_omega is not None:
+            self._place_tail(core)  # a rocket that changes during the episode
         horizon = min(self.horizon, self._max_steps - int(core.step_count[0]))
         u = core.u_ahead(0, horizon) / self.config.fin_range_deg  # in action units
         reach = 1.0 + float(np.max(np.abs(u)))

@@ -23,7 +23,7 @@ from rollenv.layout import Obs
 
 __all__ = ["DEFAULT_BANDWIDTH", "PIDController", "PIDGains", "make_pid"]
 
-#: Closed-loop bandwidth ω (rad/s) per task, chosen by :func:`tune_bandwidth`
+#: Closed-loop bandwidth ω (rad/s) per task, chosen by :func:`agents.tune.tune_bandwidth`
 #: on the default database's train split (see the README's baselines section).
 DEFAULT_BANDWIDTH = {"angle": 2.5, "rate": 8.0}
 
@@ -117,7 +117,7 @@ class PIDGains:
         the linear range.  ω is limited by what the model leaves out: the
         0.1-s sample-and-hold (a delay of about 0.05 s), the servo's 150 °/s
         and the encoder's 1.4° quantisation, which the proportional and
-        integral gains amplify; :func:`tune_bandwidth` picks it on train
+        integral gains amplify; :func:`agents.tune.tune_bandwidth` picks it on train
         episodes.  The anti-windup tracking time is Åström's
         ``T_t = sqrt(T_i·T_d)`` (``T_i = k_p/k_i``, ``T_d = k_d/k_p``; ``T_i``
         without a derivative).

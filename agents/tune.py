@@ -19,7 +19,7 @@ from agents.evaluate import evaluate, protocol_episodes
 from agents.nominal import NominalModel
 from agents.pid import PIDController, PIDGains
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv import VARIANTS, task_of
+from rollenv import VARIANTS
 from rollenv.core import RollConfig
 
 __all__ = ["COMMAND", "TuneArgs", "tune", "tune_bandwidth"]
@@ -75,10 +75,10 @@ class TuneArgs:
 
 def tune(args: TuneArgs) -> int:
     """Re-tune the PID for a database and print the gains."""
-    from rollenv.bank import load_bank, make_config
+    from rollenv.bank import load_bank, variant_config
 
-    task = task_of(args.env_id)
-    config = make_config(args.env_id, {"task": task, "split": "train"})
+    config = variant_config(args.env_id, {"split": "train"})
+    task = config.task
     model = NominalModel.from_bank(load_bank(config, args.db))
     print(f"nominal model: {model.source}")
     print(f"  a = {model.a_per_s:.4g} 1/s, α = {model.alpha:.4g}, θ̄ = {model.theta_bar_deg:.4g}°")

@@ -24,8 +24,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from disturbances.bank import TraceBank
-from rollenv import task_of
-from rollenv.bank import load_bank, make_config
+from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
 
@@ -47,7 +46,7 @@ class RollVecEnv(VecEnv):
     :class:`rollenv.env.RocketRollEnv` (the core is shared); only the vector
     API is SB3's:
 
-    * ``reset()`` returns the observations, shape ``(num_envs, 4)`` float32,
+    * ``reset()`` returns the observations, shape ``(num_envs, len(Obs))`` float32,
       and fills ``self.reset_infos``.  Seeds set by :meth:`seed` and options
       set by ``set_options`` apply to that reset only, as in SB3's
       ``DummyVecEnv``.
@@ -73,8 +72,9 @@ class RollVecEnv(VecEnv):
     num_envs : int
         Batch size.
     env_id : str
-        ``"RocketRoll-v0"`` (angle task) or ``"RocketRollRate-v0"`` (rate
-        task); sets ``task``.
+        A registered variant (``"RocketRoll-v0"``: angle task,
+        ``"RocketRollRate-v0"``: rate task, ...); its options, ``task`` among
+        them, come with it (:func:`rollenv.bank.variant_config`).
     bank : TraceBank, optional
         Traces to replay instead of the database's.
     db : path, optional
@@ -118,16 +118,10 @@ class RollVecEnv(VecEnv):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs}")
-        try:
-            task = task_of(env_id)
-        except ValueError as exc:
-            raise ValueError(f"env_id: {exc}") from None
-        if settings.setdefault("task", task) != task:
-            raise ValueError(f"{env_id} is the {task!r} task; task={settings['task']!r} conflicts")
         if "render_mode" in settings:
             raise ValueError("RollVecEnv does not render; render a single RocketRoll env")
         self.env_id = env_id
-        self.config = make_config(env_id, settings)
+        self.config = variant_config(env_id, settings)
         self.bank = load_bank(self.config, db) if bank is None else bank
         self._batch = RollBatch(self.config, self.bank, int(num_envs), parallel=False)
         self.render_mode: str | None = None
@@ -155,11 +149,10 @@ class RollVecEnv(VecEnv):
         return list(self._seeds)
 
     def reset(self) -> NDArray[np.float32]:
-        """Start new episodes in every env; the observations, shape ``(num_envs, 4)``.
+        """Start new episodes in every env; the observations, shape ``(num_envs, len(Obs))``.
 
         Seeds from :meth:`seed` and options from ``set_options`` (the reset
-        options of :class:`rollenv.env.RocketRollEnv`: ``trace``, ``start``,
-        ``rate_dps``, ``angle_deg``, ``fin_deg``, ``setpoint``, ``setpoints``)
+        options of :class:`rollenv.env.RocketRollEnv`, :data:`rollenv.env.RESET_OPTIONS`)
         apply to this reset only.
         """
         first_seed = self._seeds[0]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import difflib
 import os
 import threading
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,7 @@ from disturbances.bank import TraceBank
 from disturbances.default import open_database
 from rollenv.core import RollConfig, config_fields
 
-__all__ = ["load_bank", "make_config"]
+__all__ = ["load_bank", "make_config", "variant_config"]
 
 _CACHE: dict[tuple[Any, ...], TraceBank] = {}
 _LOCK = threading.Lock()
@@ -31,6 +32,23 @@ def make_config(owner: str, settings: dict[str, Any]) -> RollConfig:
                 f"{', '.join(known)}, and bank, db, render_mode"
             )
     return RollConfig(**settings)
+
+
+def variant_config(env_id: str, settings: Mapping[str, Any] | None = None) -> RollConfig:
+    """The configuration of the registered variant ``env_id`` with ``settings`` on top
+    (as ``gym.make(env_id, **settings)`` makes it); a ``task`` other than the
+    variant's is a ``ValueError``."""
+    from rollenv.variants import variant_options
+
+    try:
+        options = variant_options(env_id)
+    except ValueError as exc:
+        raise ValueError(f"env_id: {exc}") from None
+    given = dict(settings or {})
+    task = options["task"]
+    if given.setdefault("task", task) != task:
+        raise ValueError(f"{env_id} is the {task!r} task; task={given['task']!r} conflicts")
+    return make_config(env_id, {**options, **given})
 
 
 def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:

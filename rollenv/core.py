@@ -592,18 +592,17 @@ class RollBatch:
             _check_damping_box(self.param_low, self.param_high, config.fin_range_deg)
         self.all = np.arange(n, dtype=np.int64)
         self.state = np.zeros((n, len(State)))
-        # Where each env is (Cursor columns); the attributes below are views of it.
+        # Where each env is (Cursor columns); step_count, u_start, scale_start and
+        # scale_stride are views of it (_cursor_views; rebuilt when unpickled or copied).
         self.cursor = np.zeros((n, len(Cursor)), dtype=np.int64)
-        self.step_count = self.cursor[:, Cursor.STEP]
+        self._cursor_views()
         self.params = np.zeros((n, len(Param)))
         # Multipliers of the rocket's parameters (Scale columns): row 0 is the constant
         # rocket (all ones, stride 0); a per-step schedule gets a block of its own.
         self.scales = np.ones((1, len(Scale)))
-        self.scale_start = self.cursor[:, Cursor.SCALE_START]
-        self.scale_stride = self.cursor[:, Cursor.SCALE_STRIDE]
+        self._scales_shared = False
         self.trace = np.zeros(n, dtype=np.int64)
         self.start = np.zeros(n, dtype=np.int64)
-        self.u_start = self.cursor[:, Cursor.U_START]
         self.setpoints = np.zeros((n, config.setpoint_segments))
         self.obs = np.zeros((n, len(Obs)), dtype=np.float32)
         self.reward = np.zeros(n)
@@ -612,6 +611,23 @@ class RollBatch:
         self.parallel = bool(parallel)
         self._noisy = bool(self.cfg[Cfg.GYRO_ETA] > 0.0)
         self._no_noise = np.zeros(n)
+
+    _VIEWS = ("step_count", "u_start", "scale_start", "scale_stride")
+
+    def _cursor_views(self) -> None:
+        """Name the columns of ``cursor`` (views: the kernel writes ``cursor`` only)."""
+        self.step_count = self.cursor[:, Cursor.STEP]
+        self.u_start = self.cursor[:, Cursor.U_START]
+        self.scale_start = self.cursor[:, Cursor.SCALE_START]
+        self.scale_stride = self.cursor[:, Cursor.SCALE_STRIDE]
+
+    def __getstate__(self) -> dict[str, Any]:
+        # Pickling (and copy.deepcopy) would turn the views into arrays of their own.
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._cursor_views()
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -780,7 +796,9 @@ class RollBatch:
         return params_of_row(row)
 
     def _scale_row(self, i: int) -> int:
-        return int(self.scale_start[i] + self.step_count[i] * self.scale_stride[i])
+        """Env ``i``'s row of multipliers now (the last step's once the episode ended)."""
+        step = min(int(self.step_count[i]), self.config.max_episode_steps - 1)
+        return int(self.scale_start[i] + step * self.scale_stride[i])
 
     def _set_scales(self, index: IntArray, scales: FloatArray | None) -> None:
         """Give the envs in ``index`` the constant rocket, or the multipliers ``scales``."""
@@ -800,24 +818,37 @@ class RollBatch:
             )
         if not np.all(np.isfinite(values)) or np.any(values <= 0.0):
             raise ValueError("scales must be finite and positive")
-        if self.scales.shape[0] == 1:  # the first schedule: one block of rows per env
-            grown = np.ones((1 + self.n * steps, len(Scale)))
-            self.scales = grown
+        self._own_scales()
         for i in np.asarray(index).tolist():
             first = 1 + i * steps
             self.scales[first : first + steps] = values
             self.scale_start[i] = first
             self.scale_stride[i] = 1
 
+    def _own_scales(self) -> None:
+        """A table of multipliers this batch may write: one block of rows per env.
+
+        The first schedule grows the one-row table; a table shared by
+        :meth:`copy_env` is copied first, each env's schedule into its block.
+        """
+        steps = self.config.max_episode_steps
+        size = 1 + self.n * steps
+        if not self._scales_shared and self.scales.shape[0] == size:
+            return
+        old = self.scales
+        table = np.ones((size, len(Scale)))
+        k = np.arange(steps)
+        for i in np.flatnonzero(self.scale_stride).tolist():
+            first = 1 + i * steps
+            table[first : first + steps] = old[self.scale_start[i] + k * self.scale_stride[i]]
+            self.scale_start[i] = first
+            self.scale_stride[i] = 1
+        self.scales = table
+        self._scales_shared = False
+
     def episode_scales(self, i: int) -> FloatArray:
         """Env ``i``'s multipliers over its whole episode, one row per control step."""
         k = np.arange(self.config.max_episode_steps)
-        return np.asarray(self.scales[self.scale_start[i] + k * self.scale_stride[i]])
-
-    def scales_ahead(self, i: int, steps: int) -> FloatArray:
-        """Env ``i``'s multipliers (:class:`~rollenv.layout.Scale` columns) over its next
-        ``steps`` control steps."""
-        k = self.step_count[i] + np.arange(steps)
         return np.asarray(self.scales[self.scale_start[i] + k * self.scale_stride[i]])
 
     def copy_env(self, source: RollBatch, i: int, index: IntArray) -> None:
@@ -832,7 +863,10 @@ class RollBatch:
         self.start[index] = source.start[i]
         self.cursor[index] = source.cursor[i]
         self.setpoints[index] = source.setpoints[i]
-        self.scales = source.scales  # read only here: shared, not copied
+        # Shared, not copied (the predictor copies every step); whichever of the two
+        # writes a schedule next copies the table first (_own_scales).
+        self.scales = source.scales
+        self._scales_shared = source._scales_shared = True
 
 
 #: Rounds of redrawing undamped rockets before domain randomisation gives up.

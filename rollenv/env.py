@@ -163,8 +163,13 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
     ``trace`` (index in the bank or uid), ``start`` (sample of the trace),
     ``rate_dps``, ``angle_deg``, ``fin_deg``, ``setpoint`` (held constant) or
     ``setpoints`` (the schedule: one value per period, ``episode_s /
-    setpoint_period_s`` of them, rounded up).  :meth:`replay_options` gives
-    the options that recreate the current episode's draw.
+    setpoint_period_s`` of them, rounded up), and ``scales``: a rocket that
+    changes during the episode (an airspeed that varies), as multipliers of
+    its gain α and its damping a(θ) (:class:`rollenv.layout.Scale`), one pair
+    for the whole episode (shape ``(2,)``) or one per control step (shape
+    ``(episode_s / dt_s, 2)``); all ones is the identified rocket.
+    :meth:`replay_options` gives the options that recreate the current
+    episode's draw (with its ``scales`` when it had any).
 
     ## Episode End
 
@@ -172,7 +177,8 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
       the rig can be crossed.  (The gyro saturates at ±250 °/s.)
     * Truncation: after ``episode_s / dt_s`` steps (600).  The environment
       truncates itself, so ``gym.make(..., max_episode_steps=N)`` can only
-      shorten episodes.  Stepping past the end raises ``RuntimeError``.
+      shorten episodes; ``env.spec.max_episode_steps`` reports the length all
+      the same.  Stepping past the end raises ``RuntimeError``.
 
     ## Arguments
 
@@ -181,6 +187,8 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
     :class:`rollenv.core.RollConfig` as a keyword:
 
     * ``task`` "angle" | "rate"; ``split`` "train" | "test";
+      ``method`` "paper" (default) | "output-error" | any registered
+      identification method: whose parameters and ``u_d`` traces replay;
       ``disturbance`` "replay" | "surrogate" | "none";
       ``disturbance_scale`` (1.0); ``model`` "theta" | "constant";
       ``domain_randomization`` (False: α, θ̄, β̄, ᾱ drawn each reset uniformly
@@ -195,7 +203,8 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
     * ``db``: a database file (default: ``$ROCKETROLL_DB`` or the default
       database, built on first use); ``bank``: a
       :class:`disturbances.bank.TraceBank` to use instead;
-    * ``render_mode``: "rgb_array" | "human".
+    * ``render_mode``: "rgb_array" | "human" (a window; without a display
+      it warns once and draws nothing).
 
     An unknown option is a ``ValueError`` naming it.  A database with no
     trace as long as an episode is a ``ValueError`` at construction.
@@ -247,6 +256,7 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
         self._started = False
         self._max_steps = self.config.max_episode_steps
         self._episode: dict[str, Any] = {}
+        self._initial: dict[str, float] = {}
         self._history = HistoryRecorder(self.config.max_episode_steps + 1)
         self._renderer: Any = None
 
@@ -257,6 +267,11 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
         super().reset(seed=seed)
         fixed = reset_arguments(options, self.bank, self.config.setpoint_segments)
         self._batch.reset(self._index, self.np_random, **fixed)
+        self._initial = {  # the initial state given, and a drawn angle (for replay_options)
+            key: float(fixed[key]) for key in ("rate_dps", "angle_deg", "fin_deg") if key in fixed
+        }
+        if self.config.initial_angle_deg > 0 and "angle_deg" not in fixed:
+            self._initial["angle_deg"] = float(self._batch.state[0, _ANGLE])
         self._episode = self._episode_info()
         self._started = True
         self._history.clear()
@@ -313,11 +328,14 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
 
     # ---------------------------------------------------------------- extras
     def replay_options(self) -> dict[str, Any]:
-        """Reset options that recreate this episode's trace window and setpoints.
+        """Reset options that recreate this episode: its trace window, setpoints, the
+        rocket's ``scales`` if it had any, and its initial state where it was given or
+        drawn (a random initial angle).
 
         ``env.reset(seed=s, options=env.replay_options())`` then replays the
-        same disturbance and setpoint schedule (the gyro noise follows ``s``);
-        the evaluation protocol stores episodes this way.
+        same disturbance and setpoint schedule (the gyro noise follows ``s``, and
+        so does a domain-randomised rocket, which is drawn again); the
+        evaluation protocol stores episodes this way.
         """
         if not self._started:
             raise RuntimeError("call reset() before replay_options()")
@@ -328,6 +346,7 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
             "start": int(b.start[0]),
             "setpoints": b.setpoints[0].tolist(),
         }
+        options.update(self._initial)
         if b.scale_stride[0]:
             options["scales"] = b.episode_scales(0).tolist()
         return options

@@ -649,7 +649,7 @@ class Renderer:
         so video encoders take it unchanged.
     window_s : float, optional
         Shortest time span of the strip charts, s (10 s by default); a longer
-        snapshot widens them.
+        history widens them.
 
     Raises
     ------

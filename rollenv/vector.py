@@ -116,7 +116,9 @@ class RocketRollVectorEnv(
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
-        """Reset every env (``options`` as for the single env apply to all)."""
+        """Reset every env (``options`` as for the single env apply to all of them, for
+        this episode only: the ``NEXT_STEP`` autoreset that follows an episode's end
+        draws the next episode with no options, the database's rocket among them)."""
         if isinstance(seed, list):
             raise ValueError("RocketRollVectorEnv takes one int seed for the batch, not a list")
         super().reset(seed=seed)

@@ -24,7 +24,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import rollenv  # noqa: F401  (registers the environments)
+import rollenv  # registers the environments (and register_variant below)
 from agents.base import Design
 from agents.registry import CONTROLLERS, register_controller
 from disturbances.db import DisturbanceDB
@@ -181,6 +181,60 @@ def test_an_unregistered_method_is_refused_by_name(toy_db: Path, tmp_path: Path)
         assert "no-such" not in db.methods()
     with pytest.raises(ValueError, match="unknown identification method 'no-such'"):
         RocketRollEnv(method="no-such")
+
+
+@pytest.fixture
+def toy_variant(registered: None) -> Iterator[str]:
+    """A variant that replays the toy method's traces."""
+    from gymnasium.envs.registration import registry
+
+    rollenv.register_variant("RocketRollToy-v0", task="angle", method="toy", summary="toy traces")
+    try:
+        yield "RocketRollToy-v0"
+    finally:
+        rollenv.VARIANTS.unregister("RocketRollToy-v0")
+        registry.pop("RocketRollToy-v0", None)
+
+
+def test_a_variants_options_reach_training_tuning_and_evaluation(
+    toy_db: Path, toy_variant: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from agents.vecenv import RollVecEnv
+    from rollenv.bank import variant_config
+
+    assert variant_config(toy_variant).method == "toy"
+    assert variant_config(toy_variant, {"method": "paper"}).method == "paper"  # as gym.make
+    with pytest.raises(ValueError, match="is the 'angle' task; task='rate' conflicts"):
+        variant_config(toy_variant, {"task": "rate"})
+    env = gym.make(toy_variant, db=str(toy_db))
+    assert env.unwrapped.config.method == "toy"  # type: ignore[attr-defined]
+    venv = RollVecEnv(2, toy_variant, db=str(toy_db))
+    assert venv.config.method == "toy"
+    venv.reset()
+    assert all(info["trace"].endswith("-toy-theta") for info in venv.reset_infos)
+    capsys.readouterr()
+    argv = ["tune", "pid", "--env-id", toy_variant, "--db", str(toy_db), "--episodes", "1"]
+    assert rocketroll([*argv, "--omegas", "2"]) == 0
+    assert "α = 0.68," in capsys.readouterr().out  # the toy method's rounded α, not 0.6777
+    out = tmp_path / "eval"
+    argv = ["eval", "--env-id", toy_variant, "--db", str(toy_db), "--policy", "trim"]
+    assert rocketroll([*argv, "--episodes", "2", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert all(e["trace"].endswith("-toy-theta") for e in results["protocol"]["episodes"])
+
+
+def test_a_plugin_that_cannot_be_imported_is_one_error_naming_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from rocketroll_common import registry
+    from rocketroll_common.errors import UsageError
+
+    monkeypatch.setenv("ROCKETROLL_PLUGINS", "no_such_plugin_module")
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    with pytest.raises(UsageError, match="module 'no_such_plugin_module' cannot be loaded"):
+        METHODS.names()
+    monkeypatch.delenv("ROCKETROLL_PLUGINS")
+    assert "paper" in METHODS.names()  # tried again once the cause is gone
 
 
 def test_a_plugin_module_registers_in_another_process(tmp_path: Path) -> None:

@@ -12,8 +12,10 @@ eq. 29 after the switch.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
+import pickle
 from typing import Any
 
 import numpy as np
@@ -246,3 +248,75 @@ def test_bad_schedules_are_refused_by_name(scales: object, message: str) -> None
     env = quiet()
     with pytest.raises(ValueError, match=message):
         env.reset(seed=0, options={"scales": scales})
+
+
+def test_a_copied_or_pickled_batch_keeps_its_named_columns_on_its_cursor() -> None:
+    """step_count and friends are views of ``cursor`` (the kernel writes only that): a copy
+    must keep them so, or it would never see its episode end."""
+    env = quiet()
+    scales = np.linspace(1.0, 2.0, env.config.max_episode_steps)[:, None] * np.ones(2)
+    env.reset(seed=1, options={"scales": scales})
+    for twin in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
+        core = twin.unwrapped.core
+        for name in ("step_count", "u_start", "scale_start", "scale_stride"):
+            assert np.shares_memory(getattr(core, name), core.cursor), name
+        for _ in range(twin.config.max_episode_steps):
+            truncated = twin.step(np.zeros(1, dtype=np.float32))[3]
+        assert truncated
+        np.testing.assert_array_equal(twin.core.episode_scales(0), scales)
+        with pytest.raises(RuntimeError, match="episode ended"):
+            twin.step(np.zeros(1, dtype=np.float32))
+    np.testing.assert_array_equal(env.core.episode_scales(0), scales)
+
+
+def test_a_copy_that_takes_a_schedule_leaves_its_source_alone() -> None:
+    env = quiet()
+    steps = env.config.max_episode_steps
+    scales = np.linspace(1.0, 1.5, steps)[:, None] * np.ones(2)
+    env.reset(seed=0, options={"scales": scales})
+    for n in (1, 3):  # a predictor of the source's size, and a larger one
+        predictor = RollBatch(env.config, env.bank, n)
+        predictor.copy_env(env.core, 0, predictor.all)
+        np.testing.assert_array_equal(predictor.episode_scales(n - 1), scales)
+        predictor.reset(predictor.all[:1], np.random.default_rng(0), scales=np.full(2, 3.0))
+        np.testing.assert_array_equal(env.core.episode_scales(0), scales)
+        assert np.all(predictor.episode_scales(0) == 3.0)
+        for i in range(1, n):  # the other copies keep the source's schedule
+            np.testing.assert_array_equal(predictor.episode_scales(i), scales)
+    # ... and a source that takes a new schedule leaves an earlier copy alone.
+    predictor = RollBatch(env.config, env.bank, 2)
+    predictor.copy_env(env.core, 0, predictor.all)
+    env.reset(seed=0, options={"scales": np.full(2, 0.5)})
+    np.testing.assert_array_equal(predictor.episode_scales(1), scales)
+
+
+def test_a_schedule_in_the_vector_env_is_stepped_like_the_single_env_and_ends_with_it() -> None:
+    """The vector env runs a schedule step for step as the single env does; it is an option
+    of that reset only, so the episode after an autoreset has the database's rocket."""
+    steps = RollConfig().max_episode_steps
+    scales = 1.0 + 0.5 * np.sin(np.linspace(0.0, 9.0, steps))[:, None] * np.array([1.0, 0.5])
+    options = {"trace": 0, "start": 0, "scales": scales}
+    envs = RocketRollVectorEnv(2, bank=array_bank(), sensors=False)
+    single = quiet()
+    envs.reset(seed=0, options=options)
+    single.reset(seed=0, options=options)
+    actions = np.sin(np.arange(steps) * 0.2) * 0.7
+    for a in actions:
+        envs.step(np.full((2, 1), a, dtype=np.float32))
+        single.step(np.array([a], dtype=np.float32))
+        np.testing.assert_array_equal(envs._batch.state[0], single.core.state[0])
+    assert envs._batch.scale_stride.tolist() == [1, 1]
+    envs.step(np.zeros((2, 1), dtype=np.float32))  # NEXT_STEP autoreset: no options
+    assert envs._batch.scale_stride.tolist() == [0, 0]
+    assert envs._batch.roll_params(0) == params_of_row(envs._batch.params[0])
+
+
+def test_replay_options_carry_the_initial_state_given_or_drawn() -> None:
+    env = quiet(initial_angle_deg=30.0)
+    _, first = env.reset(seed=4, options={"fin_deg": 12.0, "rate_dps": 3.0})
+    options = env.replay_options()
+    assert options["fin_deg"] == 12.0 and options["rate_dps"] == 3.0
+    assert options["angle_deg"] == first["roll_deg"] != 0.0  # drawn in ±30°
+    _, again = env.reset(seed=77, options=options)
+    for key in ("roll_deg", "roll_rate_dps", "fin_deg", "trace", "start_s"):
+        assert again[key] == first[key], key
