@@ -195,11 +195,13 @@ class Hyperparameters:
     env_id : str
         The key it was read under.
     n_envs : int
-        Environments stepped side by side.
-    n_timesteps : int
-        Environment steps to train for.
+        Environments stepped side by side (1 when the file does not say, as
+        in rl-baselines3-zoo).
+    n_timesteps : int or None
+        Environment steps to train for (None: the file does not say;
+        ``--timesteps`` must).
     policy : str
-        SB3 policy name (``"MlpPolicy"``).
+        SB3 policy name (default ``"MlpPolicy"``).
     normalize : dict or None
         ``VecNormalize`` arguments, None for no normalisation.
     env_kwargs : dict
@@ -213,7 +215,7 @@ class Hyperparameters:
 
     env_id: str
     n_envs: int
-    n_timesteps: int
+    n_timesteps: int | None
     policy: str
     normalize: dict[str, Any] | None
     env_kwargs: dict[str, Any]
@@ -285,11 +287,10 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
             f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; known: "
             f"{', '.join(SCRIPT_KEYS + keywords)}"
         )
-    for key in ("n_envs", "n_timesteps", "policy"):
-        if key not in entry:
-            raise UsageError(f"{where}: missing key {key!r}")
-    counts = {}
+    counts: dict[str, int | None] = {"n_envs": 1, "n_timesteps": None}
     for key in ("n_envs", "n_timesteps"):
+        if key not in entry:
+            continue
         value = entry[key]
         if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
             raise UsageError(f"{where}: {key} must be a whole number, got {value!r}")
@@ -317,9 +318,9 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
     _ppo_arguments(ppo, where)  # fail now on a bad schedule or activation
     return Hyperparameters(
         env_id=env_id,
-        n_envs=counts["n_envs"],
+        n_envs=counts["n_envs"] or 1,
         n_timesteps=counts["n_timesteps"],
-        policy=str(entry["policy"]),
+        policy=str(entry.get("policy", "MlpPolicy")),
         normalize=normalize,
         env_kwargs=dict(env_kwargs),
         ppo=ppo,
@@ -461,6 +462,29 @@ def _make_eval_callback_class() -> type:
             self.history: list[tuple[int, float, float]] = []
             self._sq = 0.0
             self._count = 0
+
+        def continue_from(self, steps: int) -> None:
+            """Take over the evaluations a run resumed at ``steps`` already logged in this
+            folder (those up to ``steps``), so that resuming keeps them."""
+            import numpy as np
+
+            if self.log_path is None:
+                return
+            folder = Path(self.log_path).parent
+            npz = folder / "evaluations.npz"
+            if npz.is_file():
+                with np.load(npz) as saved:
+                    keep = saved["timesteps"] <= steps
+                    self.evaluations_timesteps = saved["timesteps"][keep].tolist()
+                    self.evaluations_results = saved["results"][keep].tolist()
+                    self.evaluations_length = saved["ep_lengths"][keep].tolist()
+            csv_path = folder / "tracking_error.csv"
+            if csv_path.is_file():
+                rows = csv_path.read_text(encoding="utf-8").splitlines()[1:]
+                for row in rows:
+                    t, r, e = row.split(",")
+                    if int(t) <= steps:
+                        self.history.append((int(t), float(r), float(e)))
 
         def _on_step(self) -> bool:
             evaluating = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
@@ -609,6 +633,8 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     hp = load_hyperparameters(args.hyperparams, args.env_id)
     n_envs = args.envs if args.envs is not None else hp.n_envs
     timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
+    if timesteps is None:
+        raise UsageError(f"--timesteps is needed: {hp.source}, {hp.env_id} has no n_timesteps")
     ppo_kwargs = ppo_arguments(hp)
     ppo_kwargs.setdefault("device", "cpu")
     n_steps = int(ppo_kwargs.get("n_steps", 2048))
@@ -665,19 +691,21 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         model = _resume(args.resume, train_env, normalize, ppo_kwargs["device"])
     else:
         model = PPO(hp.policy, train_env, seed=args.seed, verbose=args.verbose, **ppo_kwargs)
-    model.set_logger(_logger(out, args, ppo_kwargs.get("tensorboard_log")))
-    callbacks: list[Any] = [
-        _make_eval_callback_class()(
-            eval_env,
-            eval_adapter,
-            args.eval_seed,
-            n_eval_episodes=args.eval_episodes,
-            eval_freq=max(args.eval_freq // n_envs, 1) if args.eval_freq else 0,
-            log_path=str(out / "eval"),
-            deterministic=True,
-            verbose=1,
-        )
-    ]
+    start_steps = int(model.num_timesteps)
+    model.set_logger(_logger(out, args, ppo_kwargs.get("tensorboard_log"), start_steps))
+    held_out = _make_eval_callback_class()(
+        eval_env,
+        eval_adapter,
+        args.eval_seed,
+        n_eval_episodes=args.eval_episodes,
+        eval_freq=max(args.eval_freq // n_envs, 1) if args.eval_freq else 0,
+        log_path=str(out / "eval"),
+        deterministic=True,
+        verbose=1,
+    )
+    if args.resume is not None:
+        held_out.continue_from(start_steps)
+    callbacks: list[Any] = [held_out]
     if args.checkpoint_freq:
         callbacks.append(
             CheckpointCallback(
@@ -701,6 +729,8 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 reset_num_timesteps=args.resume is None,
             )
     except KeyboardInterrupt:
+        # Named by the env-steps collected, as SB3's own checkpoints are: a rollout cut
+        # short (at most n_steps x n_envs steps) is counted but collected again on resume.
         saved = _checkpoint(model, normalize, out / "checkpoints")
         again = to_argv(dataclasses.replace(args, resume=saved, out=out))
         raise Interrupted(
@@ -708,6 +738,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             f"(go on with: {shlex.join(['rocketroll', 'train', 'ppo', *again])})"
         ) from None
     train_s = time.perf_counter() - learn_started
+    trained = int(model.num_timesteps) - start_steps  # by this run (a resumed one: since then)
 
     # The result: the final model and its observation statistics (as JSON, and as SB3's
     # VecNormalize pickle for `VecNormalize.load`).
@@ -743,9 +774,10 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         "versions": _versions(),
         "torch_threads": args.torch_threads,
         "env_steps": int(model.num_timesteps),
+        "resumed_at_env_steps": start_steps if args.resume is not None else None,
         "train_time_s": round(train_s, 3),
         "wall_time_s": round(wall_s, 3),
-        "env_steps_per_s": round(model.num_timesteps / train_s, 1),
+        "env_steps_per_s": round(trained / train_s, 1),
         "final_test_eval": {
             "episodes": int(final["episodes"]),
             "seed": args.eval_seed,
@@ -758,9 +790,12 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     model.logger.close()
     train_env.close()
     eval_env.close()
+    resumed = ""
+    if args.resume is not None:
+        resumed = f" (resumed at {start_steps:,}: {model.num_timesteps:,} in all)"
     print(
-        f"\ntrained {model.num_timesteps:,} env-steps in {train_s:.1f} s "
-        f"({model.num_timesteps / train_s:,.0f} env-steps/s); wall time {wall_s:.1f} s"
+        f"\ntrained {trained:,} env-steps{resumed} in {train_s:.1f} s "
+        f"({trained / train_s:,.0f} env-steps/s); wall time {wall_s:.1f} s"
     )
     print(
         f"final model on {int(final['episodes'])} test-split episodes: mean return "
@@ -777,11 +812,16 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
 VECNORMALIZE_FILE = "vecnormalize.pkl"
 
 
-def _logger(out: Path, args: Args, tensorboard_log: str | None) -> Any:
-    """SB3's logger: CSV under ``out/logs``, stdout when verbose, TensorBoard when asked."""
+def _logger(out: Path, args: Args, tensorboard_log: str | None, start_steps: int = 0) -> Any:
+    """SB3's logger: CSV under ``out/logs``, stdout when verbose, TensorBoard when asked.
+
+    A resumed run logs to ``progress_from_N.csv`` when ``progress.csv`` exists
+    (SB3's CSV writer would start that file afresh).
+    """
     from stable_baselines3.common.logger import Logger, make_output_format
 
-    formats = [make_output_format("csv", str(out / "logs"))]
+    suffix = f"_from_{start_steps}" if (out / "logs" / "progress.csv").exists() else ""
+    formats = [make_output_format("csv", str(out / "logs"), suffix)]
     if args.verbose:
         formats.append(make_output_format("stdout", str(out / "logs")))
     if tensorboard_log is not None:
@@ -808,17 +848,28 @@ def _checkpoint(model: Any, normalize: Any, folder: Path) -> Path:
 
 
 def _resume(checkpoint: Path, train_env: Any, normalize: Any, device: str) -> Any:
-    """The model of ``checkpoint`` on ``train_env``, with its normalisation statistics."""
+    """The model of ``checkpoint`` on ``train_env``, with its normalisation statistics
+    (a checkpoint's ``ppo_vecnormalize_N_steps.pkl``, or a finished run's
+    ``vecnormalize.pkl`` beside its ``model.zip``)."""
     import pickle
 
     from stable_baselines3 import PPO
 
+    checkpoint = Path(checkpoint)
+    stats = _normalization_file(checkpoint)
+    if not stats.is_file():
+        stats = checkpoint.with_name(VECNORMALIZE_FILE)
+    if normalize is None and stats.is_file():
+        raise UsageError(
+            f"--resume {checkpoint}: it was trained with VecNormalize ({stats.name} is beside "
+            "it) but the hyperparameters say normalize: false"
+        )
     model = PPO.load(checkpoint, env=train_env, device=device)
     if normalize is not None:
-        stats = _normalization_file(Path(checkpoint))
         if not stats.is_file():
             raise UsageError(
-                f"--resume {checkpoint}: its VecNormalize statistics {stats.name} are not beside it"
+                f"--resume {checkpoint}: its VecNormalize statistics "
+                f"{_normalization_file(checkpoint).name} (or {VECNORMALIZE_FILE}) are not beside it"
             )
         with stats.open("rb") as handle:
             saved = pickle.load(handle)

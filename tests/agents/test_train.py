@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import shlex
+import shutil
 import sys
 from pathlib import Path
 from unittest import mock
@@ -133,11 +135,14 @@ def test_normalize_json_is_the_training_statistics(run):
     out, _ = run
     record = json.loads((out / "normalize.json").read_text())
     assert record["norm_obs"] is True and len(record["mean"]) == len(record["var"]) == 4
-    # The checkpoint at the last step holds VecNormalize itself, pickled by SB3.
-    venv = VecNormalize.load(
+    # vecnormalize.pkl (and the checkpoint at the last step) hold VecNormalize itself,
+    # pickled by SB3, as SB3 users load it.
+    venv = VecNormalize.load(str(out / VECNORMALIZE_FILE), RollVecEnv(1, bank=array_bank()))
+    last = VecNormalize.load(
         str(out / "checkpoints" / "ppo_vecnormalize_256_steps.pkl"),
         RollVecEnv(1, bank=array_bank()),
     )
+    np.testing.assert_array_equal(last.obs_rms.mean, venv.obs_rms.mean)
     assert isinstance(venv.obs_rms, RunningMeanStd)
     np.testing.assert_array_equal(venv.obs_rms.mean, record["mean"])
     np.testing.assert_array_equal(venv.obs_rms.var, record["var"])
@@ -147,6 +152,56 @@ def test_normalize_json_is_the_training_statistics(run):
     expected = np.asarray(venv.normalize_obs(obs))
     assert expected.dtype == normalizer(obs).dtype == np.float32
     np.testing.assert_array_equal(normalizer(obs), expected)
+
+
+def _resume(run_folder: Path, small_db: Path, checkpoint: str, timesteps: int, out: Path) -> str:
+    hyperparams = run_folder.parent / "tiny.yml"
+    argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
+    argv += ["--seed", "3", "--eval-freq", "128", "--eval-episodes", "2"]
+    argv += ["--checkpoint-freq", "128", "--no-progress-bar"]
+    argv += ["--resume", str(checkpoint), "--timesteps", str(timesteps)]
+    capture = out.parent / f"resume-{timesteps}.txt"
+    with capture.open("w", encoding="utf-8") as sink, contextlib.redirect_stdout(sink):
+        assert main(argv) == 0
+    return capture.read_text(encoding="utf-8")
+
+
+def test_resuming_in_the_same_folder_keeps_the_logs_and_the_statistics(run, small_db, tmp_path):
+    """A run resumed from its 128-step checkpoint goes on where it was: the evaluations up to
+    then are kept, the CSV log is not overwritten, VecNormalize's statistics carry on."""
+    out = tmp_path / "run"
+    shutil.copytree(run[0], out)
+    checkpoint = out / "checkpoints" / "ppo_128_steps.zip"
+    printed = _resume(run[0], small_db, str(checkpoint), 384, out)
+    assert "trained 256 env-steps (resumed at 128: 384 in all)" in printed
+    evaluations = np.load(out / "eval" / "evaluations.npz")
+    assert evaluations["timesteps"].tolist() == [128, 256, 384]
+    first = np.load(run[0] / "eval" / "evaluations.npz")
+    np.testing.assert_array_equal(evaluations["results"][0], first["results"][0])
+    rows = (out / "eval" / "tracking_error.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["128", "256", "384"]
+    assert (out / "logs" / "progress.csv").read_text() == (
+        run[0] / "logs" / "progress.csv"
+    ).read_text()
+    assert (out / "logs" / "progress_from_128.csv").is_file()
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["env_steps"] == 384 and settings["resumed_at_env_steps"] == 128
+    env = RollVecEnv(1, bank=array_bank())
+    before = VecNormalize.load(str(checkpoint.parent / "ppo_vecnormalize_128_steps.pkl"), env)
+    after = VecNormalize.load(str(out / VECNORMALIZE_FILE), env)
+    # One count per observation row: 256 steps, plus the resumed
+    # run's first reset (2 envs); a fresh VecNormalize would have counted 258.
+    assert after.obs_rms.count == pytest.approx(before.obs_rms.count + 256 + 2)
+
+
+def test_a_finished_run_resumes_from_its_model_and_vecnormalize(run, small_db, tmp_path):
+    printed = _resume(run[0], small_db, str(run[0] / "model.zip"), 320, tmp_path / "more")
+    assert "trained 64 env-steps (resumed at 256: 320 in all)" in printed
+    plain = tmp_path / "plain.yml"
+    plain.write_text(TINY.replace("normalize: {norm_obs: true, norm_reward: true}", ""))
+    args = Args(hyperparams=plain, db=str(small_db), resume=run[0] / "model.zip", out=tmp_path)
+    with pytest.raises(UsageError, match=r"trained with VecNormalize .* normalize: false"):
+        train(dataclasses.replace(args, out=tmp_path / "x", timesteps=320))
 
 
 def test_controller_acts_like_predict_within_the_action_space(run):
@@ -225,7 +280,6 @@ def test_bad_arguments_are_named_and_exit_2(argv, message, capsys):
     ("text", "message"),
     [
         ("RocketRollRate-v0: {n_envs: 2}\n", "no entry for 'RocketRoll-v0'"),
-        ("RocketRoll-v0: {n_envs: 2, policy: MlpPolicy}\n", "missing key 'n_timesteps'"),
         (TINY.replace("n_steps:", "nsteps:"), "unknown key(s) 'nsteps'"),
         (TINY.replace("n_envs: 2", "n_envs: 0"), "n_envs must be positive"),
         (TINY.replace("lin_3e-4", "cosine"), "learning_rate must be a number or 'lin_<number>'"),
@@ -240,6 +294,18 @@ def test_bad_hyperparameter_files_are_named(tmp_path, text, message):
     with pytest.raises(UsageError) as excinfo:
         load_hyperparameters(path, "RocketRoll-v0")
     assert message in str(excinfo.value) and str(path) in str(excinfo.value)
+
+
+def test_a_file_without_counts_needs_them_on_the_command_line(tmp_path):
+    """n_envs (1) and policy (MlpPolicy) default as in rl-baselines3-zoo; the length of
+    training must come from the file or --timesteps."""
+    path = tmp_path / "hp.yml"
+    path.write_text("RocketRoll-v0: {n_steps: 64, batch_size: 64}\n", encoding="utf-8")
+    hp = load_hyperparameters(path, "RocketRoll-v0")
+    assert (hp.n_envs, hp.n_timesteps, hp.policy) == (1, None, "MlpPolicy")
+    with pytest.raises(UsageError, match=r"--timesteps is needed: .*hp.yml, RocketRoll-v0 has no"):
+        train(Args(hyperparams=path, out=tmp_path / "run"))
+    assert not (tmp_path / "run").exists()
 
 
 def test_batch_size_must_divide_the_rollout(tmp_path):
