@@ -23,7 +23,7 @@ import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-__all__ = ["SERVE", "Remote", "checkout", "serve"]
+__all__ = ["SERVE", "Remote", "checkout", "serve", "start_against"]
 
 #: The option that puts a benchmark script into block-serving mode.
 SERVE = "--serve-blocks"
@@ -53,6 +53,17 @@ def checkout(ref: str) -> tuple[Path, str]:
             check=True,
         )
     return tree, commit
+
+
+def start_against(script: str, words: list[str], ref: str | None) -> tuple[Remote | None, str]:
+    """The benchmark ``script`` started in a checkout of ``ref`` with the same command-line
+    ``words`` (less ``--against``), and the commit it runs; ``(None, "")`` without a ref."""
+    if not ref:
+        return None, ""
+    tree, commit = checkout(ref)
+    print(f"against {ref} ({commit[:12]}), checked out at {tree}: starting it")
+    rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
+    return Remote(script, [w for w in rest if not w.startswith("--against=")], tree), commit
 
 
 class Remote:

@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from _against import SERVE, Remote, checkout, serve
+from _against import SERVE, serve, start_against
 
 from disturbances.bank import TraceBank
 from disturbances.db import DatabaseError
@@ -205,12 +205,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise SystemExit(f"--draws ({ns.draws}) must be at least --batch ({ns.batch})")
     if serving:
         return _serve(ns)
-    remote, commit = None, ""
-    if ns.against:
-        tree, commit = checkout(ns.against)
-        print(f"against {ns.against} ({commit[:12]}), checked out at {tree}: starting it")
-        rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
-        remote = Remote(__file__, [w for w in rest if not w.startswith("--against=")], tree)
+    remote, commit = start_against(__file__, words, ns.against)
     before: dict[str, list[float]] = {"batch": [], "sql": [], "load": []}
 
     path = ns.db if ns.db is not None else default_path()

@@ -45,7 +45,7 @@ from typing import Any
 import gymnasium as gym
 import numba
 import numpy as np
-from _against import SERVE, Remote, checkout, serve
+from _against import SERVE, serve, start_against
 from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
 import rollenv  # noqa: F401  (registers RocketRoll-v0)
@@ -160,12 +160,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if serving:
         return serve({name: run for name, (run, _) in tasks.items()})
     ours = [name for name in tasks if name.lstrip().startswith(("RocketRoll", "same"))]
-    remote, commit = None, ""
-    if ns.against:
-        tree, commit = checkout(ns.against)
-        print(f"against {ns.against} ({commit[:12]}), checked out at {tree}: starting it")
-        rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
-        remote = Remote(__file__, [w for w in rest if not w.startswith("--against=")], tree)
+    remote, commit = start_against(__file__, words, ns.against)
     rates: dict[str, list[float]] = {name: [] for name in tasks}
     before: dict[str, list[float]] = {name: [] for name in ours}
     for _ in range(ns.repeats):

@@ -43,7 +43,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from _against import SERVE, Remote, checkout, serve
+from _against import SERVE, Remote, serve, start_against
 
 from identification.baselines import output_error
 from identification.bundled import load_bundled
@@ -214,12 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     n_levels = len(result.options.noise_levels_pct)
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
     others = [m for m in METHODS.names() if m != "paper"]
-    remote, commit = None, ""
-    if ns.against:
-        tree, commit = checkout(ns.against)
-        print(f"against {ns.against} ({commit[:12]}), checked out at {tree}: starting it")
-        rest = [w for k, w in enumerate(words) if w != "--against" and words[k - 1] != "--against"]
-        remote = Remote(__file__, [w for w in rest if not w.startswith("--against=")], tree)
+    remote, commit = start_against(__file__, words, ns.against)
     timings, before = time_interleaved(
         [
             ("identify(noise_runs=0)", common["identify(noise_runs=0)"], ns.repeats),

@@ -97,6 +97,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     hp = load_hyperparameters(ns.hyperparams, ns.env_id)
     n_envs = ns.envs or hp.n_envs
     timesteps = ns.timesteps or hp.n_timesteps
+    if timesteps is None:
+        raise SystemExit(f"--timesteps is needed: {hp.source} has no n_timesteps for {ns.env_id}")
     torch.set_num_threads(ns.torch_threads)
     print(
         f"python {platform.python_version()}, numpy {np.__version__}, torch {torch.__version__} "
