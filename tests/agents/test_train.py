@@ -142,8 +142,8 @@ def test_normalize_json_is_the_training_statistics(run):
         str(out / "checkpoints" / "ppo_vecnormalize_256_steps.pkl"),
         RollVecEnv(1, bank=array_bank()),
     )
+    assert isinstance(venv.obs_rms, RunningMeanStd) and isinstance(last.obs_rms, RunningMeanStd)
     np.testing.assert_array_equal(last.obs_rms.mean, venv.obs_rms.mean)
-    assert isinstance(venv.obs_rms, RunningMeanStd)
     np.testing.assert_array_equal(venv.obs_rms.mean, record["mean"])
     np.testing.assert_array_equal(venv.obs_rms.var, record["var"])
     normalizer = ObservationNormalizer(record)
@@ -191,6 +191,7 @@ def test_resuming_in_the_same_folder_keeps_the_logs_and_the_statistics(run, smal
     after = VecNormalize.load(str(out / VECNORMALIZE_FILE), env)
     # One count per observation row: 256 steps, plus the resumed
     # run's first reset (2 envs); a fresh VecNormalize would have counted 258.
+    assert isinstance(after.obs_rms, RunningMeanStd) and isinstance(before.obs_rms, RunningMeanStd)
     assert after.obs_rms.count == pytest.approx(before.obs_rms.count + 256 + 2)
 
 
@@ -318,5 +319,6 @@ def test_batch_size_must_divide_the_rollout(tmp_path):
 def test_the_shipped_hyperparameters_load_for_both_tasks():
     for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
         hp = load_hyperparameters(DEFAULT_HYPERPARAMS, env_id)
+        assert hp.n_timesteps is not None, env_id
         assert hp.policy == "MlpPolicy" and hp.n_envs >= 1 and hp.n_timesteps >= 100_000
         assert (hp.ppo["n_steps"] * hp.n_envs) % hp.ppo["batch_size"] == 0

@@ -165,6 +165,7 @@ def test_each_line_is_split_on_its_own_separator_outside_quotes(tmp_path: Path) 
     src = tmp_path / "quoted.csv"
     src.write_text("t fin roll status\n" + body, encoding="utf-8")
     rec = import_csv(src, ["time", "fin_cmd", "roll", "skip"], source="wind-tunnel")
+    assert rec.fin_cmd_deg is not None and rec.roll_deg is not None
     np.testing.assert_allclose(rec.fin_cmd_deg, fin)
     np.testing.assert_allclose(rec.roll_deg, np.round(3 * t, 3))
 

@@ -256,8 +256,9 @@ def test_a_copied_or_pickled_batch_keeps_its_named_columns_on_its_cursor() -> No
     env = quiet()
     scales = np.linspace(1.0, 2.0, env.config.max_episode_steps)[:, None] * np.ones(2)
     env.reset(seed=1, options={"scales": scales})
-    for twin in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
-        core = twin.unwrapped.core
+    twins: tuple[RocketRollEnv, ...] = (copy.deepcopy(env), pickle.loads(pickle.dumps(env)))
+    for twin in twins:
+        core = twin.core
         for name in ("step_count", "u_start", "scale_start", "scale_stride"):
             assert np.shares_memory(getattr(core, name), core.cursor), name
         for _ in range(twin.config.max_episode_steps):
