@@ -53,10 +53,10 @@ from disturbances.rows import (
     KINDS,
     SPLITS,
     SURROGATE_KINDS,
+    ChecksumError,
     IdentificationRow,
     RecordingRow,
     TraceRow,
-    checksum,
 )
 from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
 from identification.methods import METHODS
@@ -781,6 +781,8 @@ class DisturbanceDB:
                 id=r["id"],
                 recording_id=r["recording_id"],
             )
+        except ChecksumError:
+            raise self._corrupt(r["uid"]) from None
         except ValueError as exc:
             raise self._fail(f"corrupt trace {r['uid']}: {exc}") from None
 
@@ -866,16 +868,20 @@ class DisturbanceDB:
         if not rows:
             raise DatabaseError(f"{self.path}: no trace {key!r}")
         r = rows[0]
-        return self._trace_row(r, self._verified(r))
+        return self._trace_row(r, self._samples(r))
 
-    def _verified(self, r: sqlite3.Row) -> FloatArray:
+    def _samples(self, r: sqlite3.Row) -> FloatArray:
+        """A trace's stored samples (the row type checks them against the checksum)."""
         values = readonly_array(_f64(r["samples"]))
-        if checksum(values) != r["checksum"] or values.size != r["n_samples"]:
-            raise self._fail(
-                f"trace {r['uid']} is corrupt: its stored samples do not match their "
-                "checksum (the file was altered or damaged)"
-            )
+        if values.size != r["n_samples"]:
+            raise self._corrupt(r["uid"])
         return values
+
+    def _corrupt(self, uid: str) -> DatabaseError:
+        return self._fail(
+            f"trace {uid} is corrupt: its stored samples do not match their checksum (the "
+            "file was altered or damaged)"
+        )
 
     def load_traces(self, rows: Iterable[TraceRow]) -> list[TraceRow]:
         """The given listed traces with their samples (verified), in the order given."""
@@ -892,11 +898,17 @@ class DisturbanceDB:
                 chunk,
             )
             for r in got:
-                found[int(r["id"])] = self._verified(r)
+                found[int(r["id"])] = self._samples(r)
         missing = [row.uid for row in rows if row.id not in found]
         if missing:
             raise DatabaseError(f"{self.path}: trace(s) {', '.join(missing)} no longer stored")
-        return [_with_samples(row, found[int(row.id or 0)]) for row in rows]
+        out = []
+        for row in rows:
+            try:  # the row verifies its samples against its checksum
+                out.append(dataclasses.replace(row, u_d_deg=found[int(row.id or 0)]))
+            except ChecksumError:
+                raise self._corrupt(row.uid) from None
+        return out
 
     def counts(self) -> dict[str, int]:
         """Number of recordings, identifications and traces (identified and surrogate)."""
@@ -958,11 +970,6 @@ class DisturbanceDB:
             identifications=tuple(sorted(idents.values(), key=lambda i: i.key)),
             traces=tuple(self.load_traces(ordered)),
         )
-
-
-def _with_samples(row: TraceRow, samples: FloatArray) -> TraceRow:
-    """``row`` with its samples (checked against its checksum again)."""
-    return dataclasses.replace(row, u_d_deg=samples)
 
 
 def _known_methods(stored: Sequence[str]) -> tuple[str, ...]:

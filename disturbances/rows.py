@@ -67,6 +67,10 @@ TEST_FRACTION = 0.25
 _SPLIT_SALT = b"rocketroll-split/1:"
 
 
+class ChecksumError(ValueError):
+    """A trace's samples do not match its checksum."""
+
+
 def checksum(samples: ArrayLike) -> str:
     """SHA-256 (hex) of the stored bytes of a trace: little-endian float64."""
     return hashlib.sha256(np.ascontiguousarray(samples, dtype="<f8").tobytes()).hexdigest()
@@ -402,7 +406,7 @@ class TraceRow(_Row):
                 raise ValueError(f"trace {self.uid}: has NaN or infinite samples")
             actual = checksum(u)
             if actual != self.checksum:
-                raise ValueError(
+                raise ChecksumError(
                     f"trace {self.uid}: checksum {self.checksum[:12]}… does not match its "
                     f"samples ({actual[:12]}…)"
                 )
