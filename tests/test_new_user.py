@@ -16,7 +16,7 @@ import subprocess
 import sys
 import tarfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -224,15 +224,37 @@ def test_written_files_get_the_permissions_of_open_and_keep_their_own(tmp_path: 
 
 
 # ------------------------------------------------------------------ 5. Ctrl-C
+_STARTED: list[subprocess.Popen[str]] = []
+
+
+@pytest.fixture(autouse=True)
+def _no_process_outlives_its_test() -> Iterator[None]:
+    yield
+    while _STARTED:
+        proc = _STARTED.pop()
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
+
+
+def _sigint_as_from_a_terminal() -> None:
+    # A shell starts background jobs with SIGINT ignored, and a child inherits that; a
+    # Python started so never raises KeyboardInterrupt. Ctrl-C is what is under test.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(argv: Sequence[object], cwd: Path, **env: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
+    proc = subprocess.Popen(
         [sys.executable, "-m", "rocketroll", *[str(a) for a in argv]],
         cwd=cwd,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env={**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1", **env},
+        preexec_fn=_sigint_as_from_a_terminal,
     )
+    _STARTED.append(proc)
+    return proc
 
 
 def interrupt(proc: subprocess.Popen[str], ready: str, *, stream: str = "stdout") -> str:

@@ -310,13 +310,19 @@ def test_a_recording_without_steps_is_refused() -> None:
         ("noise_seed", 0.5),
         ("noise_levels_pct", (1.0, -2.0)),
         ("noise_levels_pct", (float("nan"),)),
-        ("breakpoint_resolution_s", 5.0),  # more than max_breakpoint_s (4 s)
     ],
 )
 def test_bad_options_are_refused_naming_the_option(option: str, value: object) -> None:
     with pytest.raises(SettingError, match=f"^{option}: ") as caught:
         IdentifyOptions(**{option: value})  # type: ignore[arg-type]
     assert caught.value.setting == option
+
+
+def test_a_breakpoint_range_below_the_search_step_names_the_range() -> None:
+    """The step is not a command-line option; the range (``--max-breakpoint``) is, so the
+    error names the setting a user can change."""
+    with pytest.raises(SettingError, match=r"^max_breakpoint_s: .*search step \(0\.5 s\)"):
+        IdentifyOptions(max_breakpoint_s=0.2, breakpoint_resolution_s=0.5)
 
 
 def test_an_interval_off_the_fine_grid_is_refused() -> None:
