@@ -24,9 +24,10 @@ substep the servo moves the fin toward it by at most ``rate_limit·δt``
 fin-angle model of identification step 5 on its fine grid.  Over a substep
 the roll model (eq. 36/49) is advanced by the exact update of
 :func:`identification.model.piece_coefficients`, the one closed form of the
-project, compiled here by numba: ``u_d`` is held on its own grid, ``a(θ)`` is
-taken at the substep's mean fin angle.  Consecutive substeps with the fin at
-rest and the same ``u_d`` are merged into one piece, which is exact.  This is
+project, compiled by numba (:mod:`identification.compiled`): ``u_d`` is held on
+its own grid, ``a(θ)`` is taken at the substep's mean fin angle.  Consecutive
+substeps with the fin at rest and the same ``u_d`` are merged into one piece,
+which is exact.  This is
 the computation of the identification's re-simulation (step 9), so a replay
 reproduces it to rounding.
 """
@@ -40,14 +41,13 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numba
-import numba.extending
 import numpy as np
 from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
-from identification import model
+from identification.compiled import piece
 from identification.methods import METHODS
-from identification.model import MODEL_NAMES, RollParams, Servo, piece_coefficients
+from identification.model import MODEL_NAMES, RollParams, Servo
 from rollenv.layout import (
     OBSERVATION_NAMES,
     Cfg,
@@ -323,33 +323,7 @@ def config_fields() -> tuple[str, ...]:
 
 
 # ----------------------------------------------------------------------------- kernels
-@numba.extending.overload(model.select)
-def _select_scalar(condition: Any, if_true: Any, if_false: Any) -> Any:
-    """Scalar ``select`` for numba: a branch, not a 0-d array per call."""
-
-    def impl(condition: Any, if_true: Any, if_false: Any) -> Any:
-        return if_true if condition else if_false
-
-    return impl
-
-
-_phi_taylor = numba.njit(cache=True, nogil=True)(model.phi_taylor)
-_phi_direct = numba.njit(cache=True, nogil=True)(model.phi_direct)
-
-
-@numba.extending.overload(model.phi_functions)
-def _phi_functions_scalar(z: Any) -> Any:
-    """Scalar ``phi_functions`` for numba: only the branch that is used is computed."""
-
-    def impl(z: Any) -> Any:
-        if abs(z) < model.PHI_TAYLOR_BELOW:
-            return _phi_taylor(z)
-        return _phi_direct(z)
-
-    return impl
-
-
-_piece = numba.njit(cache=True, nogil=True)(piece_coefficients)
+_piece = piece  # the one closed form, compiled (identification.compiled)
 
 
 @numba.njit(cache=True, nogil=True)
