@@ -7,6 +7,8 @@
 * :mod:`identification.bundled` -- the recordings shipped with the package.
 * :mod:`identification.pipeline` -- the paper's steps 1-6 (``identify``).
 * :mod:`identification.methods` -- every identification method behind one ``method=``.
+* :mod:`identification.ml` -- maximum likelihood and posterior ``u_d``
+  (:mod:`identification.statespace`: Kalman filter and smoothers).
 * :mod:`identification.paper` -- the paper's printed values, once.
 
 The errors live in :mod:`rocketroll_common.errors` (``RocketrollError`` and

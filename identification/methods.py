@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 from identification.model import MODEL_NAMES, RollParams, check_model
 from identification.recording import Recording
+from rocketroll_common.arrays import FloatArray
 from rocketroll_common.registry import Registry
 
 if TYPE_CHECKING:
@@ -70,6 +71,11 @@ class ModelFit:
         Fit metrics, JSON-safe (re-simulation errors, the method's own).
     trace_settings : mapping
         How ``u_d`` was obtained, stored with the trace.
+    u_d_sd_deg : ndarray or None
+        Pointwise posterior SD of ``u_d``, °, for a method that has a posterior.
+    sample_posterior : callable or None
+        ``sample_posterior(size, seed) -> (size, N)`` whole ``u_d`` traces drawn
+        from their posterior given the recording, for a method that has one.
     """
 
     method: str
@@ -78,6 +84,8 @@ class ModelFit:
     disturbance: Disturbance
     metrics: Mapping[str, Any]
     trace_settings: Mapping[str, Any] = field(default_factory=dict)
+    u_d_sd_deg: FloatArray | None = None
+    sample_posterior: Callable[[int, int], FloatArray] | None = None
 
 
 #: ``method(context, models) -> fits``: one :class:`ModelFit` per model asked for.
@@ -289,4 +297,10 @@ register_method(
     "identification.baselines:output_error_method",
     summary="output-error nonlinear least squares on the simulated roll rate (the peer, §1)",
     default=True,
+)
+register_method(
+    "ml",
+    "identification.ml:ml_method",
+    summary="maximum likelihood: Kalman filter on the roll model with the turbulence as an "
+    "AR state; its u_d is the posterior mean",
 )

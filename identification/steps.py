@@ -1100,26 +1100,30 @@ def resimulate(
     theta_fine: ArrayLike,
     velocity: ArrayLike,
     angle: ArrayLike,
+    *,
+    initial: tuple[float, float] | None = None,
 ) -> Resimulation:
     """Step 9: simulate eq. 29/49 with the identified ``u_d`` from the initial state.
 
     The model (:func:`identification.model.simulate`, exact update) runs on the
     fine grid with the fin angle of step 5, starting from the measured
-    velocity and angle at the first sample, open loop to the end.  Errors are
-    taken at the recording's samples against the measured velocity (the
+    velocity and angle at the first sample -- or from ``initial`` (rate °/s,
+    angle °), a method's own estimate of them -- open loop to the end.  Errors
+    are taken at the recording's samples against the measured velocity (the
     smoothed one the disturbance was fitted to) and the measured angle.
     """
     theta = np.asarray(theta_fine, dtype=float)
     v_meas = np.asarray(velocity, dtype=float)
     phi_meas = np.asarray(angle, dtype=float)
+    rate0, angle0 = (float(v_meas[0]), float(phi_meas[0])) if initial is None else initial
     u_fine = disturbance.at(grid.time_s[:-1])
     sim = simulate(
         disturbance.params,
         grid.step_s,
         theta,
         u_fine,
-        rate0_dps=float(v_meas[0]),
-        angle0_deg=float(phi_meas[0]),
+        rate0_dps=rate0,
+        angle0_deg=angle0,
         servo=None,
         substeps=1,
         t0_s=float(grid.time_s[0]),

@@ -1,0 +1,872 @@
+"""Maximum-likelihood identification with the turbulence as a state (``method="ml"``).
+
+The paper's model (eq. 36/49) over one sample interval ``Δt``, with the fin
+angle ``θ(t)`` known (step 5: the servo of eq. 23 on the command, or the
+measured fin) and ``u_d`` held, is affine in the rate, the angle and ``u_d``
+(:func:`identification.model.piece_coefficients`, composed over the fine
+grid's substeps)::
+
+    v[k+1] = E[k]·v[k] + G[k]·u_d[k] + f[k]
+    φ[k+1] = φ[k] + A[k]·v[k] + B[k]·u_d[k] + g[k]
+
+The turbulence is a zero-mean autoregressive process of order ``p`` on the
+sample grid, ``u_d[k+1] = Σ a_i·u_d[k+1-i] + η[k]`` (its mean cannot be told
+from the asymmetry θ̄: θ̄ carries it, as in the paper).  With the state
+``[v, φ, u_d[k], ..., u_d[k-p+1]]`` this is a linear Gaussian state-space
+model (:mod:`identification.statespace`) whose measurements are the
+recording's columns: the encoder angle with its quantisation (variance
+``q²/12``, ``q`` read off the data), the rate gyro with the multiplicative
+noise of eq. 52 (its level estimated), or both.
+
+The parameters -- α, θ̄, the damping (``a``, or ᾱ and β̄), the AR
+coefficients, the innovation SD and the gyro's noise level -- maximise the
+Kalman filter's likelihood (``scipy.optimize.minimize``, L-BFGS-B); their
+standard errors come from the Hessian of the log-likelihood.  The order
+``p`` is the one of smallest AIC up to :data:`MAX_ORDER`.  The smoother gives
+``E[u_d | data]`` and its pointwise SD; :func:`posterior_traces` draws whole
+traces from ``p(u_d | data)`` with the simulation smoother -- turbulence with
+the right amplitude and spectrum that is consistent with the recording.
+
+No step structure is needed: ramps, doublets, random inputs and dwell steps
+alike, from the angle, the rate or both.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numba
+import numpy as np
+from scipy import linalg, optimize
+
+from identification.compiled import piece
+from identification.methods import Context, ModelFit, resimulation_metrics
+from identification.model import RollParams, check_model
+from identification.pipeline import IdentifyOptions, Measurements, measurements
+from identification.recording import Recording
+from identification.statespace import (
+    LinearGaussian,
+    Smoothed,
+    predict,
+    simulation_smoother,
+    smooth,
+    update,
+)
+from identification.steps import Disturbance, IdentificationError, resimulate
+from rocketroll_common.arrays import FloatArray, readonly_array
+
+__all__ = [
+    "MAX_ORDER",
+    "MLFit",
+    "maximum_likelihood",
+    "ml_method",
+    "posterior_given",
+    "posterior_traces",
+]
+
+#: Highest AR order of the turbulence tried.
+MAX_ORDER = 3
+#: Smallest damping the optimiser may visit, 1/s.
+MIN_DAMPING = 0.01
+#: Variance floor of a measurement, (° or °/s)², so an ideal sensor stays regular.
+_VAR_FLOOR = 1e-8
+
+
+@numba.njit(cache=True, nogil=True)
+def _interval_maps(
+    alpha: float,
+    theta_bar: float,
+    beta_bar: float,
+    alpha_bar: float,
+    theta_fine: FloatArray,
+    per: int,
+    h: float,
+) -> FloatArray:
+    """Per sample interval ``[E, G, f, A, B, g]`` of the affine update (module docstring).
+
+    An interval with the fin at rest is one exact piece; one with the fin
+    moving is the composition of its substeps, the fin linear in each.
+    """
+    n = (theta_fine.size - 1) // per
+    out = np.empty((n, 6))
+    for k in range(n):
+        lo = k * per
+        th = theta_fine[lo]
+        rest = True
+        for j in range(1, per + 1):
+            if theta_fine[lo + j] != th:
+                rest = False
+                break
+        if rest:
+            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 0.0, per * h)
+            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 1.0, per * h)
+            out[k, 0] = e
+            out[k, 1] = c1 - c0
+            out[k, 2] = c0
+            out[k, 3] = a
+            out[k, 4] = b1 - b0
+            out[k, 5] = b0
+            continue
+        e_v, g_v, f_v, a_p, b_p, g_p = 1.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        for j in range(per):
+            t0 = theta_fine[lo + j]
+            t1 = theta_fine[lo + j + 1]
+            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 0.0, h)
+            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 1.0, h)
+            # φ gains a·v + b with v the rate at the substep's start.
+            a_p += a * e_v
+            b_p += a * g_v + (b1 - b0)
+            g_p += a * f_v + b0
+            e_v, g_v, f_v = e * e_v, e * g_v + (c1 - c0), e * f_v + c0
+        out[k] = (e_v, g_v, f_v, a_p, b_p, g_p)
+    return out
+
+
+@dataclass(frozen=True)
+class _Data:
+    """What the likelihood needs from a recording, prepared once."""
+
+    name: str
+    time_s: FloatArray
+    theta_fine: FloatArray
+    per: int
+    h: float
+    y: FloatArray  # (n, d): columns in the order of ``observed``
+    observed: np.ndarray  # state index of each column: 0 rate, 1 angle
+    angle_var: float  # encoder quantisation variance, or NaN without an encoder
+    has_gyro: bool
+    theta_min: float
+    theta_max: float
+    sources: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.y.shape[0])
+
+    @property
+    def dt(self) -> float:
+        return self.per * self.h
+
+
+def _quantum(values: FloatArray) -> float:
+    """The encoder's resolution: the step of the grid the angle values lie on (0 if none)."""
+    levels = np.unique(values)
+    if levels.size < 3:
+        return 0.0
+    steps = np.diff(levels)
+    q = float(np.min(steps))
+    if q <= 0.0:
+        return 0.0
+    ratio = steps / q
+    if float(np.max(np.abs(ratio - np.round(ratio)))) > 1e-3:
+        return 0.0  # not on a grid: an unquantised (or already processed) angle
+    return q
+
+
+def _prepare(inputs: Measurements) -> _Data:
+    rec = inputs.recording
+    # A validated recording has at least 50 samples and a fin that moves.
+    theta = np.asarray(inputs.theta_fine, dtype=float)
+    columns, observed = [], []
+    angle_var = math.nan
+    if rec.roll_rate_dps is not None:
+        columns.append(np.asarray(rec.roll_rate_dps, dtype=float))
+        observed.append(0)
+    if rec.roll_deg is not None:
+        roll = np.asarray(rec.roll_deg, dtype=float)
+        q = _quantum(roll)
+        angle_var = max(q * q / 12.0, _VAR_FLOOR)
+        columns.append(roll)
+        observed.append(1)
+    return _Data(
+        name=rec.name,
+        time_s=np.asarray(rec.time_s, dtype=float),
+        theta_fine=theta,
+        per=int(inputs.grid.per_sample),
+        h=float(inputs.grid.step_s),
+        y=np.column_stack(columns),
+        observed=np.asarray(observed, dtype=np.intp),
+        angle_var=angle_var,
+        has_gyro=rec.roll_rate_dps is not None,
+        theta_min=float(theta.min()),
+        theta_max=float(theta.max()),
+        sources={"fin_angle": inputs.theta_source},
+    )
+
+
+# ----------------------------------------------------------------------------- parameters
+@dataclass(frozen=True)
+class _Layout:
+    """Names of the unconstrained vector the optimiser moves, for one model and order.
+
+    The θ-dependent damping is moved as its value ``a_mid`` at the typical
+    deflection ``|θ + θ̄| = pivot`` and its change ``slope = ᾱ·pivot`` across
+    it: ᾱ and β̄ themselves are nearly collinear, which slows the optimiser.
+    """
+
+    model: str
+    order: int
+    gyro: bool
+    pivot: float = 1.0
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        damping = ("a",) if self.model == "constant" else ("a_mid", "slope")
+        ar = tuple(f"ar{i + 1}" for i in range(self.order))
+        return ("alpha", "theta_bar", *damping, *ar, "sd", *(("gyro",) if self.gyro else ()))
+
+    def natural(self, x: FloatArray) -> dict[str, Any]:
+        """Parameters from the optimiser's vector: AR coefficients stationary by
+        construction (partial autocorrelations through tanh), SDs positive (log)."""
+        values = dict(zip(self.names, x.tolist(), strict=True))
+        pacf = np.tanh([values[f"ar{i + 1}"] for i in range(self.order)])
+        out: dict[str, Any] = {
+            "alpha": values["alpha"],
+            "theta_bar": values["theta_bar"],
+            "ar": _ar_from_pacf(pacf),
+            "innovation_sd": math.exp(values["sd"]),
+            "gyro": math.exp(values["gyro"]) if self.gyro else 0.0,
+        }
+        if self.model == "constant":
+            out["alpha_bar"], out["beta_bar"] = 0.0, values["a"]
+        else:
+            out["alpha_bar"] = values["slope"] / self.pivot
+            out["beta_bar"] = values["a_mid"] - values["slope"]
+        return out
+
+    def vector(self, nat: dict[str, Any]) -> FloatArray:
+        """The optimiser's vector for natural parameters (inverse of :meth:`natural`)."""
+        pacf = _pacf_from_ar(np.asarray(nat["ar"], dtype=float))
+        slope = nat["alpha_bar"] * self.pivot
+        values = {
+            "alpha": nat["alpha"],
+            "theta_bar": nat["theta_bar"],
+            "a": nat["beta_bar"],
+            "a_mid": nat["beta_bar"] + slope,
+            "slope": slope,
+            "sd": math.log(nat["innovation_sd"]),
+            "gyro": math.log(max(nat["gyro"], 1e-6)),
+            **{
+                f"ar{i + 1}": float(np.arctanh(np.clip(r, -0.999, 0.999)))
+                for i, r in enumerate(pacf)
+            },
+        }
+        return np.array([values[name] for name in self.names], dtype=float)
+
+
+def _ar_from_pacf(pacf: FloatArray) -> FloatArray:
+    """AR coefficients from partial autocorrelations (Durbin–Levinson; |pacf| < 1: stationary)."""
+    phi = np.zeros(0)
+    for k, r in enumerate(np.asarray(pacf, dtype=float)):
+        phi = np.append(phi - r * phi[::-1], r) if k else np.array([r])
+    return phi
+
+
+def _pacf_from_ar(ar: FloatArray) -> FloatArray:
+    """Partial autocorrelations of a stationary AR polynomial (inverse Durbin–Levinson)."""
+    phi = np.asarray(ar, dtype=float).copy()
+    out = np.empty(phi.size)
+    for k in range(phi.size - 1, -1, -1):
+        r = phi[k]
+        out[k] = r
+        if k:
+            phi = (phi[:k] + r * phi[:k][::-1]) / (1.0 - r * r)
+    return out
+
+
+def _stationary_cov(ar: FloatArray, innovation_sd: float) -> FloatArray:
+    """Covariance of ``[u_d[k], ..., u_d[k-p+1]]`` of the stationary AR process."""
+    p = ar.size
+    companion = np.zeros((p, p))
+    companion[0] = ar
+    companion[1:, :-1] = np.eye(p - 1)
+    q = np.zeros((p, p))
+    q[0, 0] = innovation_sd**2
+    cov = linalg.solve_discrete_lyapunov(companion, q)
+    return np.asarray(0.5 * (cov + cov.T), dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class _Parts:
+    """The roll model's state-space pieces under one set of parameters."""
+
+    maps: FloatArray  # (n - 1, 6): [E, G, f, A, B, g] per interval
+    ar: FloatArray
+    innovation_var: float
+    obs_var: FloatArray
+    initial_mean: FloatArray
+    initial_cov: FloatArray
+
+
+def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
+    """The model of ``data`` under natural parameters; None where the damping is not positive."""
+    alpha, theta_bar = nat["alpha"], nat["theta_bar"]
+    alpha_bar, beta_bar = nat["alpha_bar"], nat["beta_bar"]
+    lowest = beta_bar + min(
+        alpha_bar * abs(data.theta_min + theta_bar), alpha_bar * abs(data.theta_max + theta_bar)
+    )
+    if not (lowest >= MIN_DAMPING and alpha != 0.0):
+        return None
+    ar = np.asarray(nat["ar"], dtype=float)
+    m = 2 + ar.size
+    maps = _interval_maps(alpha, theta_bar, beta_bar, alpha_bar, data.theta_fine, data.per, data.h)
+    obs_var = np.empty(data.y.shape)
+    for j, index in enumerate(data.observed.tolist()):
+        if index == 1:
+            obs_var[:, j] = data.angle_var
+        else:  # eq. 52: y = (1 + g·ε)·v, so Var = g²·v², with v² ≈ y²/(1 + g²)
+            g2 = nat["gyro"] ** 2
+            obs_var[:, j] = g2 * data.y[:, j] ** 2 / (1.0 + g2) + _VAR_FLOOR
+    u_cov = _stationary_cov(ar, nat["innovation_sd"])
+    initial_mean = np.zeros(m)
+    initial_cov = np.zeros((m, m))
+    initial_cov[2:, 2:] = u_cov
+    initial_mean[0] = alpha * (float(data.theta_fine[0]) + theta_bar)
+    initial_cov[0, 0] = (alpha**2) * u_cov[0, 0] + 1.0
+    angle_col = np.flatnonzero(data.observed == 1)
+    if angle_col.size:
+        # Where the angle starts is not a parameter: a wide prior, pinned by the first reading.
+        initial_mean[1] = data.y[0, angle_col[0]]
+        initial_cov[1, 1] = 1e4
+    else:
+        initial_cov[1, 1] = 1.0
+    return _Parts(maps, ar, nat["innovation_sd"] ** 2, obs_var, initial_mean, initial_cov)
+
+
+def _state_space(data: _Data, parts: _Parts) -> LinearGaussian:
+    """The model as a general :class:`LinearGaussian` (for the smoother)."""
+    n, p = data.n, parts.ar.size
+    m = 2 + p
+    maps = parts.maps
+    transition = np.zeros((n, m, m))
+    transition[:-1, 0, 0] = maps[:, 0]
+    transition[:-1, 0, 2] = maps[:, 1]
+    transition[:-1, 1, 0] = maps[:, 3]
+    transition[:, 1, 1] = 1.0
+    transition[:-1, 1, 2] = maps[:, 4]
+    transition[:, 2, 2:] = parts.ar
+    for i in range(1, p):
+        transition[:, 2 + i, 1 + i] = 1.0
+    intercept = np.zeros((n, m))
+    intercept[:-1, 0] = maps[:, 2]
+    intercept[:-1, 1] = maps[:, 5]
+    state_cov = np.zeros((m, m))
+    state_cov[2, 2] = parts.innovation_var
+    return LinearGaussian(
+        y=data.y,
+        observed=data.observed,
+        obs_var=parts.obs_var,
+        transition=transition,
+        intercept=intercept,
+        state_cov=state_cov,
+        initial_mean=parts.initial_mean,
+        initial_cov=parts.initial_cov,
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _roll_loglike(
+    maps: FloatArray,
+    ar: FloatArray,
+    innovation_var: float,
+    y: FloatArray,
+    observed: np.ndarray,
+    obs_var: FloatArray,
+    a0: FloatArray,
+    p0: FloatArray,
+) -> float:
+    """The Kalman filter's log-likelihood of :func:`_state_space`, the transition
+    written per step from ``maps`` instead of stored (what the optimiser calls)."""
+    n, d = y.shape
+    m = a0.size
+    t = np.zeros((m, m))
+    t[1, 1] = 1.0
+    t[2, 2:] = ar
+    for i in range(1, ar.size):
+        t[2 + i, 1 + i] = 1.0
+    c = np.zeros(m)
+    q = np.zeros((m, m))
+    q[2, 2] = innovation_var
+    gains = np.empty((d, m))
+    work = np.empty((m + 1, m))
+    a = a0.copy()
+    p = p0.copy()
+    ll = 0.0
+    for k in range(n):
+        ll += update(a, p, y[k], observed, obs_var[k], gains)
+        if not ll > -np.inf:
+            return -np.inf
+        if k + 1 < n:
+            t[0, 0] = maps[k, 0]
+            t[0, 2] = maps[k, 1]
+            c[0] = maps[k, 2]
+            t[1, 0] = maps[k, 3]
+            t[1, 2] = maps[k, 4]
+            c[1] = maps[k, 5]
+            predict(a, p, t, c, q, work)
+    return ll
+
+
+#: Negative log-likelihood returned where the parameters are outside the model (unstable).
+_OUTSIDE = 1e12
+
+
+def _negloglike_natural(data: _Data, nat: dict[str, Any]) -> float:
+    parts = _parts(data, nat)
+    if parts is None:
+        return _OUTSIDE
+    value = -_roll_loglike(
+        parts.maps,
+        parts.ar,
+        parts.innovation_var,
+        data.y,
+        data.observed,
+        parts.obs_var,
+        parts.initial_mean,
+        parts.initial_cov,
+    )
+    return value if np.isfinite(value) else _OUTSIDE
+
+
+def _negloglike(x: FloatArray, data: _Data, layout: _Layout) -> float:
+    return _negloglike_natural(data, layout.natural(x))
+
+
+def _start(data: _Data, inputs: Measurements, model: str, order: int) -> dict[str, Any]:
+    """A starting point from the data alone: α and θ̄ from a line through rate
+    against fin angle, a = 1 1/s, u_d of the residual's size, lag-one correlation 0.5."""
+    fin = np.asarray(inputs.theta_fine[:: data.per], dtype=float)
+    rate = np.asarray(inputs.velocity_dps, dtype=float)
+    slope, intercept = np.polyfit(fin, rate, 1)
+    if abs(slope) < 1e-3:
+        slope = 1e-3 if slope >= 0 else -1e-3
+    residual = rate / slope - fin - intercept / slope
+    sd_u = max(float(np.std(residual)), 0.5)
+    ar = np.zeros(order)
+    ar[0] = 0.5
+    return {
+        "alpha": float(slope),
+        "theta_bar": float(intercept / slope),
+        "alpha_bar": 0.0,
+        "beta_bar": 1.0,
+        "ar": ar,
+        "innovation_sd": sd_u * math.sqrt(1.0 - 0.25),
+        "gyro": 0.02,
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class MLFit:
+    """Result of :func:`maximum_likelihood` for one damping model.
+
+    Attributes
+    ----------
+    model : str
+        ``constant`` or ``theta``.
+    params : RollParams
+        The estimate.
+    ar : ndarray
+        The turbulence's AR coefficients (order = size).
+    innovation_sd_deg, sd_deg : float
+        SD of the AR innovation and of ``u_d`` itself, °.
+    gyro_noise : float
+        Estimated gyro noise level (eq. 52, fraction), 0 without a gyro.
+    loglike, aic : float
+        Log-likelihood at the optimum and ``2k - 2·loglike``.
+    n_params : int
+        ``k``.
+    std_errors : dict
+        Standard error of each natural parameter (NaN where the Hessian is
+        not positive definite there).
+    orders : dict
+        AIC of each AR order tried.
+    converged : bool
+        The optimiser's verdict.
+    nfev : int
+        Likelihood evaluations (all orders).
+    u_d_mean_deg, u_d_sd_deg : ndarray, shape (n - 1,)
+        Posterior mean and SD of ``u_d`` over each sample interval.
+    time_s : ndarray, shape (n,)
+        Sample times.
+    """
+
+    model: str
+    params: RollParams
+    ar: FloatArray
+    innovation_sd_deg: float
+    sd_deg: float
+    gyro_noise: float
+    loglike: float
+    aic: float
+    n_params: int
+    std_errors: dict[str, float]
+    orders: dict[int, float]
+    converged: bool
+    nfev: int
+    u_d_mean_deg: FloatArray
+    u_d_sd_deg: FloatArray
+    time_s: FloatArray
+    _state_space: LinearGaussian = field(repr=False)
+    _smoothed: Smoothed = field(repr=False)
+
+    @property
+    def initial_state(self) -> tuple[float, float]:
+        """Posterior mean roll rate (°/s) and angle (°) at the first sample."""
+        first = self._smoothed.mean[0]
+        return float(first[0]), float(first[1])
+
+    @property
+    def interval_s(self) -> float:
+        return float(self.time_s[1] - self.time_s[0])
+
+    def disturbance(self) -> Disturbance:
+        """The posterior mean ``u_d`` as a step-8 style disturbance (held per interval)."""
+        return Disturbance(
+            model=self.model,
+            params=self.params,
+            interval_s=self.interval_s,
+            start_s=readonly_array(self.time_s[:-1]),
+            u_d_deg=readonly_array(self.u_d_mean_deg),
+        )
+
+
+def _minimize(data: _Data, layout: _Layout, start: dict[str, Any]) -> optimize.OptimizeResult:
+    return optimize.minimize(
+        _negloglike,
+        layout.vector(start),
+        args=(data, layout),
+        method="L-BFGS-B",
+        options={"maxiter": 500},
+    )
+
+
+def _pivot(data: _Data, theta_bar: float) -> float:
+    """The typical deflection ``mean |θ + θ̄|`` of the recording, ° (at least 1°)."""
+    return max(float(np.mean(np.abs(data.theta_fine + theta_bar))), 1.0)
+
+
+def _std_errors(data: _Data, model: str, nat: dict[str, Any]) -> dict[str, float]:
+    """Standard errors of the rocket's parameters from the observed information
+    (the Hessian of the log-likelihood over all free parameters, inverted)."""
+    layout = _Layout(model, int(np.size(nat["ar"])), data.has_gyro, _pivot(data, nat["theta_bar"]))
+    rocket = (
+        ["alpha", "theta_bar", "beta_bar"]
+        if model == "constant"
+        else ["alpha", "theta_bar", "alpha_bar", "beta_bar"]
+    )
+    x0 = layout.vector(nat)
+    k = len(rocket)
+
+    def f(values: FloatArray) -> float:
+        # Rocket parameters in natural units, the turbulence's in the optimiser's.
+        trial = layout.natural(np.concatenate([x0[:k], values[k:]]))
+        trial.update(zip(rocket, values[:k].tolist(), strict=True))
+        return _negloglike_natural(data, trial)
+
+    from statsmodels.tools.numdiff import approx_hess3
+
+    point = np.concatenate([[nat[name] for name in rocket], x0[k:]])
+    hess = approx_hess3(point, f)
+    try:
+        diag = np.diag(np.linalg.inv(hess))[:k]
+        se = np.sqrt(np.where(diag > 0, diag, np.nan))
+    except np.linalg.LinAlgError:
+        se = np.full(k, np.nan)
+    rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
+    return {rename.get(n, n): float(v) for n, v in zip(rocket, se, strict=True)}
+
+
+@dataclass
+class _Search:
+    """Fits of one recording across models and AR orders, shared (the constant
+    model's AR(1) fit starts the θ model)."""
+
+    data: _Data
+    inputs: Measurements
+    nfev: int = 0
+    found: dict[tuple[str, int], tuple[float, dict[str, Any], bool, str]] = field(
+        default_factory=dict
+    )
+
+    def order(self, model: str, order: int) -> tuple[float, dict[str, Any], bool, str]:
+        """(−log-likelihood, natural parameters, converged, message) of one model and order."""
+        key = (model, order)
+        if key in self.found:
+            return self.found[key]
+        if order > 1:
+            warm = dict(self.order(model, order - 1)[1])
+            warm["ar"] = np.append(warm["ar"], 0.0)
+        elif model == "theta":
+            warm = dict(self.order("constant", 1)[1])  # ᾱ = 0: the nested model
+        else:
+            warm = _start(self.data, self.inputs, model, order)
+        layout = _Layout(model, order, self.data.has_gyro, _pivot(self.data, warm["theta_bar"]))
+        result = _minimize(self.data, layout, warm)
+        self.nfev += int(result.nfev)
+        self.found[key] = (
+            float(result.fun),
+            layout.natural(result.x),
+            bool(result.success),
+            str(result.message),
+        )
+        return self.found[key]
+
+
+def _n_params(model: str, order: int, gyro: bool) -> int:
+    return len(_Layout(model, order, gyro).names)
+
+
+def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
+    """The model's fit at the AR order of least AIC (orders tried upwards until AIC rises)."""
+    check_model(model)
+    data = search.data
+    orders: dict[int, float] = {}
+    best = 1
+    for order in range(1, max_order + 1):
+        fun = search.order(model, order)[0]
+        orders[order] = 2.0 * _n_params(model, order, data.has_gyro) + 2.0 * fun
+        if orders[order] < orders[best]:
+            best = order
+        elif order > best:
+            break
+    fun, nat, converged, message = search.order(model, best)
+    parts = _parts(data, nat)
+    if parts is None or not fun < _OUTSIDE:
+        raise IdentificationError(
+            f"{data.name}: maximum likelihood found no stable model ({message})"
+        )
+    return _result(
+        data,
+        model,
+        nat,
+        parts,
+        loglike=-fun,
+        aic=float(orders[best]),
+        n_params=_n_params(model, best, data.has_gyro),
+        std_errors=_std_errors(data, model, nat),
+        orders=orders,
+        converged=converged,
+        nfev=search.nfev,
+    )
+
+
+def _result(
+    data: _Data,
+    model: str,
+    nat: dict[str, Any],
+    parts: _Parts,
+    *,
+    loglike: float,
+    aic: float,
+    n_params: int,
+    std_errors: dict[str, float],
+    orders: dict[int, float],
+    converged: bool,
+    nfev: int,
+) -> MLFit:
+    """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``."""
+    ss = _state_space(data, parts)
+    smoothed = smooth(ss)
+    u_cov = _stationary_cov(nat["ar"], nat["innovation_sd"])
+    return MLFit(
+        model=model,
+        params=RollParams(nat["alpha"], nat["theta_bar"], nat["beta_bar"], nat["alpha_bar"]),
+        ar=np.asarray(nat["ar"], dtype=float),
+        innovation_sd_deg=float(nat["innovation_sd"]),
+        sd_deg=float(math.sqrt(u_cov[0, 0])),
+        gyro_noise=float(nat["gyro"]),
+        loglike=float(loglike),
+        aic=aic,
+        n_params=n_params,
+        std_errors=std_errors,
+        orders=orders,
+        converged=converged,
+        nfev=nfev,
+        u_d_mean_deg=readonly_array(smoothed.mean[:-1, 2]),
+        u_d_sd_deg=readonly_array(np.sqrt(np.clip(smoothed.cov[:-1, 2, 2], 0.0, None))),
+        time_s=readonly_array(data.time_s),
+        _state_space=ss,
+        _smoothed=smoothed,
+    )
+
+
+def posterior_given(
+    recording: Recording,
+    params: RollParams,
+    ar: Sequence[float],
+    sd_deg: float,
+    *,
+    gyro_noise: float = 0.0,
+    options: IdentifyOptions | None = None,
+) -> MLFit:
+    """The posterior of ``u_d`` under given parameters and turbulence statistics (no fit).
+
+    With the tunnel's true parameters and its turbulence (AR(1),
+    ``exp(-Δt/τ)``, its SD) this is the best any estimate of ``u_d`` from the
+    recording can do: the bound :mod:`benchmarks.ground_truth` holds the
+    methods to.
+
+    Parameters
+    ----------
+    recording : Recording
+        The data.
+    params : RollParams
+        The rocket.
+    ar : sequence of float
+        AR coefficients of the turbulence on the sample grid (stationary).
+    sd_deg : float
+        SD of ``u_d`` itself, °.
+    gyro_noise : float
+        The gyro's noise level (eq. 52, a fraction), if the recording has a gyro.
+    options : IdentifyOptions, optional
+        Fine grid and servo settings.
+    """
+    coefficients = np.asarray(ar, dtype=float)
+    if coefficients.ndim != 1 or coefficients.size < 1:
+        raise ValueError("ar must be a sequence of at least one coefficient")
+    if np.any(np.abs(_pacf_from_ar(coefficients)) >= 1.0):
+        raise ValueError(f"ar {coefficients.tolist()} is not stationary")
+    if not sd_deg > 0.0:
+        raise ValueError(f"sd_deg must be positive, got {sd_deg!r}")
+    opts = IdentifyOptions() if options is None else options
+    data = _prepare(measurements(recording, opts))
+    unit = math.sqrt(_stationary_cov(coefficients, 1.0)[0, 0])
+    nat = {
+        "alpha": params.alpha,
+        "theta_bar": params.theta_bar_deg,
+        "alpha_bar": params.alpha_bar_per_deg_s,
+        "beta_bar": params.beta_bar_per_s,
+        "ar": coefficients,
+        "innovation_sd": sd_deg / unit,
+        "gyro": gyro_noise,
+    }
+    parts = _parts(data, nat)
+    if parts is None:
+        raise IdentificationError(f"{recording.name}: the damping a(θ) is not positive")
+    model = "constant" if params.is_constant_damping else "theta"
+    ll = -_negloglike_natural(data, nat)
+    return _result(
+        data,
+        model,
+        nat,
+        parts,
+        loglike=ll,
+        aic=math.nan,
+        n_params=0,
+        std_errors={},
+        orders={},
+        converged=True,
+        nfev=1,
+    )
+
+
+def maximum_likelihood(
+    recording: Recording,
+    model: str = "theta",
+    *,
+    options: IdentifyOptions | None = None,
+    max_order: int = MAX_ORDER,
+) -> MLFit:
+    """Fit eq. 29 (``model="constant"``) or eq. 49 (``"theta"``) by maximum likelihood.
+
+    Parameters
+    ----------
+    recording : Recording
+        Any recording with a fin input and the roll angle, the roll rate or both.
+    model : str
+        ``constant`` or ``theta``.
+    options : IdentifyOptions, optional
+        Fine grid and servo settings (shared with the paper's pipeline).
+    max_order : int
+        Highest AR order of the turbulence tried (AIC picks).
+
+    Returns
+    -------
+    MLFit
+    """
+    try:
+        check_model(model)
+    except ValueError as exc:
+        raise IdentificationError(str(exc)) from None
+    opts = IdentifyOptions() if options is None else options
+    inputs = measurements(recording, opts)
+    return _fit(_Search(_prepare(inputs), inputs), model, max_order)
+
+
+def posterior_traces(fit: MLFit, size: int, seed: int = 0) -> FloatArray:
+    """``size`` draws of the whole ``u_d`` trace from its posterior given the recording.
+
+    Durbin–Koopman simulation smoothing (:func:`identification.statespace.simulation_smoother`):
+    each draw is a realisation of the fitted turbulence process consistent
+    with the data.  Returns shape ``(size, n - 1)``, ° per sample interval.
+    """
+    if size < 1:
+        raise ValueError(f"size must be at least 1, got {size}")
+    rng = np.random.default_rng(seed)
+    draws = simulation_smoother(fit._state_space, fit._smoothed, rng, size)
+    return np.asarray(draws[:, :-1, 2], dtype=float)
+
+
+def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
+    """Maximum likelihood as an identification method (``method="ml"``).
+
+    Its trace is the posterior mean ``u_d``; metrics add the log-likelihood,
+    AIC, AR order, standard errors and the turbulence's fitted statistics.
+    The re-simulation (step 9) starts from the posterior mean initial state,
+    the method's own estimate of it: the measured first velocity is a
+    smoothed derivative whose error would stay in the angle for good.
+    """
+    inputs = context.measurements
+    search = _Search(_prepare(inputs), inputs)
+    fits = []
+    for model in models:
+        found = _fit(search, model)
+        dist = found.disturbance()
+        resim = resimulate(
+            dist,
+            inputs.recording,
+            inputs.grid,
+            inputs.theta_fine,
+            inputs.velocity_dps,
+            inputs.angle_deg,
+            initial=found.initial_state,
+        )
+        metrics = {
+            "sources": {
+                "angle": inputs.angle_source,
+                "velocity": inputs.velocity_source,
+                "fin_angle": inputs.theta_source,
+            },
+            **resimulation_metrics(resim),
+            "loglike": found.loglike,
+            "aic": found.aic,
+            "n_params": found.n_params,
+            "ar_order": int(found.ar.size),
+            "ar": found.ar.tolist(),
+            "u_d_sd_deg": found.sd_deg,
+            "innovation_sd_deg": found.innovation_sd_deg,
+            "gyro_noise": found.gyro_noise,
+            "std_errors": found.std_errors,
+            "aic_by_order": {str(k): v for k, v in found.orders.items()},
+            "nfev": found.nfev,
+            "converged": found.converged,
+            "posterior_sd_mean_deg": float(np.mean(found.u_d_sd_deg)),
+        }
+        settings = {"interval_s": found.interval_s, "estimate": "posterior mean (RTS smoother)"}
+        fits.append(
+            ModelFit(
+                "ml",
+                model,
+                found.params,
+                dist,
+                metrics,
+                settings,
+                u_d_sd_deg=found.u_d_sd_deg,
+                sample_posterior=functools.partial(posterior_traces, found),
+            )
+        )
+    return fits
