@@ -1,37 +1,37 @@
-"""Ground-truth recovery of the paper's method and of the output-error peer.
+"""Ground-truth recovery of every identification method, over seeds and truths.
 
-For each virtual-tunnel seed (the paper's Table 1 experiment with known
-parameters and a known disturbance), this script runs
+For each virtual-tunnel truth (``--truth``, see ``benchmarks/_truths.py``:
+the paper's rocket and ones that differ from it) and seed, this script runs
+every registered identification method (``--methods``; default all:
+``paper``, ``output-error``, ``ml``) on the recording, through
+:func:`identification.methods.fit` with one shared context, and compares them
+with the truth the tunnel recorded:
 
-* the paper's method, ``identify(rec, IdentifyOptions(noise_runs=0))``, and
-* the peer, ``output_error(rec, "constant")`` and ``output_error(rec, "theta")``
-  (:mod:`identification.baselines`: nonlinear least squares on the simulated
-  roll rate),
-
-and compares them with the truth the tunnel recorded:
-
-* α, relative error in %;
-* θ̄, error in °;
+* α, relative error in %, and θ̄, error in °, of each model's fit;
 * the constant damping ``a`` (eq. 29), relative error in % -- for a
-  θ-dependent truth (eq. 49, the tunnel's default) there is no single true
-  ``a``; the reference is then ``a(θ)`` averaged over the run's step fin
-  levels (``Identification.truth()["a_per_s"]``);
+  θ-dependent truth (eq. 49) there is no single true ``a``; the reference is
+  then ``a(θ)`` averaged over the run's step fin levels;
 * the damping curve ``a(θ)`` over the step fin levels ``f``: RMS and signed
-  mean of ``â(f) - a_true(f)``, 1/s, for both models (the constant model's
-  ``â`` is flat);
+  mean of ``â(f) - a_true(f)``, 1/s (the constant model's ``â`` is flat);
 * ᾱ and β̄ of the θ-dependent model (eq. 48);
-* for the paper's method only, the identified disturbance ``u_d`` against the
-  tunnel's true ``u_d``: mean absolute error, ° (the peer does not identify
-  ``u_d``: it treats the disturbance as output noise).
+* the identified ``u_d`` against the tunnel's true ``u_d``: mean absolute
+  error, °, and its ratio to the **bound**: the smoother with the *true*
+  parameters and turbulence statistics (:func:`identification.ml.posterior_given`)
+  on the same recording, computed in the same run;
+* for a method with a posterior (``ml``): how often the true ``u_d`` lies in
+  the 90 % posterior band, and 50 posterior sample traces' SD and lag-1..10
+  autocorrelation against the true trace's.
 
 Per metric and method the table gives, over seeds, the mean absolute error,
 the SD of the signed error, the bias (signed mean) and the worst error (the
-signed value with the largest magnitude).  The summary below the table is
-computed from those numbers.
+signed value with the largest magnitude).  Below it: each method's biases,
+and the targets of issue 14 for the methods with a posterior, each PASS or
+FAIL as measured.
 
 Run from the repository root::
 
     .venv/bin/python benchmarks/ground_truth.py --seeds 20
+    .venv/bin/python benchmarks/ground_truth.py --seeds 20 --truth all
 """
 
 from __future__ import annotations
@@ -44,53 +44,51 @@ import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
+from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
-from identification.baselines import OutputErrorFit, output_error
+from identification.methods import METHODS, Context, ModelFit, fit
+from identification.ml import posterior_given
 from identification.model import RollParams, damping
-from identification.pipeline import Identification, IdentifyOptions, identify
+from identification.pipeline import IdentifyOptions
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll_common.arrays import FloatArray
 
-PAPER = "paper"
-PEER = "peer"
-METHOD_TITLES = {PAPER: "paper's method", PEER: "output-error peer"}
+#: Posterior sample traces drawn per seed for the SD and autocorrelation checks.
+POSTERIOR_DRAWS = 50
+#: Autocorrelation lags compared.
+LAGS = 10
 
 
 @dataclass(frozen=True)
 class Metric:
-    """One row of the table.
-
-    ``key`` names the per-seed column; ``paper``/``peer`` say which estimate
-    of each method the row uses (``None``: not applicable).
-    """
+    """One row of the table: ``key`` names the per-seed value."""
 
     key: str
     label: str
     unit: str
-    paper: str | None
-    peer: str | None
-    summary: str
+    summary: str = ""
 
 
 METRICS: tuple[Metric, ...] = (
-    Metric("alpha_pct", "α, constant-model fit", "%", "α (steady state)", "constant", "α"),
-    Metric("alpha_theta_pct", "α, θ-model fit", "%", "α (steady state)", "theta", "α (θ fit)"),
-    Metric("theta_bar_deg", "θ̄, constant-model fit", "°", "θ̄ (steady state)", "constant", "θ̄"),
-    Metric("theta_bar_theta_deg", "θ̄, θ-model fit", "°", "θ̄ (steady state)", "theta", "θ̄ (θ fit)"),
-    Metric(
-        "a_const_pct", "constant a vs averaged truth", "%", "constant", "constant", "constant a"
-    ),
-    Metric("a_rms_const", "a(θ) RMS, constant model", "1/s", "constant", "constant", ""),
-    Metric("a_rms_theta", "a(θ) RMS, θ model", "1/s", "theta", "theta", ""),
-    Metric("a_mean_theta", "a(θ) mean offset, θ model", "1/s", "theta", "theta", "a(θ)"),
-    Metric("alpha_bar", "ᾱ, θ model", "1/(°s)", "theta", "theta", "ᾱ"),
-    Metric("beta_bar", "β̄, θ model", "1/s", "theta", "theta", "β̄"),
-    Metric("ud_theta_mae", "u_d,θ MAE vs true u_d", "°", "theta", None, ""),
-    Metric("ud_const_mae", "u_d,constant MAE vs true u_d", "°", "constant", None, ""),
+    Metric("alpha_pct", "α, constant-model fit", "%", "α"),
+    Metric("alpha_theta_pct", "α, θ-model fit", "%", "α (θ fit)"),
+    Metric("theta_bar_deg", "θ̄, constant-model fit", "°", "θ̄"),
+    Metric("theta_bar_theta_deg", "θ̄, θ-model fit", "°", "θ̄ (θ fit)"),
+    Metric("a_const_pct", "constant a vs averaged truth", "%", "constant a"),
+    Metric("a_rms_const", "a(θ) RMS, constant model", "1/s"),
+    Metric("a_rms_theta", "a(θ) RMS, θ model", "1/s"),
+    Metric("a_mean_theta", "a(θ) mean offset, θ model", "1/s", "a(θ)"),
+    Metric("alpha_bar", "ᾱ, θ model", "1/(°s)", "ᾱ"),
+    Metric("beta_bar", "β̄, θ model", "1/s", "β̄"),
+    Metric("ud_theta_mae", "u_d,θ MAE vs true u_d", "°"),
+    Metric("ud_const_mae", "u_d,constant MAE vs true u_d", "°"),
+    Metric("ud_bound_ratio", "u_d MAE / true-parameter bound", "×"),
+    Metric("coverage90", "true u_d in 90 % posterior band", "frac"),
+    Metric("sample_sd_pct", "posterior draws' SD vs true SD", "%"),
+    Metric("sample_acf", "posterior draws' ACF, max |error|", "abs"),
 )
 
 
@@ -123,52 +121,85 @@ def parameter_errors(
     }
 
 
-def disturbance_mae(result: Identification, model: str, true_ud: FloatArray) -> float:
-    """MAE of the identified ``u_d`` against the truth of the same intervals.
+def trace_mae(u: FloatArray, true_ud: FloatArray) -> float:
+    """MAE of an identified ``u_d`` against the truth of the same intervals.
 
-    The identified trace has ``N_total`` values, one per 0.1 s interval; the
-    tunnel's ``ud_true_deg`` holds its value over each sample interval, so the
-    first ``N_total`` truth samples are the same intervals.
+    The tunnel's ``ud_true_deg`` holds its value over each sample interval and
+    every method's trace starts at the first sample, one value per interval.
     """
-    u = result.disturbances[model].u_d_deg
     return float(np.mean(np.abs(u - true_ud[: u.size])))
 
 
+def acf(x: FloatArray, lags: int = LAGS) -> FloatArray:
+    """Sample autocorrelation at lags 1..``lags``."""
+    d = np.asarray(x, dtype=float) - float(np.mean(x))
+    v = float(np.dot(d, d))
+    return np.array([float(np.dot(d[:-k], d[k:])) / v for k in range(1, lags + 1)])
+
+
+def bound_of(rec_spec: TunnelSpec, rec: object) -> FloatArray:
+    """The true-parameter smoother's ``u_d`` (the bound no method can beat on average)."""
+    turbulence = rec_spec.turbulence_model()
+    tau = turbulence.correlation_time_s
+    lag_one = math.exp(-rec_spec.log_dt / tau) if tau > 0 else 0.0
+    gyro = 0.0 if rec_spec.gyro_noise is None else rec_spec.gyro_noise / 100.0
+    found = posterior_given(
+        rec,  # type: ignore[arg-type]
+        rec_spec.params(),
+        [lag_one],
+        turbulence.sd_deg,
+        gyro_noise=gyro,
+    )
+    return np.asarray(found.u_d_mean_deg, dtype=float)
+
+
+def posterior_errors(found: ModelFit, true_ud: FloatArray, seed: int) -> dict[str, float]:
+    """Coverage of the 90 % band and the posterior draws' SD and ACF against the truth."""
+    out: dict[str, float] = {}
+    u = np.asarray(found.disturbance.u_d_deg, dtype=float)
+    truth = true_ud[: u.size]
+    if found.u_d_sd_deg is not None:
+        out["coverage90"] = float(np.mean(np.abs(u - truth) <= 1.645 * found.u_d_sd_deg))
+    if found.sample_posterior is not None:
+        draws = found.sample_posterior(POSTERIOR_DRAWS, seed)
+        out["sample_sd_pct"] = relative_pct(float(np.mean(draws.std(axis=1))), float(truth.std()))
+        mean_acf = np.mean([acf(d) for d in draws], axis=0)
+        out["sample_acf"] = float(np.max(np.abs(mean_acf - acf(truth))))
+    return out
+
+
 def study_seed(
-    seed: int, model: Literal["theta", "constant"]
-) -> tuple[dict[str, float], dict[str, float], dict[str, float]]:
-    """One seed: per-method errors and bookkeeping (timings, optimiser status)."""
-    rec = run_tunnel(TunnelSpec(seed=seed, model=model))
+    truth_name: str, seed: int, methods: Sequence[str]
+) -> tuple[dict[str, dict[str, float]], dict[str, float]]:
+    """One recording: per-method errors and bookkeeping (timings, optimiser status)."""
+    spec = spec_of(truth_name, seed)
+    rec = run_tunnel(spec)
     truth = rec.truth()
     if truth is None or rec.ud_true_deg is None:
         raise RuntimeError(f"seed {seed}: the tunnel recording carries no ground truth")
-
-    start = time.perf_counter()
-    result = identify(rec, IdentifyOptions(noise_runs=0))
-    paper_s = time.perf_counter() - start
-    start = time.perf_counter()
-    fits: dict[str, OutputErrorFit] = {m: output_error(rec, m) for m in ("constant", "theta")}
-    peer_s = time.perf_counter() - start
-
-    true_avg = result.truth()
-    assert true_avg is not None
-    levels = result.segments.step_levels_deg
-    a_avg = true_avg["a_per_s"]
-    paper = parameter_errors(result.constant_model, result.theta_model, truth, a_avg, levels)
-    paper["ud_theta_mae"] = disturbance_mae(result, "theta", rec.ud_true_deg)
-    paper["ud_const_mae"] = disturbance_mae(result, "constant", rec.ud_true_deg)
-    peer = parameter_errors(fits["constant"].params, fits["theta"].params, truth, a_avg, levels)
-    info = {
-        "paper_s": paper_s,
-        "peer_s": peer_s,
-        "peer_nfev": float(fits["constant"].nfev + fits["theta"].nfev),
-        "peer_failures": float(sum(not f.success for f in fits.values())),
-        "a_truth_avg": a_avg,
-        "outlier_step": float(
-            -1 if result.damping_vs_fin.outlier is None else result.damping_vs_fin.outlier + 1
-        ),
-    }
-    return paper, peer, info
+    true_ud = np.asarray(rec.ud_true_deg, dtype=float)
+    context = Context(rec, IdentifyOptions(noise_runs=0))
+    levels = np.asarray(context.measurements.segments.step_levels_deg, dtype=float)
+    a_avg = float(np.mean(damping(truth, levels)))
+    bound = bound_of(spec, rec)
+    bound_mae = trace_mae(bound, true_ud)
+    info: dict[str, float] = {"a_truth_avg": a_avg, "bound_mae": bound_mae}
+    errors: dict[str, dict[str, float]] = {}
+    for method in methods:
+        start = time.perf_counter()
+        fits = fit(context, method, ("constant", "theta"))
+        info[f"{method}_s"] = time.perf_counter() - start
+        row = parameter_errors(fits["constant"].params, fits["theta"].params, truth, a_avg, levels)
+        row["ud_theta_mae"] = trace_mae(fits["theta"].disturbance.u_d_deg, true_ud)
+        row["ud_const_mae"] = trace_mae(fits["constant"].disturbance.u_d_deg, true_ud)
+        own = fits[spec.model]  # the truth's own model
+        row["ud_bound_ratio"] = trace_mae(own.disturbance.u_d_deg, true_ud) / bound_mae
+        row.update(posterior_errors(own, true_ud, seed))
+        info[f"{method}_failures"] = float(
+            sum(f.metrics.get("converged", True) is False for f in fits.values())
+        )
+        errors[method] = row
+    return errors, info
 
 
 @dataclass(frozen=True)
@@ -222,119 +253,119 @@ def fmt(value: float, unit: str) -> str:
     return f"{value:+.3f}"
 
 
-def print_table(
-    per_seed: dict[str, list[dict[str, float]]],
-) -> dict[tuple[str, str], Stats]:
+def print_table(per_seed: dict[str, list[dict[str, float]]]) -> dict[tuple[str, str], Stats]:
+    """One block per method; rows the metrics it has; columns over seeds."""
     cols = ("mean|e|", "SD", "bias", "worst")
     width = 8
-    method_block = " ".join(f"{c:>{width}s}" for c in cols)
-    head1 = (
-        f"{'metric':33s} {'unit':>6s} | {METHOD_TITLES[PAPER]:^35s} | {METHOD_TITLES[PEER]:^35s}"
-    )
-    head2 = f"{'':33s} {'':>6s} | {method_block} | {method_block}"
-    print(head1)
-    print(head2)
-    print("-" * len(head2))
+    header = f"{'metric':36s} {'unit':>6s} | " + " ".join(f"{c:>{width}s}" for c in cols)
     table: dict[tuple[str, str], Stats] = {}
-    for metric in METRICS:
-        cells = []
-        for method, which in ((PAPER, metric.paper), (PEER, metric.peer)):
-            if which is None:
-                cells.append(" ".join(f"{'n/a':>{width}s}" for _ in cols))
+    for method, rows in per_seed.items():
+        print(f"{method}: {METHODS.entry(method).info.get('summary', '')}")
+        print(header)
+        print("-" * len(header))
+        for metric in METRICS:
+            values = [row[metric.key] for row in rows if metric.key in row]
+            if not values:
                 continue
-            s = stats_of([row[metric.key] for row in per_seed[method]])
+            s = stats_of(values)
             table[(method, metric.key)] = s
-            # mean|e| is a magnitude: shown unsigned.
-            mean_text = fmt(s.mean_abs, metric.unit).lstrip("+")
-            values = (
-                mean_text,
+            cells = (
+                fmt(s.mean_abs, metric.unit).lstrip("+"),  # a magnitude: unsigned
                 fmt(s.sd, metric.unit).lstrip("+"),
                 fmt(s.bias, metric.unit),
                 fmt(s.worst, metric.unit),
             )
-            cells.append(" ".join(f"{v:>{width}s}" for v in values))
-        print(f"{ljust(metric.label, 33)} {rjust(metric.unit, 6)} | {cells[0]} | {cells[1]}")
+            print(
+                f"{ljust(metric.label, 36)} {rjust(metric.unit, 6)} | "
+                + " ".join(f"{v:>{width}s}" for v in cells)
+            )
+        print()
     return table
 
 
-def describe_bias(metric: Metric, s: Stats, method: str) -> str:
+def describe_bias(metric: Metric, s: Stats) -> str:
     unit = "" if metric.unit == "%" else f" {metric.unit}"
+    what, ref = metric.summary, " relative" if metric.unit == "%" else ""
     if metric.key == "a_const_pct":
-        what = "constant a"
         ref = " relative to the averaged truth"
-    elif metric.unit == "%":
-        what, ref = metric.summary, " relative"
-    else:
-        what, ref = metric.summary, ""
     value = fmt(s.bias, metric.unit) + ("%" if metric.unit == "%" else unit)
     verdict = "biased" if s.significant else "not significantly biased"
     t = s.bias / s.standard_error if np.isfinite(s.standard_error) and s.standard_error else 0.0
-    return f"{METHOD_TITLES[method]}: {what} {verdict} ({value}{ref}, t = {t:+.1f})"
+    return f"{what} {verdict} ({value}{ref}, t = {t:+.1f})"
+
+
+#: Issue 14's floor for a method with a posterior: (metric, statistic, low, high, text).
+TARGETS: tuple[tuple[str, str, float, float, str], ...] = (
+    ("alpha_theta_pct", "mean_abs", 0.0, 1.5, "α mean |error| ≤ 1.5 %"),
+    ("theta_bar_theta_deg", "mean_abs", 0.0, 0.3, "θ̄ mean |error| ≤ 0.3°"),
+    ("a_rms_theta", "mean_abs", 0.0, 0.15, "a(θ) RMS error ≤ 0.15 1/s"),
+    ("ud_bound_ratio", "bias", 0.0, 1.10, "u_d MAE within 10 % of the true-parameter bound"),
+    ("coverage90", "bias", 0.85, 0.95, "90 % band holds the true u_d 85-95 % of the time"),
+    ("sample_sd_pct", "bias", -5.0, 5.0, "posterior draws' SD within 5 % of the truth's"),
+    ("sample_acf", "mean_abs", 0.0, 0.05, "posterior draws' lag-1..10 ACF within 0.05"),
+)
 
 
 def print_summary(
     table: dict[tuple[str, str], Stats],
     info: list[dict[str, float]],
-    model: str,
-) -> None:
-    print()
+    methods: Sequence[str],
+) -> bool:
+    """Biases per method and the targets; True if every target measured is met."""
     print("Summary (bias = signed mean over seeds; 'biased' = |bias| > 2 standard errors):")
-    for method in (PAPER, PEER):
-        for metric in METRICS:
-            if not metric.summary or (method, metric.key) not in table:
-                continue
-            if method == PAPER and metric.key in ("alpha_theta_pct", "theta_bar_theta_deg"):
-                continue  # the same steady-state α, θ̄ as the constant-model row
-            print("  " + describe_bias(metric, table[(method, metric.key)], method))
-    better: list[str] = []
-    worse: list[str] = []
+    for method in methods:
+        notes = [
+            describe_bias(metric, table[(method, metric.key)])
+            for metric in METRICS
+            if metric.summary and (method, metric.key) in table
+        ]
+        print(f"  {method}: " + "; ".join(notes))
     for metric in METRICS:
-        if (PAPER, metric.key) in table and (PEER, metric.key) in table:
-            p = table[(PAPER, metric.key)].mean_abs
-            q = table[(PEER, metric.key)].mean_abs
-            (better if p < q else worse).append(f"{metric.label} ({p:.3g} vs {q:.3g})")
-    print("  mean |error| lower for the paper's method: " + ("; ".join(better) or "none"))
-    print("  mean |error| lower for the peer: " + ("; ".join(worse) or "none"))
-    ud = table[(PAPER, "ud_theta_mae")]
+        have = [m for m in methods if (m, metric.key) in table]
+        if len(have) > 1 and metric.key != "coverage90":
+            best = min(have, key=lambda m: table[(m, metric.key)].mean_abs)
+            print(f"  lowest mean |error|, {metric.label}: {best}")
     print(
-        f"  paper's method: u_d,θ recovered with a mean absolute error of {ud.bias:.2f}° "
-        f"(worst seed {ud.worst:.2f}°)"
+        "  true-parameter smoother bound: u_d MAE "
+        f"{np.mean([r['bound_mae'] for r in info]):.3f}° (mean over recordings)"
     )
-    failures = int(sum(row["peer_failures"] for row in info))
-    outliers = sum(row["outlier_step"] > 0 for row in info)
-    print(
-        f"  output-error optimiser: {failures} non-converged fits of {2 * len(info)}, "
-        f"{np.mean([row['peer_nfev'] for row in info]):.1f} simulations per seed (both models)"
-    )
-    print(f"  paper's step 7 left a step out as an outlier in {outliers} of {len(info)} seeds")
-    print(
-        f"  median wall time per seed (noisy; benchmarks/speed.py times properly): paper's method "
-        f"{1e3 * np.median([r['paper_s'] for r in info]):.0f} ms, "
-        f"peer (both models) {1e3 * np.median([r['peer_s'] for r in info]):.0f} ms"
-    )
-    if model == "theta":
-        avg = np.mean([row["a_truth_avg"] for row in info])
+    for method in methods:
+        failures = int(sum(r.get(f"{method}_failures", 0.0) for r in info))
+        median = 1e3 * float(np.median([r[f"{method}_s"] for r in info]))
         print(
-            f"  (θ-dependent truth: the 'averaged truth' of the constant a is a(θ) averaged "
-            f"over the step levels, {avg:.4f} 1/s)"
+            f"  {method}: {failures} non-converged fits of {2 * len(info)}; median wall time "
+            f"{median:.0f} ms per recording, both models (noisy; benchmarks/speed.py times)"
         )
+    ok = True
+    for method in methods:
+        if (method, "coverage90") not in table:
+            continue
+        print(f"Targets (issue 14), {method}:")
+        a_mean = table.get((method, "a_mean_theta"))
+        for key, stat, low, high, text in TARGETS:
+            s = table.get((method, key))
+            if s is None:
+                continue
+            value = getattr(s, stat)
+            passed = low <= value <= high
+            if key == "a_rms_theta" and a_mean is not None and a_mean.significant:
+                passed, text = False, text + " without significant bias"
+            ok &= passed
+            print(f"  {'PASS' if passed else 'FAIL'}  {text}: {value:+.3f}")
+    return ok
 
 
-def write_csv(
-    path: Path,
-    seeds: Sequence[int],
-    per_seed: dict[str, list[dict[str, float]]],
-    info: list[dict[str, float]],
-) -> None:
+def write_csv(path: Path, keys: Sequence[tuple[str, int]], per_seed: dict, info: list) -> None:
     rows = []
-    for i, seed in enumerate(seeds):
-        row: dict[str, float | int] = {"seed": seed}
-        for method in (PAPER, PEER):
-            row.update({f"{method}_{k}": v for k, v in per_seed[method][i].items()})
+    for i, (truth, seed) in enumerate(keys):
+        row: dict[str, float | int | str] = {"truth": truth, "seed": seed}
+        for method, values in per_seed.items():
+            row.update({f"{method}_{k}": v for k, v in values[i].items()})
         row.update(info[i])
         rows.append(row)
+    fields = list(dict.fromkeys(k for row in rows for k in row))
     with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(handle, fieldnames=fields)
         writer.writeheader()
         writer.writerows(rows)
 
@@ -343,48 +374,82 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="benchmarks/ground_truth.py",
         description=(
-            "Recovery of the tunnel's ground truth by the paper's method and by the "
-            "output-error peer, over several turbulence seeds."
+            "Recovery of the tunnel's ground truth by every identification method, over "
+            "several turbulence seeds and truths."
         ),
     )
-    parser.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
+    parser.add_argument("--seeds", type=int, default=20, help="seeds per truth (default 20)")
     parser.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument(
+        "--truth",
+        action="append",
+        choices=(*TRUTHS, "all"),
+        help="a named truth (repeat for several; 'all': every one; default: paper); "
+        + "; ".join(f"{k}: {d}" for k, (d, _) in TRUTHS.items()),
+    )
     parser.add_argument(
         "--model",
         choices=("theta", "constant"),
-        default="theta",
-        help="the tunnel's true roll model: eq. 49 (theta, default) or eq. 29 (constant)",
+        default=None,
+        help="shorthand: theta = --truth paper, constant = --truth paper-constant",
     )
-    parser.add_argument("--csv", type=Path, default=None, help="write per-seed rows to this CSV")
+    parser.add_argument(
+        "--methods",
+        default=None,
+        help="comma-separated registered methods (default: all: "
+        + ", ".join(METHODS.names())
+        + ")",
+    )
+    parser.add_argument(
+        "--csv", type=Path, default=None, help="write per-recording rows to this CSV"
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit 1 when a target of issue 14 is missed"
+    )
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ns = build_parser().parse_args(argv)
+    parser = build_parser()
+    ns = parser.parse_args(argv)
     if ns.seeds < 1 or ns.first_seed < 0:
-        raise SystemExit("--seeds must be >= 1 and --first-seed >= 0")
-    model: Literal["theta", "constant"] = ns.model
+        parser.error("--seeds must be >= 1 and --first-seed >= 0")
+    truths = list(ns.truth or [])
+    if ns.model is not None:
+        truths.append("paper" if ns.model == "theta" else "paper-constant")
+    if not truths:
+        truths = ["paper"]
+    if "all" in truths:
+        truths = list(TRUTHS)
+    methods = METHODS.names() if ns.methods is None else tuple(ns.methods.split(","))
+    for method in methods:
+        if method not in METHODS.names():
+            parser.error(
+                f"--methods: unknown method {method!r}; known: {', '.join(METHODS.names())}"
+            )
     seeds = list(range(ns.first_seed, ns.first_seed + ns.seeds))
-    truth = TunnelSpec(model=model).params()
-    print(
-        f"ground truth ({model} model): α = {truth.alpha:.4f}, θ̄ = {truth.theta_bar_deg:.4f}°, "
-        f"ᾱ = {truth.alpha_bar_per_deg_s:+.4f} 1/(°s), β̄ = {truth.beta_bar_per_s:.4f} 1/s; "
-        f"seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}), Table 1 schedule"
-    )
-    per_seed: dict[str, list[dict[str, float]]] = {PAPER: [], PEER: []}
+    for name in dict.fromkeys(truths):
+        p = spec_of(name, 0).params()
+        print(
+            f"truth {name}: {TRUTHS[name][0]}; α = {p.alpha:.4f}, θ̄ = {p.theta_bar_deg:+.4f}°, "
+            f"ᾱ = {p.alpha_bar_per_deg_s:+.4f} 1/(°s), β̄ = {p.beta_bar_per_s:.4f} 1/s"
+        )
+    print(f"seeds {seeds[0]}-{seeds[-1]} ({len(seeds)} per truth); methods {', '.join(methods)}")
+    keys = [(name, seed) for name in dict.fromkeys(truths) for seed in seeds]
+    per_seed: dict[str, list[dict[str, float]]] = {m: [] for m in methods}
     info: list[dict[str, float]] = []
-    for seed in tqdm(seeds, desc="seeds", unit="seed"):
-        paper, peer, extra = study_seed(seed, model)
-        per_seed[PAPER].append(paper)
-        per_seed[PEER].append(peer)
+    for name, seed in tqdm(keys, desc="recordings", unit="rec"):
+        errors, extra = study_seed(name, seed, methods)
+        for method in methods:
+            per_seed[method].append(errors[method])
         info.append(extra)
     print()
     table = print_table(per_seed)
-    print_summary(table, info, model)
+    ok = print_summary(table, info, methods)
     if ns.csv is not None:
-        write_csv(ns.csv, seeds, per_seed, info)
+        write_csv(ns.csv, keys, per_seed, info)
         print(f"\nwrote {ns.csv}")
-    return 0
+    return 1 if ns.strict and not ok else 0
 
 
 if __name__ == "__main__":

@@ -1,0 +1,54 @@
+"""Named virtual-tunnel truths the benchmarks check methods against.
+
+The paper's rocket and schedule, and truths that differ from it in the gain,
+the sign of the asymmetry, the shape of a(θ), the schedule, the turbulence's
+distribution and correlation time, and the sensors: a method tuned to the
+paper's truth alone is a defect.  Each entry makes the :class:`TunnelSpec` of
+one seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from identification.tunnel import TunnelSpec
+
+__all__ = ["TRUTHS", "spec_of"]
+
+#: name -> (description, tunnel settings other than the seed)
+TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
+    "paper": ("the paper's rocket (eq. 49) and Table 1 schedule", {}),
+    "paper-constant": (
+        "the paper's constant-damping rocket (eq. 29, a = 1.314)",
+        {"model": "constant"},
+    ),
+    "negative": (
+        "α = 0.9, θ̄ = -3.3° (β = -3), τ = 0.3 s",
+        {"alpha": 0.9, "beta": -3.0, "correlation_time": 0.3},
+    ),
+    "rising": (
+        "a(θ) rising with |θ + θ̄| (ᾱ = +0.02, β̄ = 1.0), α = 0.5, β = 1.5",
+        {"alpha": 0.5, "beta": 1.5, "alpha_bar": 0.02, "beta_bar": 1.0},
+    ),
+    "staircase-laplace": (
+        "random staircase of 12 steps, Laplace turbulence, τ = 1.0 s, SD 7°",
+        {
+            "schedule": "staircase",
+            "steps": 12,
+            "turbulence": "laplace",
+            "correlation_time": 1.0,
+            "turbulence_sd": 7.0,
+        },
+    ),
+    "gyro": (
+        "rate gyro (2 % noise, eq. 52) and measured fin, no encoder; Student-t turbulence",
+        {"no_encoder": True, "gyro_noise": 2.0, "measured_fin": True, "turbulence": "student-t"},
+    ),
+}
+
+
+def spec_of(truth: str, seed: int) -> TunnelSpec:
+    """The tunnel run of ``truth`` with turbulence seed ``seed``."""
+    _, settings = TRUTHS[truth]
+    make: Callable[..., TunnelSpec] = TunnelSpec
+    return make(seed=seed, **settings)
