@@ -384,9 +384,10 @@ def list_traces(args: ListArgs) -> int:
             print(json.dumps([_row_json(r) for r in rows], indent=2, allow_nan=False))
             return 0
         counts = db.counts()
+        drawn = f", {counts['posterior']} posterior draws" if counts["posterior"] else ""
         print(
             f"{db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
-            f"{counts['surrogates']} surrogates; {len(rows)} shown"
+            f"{counts['surrogates']} surrogates{drawn}; {len(rows)} shown"
         )
         print(_trace_table(rows))
     return 0
@@ -482,11 +483,23 @@ class AddArgs:
     surrogate_kind: list[str] = setting(
         default_factory=list, help="surrogate kind (repeatable; default iaaft)", metavar="KIND"
     )
+    posterior: int = setting(
+        0,
+        "posterior u_d draws per trace of a method with a posterior (--method ml)",
+        ge=0,
+        le=1000,
+    )
+    posterior_seed: int = setting(0, "seed of the first posterior draw", ge=0, le=2**63 - 1)
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
         check(self)
         _check_methods(self.method)
+        if self.posterior and not any(METHODS.entry(m).info.get("posterior") for m in self.method):
+            raise UsageError(
+                "--posterior needs a method with a posterior (--method ml); none of "
+                f"{', '.join(self.method)} has one"
+            )
         for kind in self.surrogate_kind:
             if kind not in SURROGATE_KINDS:
                 raise UsageError(
@@ -513,6 +526,8 @@ def add(args: AddArgs) -> int:
             methods=args.method,
             surrogates=args.surrogates,
             surrogate_kinds=tuple(args.surrogate_kind or ["iaaft"]),
+            posterior=args.posterior,
+            posterior_seed=args.posterior_seed,
         )
         if result.recordings == 0 and result.traces == 0:
             print(f"{db.path}: {recording.name} is already stored (same samples); nothing added")

@@ -51,6 +51,7 @@ import numpy as np
 
 from disturbances.rows import (
     KINDS,
+    POSTERIOR_KIND,
     SPLITS,
     SURROGATE_KINDS,
     ChecksumError,
@@ -847,7 +848,7 @@ class DisturbanceDB:
         Filters (each a value or a list of values): ``split`` (train, test),
         ``model`` (constant, theta), ``method`` (a registered identification
         method, or one this database holds), ``kind`` (identified, iaaft, ar,
-        or ``surrogate`` for both), ``source`` (synthetic, wind-tunnel,
+        ``surrogate`` for both, or posterior), ``source`` (synthetic, wind-tunnel,
         flight), ``recording`` (name); ``metadata`` (a mapping of the
         recording's metadata keys to required values), ``min_duration_s``,
         and ``validated`` (``True``: identified traces and surrogates that
@@ -911,18 +912,21 @@ class DisturbanceDB:
         return out
 
     def counts(self) -> dict[str, int]:
-        """Number of recordings, identifications and traces (identified and surrogate)."""
+        """Number of recordings, identifications and traces (identified, surrogate, posterior)."""
         rows = self._query(
             "SELECT (SELECT COUNT(*) FROM recordings), (SELECT COUNT(*) FROM identifications), "
             "(SELECT COUNT(*) FROM traces WHERE kind = 'identified'), "
-            "(SELECT COUNT(*) FROM traces WHERE kind != 'identified')"
+            "(SELECT COUNT(*) FROM traces WHERE kind = ?), "
+            f"(SELECT COUNT(*) FROM traces WHERE kind IN ({','.join('?' * len(SURROGATE_KINDS))}))",
+            (POSTERIOR_KIND, *SURROGATE_KINDS),
         )
         r = rows[0]
         return {
             "recordings": r[0],
             "identifications": r[1],
             "traces": r[2],
-            "surrogates": r[3],
+            "surrogates": r[4],
+            "posterior": r[3],
         }
 
     def traces_by_uid(self, uids: Sequence[str]) -> list[TraceRow]:

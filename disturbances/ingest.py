@@ -12,6 +12,12 @@ them and hands them over, one transaction per call:
   run (``rocketroll identify --db``);
 * :func:`add_surrogates` -- surrogates of a stored trace.
 
+A method with a posterior (``ml``) can also store ``posterior`` draws of each
+of its traces (``kind="posterior"``): whole ``u_d`` traces from ``p(u_d |
+recording)``, each with its seed, the identified (posterior-mean) trace as
+its source and the same parameters.  They are drawn when the recording is
+identified, from that fit.
+
 Every method's trace is recovered and re-simulated the same way (steps 8-9,
 :meth:`identification.methods.Context.disturbance`) unless the method makes
 its own, so traces and metrics of all methods compare like for like.
@@ -28,6 +34,7 @@ import numpy as np
 
 from disturbances.db import DatabaseError, StoreResult, now, package_version
 from disturbances.rows import (
+    POSTERIOR_KIND,
     SURROGATE_KINDS,
     IdentificationRow,
     RecordingRow,
@@ -35,6 +42,7 @@ from disturbances.rows import (
     checksum,
     content_hash,
     identified_uid,
+    posterior_uid,
     surrogate_uid,
 )
 from disturbances.stores import Store
@@ -42,12 +50,14 @@ from identification.methods import METHODS, Context, ModelFit, default_methods, 
 from identification.pipeline import Identification, IdentifyOptions
 from identification.recording import Recording
 from identification.statistics import trace_statistics
+from rocketroll_common.arrays import FloatArray
 
 __all__ = [
     "add_identification",
     "add_recording",
     "add_surrogates",
     "identification_rows",
+    "posterior_rows",
     "surrogate_rows",
     "trace_summary",
 ]
@@ -94,6 +104,52 @@ def _trace_row(
     )
 
 
+def posterior_rows(
+    identified: TraceRow, fitted: ModelFit, count: int, seed: int = 0
+) -> list[TraceRow]:
+    """``count`` posterior draws of ``u_d`` that go with the identified trace of ``fitted``.
+
+    Draw ``k`` has seed ``seed + k`` and is ``fitted.sample_posterior(1, seed + k)``:
+    the same fit and seed always give the same draw.
+    """
+    if count < 0:
+        raise ValueError(f"count must be non-negative, got {count}")
+    sample = fitted.sample_posterior
+    if count and sample is None:
+        raise ValueError(f"method {fitted.method!r} has no posterior to draw from")
+    rows = []
+    for k in range(count):
+        assert sample is not None
+        u: FloatArray = np.asarray(sample(1, seed + k)[0], dtype=np.float64)
+        rows.append(
+            dataclasses.replace(
+                identified,
+                uid=posterior_uid(identified.uid, seed + k),
+                kind=POSTERIOR_KIND,
+                source_uid=identified.uid,
+                seed=seed + k,
+                settings={
+                    **identified.settings,
+                    "estimate": "posterior draw (simulation smoother, Durbin & Koopman 2002)",
+                },
+                checksum=checksum(u),
+                statistics=trace_summary(u),
+                u_d_deg=u,
+                id=None,
+            )
+        )
+    return rows
+
+
+def _check_posterior(methods: Sequence[str], posterior: int) -> None:
+    if posterior and not any(METHODS.entry(m).info.get("posterior") for m in methods):
+        with_one = [e.name for e in METHODS.entries() if e.info.get("posterior")]
+        raise ValueError(
+            f"posterior draws need a method with a posterior ({', '.join(with_one) or 'none'}"
+            f" registered); none of {', '.join(methods)} has one"
+        )
+
+
 def _methods(methods: Sequence[str] | None) -> tuple[str, ...]:
     chosen = default_methods() if methods is None else tuple(methods)
     if not chosen:
@@ -111,7 +167,11 @@ def _models_of(method: str) -> tuple[str, ...]:
 
 
 def identification_rows(
-    context: Context, methods: Sequence[str] | None = None
+    context: Context,
+    methods: Sequence[str] | None = None,
+    *,
+    posterior: int = 0,
+    posterior_seed: int = 0,
 ) -> tuple[RecordingRow, list[IdentificationRow], list[TraceRow]]:
     """Rows for a recording, its identifications by ``methods`` and their traces.
 
@@ -122,8 +182,13 @@ def identification_rows(
     methods : sequence of str, optional
         Registered identification methods (default: the default ones); each
         fits every damping model it supports.
+    posterior : int
+        Posterior draws per trace of each method that has a posterior.
+    posterior_seed : int
+        Seed of the first draw (the next ones count up).
     """
     chosen = _methods(methods)
+    _check_posterior(chosen, posterior)
     stamp = now()
     version = package_version()
     recording = RecordingRow.of(context.recording, added_at=stamp)
@@ -144,7 +209,10 @@ def identification_rows(
                     stamp,
                 )
             )
-            traces.append(_trace_row(recording, fitted, stamp, version))
+            trace = _trace_row(recording, fitted, stamp, version)
+            traces.append(trace)
+            if fitted.sample_posterior is not None:
+                traces += posterior_rows(trace, fitted, posterior, posterior_seed)
     return recording, identifications, traces
 
 
@@ -164,6 +232,8 @@ def add_recording(
     surrogate_kinds: Sequence[str] = ("iaaft",),
     surrogate_seed: int = 0,
     surrogate_method: str | None = None,
+    posterior: int = 0,
+    posterior_seed: int = 0,
 ) -> StoreResult:
     """Identify a recording and store it with all its results, in one transaction.
 
@@ -193,8 +263,15 @@ def add_recording(
         Seed of the first surrogate (the next ones count up).
     surrogate_method : str, optional
         Whose traces the surrogates are made from.
+    posterior : int
+        Posterior draws per trace of each method with a posterior (``ml``),
+        made from this identification (a recording already identified by the
+        method gets none).
+    posterior_seed : int
+        Seed of the first draw (the next ones count up).
     """
     chosen = _methods(methods)
+    _check_posterior(chosen, posterior)
     source_method = _surrogate_method(chosen, surrogate_method)
     recording_hash = content_hash(recording.columns())
     missing = [
@@ -222,6 +299,8 @@ def add_recording(
         surrogate_kinds=surrogate_kinds,
         surrogate_seed=surrogate_seed,
         surrogate_method=source_method,
+        posterior=posterior,
+        posterior_seed=posterior_seed,
     )
 
 
@@ -261,9 +340,13 @@ def _store(
     surrogate_kinds: Sequence[str],
     surrogate_seed: int,
     surrogate_method: str,
+    posterior: int = 0,
+    posterior_seed: int = 0,
 ) -> StoreResult:
     db.check_version(writing=True)
-    recording, identifications, traces = identification_rows(context, methods)
+    recording, identifications, traces = identification_rows(
+        context, methods, posterior=posterior, posterior_seed=posterior_seed
+    )
     if db.has_recording(recording.content_hash):
         # Partly stored already: new identifications must be made like the stored
         # ones, and surrogates come from the stored traces, never from new twins.
@@ -278,7 +361,7 @@ def _store(
             )
     made: list[TraceRow] = []
     if surrogates:
-        sources = [t for t in traces if t.method == surrogate_method]
+        sources = [t for t in traces if t.method == surrogate_method and t.kind == "identified"]
         if not sources:
             for model in _models_of(surrogate_method):
                 uid = identified_uid(recording.content_hash, surrogate_method, model)

@@ -15,7 +15,8 @@ Identity is by content, never by row number:
   twice are one recording, whatever the file or name they came in);
 * an identification by ``(recording hash, method, model)``;
 * a trace by its ``uid``: ``<hash[:12]>-<method>-<model>`` for an identified
-  trace, ``<source uid>-<surrogate method>-<seed>`` for a surrogate.
+  trace, ``<source uid>-<surrogate method>-<seed>`` for a surrogate and
+  ``<source uid>-posterior-<seed>`` for a posterior draw.
 
 The train/test split belongs to the recording: its ``split`` metadata line
 when it has one (a user holding out chosen runs), else a function of its
@@ -43,6 +44,7 @@ from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
     "KINDS",
+    "POSTERIOR_KIND",
     "SPLITS",
     "SURROGATE_KINDS",
     "TEST_FRACTION",
@@ -53,14 +55,18 @@ __all__ = [
     "content_hash",
     "identified_uid",
     "json_safe",
+    "posterior_uid",
     "split_of",
     "surrogate_uid",
 ]
 
 #: Surrogate generators of :mod:`disturbances.surrogate`.
 SURROGATE_KINDS = ("iaaft", "ar")
-#: A trace is identified from a recording, or a surrogate of another trace.
-KINDS = ("identified", *SURROGATE_KINDS)
+#: A draw of ``u_d`` from its posterior given the recording (a method with a posterior, ``ml``).
+POSTERIOR_KIND = "posterior"
+#: A trace is identified from a recording (for a method with a posterior: its mean), a
+#: surrogate of another trace, or a posterior draw that goes with an identified trace.
+KINDS = ("identified", *SURROGATE_KINDS, POSTERIOR_KIND)
 SPLITS = ("train", "test")
 #: Share of recordings (by hash) that go to the test split.
 TEST_FRACTION = 0.25
@@ -309,6 +315,11 @@ def surrogate_uid(source_uid: str, kind: str, seed: int) -> str:
     return f"{source_uid}-{kind}-{seed}"
 
 
+def posterior_uid(source_uid: str, seed: int) -> str:
+    """The uid of the posterior draw of seed ``seed`` that goes with trace ``source_uid``."""
+    return surrogate_uid(source_uid, POSTERIOR_KIND, seed)
+
+
 #: Keys of a trace's ``statistics``.
 STATISTICS = ("mean_deg", "sd_deg", "q05_deg", "q95_deg", "normality_p")
 
@@ -326,11 +337,12 @@ class TraceRow(_Row):
         The identification whose parameters go with it (for a surrogate:
         its source's).
     kind : str
-        ``identified``, ``iaaft`` or ``ar``.
+        ``identified``, ``iaaft``, ``ar`` or ``posterior``.
     source_uid : str or None
-        The trace a surrogate was made from; ``None`` for an identified one.
+        The trace a surrogate was made from, or the identified (posterior-mean)
+        trace a posterior draw goes with; ``None`` for an identified one.
     seed : int or None
-        The surrogate's seed.
+        The surrogate's or posterior draw's seed.
     settings : mapping
         How it was made (JSON-safe).
     dt_s : float
@@ -393,7 +405,9 @@ class TraceRow(_Row):
         if self.kind not in KINDS:
             raise ValueError(f"trace {self.uid}: kind must be one of {', '.join(KINDS)}")
         if (self.kind == "identified") != (self.source_uid is None):
-            raise ValueError(f"trace {self.uid}: only a surrogate has a source trace")
+            raise ValueError(
+                f"trace {self.uid}: only a surrogate or a posterior draw has a source trace"
+            )
         check_model(self.model)
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise ValueError(f"trace {self.uid}: dt_s must be positive, got {self.dt_s!r}")

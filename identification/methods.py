@@ -102,6 +102,7 @@ def register_method(
     summary: str = "",
     default: bool = False,
     models: Sequence[str] = MODEL_NAMES,
+    posterior: bool = False,
     replace: bool = False,
 ) -> None:
     """Register an identification method.
@@ -120,13 +121,22 @@ def register_method(
         without ``--method``, and of the default database.
     models : sequence of str
         The damping models the method can fit.
+    posterior : bool
+        Its fits carry ``u_d_sd_deg`` and ``sample_posterior`` (posterior
+        draws can be stored with its traces).
     replace : bool
         Replace a method registered under ``name``.
     """
     for model in models:
         check_model(model)
     METHODS.register(
-        name, method, summary=summary, replace=replace, default=default, models=tuple(models)
+        name,
+        method,
+        summary=summary,
+        replace=replace,
+        default=default,
+        models=tuple(models),
+        posterior=posterior,
     )
 
 
@@ -303,4 +313,5 @@ register_method(
     "identification.ml:ml_method",
     summary="maximum likelihood: Kalman filter on the roll model with the turbulence as an "
     "AR state; its u_d is the posterior mean",
+    posterior=True,
 )

@@ -56,12 +56,15 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
 
     Identified traces for ``disturbance="replay"`` (and ``"none"``, which
     still takes the rocket's parameters from them), validated surrogates for
-    ``"surrogate"``; ``config.method`` (the paper's by default); ``config.model``;
-    ``config.split``.
+    ``"surrogate"``, posterior draws for ``"posterior"`` (a method with a
+    posterior, ``method="ml"``); ``config.method`` (the paper's by default);
+    ``config.model``; ``config.split``.
     Banks are cached per file state and selection, so a vector of
     environments in one process loads the traces once.
     """
-    kind = "surrogate" if config.disturbance == "surrogate" else "identified"
+    kind = {"surrogate": "surrogate", "posterior": "posterior"}.get(
+        config.disturbance, "identified"
+    )
     database = open_database(None if db is None else Path(db))
     try:
         path = Path(database.path).resolve()

@@ -74,7 +74,7 @@ __all__ = [
 ]
 
 TASKS = ("angle", "rate")
-DISTURBANCES = ("replay", "surrogate", "none")
+DISTURBANCES = ("replay", "surrogate", "posterior", "none")
 SETPOINTS = ("steps", "zero")
 SPLITS = ("train", "test")
 
@@ -110,8 +110,9 @@ class RollConfig:
         Gyro full scale: the measured rate is clipped to ±this, °/s.
     disturbance : str
         ``"replay"`` identified ``u_d`` traces, ``"surrogate"`` surrogate
-        traces, or ``"none"`` (``u_d = 0``, the rocket still one of the
-        database's).
+        traces, ``"posterior"`` posterior draws of ``u_d`` (a method with a
+        posterior: ``method="ml"``), or ``"none"`` (``u_d = 0``, the rocket
+        still one of the database's).
     disturbance_scale : float
         Factor on ``u_d``.
     model : str

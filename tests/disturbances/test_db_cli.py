@@ -287,6 +287,7 @@ def test_add_then_add_again(db_copy: Path, capsys: pytest.CaptureFixture[str]) -
         "identifications": before["identifications"] + 4,
         "traces": before["traces"] + 4,
         "surrogates": before["surrogates"],
+        "posterior": 0,
     }
     with DisturbanceDB(db_copy, create=False) as d:
         idents = d.identifications(recording=NEW)
@@ -398,7 +399,13 @@ def test_export_filtered_brings_surrogate_sources(
     assert manifest["filters"] == {"split": "test", "kind": "surrogate"}
     new = tmp_path / "new.sqlite"
     ok(["db", "import", str(out_dir), "--db", str(new)], capsys)
-    assert counts(new) == {"recordings": 1, "identifications": 2, "traces": 2, "surrogates": 2}
+    assert counts(new) == {
+        "recordings": 1,
+        "identifications": 2,
+        "traces": 2,
+        "surrogates": 2,
+        "posterior": 0,
+    }
 
 
 def test_export_into_non_empty_folder(
