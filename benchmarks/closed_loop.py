@@ -1,0 +1,302 @@
+"""Closed-loop fidelity: does a controller's score on a replay predict its score on the rocket?
+
+For each virtual-tunnel truth (``benchmarks/_truths.py``) and seed, the tunnel
+records a run with known rocket parameters and a known turbulence ``u_d``.
+Every identification method (``--methods``) identifies the recording; its
+θ-model parameters and ``u_d`` trace are what the disturbance database would
+replay.  A method with a posterior (``ml``) also gives ``--draws`` posterior
+``u_d`` traces.  Then each controller (``--policies``: trim, PID, PPO, the
+oracle) runs on each task (``--tasks``: angle with setpoint steps, angle held
+at zero, rate with setpoint steps) over the same episode windows (the same
+start, setpoints and gyro noise) twice:
+
+* **true**: the tunnel's true parameters with the true ``u_d``: what the real
+  rocket would score;
+* **replay**: the method's parameters with the method's ``u_d`` (for the
+  posterior, the mean score over its draws): what the environment scores.
+
+The controllers are the shipped ones, designed on the default database's
+train split, the same in both runs.  Per recording the score of a metric is
+the mean over its windows; the table gives, per method, task, controller and
+metric, the ratio replay / true averaged over recordings, its SD over them
+and its range, and a verdict per method against issue 14's floor: every
+averaged RMS and settled-RMS ratio of trim, PID and PPO within [0.90, 1.10]
+and the oracle's within [0.80, 1.25], on every task and every truth.
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/closed_loop.py                       # 5 seeds x 4 truths
+    .venv/bin/python benchmarks/closed_loop.py --seeds 2 --truth paper --policies pid
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+from _truths import TRUTHS, spec_of
+from tqdm.auto import tqdm
+
+from agents.base import Controller, EpisodeSpec
+from agents.evaluate import metrics, run_episode
+from agents.registry import make_controller
+from disturbances.bank import TraceBank
+from identification.methods import METHODS, Context, fit
+from identification.model import RollParams
+from identification.pipeline import IdentifyOptions
+from identification.tunnel import run_tunnel
+from rocketroll_common.arrays import FloatArray
+from rollenv.bank import variant_config
+from rollenv.core import RollConfig
+from rollenv.env import RocketRollEnv
+
+#: name -> (environment id, settings on top of it)
+TASKS: dict[str, tuple[str, dict[str, object]]] = {
+    "angle-steps": ("RocketRoll-v0", {}),
+    "angle-zero": ("RocketRoll-v0", {"setpoint": "zero"}),
+    "rate-steps": ("RocketRollRate-v0", {}),
+}
+#: The metrics compared, and the floor on their averaged ratio per controller.
+SCORES = ("rms_error", "settled_rms_error")
+BOUNDS = {"oracle": (0.80, 1.25)}
+DEFAULT_BOUNDS = (0.90, 1.10)
+DEFAULT_TRUTHS = ("paper", "negative", "rising", "staircase-laplace")
+
+
+@dataclass(frozen=True)
+class Rocket:
+    """One replayable rocket: parameters and a ``u_d`` trace held per 0.1 s."""
+
+    params: RollParams
+    u_d_deg: FloatArray
+
+
+def rockets_of(
+    truth: str, seed: int, methods: Sequence[str], draws: int
+) -> tuple[Rocket, dict[str, list[Rocket]]]:
+    """The true rocket of one recording and, per replay, what it would replay."""
+    spec = spec_of(truth, seed)
+    rec = run_tunnel(spec)
+    if rec.ud_true_deg is None:
+        raise RuntimeError(f"{truth} seed {seed}: no true u_d")
+    true = Rocket(spec.params(), np.asarray(rec.ud_true_deg[:-1], dtype=float))
+    context = Context(rec, IdentifyOptions(noise_runs=0))
+    replays: dict[str, list[Rocket]] = {}
+    for method in methods:
+        found = fit(context, method, ["theta"])["theta"]
+        replays[method] = [Rocket(found.params, np.asarray(found.disturbance.u_d_deg))]
+        if found.sample_posterior is not None and draws:
+            replays[f"{method} posterior"] = [
+                Rocket(found.params, np.asarray(u)) for u in found.sample_posterior(draws, seed)
+            ]
+    return true, replays
+
+
+def env_of(config: RollConfig, rocket: Rocket) -> RocketRollEnv:
+    bank = TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params)
+    settings = {f.name: getattr(config, f.name) for f in fields(config)}
+    return RocketRollEnv(bank=bank, **settings)
+
+
+def windows(
+    config: RollConfig, true: Rocket, length: int, count: int, seed: int
+) -> list[EpisodeSpec]:
+    """``count`` episode windows spread over the first ``length`` samples, each with the
+    setpoints the true env draws for it."""
+    env = env_of(config, true)
+    uid = env.bank.traces[0].uid
+    span = length - config.max_episode_steps - 1
+    starts = np.linspace(0, span, count).astype(int)
+    specs = []
+    for i, start in enumerate(starts.tolist()):
+        env.reset(seed=seed * 1000 + i, options={"trace": uid, "start": start})
+        options = env.replay_options()
+        specs.append(EpisodeSpec(i, seed * 1000 + i, uid, start, tuple(options["setpoints"])))
+    env.close()
+    return specs
+
+
+def score(
+    config: RollConfig, controller: Controller, rocket: Rocket, specs: Sequence[EpisodeSpec]
+) -> dict[str, float]:
+    """Mean of each compared metric over the windows, on ``rocket``."""
+    env = env_of(config, rocket)
+    uid = env.bank.traces[0].uid
+    totals = dict.fromkeys(SCORES, 0.0)
+    for spec in specs:
+        history = run_episode(
+            env, controller, EpisodeSpec(spec.index, spec.seed, uid, spec.start, spec.setpoints)
+        )
+        values = metrics(history, config)
+        for name in SCORES:
+            totals[name] += values[name] / len(specs)
+    env.close()
+    return totals
+
+
+def summarise(values: Sequence[float]) -> tuple[float, float, float, float]:
+    x = np.asarray(values, dtype=float)
+    sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
+    return float(np.mean(x)), sd, float(np.min(x)), float(np.max(x))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="benchmarks/closed_loop.py",
+        description="Closed-loop fidelity of each identification method's replay against the "
+        "virtual tunnel's truth, per controller and task.",
+    )
+    parser.add_argument("--seeds", type=int, default=5, help="seeds per truth (default 5)")
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument(
+        "--truth",
+        action="append",
+        choices=(*TRUTHS, "all"),
+        help=f"a named truth (repeat; default: {', '.join(DEFAULT_TRUTHS)})",
+    )
+    parser.add_argument(
+        "--methods", default=None, help="comma-separated methods (default: all registered)"
+    )
+    parser.add_argument(
+        "--policies", default="trim,pid,ppo,oracle", help="comma-separated controllers"
+    )
+    parser.add_argument(
+        "--tasks", default=",".join(TASKS), help=f"comma-separated tasks ({', '.join(TASKS)})"
+    )
+    parser.add_argument("--windows", type=int, default=4, help="60-s windows per recording")
+    parser.add_argument("--draws", type=int, default=4, help="posterior draws per recording")
+    parser.add_argument("--csv", type=Path, default=None, help="per-recording scores to a CSV")
+    parser.add_argument("--strict", action="store_true", help="exit 1 if no method passes")
+    ns = parser.parse_args(argv)
+    truths = list(dict.fromkeys(ns.truth or DEFAULT_TRUTHS))
+    if "all" in truths:
+        truths = list(TRUTHS)
+    methods = METHODS.names() if ns.methods is None else tuple(ns.methods.split(","))
+    for method in methods:
+        if method not in METHODS.names():
+            parser.error(f"--methods: unknown method {method!r}")
+    policies = ns.policies.split(",")
+    tasks = ns.tasks.split(",")
+    for task in tasks:
+        if task not in TASKS:
+            parser.error(f"--tasks: unknown task {task!r}; known: {', '.join(TASKS)}")
+    if ns.seeds < 1 or ns.windows < 1 or ns.draws < 0:
+        parser.error("--seeds and --windows must be >= 1, --draws >= 0")
+
+    configs = {t: variant_config(TASKS[t][0], TASKS[t][1]) for t in tasks}
+    controllers = {
+        (t, p): make_controller(p, configs[t], TASKS[t][0]) for t in tasks for p in policies
+    }
+    seeds = range(ns.first_seed, ns.first_seed + ns.seeds)
+    print(
+        f"truths {', '.join(truths)}; seeds {seeds[0]}-{seeds[-1]}; methods {', '.join(methods)}; "
+        f"controllers {', '.join(policies)}; tasks {', '.join(tasks)}; {ns.windows} windows of "
+        f"60 s per recording; {ns.draws} posterior draws"
+    )
+    # ratios[(replay, task, policy, metric)] -> per-recording ratios; truth of each
+    ratios: dict[tuple[str, str, str, str], list[float]] = {}
+    rows: list[dict[str, object]] = []
+    began = time.perf_counter()
+    for truth in tqdm(truths, desc="truths", unit="truth"):
+        for seed in tqdm(seeds, desc=truth, unit="rec", leave=False):
+            true, replays = rockets_of(truth, seed, methods, ns.draws)
+            length = min(r.u_d_deg.size for rs in replays.values() for r in rs)
+            length = min(length, true.u_d_deg.size)
+            for task in tasks:
+                config = configs[task]
+                specs = windows(config, true, length, ns.windows, seed)
+                for policy in policies:
+                    controller = controllers[(task, policy)]
+                    base = score(config, controller, true, specs)
+                    for replay, rockets in replays.items():
+                        got = [score(config, controller, r, specs) for r in rockets]
+                        for name in SCORES:
+                            value = float(np.mean([g[name] for g in got]))
+                            ratio = value / base[name]
+                            ratios.setdefault((replay, task, policy, name), []).append(ratio)
+                            rows.append(
+                                {
+                                    "truth": truth,
+                                    "seed": seed,
+                                    "task": task,
+                                    "controller": policy,
+                                    "replay": replay,
+                                    "metric": name,
+                                    "true": base[name],
+                                    "replayed": value,
+                                    "ratio": ratio,
+                                }
+                            )
+    print(f"\n{time.perf_counter() - began:.0f} s\n")
+    replays_seen = list(dict.fromkeys(k[0] for k in ratios))
+    header = (
+        f"{'replay':22s} {'task':12s} {'controller':10s} {'metric':18s} {'ratio':>7s} "
+        f"{'SD':>6s} {'min':>6s} {'max':>6s}  in floor"
+    )
+    print("replay score / true score, per recording, averaged over recordings:")
+    print(header)
+    print("-" * len(header))
+    verdicts: dict[str, list[tuple[str, bool]]] = {r: [] for r in replays_seen}
+    for replay in replays_seen:
+        for task in tasks:
+            for policy in policies:
+                for name in SCORES:
+                    values = ratios[(replay, task, policy, name)]
+                    mean, sd, lo, hi = summarise(values)
+                    low, high = BOUNDS.get(policy, DEFAULT_BOUNDS)
+                    # The floor holds per truth: the ratio averaged over each truth's seeds.
+                    per_truth = [
+                        float(
+                            np.mean(
+                                [
+                                    r["ratio"]
+                                    for r in rows
+                                    if r["truth"] == t
+                                    and r["replay"] == replay
+                                    and r["task"] == task
+                                    and r["controller"] == policy
+                                    and r["metric"] == name
+                                ]
+                            )
+                        )
+                        for t in truths
+                    ]
+                    ok = all(low <= v <= high for v in per_truth)
+                    verdicts[replay].append((f"{task}/{policy}/{name}", ok))
+                    print(
+                        f"{replay:22s} {task:12s} {policy:10s} {name:18s} {mean:7.3f} {sd:6.3f} "
+                        f"{lo:6.3f} {hi:6.3f}  {'yes' if ok else 'NO'}"
+                    )
+        print()
+    print(
+        "Verdict per replay (floor: trim, PID, PPO within [0.90, 1.10], the oracle within "
+        "[0.80, 1.25], averaged over each truth's seeds, every task and truth):"
+    )
+    for replay, checks in verdicts.items():
+        missed = [c for c, ok in checks if not ok]
+        print(
+            f"  {replay}: {len(checks) - len(missed)}/{len(checks)} within the floor"
+            + (
+                f"; outside: {', '.join(missed[:6])}{' ...' if len(missed) > 6 else ''}"
+                if missed
+                else ""
+            )
+        )
+    if ns.csv is not None:
+        with ns.csv.open("w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+        print(f"\nwrote {ns.csv}")
+    passed = any(all(ok for _, ok in checks) for checks in verdicts.values())
+    return 1 if ns.strict and not passed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,55 @@
+"""The fidelity benchmarks run end to end (tiny settings; the figures are the scripts' job)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_script(name: str, *args: str, db: Path) -> str:
+    done = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / name), *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO), "ROCKETROLL_DB": str(db)},
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done.stdout
+
+
+def test_ground_truth_reports_every_method_and_the_targets(default_db: Path) -> None:
+    out = run_script("ground_truth.py", "--seeds", "1", "--truth", "negative", db=default_db)
+    for method in ("paper:", "output-error:", "ml:"):
+        assert method in out
+    assert "u_d MAE / true-parameter bound" in out
+    assert "Targets (issue 14), ml:" in out
+    assert out.count("PASS") + out.count("FAIL") == 7
+
+
+def test_closed_loop_scores_each_replay_against_the_truth(default_db: Path) -> None:
+    out = run_script(
+        "closed_loop.py",
+        "--seeds",
+        "1",
+        "--truth",
+        "rising",
+        "--policies",
+        "trim,pid",
+        "--tasks",
+        "angle-zero",
+        "--windows",
+        "1",
+        "--draws",
+        "1",
+        db=default_db,
+    )
+    for replay in ("paper", "output-error", "ml", "ml posterior"):
+        assert f"  {replay}: " in out
+    assert "angle-zero" in out and "settled_rms_error" in out
