@@ -308,6 +308,11 @@ def run(args: Args) -> list[Evaluation]:
         raise UsageError(f"two --policy values give controllers of one name: {', '.join(names)}")
     print(f"rocketroll eval: {args.env_id}, split={args.split}, {args.episodes} episodes, ")
     print(f"  seed={args.seed}, policies: {', '.join(args.policy)}")
+    draws = {"posterior": "posterior draws", "replay": "identified traces"}
+    print(
+        f"  replay: {config.method}'s {draws.get(str(config.disturbance), config.disturbance)}"
+        f" of u_d, {config.model} model"
+    )
     bank = load_bank(config, args.db)
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
     results = [evaluate(config, c, specs, bank=bank, progress=True) for c in controllers]

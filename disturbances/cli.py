@@ -268,6 +268,12 @@ class BuildArgs:
     db: str | None = _db_setting()
     force: bool = setting(False, "rebuild even if up to date")
     surrogates: int = setting(2, "IAAFT surrogates per paper-method trace", ge=0, le=1000)
+    posterior: int = setting(
+        8,  # disturbances.default.DEFAULT_POSTERIOR (not imported at start-up)
+        "posterior u_d draws per trace of a method with a posterior (ml)",
+        ge=0,
+        le=1000,
+    )
     recordings: list[Path] = setting(
         default_factory=list,
         help="recording files (default: the bundled ones)",
@@ -280,6 +286,7 @@ def build(args: BuildArgs) -> int:
     """Build a database from the bundled (or given) recordings."""
     from disturbances.db import DatabaseError, DisturbanceDB
     from disturbances.default import (
+        DEFAULT_POSTERIOR,
         DEFAULT_SURROGATES,
         _expected_fingerprint,
         build_database,
@@ -289,7 +296,11 @@ def build(args: BuildArgs) -> int:
     from disturbances.schema import SCHEMA_VERSION
 
     path = Path(args.db) if args.db is not None else default_path()
-    default_recipe = not args.recordings and args.surrogates == DEFAULT_SURROGATES
+    default_recipe = (
+        not args.recordings
+        and args.surrogates == DEFAULT_SURROGATES
+        and args.posterior == DEFAULT_POSTERIOR
+    )
     if path.exists() and not args.force:
         found = peek(path)
         if found is None:  # not a readable database: say why
@@ -311,12 +322,19 @@ def build(args: BuildArgs) -> int:
         ):
             print(f"{path}: up to date (built by rocketroll {info.get('created_by')})")
             return 0
-    build_database(path, args.recordings or None, surrogates=args.surrogates, progress=True)
+    build_database(
+        path,
+        args.recordings or None,
+        surrogates=args.surrogates,
+        posterior=args.posterior,
+        progress=True,
+    )
     with DisturbanceDB(path, create=False) as db:
         counts = db.counts()
     print(
         f"built {path}: {counts['recordings']} recordings, {counts['identifications']} "
-        f"identifications, {counts['traces']} traces, {counts['surrogates']} surrogates"
+        f"identifications, {counts['traces']} traces, {counts['surrogates']} surrogates, "
+        f"{counts['posterior']} posterior draws"
     )
     return 0
 

@@ -8,9 +8,12 @@ database lives at
 2. ``$XDG_CACHE_HOME/rocketroll/disturbances.sqlite`` (``~/.cache/...``).
 
 It is made from the bundled synthetic recordings
-(:data:`identification.bundled.BUNDLED`): each is identified by the paper's
-method and the output-error peer, both models, with
-:data:`DEFAULT_SURROGATES` IAAFT surrogates of every paper-method trace.  The
+(:data:`identification.bundled.BUNDLED`): each is identified by the default
+methods -- the paper's, the output-error peer and maximum likelihood -- both
+models, with :data:`DEFAULT_SURROGATES` IAAFT surrogates of every paper-method
+trace and :data:`DEFAULT_POSTERIOR` posterior draws of every maximum-likelihood
+trace (what the environment replays by default: ``benchmarks/closed_loop.py``
+finds them the most faithful replay).  The
 recipe, the package version, the schema and the bundled files' bytes make its
 *fingerprint*; a database built this way is marked ``origin: bundled``.  A
 default database whose fingerprint differs -- built by another rocketroll
@@ -46,13 +49,14 @@ from disturbances.rows import SURROGATE_KINDS
 from disturbances.schema import APPLICATION_ID, SCHEMA_VERSION
 from disturbances.stores import Store, open_store
 from identification.bundled import bundled_paths
-from identification.methods import default_methods
+from identification.methods import METHODS, database_methods
 from identification.pipeline import IdentifyOptions
 from identification.recording import load_recording
 from rocketroll_common.files import created_folders_removed_on_error, file_mode
 
 __all__ = [
     "BUILD_RECIPE",
+    "DEFAULT_POSTERIOR",
     "DEFAULT_SURROGATES",
     "ENV_VAR",
     "build_database",
@@ -66,8 +70,10 @@ __all__ = [
 ENV_VAR = "ROCKETROLL_DB"
 #: IAAFT surrogates per paper-method trace in the default database.
 DEFAULT_SURROGATES = 2
+#: Posterior u_d draws per trace of a method with a posterior (ml) in the default database.
+DEFAULT_POSTERIOR = 8
 #: Version of the recipe below; bump it when the build changes in any other way.
-BUILD_RECIPE = 2
+BUILD_RECIPE = 3
 
 
 def default_path() -> Path:
@@ -84,17 +90,21 @@ def fingerprint(
     options: IdentifyOptions,
     surrogates: int,
     surrogate_kinds: Sequence[str],
+    posterior: int = DEFAULT_POSTERIOR,
+    methods: Sequence[str] | None = None,
 ) -> str:
     """What a build depends on, hashed: recipe, versions, settings and the input bytes."""
+    methods = database_methods() if methods is None else tuple(methods)
     h = hashlib.sha256()
     recipe = {
         "recipe": BUILD_RECIPE,
         "schema": SCHEMA_VERSION,
         "package": package_version(),
-        "methods": list(default_methods()),
+        "methods": list(methods),
         "options": dataclasses.asdict(dataclasses.replace(options, progress=False)),
         "surrogates": surrogates,
         "surrogate_kinds": list(surrogate_kinds),
+        "posterior": posterior,
     }
     h.update(json.dumps(recipe, sort_keys=True).encode())
     for path in recordings:
@@ -129,13 +139,17 @@ def build_database(
     options: IdentifyOptions | None = None,
     surrogates: int = DEFAULT_SURROGATES,
     surrogate_kinds: Sequence[str] = ("iaaft",),
+    posterior: int = DEFAULT_POSTERIOR,
+    methods: Sequence[str] | None = None,
     progress: bool = False,
 ) -> Path:
     """Build a database from recordings (default: the bundled ones), atomically.
 
-    Every recording is identified by the default identification methods
-    (:func:`identification.methods.default_methods`), for every model they
-    fit, with ``surrogates`` surrogates of each paper-method trace.
+    Every recording is identified by ``methods`` (default: the recipe's,
+    :func:`identification.methods.database_methods`: the paper's, the
+    output-error peer and maximum likelihood), for every model they fit, with
+    ``surrogates`` surrogates of each paper-method trace and ``posterior``
+    posterior draws of each trace of a method with a posterior.
 
     Parameters
     ----------
@@ -152,6 +166,10 @@ def build_database(
         Surrogates per kind and per paper-method trace.
     surrogate_kinds : sequence of str
         ``iaaft`` and/or ``ar``.
+    posterior : int
+        Posterior draws per trace of a method with a posterior (``ml``).
+    methods : sequence of str, optional
+        Identification methods; default: the default database's.
     progress : bool
         Show a progress bar.
 
@@ -162,7 +180,9 @@ def build_database(
     """
     target = Path(path)
     with created_folders_removed_on_error(target), _build_lock(target.parent):
-        return _build(target, recordings, options, surrogates, surrogate_kinds, progress)
+        return _build(
+            target, recordings, options, surrogates, surrogate_kinds, posterior, progress, methods
+        )
 
 
 def _build(
@@ -171,7 +191,9 @@ def _build(
     options: IdentifyOptions | None,
     surrogates: int,
     surrogate_kinds: Sequence[str],
+    posterior: int,
     progress: bool,
+    methods: Sequence[str] | None = None,
 ) -> Path:
     """:func:`build_database` with the folder's build lock held."""
     from tqdm.auto import tqdm
@@ -182,6 +204,9 @@ def _build(
     if unknown:
         raise ValueError(f"unknown surrogate kind(s) {unknown}; use {', '.join(SURROGATE_KINDS)}")
     opts = IdentifyOptions() if options is None else options
+    chosen = database_methods() if methods is None else tuple(methods)
+    if not any(METHODS.entry(m).info.get("posterior") for m in chosen):
+        posterior = 0  # nothing to draw from
     loaded = [load_recording(f) for f in files]  # every file is validated before any work
     _remove_stale_builds(target)
     fd, tmp_name = tempfile.mkstemp(
@@ -200,8 +225,10 @@ def _build(
                     opts,
                     surrogates=surrogates,
                     surrogate_kinds=surrogate_kinds,
+                    posterior=posterior,
+                    methods=chosen,
                 )
-            made = fingerprint(files, opts, surrogates, surrogate_kinds)
+            made = fingerprint(files, opts, surrogates, surrogate_kinds, posterior, chosen)
             # Only the default recipe on the bundled data may be rebuilt automatically.
             default = bundled and made == _expected_fingerprint()
             db.set_info(
@@ -228,7 +255,9 @@ def _remove_stale_builds(target: Path) -> None:
 
 
 def _expected_fingerprint() -> str:
-    return fingerprint(bundled_paths(), IdentifyOptions(), DEFAULT_SURROGATES, ("iaaft",))
+    return fingerprint(
+        bundled_paths(), IdentifyOptions(), DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR
+    )
 
 
 def open_default(*, progress: bool | None = None) -> DisturbanceDB:
@@ -299,7 +328,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             f"{version}; rebuilding it with schema {SCHEMA_VERSION}",
             file=sys.stderr,
         )
-        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), show)
+        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, show)
         return DisturbanceDB(path, create=False)
     if not path.exists() or path.stat().st_size == 0:
         print(
@@ -307,7 +336,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             "from the bundled recordings (once)",
             file=sys.stderr,
         )
-        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), show)
+        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, show)
         return DisturbanceDB(path, create=False)
     db = DisturbanceDB(path, create=False)
     info = db.info()
@@ -323,7 +352,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             f"rocketroll: the default disturbance database {path} {why}; rebuilding it",
             file=sys.stderr,
         )
-        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), show)
+        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, show)
         return DisturbanceDB(path, create=False)
     db.check_version()
     return db

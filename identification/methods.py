@@ -44,6 +44,7 @@ __all__ = [
     "Context",
     "MethodFunction",
     "ModelFit",
+    "database_methods",
     "default_methods",
     "fit",
     "paper_method",
@@ -103,6 +104,7 @@ def register_method(
     default: bool = False,
     models: Sequence[str] = MODEL_NAMES,
     posterior: bool = False,
+    database: bool | None = None,
     replace: bool = False,
 ) -> None:
     """Register an identification method.
@@ -118,12 +120,15 @@ def register_method(
         One line for ``--help``.
     default : bool
         Part of what ``rocketroll identify`` and ``rocketroll db add`` run
-        without ``--method``, and of the default database.
+        without ``--method`` (and, unless ``database`` says otherwise, of the
+        default database).
     models : sequence of str
         The damping models the method can fit.
     posterior : bool
         Its fits carry ``u_d_sd_deg`` and ``sample_posterior`` (posterior
         draws can be stored with its traces).
+    database : bool, optional
+        Part of the default database's recipe; default: ``default``.
     replace : bool
         Replace a method registered under ``name``.
     """
@@ -137,12 +142,18 @@ def register_method(
         default=default,
         models=tuple(models),
         posterior=posterior,
+        database=default if database is None else database,
     )
 
 
 def default_methods() -> tuple[str, ...]:
     """The methods run when none is named, in registration order."""
     return tuple(e.name for e in METHODS.entries() if e.info.get("default"))
+
+
+def database_methods() -> tuple[str, ...]:
+    """The methods of the default database's recipe, in registration order."""
+    return tuple(e.name for e in METHODS.entries() if e.info.get("database"))
 
 
 class Context:
@@ -312,6 +323,8 @@ register_method(
     "ml",
     "identification.ml:ml_method",
     summary="maximum likelihood: Kalman filter on the roll model with the turbulence as an "
-    "AR state; its u_d is the posterior mean",
+    "AR state; its u_d is the posterior mean, and its posterior draws are what the "
+    "environment replays by default",
     posterior=True,
+    database=True,
 )

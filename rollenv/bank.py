@@ -63,7 +63,7 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     environments in one process loads the traces once.
     """
     kind = {"surrogate": "surrogate", "posterior": "posterior"}.get(
-        config.disturbance, "identified"
+        str(config.disturbance), "identified"
     )
     database = open_database(None if db is None else Path(db))
     try:

@@ -108,19 +108,23 @@ class RollConfig:
         η of eq. 52: measured rate ``(1 + η/100·ε)·v``, ε ~ N(0, 1); 0 is none.
     gyro_range_dps : float
         Gyro full scale: the measured rate is clipped to ±this, °/s.
-    disturbance : str
-        ``"replay"`` identified ``u_d`` traces, ``"surrogate"`` surrogate
-        traces, ``"posterior"`` posterior draws of ``u_d`` (a method with a
-        posterior: ``method="ml"``), or ``"none"`` (``u_d = 0``, the rocket
-        still one of the database's).
+    disturbance : str or None
+        ``"posterior"`` posterior draws of ``u_d`` (a method with a
+        posterior: ``method="ml"``), ``"replay"`` the identified ``u_d``
+        traces (for ``ml``: the posterior mean), ``"surrogate"`` surrogate
+        traces, or ``"none"`` (``u_d = 0``, the rocket still one of the
+        database's).  Default (None): ``"posterior"`` for a method with a
+        posterior, else ``"replay"`` -- so by default ml's posterior draws,
+        which ``benchmarks/closed_loop.py`` finds the replay whose scores
+        predict the true rocket's best.
     disturbance_scale : float
         Factor on ``u_d``.
     model : str
         ``"theta"`` (eq. 49, a(θ)) or ``"constant"`` damping (eq. 29).
     method : str
         The identification method whose parameters and ``u_d`` traces are
-        replayed (``"paper"``, ``"output-error"``, or any registered one,
-        :data:`identification.methods.METHODS`).
+        replayed: ``"ml"`` (default), ``"paper"``, ``"output-error"``, or any
+        registered one (:data:`identification.methods.METHODS`).
     split : str
         Database split the traces come from: ``"train"`` or ``"test"``.
     domain_randomization : bool
@@ -154,10 +158,10 @@ class RollConfig:
     encoder_counts: int = 256
     gyro_noise_pct: float = 2.0
     gyro_range_dps: float = 250.0
-    disturbance: str = "replay"
+    disturbance: str | None = None
     disturbance_scale: float = 1.0
     model: str = "theta"
-    method: str = "paper"
+    method: str = "ml"
     split: str = "train"
     domain_randomization: bool = False
     setpoint: str = "steps"
@@ -170,6 +174,10 @@ class RollConfig:
     fin_weight: float = 0.1
 
     def __post_init__(self) -> None:
+        if self.disturbance is None:
+            entry = METHODS.entries()
+            posterior = any(e.name == self.method and e.info.get("posterior") for e in entry)
+            object.__setattr__(self, "disturbance", "posterior" if posterior else "replay")
         for f in fields(self):
             value = getattr(self, f.name)
             numeric = f.type in ("float", "float | None", "int")

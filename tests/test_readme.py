@@ -70,9 +70,13 @@ def test_the_evaluation_tables(
 def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert rocketroll(["db", "list", "--kind", "identified", "--method", "paper"]) == 0
     out = capsys.readouterr().out
-    assert "9 recordings, 36 traces, 36 surrogates; 18 shown" in out
+    assert "9 recordings, 54 traces, 36 surrogates, 144 posterior draws; 18 shown" in out
     assert re.search(r"2d68d98ae09b-paper-theta .* 7\.91 \[-12\.48,  13\.58\]", out)
-    assert "36 identified traces and 36 surrogates, 6 train and 3 test recordings" in README
+    words = " ".join(README.split())
+    assert (
+        "54 identified traces, 36 surrogates and 144 posterior draws, 6 train and 3 test "
+        "recordings" in words
+    )
 
 
 # ------------------------------------------------------------------ slow: the committed policies

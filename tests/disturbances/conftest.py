@@ -1,8 +1,11 @@
 """Fixtures of the disturbance-database tests.
 
 ``small_db`` is built once per session from two bundled recordings (one in
-each split) without the Monte Carlo noise study, with one IAAFT surrogate per
-paper trace; tests that change a database work on a copy (``db_copy``).
+each split) without the Monte Carlo noise study, by the paper's method and the
+output-error peer (the methods ``db add`` runs by default), with one IAAFT
+surrogate per paper trace; tests that change a database work on a copy
+(``db_copy``).  The default database's recipe (with maximum likelihood and its
+posterior draws) is tested on the session's default database.
 """
 
 from __future__ import annotations
@@ -25,7 +28,13 @@ SMALL = ("tunnel-paper-seed0", "tunnel-paper-seed4")
 def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A database file of :data:`SMALL` (do not modify; use ``db_copy``)."""
     path = tmp_path_factory.mktemp("small-db") / "small.sqlite"
-    build_database(path, [bundled_path(n) for n in SMALL], options=FAST, surrogates=1)
+    build_database(
+        path,
+        [bundled_path(n) for n in SMALL],
+        options=FAST,
+        surrogates=1,
+        methods=("paper", "output-error"),
+    )
     return path
 
 

@@ -412,7 +412,7 @@ def test_default_database_is_rebuilt_when_built_by_another_version(
 
     def fake_build(target: Path, *args: object, **kwargs: object) -> Path:
         built.append(Path(target))
-        real_build(target, [bundled_path("tunnel-paper-seed0")], FAST, 0, ("iaaft",), False)
+        real_build(target, [bundled_path("tunnel-paper-seed0")], FAST, 0, ("iaaft",), 0, False)
         return Path(target)
 
     monkeypatch.setattr(default_db, "_build", fake_build)

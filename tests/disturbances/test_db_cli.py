@@ -129,8 +129,14 @@ def test_build_given_recordings_refuses_plain_rebuild_and_force_replaces(
 ) -> None:
     db = tmp_path / "given.sqlite"
     recordings = [str(bundled_path(SEED0)), str(bundled_path(SEED4))]
-    out = ok(["db", "build", "--db", str(db), *recordings, "--surrogates", "0"], capsys)
-    assert out.strip() == f"built {db}: 2 recordings, 8 identifications, 8 traces, 0 surrogates"
+    out = ok(
+        ["db", "build", "--db", str(db), *recordings, "--surrogates", "0", "--posterior", "2"],
+        capsys,
+    )
+    # The recipe's three methods (paper, output-error, ml) x two models, 2 draws per ml trace.
+    assert out.strip() == (
+        f"built {db}: 2 recordings, 12 identifications, 12 traces, 0 surrogates, 8 posterior draws"
+    )
     with DisturbanceDB(db, create=False) as d:
         assert [r.name for r in d.recordings()] == [SEED0, SEED4]
         assert d.info()["origin"] == "user"
@@ -150,7 +156,9 @@ def test_build_given_recordings_refuses_plain_rebuild_and_force_replaces(
         ["db", "build", "--db", str(db), "--force", str(bundled_path(NEW)), "--surrogates", "0"],
         capsys,
     )
-    assert out.strip() == f"built {db}: 1 recordings, 4 identifications, 4 traces, 0 surrogates"
+    assert out.strip() == (
+        f"built {db}: 1 recordings, 6 identifications, 6 traces, 0 surrogates, 16 posterior draws"
+    )
     with DisturbanceDB(db, create=False) as d:
         assert [r.name for r in d.recordings()] == [NEW]
     # No temporary files of the atomic build are left beside it.

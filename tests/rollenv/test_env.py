@@ -356,7 +356,7 @@ OPTIONS = st.fixed_dictionaries(
     {
         "task": st.sampled_from(["angle", "rate"]),
         "sensors": st.booleans(),
-        "disturbance": st.sampled_from(["replay", "surrogate", "none"]),
+        "disturbance": st.sampled_from(["posterior", "replay", "surrogate", "none"]),
         "disturbance_scale": st.floats(0.0, 3.0),
         "model": st.sampled_from(["theta", "constant"]),
         "domain_randomization": st.booleans(),
@@ -389,7 +389,9 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
     dt = options["dt_s"]
     substeps = round(dt / 0.01)
     bank = array_bank(options["model"]) if from_arrays else None
-    env = RocketRollEnv(bank=bank, episode_s=3.0, **options)
+    # Surrogates are made of the paper's traces; the rest replays the default, ml.
+    method = "paper" if options["disturbance"] == "surrogate" else "ml"
+    env = RocketRollEnv(bank=bank, episode_s=3.0, method=method, **options)
     steps = env.config.max_episode_steps
     assert steps == round(3.0 / dt)
     scale = 0.0 if options["disturbance"] == "none" else options["disturbance_scale"]
@@ -426,8 +428,10 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
     else:
         assert "iaaft" not in info["trace"]
     if not from_arrays:
-        suffix = r"-iaaft-\d+" if options["disturbance"] == "surrogate" else ""
-        assert re.fullmatch(rf"[0-9a-f]+-paper-{options['model']}{suffix}", info["trace"])
+        suffix = {"surrogate": r"-iaaft-\d+", "posterior": r"-posterior-\d+"}.get(
+            options["disturbance"], ""
+        )
+        assert re.fullmatch(rf"[0-9a-f]+-{method}-{options['model']}{suffix}", info["trace"])
     assert params.is_constant_damping == (options["model"] == "constant")
 
     # Starting state: fin 0, steady rate, angle within ±initial_angle_deg.
@@ -764,25 +768,35 @@ def test_a_box_with_negative_damping_is_refused():
 
 
 @pytest.mark.parametrize("split", ["train", "test"])
-@pytest.mark.parametrize("disturbance", ["replay", "surrogate"])
+@pytest.mark.parametrize(
+    ("disturbance", "method", "kind"),
+    [
+        (None, None, "posterior"),  # the default: ml's posterior draws
+        ("replay", "paper", "identified"),
+        ("replay", "ml", "identified"),
+        ("surrogate", "paper", "iaaft"),
+        ("posterior", "ml", "posterior"),
+    ],
+)
 @pytest.mark.parametrize("model", ["theta", "constant"])
-def test_the_database_selection(default_db, split, disturbance, model):
+def test_the_database_selection(default_db, split, disturbance, method, kind, model):
     with open_default(progress=False) as db:
         infos = db.traces()
     split_of = {i.uid: i.split for i in infos}
     model_of = {i.uid: i.model for i in infos}
     kind_of = {i.uid: i.kind for i in infos}
     method_of = {i.uid: i.method for i in infos}
-    env = RocketRollEnv(split=split, disturbance=disturbance, model=model, episode_s=10.0)
+    chosen = {k: v for k, v in (("disturbance", disturbance), ("method", method)) if v is not None}
+    env = RocketRollEnv(split=split, model=model, episode_s=10.0, **chosen)
     seen = set()
     for seed in range(40):
         uid = env.reset(seed=seed)[1]["trace"]
         seen.add(uid)
         assert split_of[uid] == split
         assert model_of[uid] == model
-        assert method_of[uid] == "paper"
-        assert kind_of[uid] == ("iaaft" if disturbance == "surrogate" else "identified")
-        assert ("-iaaft-" in uid) == (disturbance == "surrogate")
+        assert method_of[uid] == (method or "ml")
+        assert kind_of[uid] == kind
+        assert (f"-{kind}-" in uid) == (kind != "identified")
         p = env._batch.roll_params(0)
         assert p.is_constant_damping == (model == "constant")
         assert p == next(i.params for i in infos if i.uid == uid)

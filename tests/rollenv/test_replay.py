@@ -198,10 +198,13 @@ def test_replay_through_the_default_database(default_db, name, model, split):
     )
     rate, angle = replay(env, recording, result)
     check_matches_resimulation(rate, angle, result, model)
-    # ... and through the environment's own bank of the split, picked by uid.
+    # ... and through the environment's own bank of the split (the paper's traces, not the
+    # default ml posterior draws), picked by uid.
     env = RocketRollEnv(
         split=split,
         model=model,
+        method="paper",
+        disturbance="replay",
         sensors=False,
         setpoint="zero",
         episode_s=(recording.n_samples - 1) / 10,
