@@ -21,12 +21,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from identification.methods import Context, ModelFit, resimulation_metrics, trace_settings
-from identification.model import RollParams, check_model, damping, simulate
-from identification.pipeline import IdentifyOptions, Measurements, measurements
+from identification.model import RollParams, damping, simulate
+from identification.pipeline import IdentifyOptions, Measurements, model_inputs
 from identification.recording import Recording
-from identification.steps import (
-    IdentificationError,
-)
 from rocketroll_common.arrays import FloatArray
 
 __all__ = ["OutputErrorFit", "output_error", "output_error_method"]
@@ -91,12 +88,7 @@ def output_error(
     -------
     OutputErrorFit
     """
-    try:
-        check_model(model)
-    except ValueError as exc:
-        raise IdentificationError(str(exc)) from None
-    opts = IdentifyOptions() if options is None else options
-    return _output_error(measurements(recording, opts), model, x0)
+    return _output_error(model_inputs(recording, model, options), model, x0)
 
 
 def _output_error(inputs: Measurements, model: str, x0: RollParams | None) -> OutputErrorFit:

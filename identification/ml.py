@@ -48,7 +48,7 @@ from scipy import linalg, optimize
 from identification.compiled import piece
 from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.model import RollParams, check_model
-from identification.pipeline import IdentifyOptions, Measurements, measurements
+from identification.pipeline import IdentifyOptions, Measurements, measurements, model_inputs
 from identification.recording import Recording
 from identification.statespace import (
     LinearGaussian,
@@ -852,12 +852,7 @@ def maximum_likelihood(
     -------
     MLFit
     """
-    try:
-        check_model(model)
-    except ValueError as exc:
-        raise IdentificationError(str(exc)) from None
-    opts = IdentifyOptions() if options is None else options
-    inputs = measurements(recording, opts)
+    inputs = model_inputs(recording, model, options)
     return _fit(_Search(_prepare(inputs), inputs), model, max_order)
 
 

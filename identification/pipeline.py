@@ -236,10 +236,7 @@ class Identification:
 
     def model(self, name: str) -> RollParams:
         """``constant`` or ``theta``."""
-        try:
-            check_model(name)
-        except ValueError as exc:
-            raise IdentificationError(str(exc)) from None
+        checked_model(name)
         return self.constant_model if name == "constant" else self.theta_model
 
     @property
@@ -423,6 +420,21 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
         velocity_fine=velocity_fine,
         recording=recording,
     )
+
+
+def checked_model(name: str) -> str:
+    """``name`` if it names a damping model, else an :class:`IdentificationError`."""
+    try:
+        return check_model(name)
+    except ValueError as exc:
+        raise IdentificationError(str(exc)) from None
+
+
+def model_inputs(recording: Recording, model: str, options: IdentifyOptions | None) -> Measurements:
+    """:func:`measurements` for an estimator of one damping model, which ``model`` must
+    name (an :class:`IdentificationError` otherwise); ``options`` default to the paper's."""
+    checked_model(model)
+    return measurements(recording, IdentifyOptions() if options is None else options)
 
 
 def recover_disturbance(
