@@ -7,7 +7,9 @@ every registered identification method (``--methods``; default all:
 :func:`identification.methods.fit` with one shared context, and compares them
 with the truth the tunnel recorded:
 
-* α, relative error in %, and θ̄, error in °, of each model's fit;
+* α, relative error in %, and θ̄, error in °, of each model's fit; and θ̄ against the
+  truth's θ̄ plus the mean of the true ``u_d`` over the record, which the data cannot tell
+  from θ̄ (eq. 36 sees their sum): the method's own error beyond that information limit;
 * the constant damping ``a`` (eq. 29), relative error in % -- for a
   θ-dependent truth (eq. 49) there is no single true ``a``; the reference is
   then ``a(θ)`` averaged over the run's step fin levels;
@@ -77,6 +79,7 @@ METRICS: tuple[Metric, ...] = (
     Metric("alpha_theta_pct", "α, θ-model fit", "%", "α (θ fit)"),
     Metric("theta_bar_deg", "θ̄, constant-model fit", "°", "θ̄"),
     Metric("theta_bar_theta_deg", "θ̄, θ-model fit", "°", "θ̄ (θ fit)"),
+    Metric("theta_bar_record_deg", "θ̄ + record's mean u_d, θ fit", "°"),
     Metric("a_const_pct", "constant a vs averaged truth", "%", "constant a"),
     Metric("a_rms_const", "a(θ) RMS, constant model", "1/s"),
     Metric("a_rms_theta", "a(θ) RMS, θ model", "1/s"),
@@ -178,6 +181,7 @@ def study_seed(
     if truth is None or rec.ud_true_deg is None:
         raise RuntimeError(f"seed {seed}: the tunnel recording carries no ground truth")
     true_ud = np.asarray(rec.ud_true_deg, dtype=float)
+    record_mean = float(np.mean(true_ud[:-1]) - spec.turbulence_mean)
     context = Context(rec, IdentifyOptions(noise_runs=0))
     levels = np.asarray(context.measurements.segments.step_levels_deg, dtype=float)
     a_avg = float(np.mean(damping(truth, levels)))
@@ -190,6 +194,9 @@ def study_seed(
         fits = fit(context, method, ("constant", "theta"))
         info[f"{method}_s"] = time.perf_counter() - start
         row = parameter_errors(fits["constant"].params, fits["theta"].params, truth, a_avg, levels)
+        # The data cannot tell θ̄ from the mean of u_d over this record (eq. 36 sees their
+        # sum): against that sum, what is left is the method's own error.
+        row["theta_bar_record_deg"] = row["theta_bar_theta_deg"] - record_mean
         row["ud_theta_mae"] = trace_mae(fits["theta"].disturbance.u_d_deg, true_ud)
         row["ud_const_mae"] = trace_mae(fits["constant"].disturbance.u_d_deg, true_ud)
         own = fits[spec.model]  # the truth's own model
