@@ -87,10 +87,10 @@ def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[st
 def test_a_committed_policy_is_reproduced_by_its_recorded_command(
     env_id: str, exact: bool, default_db: Path, tmp_path: Path
 ) -> None:
-    """README: the angle policy is reproduced bit for bit (2.5 min, one torch thread); the
-    rate policy's 10 M steps (10 min) are sensitive to floating point: on this machine's
-    current hardware the landed code of 18bcb80 and this one both end 0.3 % from the
-    committed policy, identical to each other, so its held-out score is compared."""
+    """README: the angle policy is reproduced bit for bit (3 min, one torch thread); the
+    rate policy's 10 M steps (12 min) are sensitive to floating point across hardware (a
+    previous rate policy, re-run on other hardware, ended 0.3 % from its committed self), so
+    its held-out score is compared, within 1 %."""
     from stable_baselines3 import PPO
 
     from agents.ppo import COMMITTED
