@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
-from identification.methods import METHODS, default_methods
+from identification.methods import METHODS, default_methods, has_posterior
 from identification.model import MODEL_NAMES
 from identification.pipeline import IdentifyOptions
 from identification.recording import SOURCES
@@ -513,7 +513,7 @@ class AddArgs:
     def __post_init__(self) -> None:
         check(self)
         _check_methods(self.method)
-        if self.posterior and not any(METHODS.entry(m).info.get("posterior") for m in self.method):
+        if self.posterior and not any(has_posterior(m) for m in self.method):
             raise UsageError(
                 "--posterior needs a method with a posterior (--method ml); none of "
                 f"{', '.join(self.method)} has one"

@@ -49,7 +49,7 @@ from disturbances.rows import SURROGATE_KINDS
 from disturbances.schema import APPLICATION_ID, SCHEMA_VERSION
 from disturbances.stores import Store, open_store
 from identification.bundled import bundled_paths
-from identification.methods import METHODS, database_methods
+from identification.methods import database_methods, has_posterior
 from identification.pipeline import IdentifyOptions
 from identification.recording import load_recording
 from rocketroll_common.files import created_folders_removed_on_error, file_mode
@@ -205,7 +205,7 @@ def _build(
         raise ValueError(f"unknown surrogate kind(s) {unknown}; use {', '.join(SURROGATE_KINDS)}")
     opts = IdentifyOptions() if options is None else options
     chosen = database_methods() if methods is None else tuple(methods)
-    if not any(METHODS.entry(m).info.get("posterior") for m in chosen):
+    if not any(has_posterior(m) for m in chosen):
         posterior = 0  # nothing to draw from
     loaded = [load_recording(f) for f in files]  # every file is validated before any work
     _remove_stale_builds(target)

@@ -46,7 +46,14 @@ from disturbances.rows import (
     surrogate_uid,
 )
 from disturbances.stores import Store
-from identification.methods import METHODS, Context, ModelFit, default_methods, fit
+from identification.methods import (
+    METHODS,
+    Context,
+    ModelFit,
+    default_methods,
+    fit,
+    has_posterior,
+)
 from identification.pipeline import Identification, IdentifyOptions
 from identification.recording import Recording
 from identification.statistics import trace_statistics
@@ -142,8 +149,8 @@ def posterior_rows(
 
 
 def _check_posterior(methods: Sequence[str], posterior: int) -> None:
-    if posterior and not any(METHODS.entry(m).info.get("posterior") for m in methods):
-        with_one = [e.name for e in METHODS.entries() if e.info.get("posterior")]
+    if posterior and not any(has_posterior(m) for m in methods):
+        with_one = [name for name in METHODS.names() if has_posterior(name)]
         raise ValueError(
             f"posterior draws need a method with a posterior ({', '.join(with_one) or 'none'}"
             f" registered); none of {', '.join(methods)} has one"

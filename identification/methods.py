@@ -47,6 +47,7 @@ __all__ = [
     "database_methods",
     "default_methods",
     "fit",
+    "has_posterior",
     "paper_method",
     "register_method",
     "resimulation_metrics",
@@ -149,6 +150,12 @@ def register_method(
 def default_methods() -> tuple[str, ...]:
     """The methods run when none is named, in registration order."""
     return tuple(e.name for e in METHODS.entries() if e.info.get("default"))
+
+
+def has_posterior(method: str) -> bool:
+    """Whether the method registered as ``method`` has a posterior to draw ``u_d`` from
+    (False for a name that is not registered)."""
+    return any(e.name == method and e.info.get("posterior") for e in METHODS.entries())
 
 
 def database_methods() -> tuple[str, ...]:

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from identification.compiled import piece
-from identification.methods import METHODS
+from identification.methods import METHODS, has_posterior
 from identification.model import MODEL_NAMES, RollParams, Servo
 from rollenv.layout import (
     OBSERVATION_NAMES,
@@ -175,9 +175,8 @@ class RollConfig:
 
     def __post_init__(self) -> None:
         if self.disturbance is None:
-            entry = METHODS.entries()
-            posterior = any(e.name == self.method and e.info.get("posterior") for e in entry)
-            object.__setattr__(self, "disturbance", "posterior" if posterior else "replay")
+            resolved = "posterior" if has_posterior(self.method) else "replay"
+            object.__setattr__(self, "disturbance", resolved)
         for f in fields(self):
             value = getattr(self, f.name)
             numeric = f.type in ("float", "float | None", "int")
