@@ -142,15 +142,10 @@ class _Data:
     has_gyro: bool
     theta_min: float
     theta_max: float
-    sources: dict[str, str] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
         return int(self.y.shape[0])
-
-    @property
-    def dt(self) -> float:
-        return self.per * self.h
 
 
 def _quantum(values: FloatArray) -> float:
@@ -195,7 +190,6 @@ def _prepare(inputs: Measurements) -> _Data:
         has_gyro=rec.roll_rate_dps is not None,
         theta_min=float(theta.min()),
         theta_max=float(theta.max()),
-        sources={"fin_angle": inputs.theta_source},
     )
 
 
@@ -670,7 +664,8 @@ class _Search:
             warm = _start(self.data, self.inputs, model, order)
         layout = _Layout(model, order, self.data.has_gyro, _pivot(self.data, warm["theta_bar"]))
         result = _minimize(self.data, layout, warm)
-        self.nfev += int(result.nfev)
+        # Each call of the objective is one value and one forward difference per parameter.
+        self.nfev += int(result.nfev) * (result.x.size + 1)
         self.found[key] = (
             float(result.fun),
             layout.natural(result.x),
