@@ -64,7 +64,8 @@ METRICS: dict[str, tuple[str, str]] = {
 }
 
 
-def _env(config: RollConfig, bank: TraceBank) -> RocketRollEnv:
+def env_on(config: RollConfig, bank: TraceBank) -> RocketRollEnv:
+    """The environment of ``config`` replaying ``bank`` (a protocol's, or any other)."""
     settings = {f.name: getattr(config, f.name) for f in fields(config)}
     return RocketRollEnv(bank=bank, **settings)
 
@@ -90,7 +91,7 @@ def protocol_episodes(
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     bank = load_bank(config, db) if bank is None else bank
-    env = _env(config, bank)
+    env = env_on(config, bank)
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=episodes)
     specs = []
     for i, s in enumerate(seeds.tolist()):
@@ -174,7 +175,7 @@ def evaluate(
 ) -> Evaluation:
     """Run ``controller`` through every episode of ``specs``."""
     bank = load_bank(config, db) if bank is None else bank
-    env = _env(config, bank)
+    env = env_on(config, bank)
     rollouts, episodes = [], []
     began = time.perf_counter()
     iterator: Any = specs

@@ -36,7 +36,7 @@ import csv
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +44,7 @@ from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
 from agents.base import Controller, EpisodeSpec
-from agents.evaluate import metrics, run_episode
+from agents.evaluate import env_on, metrics, run_episode
 from agents.registry import make_controller
 from disturbances.bank import TraceBank
 from identification.methods import METHODS, Context, fit
@@ -99,9 +99,8 @@ def rockets_of(
 
 
 def env_of(config: RollConfig, rocket: Rocket) -> RocketRollEnv:
-    bank = TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params)
-    settings = {f.name: getattr(config, f.name) for f in fields(config)}
-    return RocketRollEnv(bank=bank, **settings)
+    """The environment of ``config`` replaying one rocket."""
+    return env_on(config, TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params))
 
 
 def windows(
@@ -199,8 +198,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"controllers {', '.join(policies)}; tasks {', '.join(tasks)}; {ns.windows} windows of "
         f"60 s per recording; {ns.draws} posterior draws"
     )
-    # ratios[(replay, task, policy, metric)] -> per-recording ratios; truth of each
-    ratios: dict[tuple[str, str, str, str], list[float]] = {}
+    # ratios[(replay, task, policy, metric)][truth] -> that truth's per-recording ratios
+    ratios: dict[tuple[str, str, str, str], dict[str, list[float]]] = {}
     rows: list[dict[str, object]] = []
     began = time.perf_counter()
     for truth in tqdm(truths, desc="truths", unit="truth"):
@@ -219,7 +218,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         for name in SCORES:
                             value = float(np.mean([g[name] for g in got]))
                             ratio = value / base[name]
-                            ratios.setdefault((replay, task, policy, name), []).append(ratio)
+                            cell = ratios.setdefault((replay, task, policy, name), {})
+                            cell.setdefault(truth, []).append(ratio)
                             rows.append(
                                 {
                                     "truth": truth,
@@ -247,27 +247,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         for task in tasks:
             for policy in policies:
                 for name in SCORES:
-                    values = ratios[(replay, task, policy, name)]
-                    mean, sd, lo, hi = summarise(values)
+                    by_truth = ratios[(replay, task, policy, name)]
+                    mean, sd, lo, hi = summarise([r for rs in by_truth.values() for r in rs])
                     low, high = BOUNDS.get(policy, DEFAULT_BOUNDS)
                     # The floor holds per truth: the ratio averaged over each truth's seeds.
-                    per_truth = [
-                        float(
-                            np.mean(
-                                [
-                                    r["ratio"]
-                                    for r in rows
-                                    if r["truth"] == t
-                                    and r["replay"] == replay
-                                    and r["task"] == task
-                                    and r["controller"] == policy
-                                    and r["metric"] == name
-                                ]
-                            )
-                        )
-                        for t in truths
-                    ]
-                    ok = all(low <= v <= high for v in per_truth)
+                    ok = all(low <= float(np.mean(rs)) <= high for rs in by_truth.values())
                     verdicts[replay].append((f"{task}/{policy}/{name}", ok))
                     print(
                         f"{replay:22s} {task:12s} {policy:10s} {name:18s} {mean:7.3f} {sd:6.3f} "

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from agents.base import Controller
-from agents.evaluate import EpisodeSpec, _env, evaluate, protocol_episodes, run_episode
+from agents.evaluate import EpisodeSpec, env_on, evaluate, protocol_episodes, run_episode
 from agents.nominal import NominalModel, TrimController
 from agents.oracle import OracleController
 from agents.pid import DEFAULT_BANDWIDTH, PIDController, PIDGains
@@ -95,7 +95,7 @@ def test_pid_holds_a_setpoint_to_the_encoder_resolution(setpoint, train_model, d
     (1.40625°), on every rocket of the test split, with the gyro noise on."""
     cfg = config(split="test", disturbance="none")
     bank = load_bank(cfg, None)
-    env = _env(cfg, bank)
+    env = env_on(cfg, bank)
     for trace in range(len(bank)):
         pid = PIDController.for_env(cfg, train_model)
         spec = EpisodeSpec(0, 7 + trace, bank.traces[trace].uid, 0, (setpoint,) * 6)
@@ -110,7 +110,7 @@ def test_pid_holds_a_rate_setpoint_to_the_gyro_noise(train_model, default_db):
     bank = load_bank(cfg, None)
     pid = PIDController.for_env(cfg, train_model)
     rollout = run_episode(
-        _env(cfg, bank), pid, EpisodeSpec(0, 3, bank.traces[0].uid, 0, (8.0,) * 6)
+        env_on(cfg, bank), pid, EpisodeSpec(0, 3, bank.traces[0].uid, 0, (8.0,) * 6)
     )
     # 2 % gyro noise on 8 °/s is 0.16 °/s (1 SD); at ω = 8 rad/s the loop passes it on
     # (measured: RMS 0.162 °/s), so the error is of the order of the noise, no more.
@@ -124,7 +124,7 @@ def test_pid_holds_a_rate_setpoint_to_the_gyro_noise(train_model, default_db):
 def test_back_calculation_limits_the_overshoot_after_a_saturated_slew(train_model, default_db):
     cfg = config(split="test", disturbance="none")
     bank = load_bank(cfg, None)
-    env = _env(cfg, bank)
+    env = env_on(cfg, bank)
     spec = EpisodeSpec(0, 1, bank.traces[0].uid, 0, (0.0, 90.0, 90.0, 90.0, 90.0, 90.0))
 
     def overshoot(pid: PIDController) -> float:
@@ -161,7 +161,7 @@ def test_the_oracle_predicts_the_environment_exactly(default_db):
     """With the reward's own weights and a one-step plan, the cost the oracle minimises
     is the reward the environment then pays, to rounding: its model is the true one."""
     cfg = config(split="test")
-    env = _env(cfg, load_bank(cfg, None))
+    env = env_on(cfg, load_bank(cfg, None))
     oracle = OracleController(
         cfg, horizon=1, rate_weight=cfg.rate_weight, fin_weight=cfg.fin_weight
     )

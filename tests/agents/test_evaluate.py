@@ -11,7 +11,7 @@ import pytest
 from agents.evaluate import (
     COMMAND,
     METRICS,
-    _env,
+    env_on,
     evaluate,
     markdown_table,
     metrics,
@@ -45,7 +45,7 @@ def test_protocol_episodes_are_fixed_by_the_seed(angle_config):
         assert len(spec.setpoints) == 6 and spec.setpoints[0] == 0.0
         assert all(abs(s) <= 90.0 for s in spec.setpoints)
     # The environment's own draws, not a distribution of the protocol's.
-    env = _env(angle_config, load_bank(angle_config, None))
+    env = env_on(angle_config, load_bank(angle_config, None))
     for spec in first:
         env.reset(seed=spec.seed)
         assert env.replay_options() == spec.options()
