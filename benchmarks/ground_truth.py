@@ -55,6 +55,7 @@ from identification.methods import METHODS, Context, ModelFit, fit
 from identification.ml import posterior_given
 from identification.model import RollParams, damping
 from identification.pipeline import IdentifyOptions
+from identification.recording import Recording
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll_common.arrays import FloatArray
 
@@ -140,14 +141,14 @@ def acf(x: FloatArray, lags: int = LAGS) -> FloatArray:
     return np.array([float(np.dot(d[:-k], d[k:])) / v for k in range(1, lags + 1)])
 
 
-def bound_of(rec_spec: TunnelSpec, rec: object) -> FloatArray:
+def bound_of(rec_spec: TunnelSpec, rec: Recording) -> FloatArray:
     """The true-parameter smoother's ``u_d`` (the bound no method can beat on average)."""
     turbulence = rec_spec.turbulence_model()
     tau = turbulence.correlation_time_s
     lag_one = math.exp(-rec_spec.log_dt / tau) if tau > 0 else 0.0
     gyro = 0.0 if rec_spec.gyro_noise is None else rec_spec.gyro_noise / 100.0
     found = posterior_given(
-        rec,  # type: ignore[arg-type]
+        rec,
         rec_spec.params(),
         [lag_one],
         turbulence.sd_deg,
