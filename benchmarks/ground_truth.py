@@ -10,6 +10,8 @@ with the truth the tunnel recorded:
 * α, relative error in %, and θ̄, error in °, of each model's fit; and θ̄ against the
   truth's θ̄ plus the mean of the true ``u_d`` over the record, which the data cannot tell
   from θ̄ (eq. 36 sees their sum): the method's own error beyond that information limit;
+  and the limit itself, E|record mean of u_d| for the truth's turbulence and the
+  recording's length (:func:`theta_bar_limit`): no method can do better on average;
 * the constant damping ``a`` (eq. 29), relative error in % -- for a
   θ-dependent truth (eq. 49) there is no single true ``a``; the reference is
   then ``a(θ)`` averaged over the run's step fin levels;
@@ -40,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import math
 import time
 import unicodedata
@@ -63,6 +66,8 @@ from rocketroll_common.arrays import FloatArray
 POSTERIOR_DRAWS = 50
 #: Autocorrelation lags compared.
 LAGS = 10
+#: Turbulence records simulated per truth for the θ̄ information limit.
+LIMIT_RECORDS = 400
 
 
 @dataclass(frozen=True)
@@ -157,6 +162,25 @@ def bound_of(rec_spec: TunnelSpec, rec: Recording) -> FloatArray:
     return np.asarray(found.u_d_mean_deg, dtype=float)
 
 
+@functools.cache
+def theta_bar_limit(truth_name: str, n: int) -> float:
+    """What no method can beat on θ̄, in mean |error| (°): E|mean of u_d over a record|.
+
+    The data see θ̄ plus the record's mean of ``u_d`` (eq. 36), so even an
+    estimator that knew that sum exactly misses θ̄ by the record's mean.  Its
+    expected size, from :data:`LIMIT_RECORDS` records of the truth's own turbulence
+    process (marginal and correlation) over the recording's ``n`` intervals.
+    """
+    spec = spec_of(truth_name, 0)
+    turbulence = spec.turbulence_model()
+    rng = np.random.default_rng(12345)
+    means = [
+        float(np.mean(turbulence.sample(n, spec.log_dt, rng))) - turbulence.mean_deg
+        for _ in range(LIMIT_RECORDS)
+    ]
+    return float(np.mean(np.abs(means)))
+
+
 def posterior_errors(found: ModelFit, true_ud: FloatArray, seed: int) -> dict[str, float]:
     """Coverage of the 90 % band and the posterior draws' SD and ACF against the truth."""
     out: dict[str, float] = {}
@@ -188,7 +212,11 @@ def study_seed(
     a_avg = float(np.mean(damping(truth, levels)))
     bound = bound_of(spec, rec)
     bound_mae = trace_mae(bound, true_ud)
-    info: dict[str, float] = {"a_truth_avg": a_avg, "bound_mae": bound_mae}
+    info: dict[str, float] = {
+        "a_truth_avg": a_avg,
+        "bound_mae": bound_mae,
+        "theta_bar_limit": theta_bar_limit(truth_name, true_ud.size - 1),
+    }
     errors: dict[str, dict[str, float]] = {}
     for method in methods:
         start = time.perf_counter()
@@ -337,6 +365,11 @@ def print_summary(
         "  true-parameter smoother bound: u_d MAE "
         f"{np.mean([r['bound_mae'] for r in info]):.3f}° (mean over recordings)"
     )
+    print(
+        "  θ̄ information limit: mean |error| "
+        f"{np.mean([r['theta_bar_limit'] for r in info]):.3f}° (E|record mean of u_d|: what "
+        "an estimator that knew θ̄ + that mean exactly would still miss)"
+    )
     for method in methods:
         failures = int(sum(r.get(f"{method}_failures", 0.0) for r in info))
         median = 1e3 * float(np.median([r[f"{method}_s"] for r in info]))
@@ -359,6 +392,9 @@ def print_summary(
             if key == "a_rms_theta" and a_mean is not None and a_mean.significant:
                 passed, text = False, text + " without significant bias"
             ok &= passed
+            if key == "theta_bar_theta_deg":
+                limit = float(np.mean([r["theta_bar_limit"] for r in info]))
+                text += f" (the information limit of these recordings: {limit:.3f}°)"
             print(f"  {'PASS' if passed else 'FAIL'}  {text}: {value:+.3f}")
     return ok
 
