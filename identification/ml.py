@@ -292,7 +292,8 @@ class _Parts:
     maps: FloatArray  # (n - 1, 6): [E, G, f, A, B, g] per interval
     ar: FloatArray
     innovation_var: float
-    obs_var: FloatArray
+    gyro_var: float  # g² of eq. 52
+    obs_var: FloatArray  # the gyro's columns NaN until a filter pass fills them
     initial_mean: FloatArray
     initial_cov: FloatArray
 
@@ -313,9 +314,8 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
     for j, index in enumerate(data.observed.tolist()):
         if index == 1:
             obs_var[:, j] = data.angle_var
-        else:  # eq. 52: y = (1 + g·ε)·v, so Var = g²·v², with v² ≈ y²/(1 + g²)
-            g2 = nat["gyro"] ** 2
-            obs_var[:, j] = g2 * data.y[:, j] ** 2 / (1.0 + g2) + _VAR_FLOOR
+        else:  # eq. 52: Var = g²·v², filled in by the filter (:func:`_roll_loglike`)
+            obs_var[:, j] = math.nan
     u_cov = _stationary_cov(ar, nat["innovation_sd"])
     initial_mean = np.zeros(m)
     initial_cov = np.zeros((m, m))
@@ -329,7 +329,9 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
         initial_cov[1, 1] = 1e4
     else:
         initial_cov[1, 1] = 1.0
-    return _Parts(maps, ar, nat["innovation_sd"] ** 2, obs_var, initial_mean, initial_cov)
+    return _Parts(
+        maps, ar, nat["innovation_sd"] ** 2, nat["gyro"] ** 2, obs_var, initial_mean, initial_cov
+    )
 
 
 def _state_space(data: _Data, parts: _Parts) -> LinearGaussian:
@@ -423,6 +425,7 @@ def _roll_loglike(
     maps: FloatArray,
     ar: FloatArray,
     innovation_var: float,
+    gyro_var: float,
     y: FloatArray,
     observed: np.ndarray,
     obs_var: FloatArray,
@@ -430,7 +433,13 @@ def _roll_loglike(
     p0: FloatArray,
 ) -> float:
     """The Kalman filter's log-likelihood of :func:`_state_space`, with the roll model's
-    sparse time update (what the optimiser calls)."""
+    sparse time update (what the optimiser calls).
+
+    The gyro's noise is multiplicative (eq. 52: ``y = (1 + g·ε)·v``): its variance
+    ``g²·v²`` is taken at the predicted rate, ``g²·E[v² | y before] = g²·(v̂² + P_vv)``,
+    which makes the update the best linear one (the reading itself would put its
+    own noise into its weight).  The variances used are written into ``obs_var``'s
+    gyro columns, so the smoother runs on the filter's model."""
     n, d = y.shape
     m = a0.size
     gains = np.empty((d, m))
@@ -439,6 +448,9 @@ def _roll_loglike(
     p = p0.copy()
     ll = 0.0
     for k in range(n):
+        for j in range(d):
+            if observed[j] == 0:  # the rate is updated first: a, p are the prediction
+                obs_var[k, j] = gyro_var * (a[0] * a[0] + p[0, 0]) + _VAR_FLOOR
         ll += update(a, p, y[k], observed, obs_var[k], gains)
         if not ll > -np.inf:
             return -np.inf
@@ -455,17 +467,25 @@ def _negloglike_natural(data: _Data, nat: dict[str, Any]) -> float:
     parts = _parts(data, nat)
     if parts is None:
         return _OUTSIDE
-    value = -_roll_loglike(
-        parts.maps,
-        parts.ar,
-        parts.innovation_var,
-        data.y,
-        data.observed,
-        parts.obs_var,
-        parts.initial_mean,
-        parts.initial_cov,
-    )
+    value = -_filter(data, parts)
     return value if np.isfinite(value) else _OUTSIDE
+
+
+def _filter(data: _Data, parts: _Parts) -> float:
+    """The log-likelihood of ``data`` under ``parts`` (fills the gyro's variances)."""
+    return float(
+        _roll_loglike(
+            parts.maps,
+            parts.ar,
+            parts.innovation_var,
+            parts.gyro_var,
+            data.y,
+            data.observed,
+            parts.obs_var,
+            parts.initial_mean,
+            parts.initial_cov,
+        )
+    )
 
 
 def _negloglike(x: FloatArray, data: _Data, layout: _Layout) -> float:
@@ -728,6 +748,7 @@ def _result(
     nfev: int,
 ) -> MLFit:
     """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``."""
+    _filter(data, parts)  # the gyro's variances, as the likelihood had them
     ss = _state_space(data, parts)
     smoothed = smooth(ss)
     u_cov = _stationary_cov(nat["ar"], nat["innovation_sd"])

@@ -89,8 +89,9 @@ def negative() -> tuple[Recording, object]:
     return rec, maximum_likelihood(rec, "theta")
 
 
-def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple) -> None:
-    rec, _ = negative
+@pytest.mark.parametrize("sensors", ["encoder", "gyro and encoder"])
+def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple, sensors: str) -> None:
+    rec = negative[0] if sensors == "encoder" else doublet_recording(gyro=True, encoder=True)
     data = _prepare(measurements(rec, IdentifyOptions()))
     nat = {
         "alpha": 0.7,
@@ -99,7 +100,7 @@ def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple) -> No
         "beta_bar": 2.0,
         "ar": np.array([0.6, 0.1]),
         "innovation_sd": 5.0,
-        "gyro": 0.0,
+        "gyro": 0.0 if sensors == "encoder" else 0.03,
     }
     parts = _parts(data, nat)
     assert parts is not None
@@ -107,13 +108,65 @@ def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple) -> No
         parts.maps,
         parts.ar,
         parts.innovation_var,
+        parts.gyro_var,
         data.y,
         data.observed,
         parts.obs_var,
         parts.initial_mean,
         parts.initial_cov,
     )
+    assert np.all(np.isfinite(parts.obs_var))  # the gyro's variances filled in
     assert fast == pytest.approx(loglike(_state_space(data, parts)), rel=1e-12)
+
+
+def test_the_gyro_variance_is_taken_at_the_predicted_rate() -> None:
+    """Eq. 52's g²·v² at E[v²] before the reading, not at the reading: a reading's own
+    noise must not set its weight."""
+    rec = doublet_recording(gyro=True, encoder=False)
+    data = _prepare(measurements(rec, IdentifyOptions()))
+    nat = {
+        "alpha": 0.8,
+        "theta_bar": -2.5,
+        "alpha_bar": 0.015,
+        "beta_bar": 1.8,
+        "ar": np.array([0.8]),
+        "innovation_sd": 5.0,
+        "gyro": 0.02,
+    }
+    parts = _parts(data, nat)
+    assert parts is not None
+    _roll_loglike(
+        parts.maps,
+        parts.ar,
+        parts.innovation_var,
+        parts.gyro_var,
+        data.y,
+        data.observed,
+        parts.obs_var,
+        parts.initial_mean,
+        parts.initial_cov,
+    )
+    # Two recordings that differ in one reading only: that reading's variance is the same.
+    spiked = data.y.copy()
+    spiked[500, 0] *= 1.5
+    again = _parts(data, nat)
+    assert again is not None
+    _roll_loglike(
+        again.maps,
+        again.ar,
+        again.innovation_var,
+        again.gyro_var,
+        spiked,
+        data.observed,
+        again.obs_var,
+        again.initial_mean,
+        again.initial_cov,
+    )
+    assert again.obs_var[500, 0] == parts.obs_var[500, 0]
+    assert again.obs_var[501, 0] != parts.obs_var[501, 0]  # later ones see it
+    # Its size is g²·v² on average.
+    rate = np.asarray(rec.roll_rate_dps)
+    assert np.mean(parts.obs_var[:, 0]) == pytest.approx(0.02**2 * np.mean(rate**2), rel=0.05)
 
 
 def test_the_interval_maps_are_the_models_simulation(negative: tuple) -> None:
