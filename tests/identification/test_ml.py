@@ -12,6 +12,7 @@ import pytest
 
 from identification.methods import fit
 from identification.ml import (
+    _hessian,
     _interval_maps,
     _parts,
     _prepare,
@@ -276,3 +277,14 @@ def test_ml_is_a_registered_method_with_likelihood_metrics(negative: tuple) -> N
         assert m["resim_angle_mae_deg"] < 0.2
     # θ-dependent damping is the truth here; the likelihood says so.
     assert fits["theta"].metrics["aic"] < fits["constant"].metrics["aic"]
+
+
+def test_the_threaded_hessian_is_statsmodels_approx_hess3() -> None:
+    """Same points, same arithmetic: the standard errors do not depend on the threads."""
+    from statsmodels.tools.numdiff import approx_hess3
+
+    def f(x: np.ndarray) -> float:
+        return float(np.sum(np.sin(x) * x[::-1]) + x[0] ** 3 * x[2] + np.exp(0.1 * x[4]))
+
+    x = np.array([0.3, -1.2, 2.0, 0.05, 7.0])
+    assert np.array_equal(_hessian(f, x), approx_hess3(x, f))
