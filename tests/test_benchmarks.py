@@ -33,9 +33,7 @@ def test_ground_truth_reports_every_method_and_the_targets(default_db: Path) -> 
     assert out.count("PASS") + out.count("FAIL") == 7
 
 
-def test_closed_loop_scores_each_replay_against_the_truth(
-    default_db: Path, tmp_path: Path
-) -> None:
+def test_closed_loop_scores_each_replay_against_the_truth(default_db: Path, tmp_path: Path) -> None:
     settings = ["--seeds", "2", "--truth", "rising", "--policies", "trim,pid"]
     settings += ["--tasks", "angle-zero", "--windows", "1", "--draws", "1"]
     serial, parallel = tmp_path / "serial.csv", tmp_path / "parallel.csv"
@@ -48,3 +46,11 @@ def test_closed_loop_scores_each_replay_against_the_truth(
     rows = serial.read_text().splitlines()
     assert len(rows) == 1 + 2 * 4 * 2 * 2  # header; seeds x replays x controllers x metrics
     assert parallel.read_text().splitlines() == rows
+
+
+def test_ml_bias_fits_each_seed_three_ways(default_db: Path) -> None:
+    out = run_script("ml_bias.py", "--seeds", "2", "--truth", "negative", db=default_db)
+    for line in ("quantised ", "white ", "exact ", "quantised - white", "white - exact"):
+        assert f"  {line}" in out
+    # The two seeds' offsets are numbers with a spread, not NaN.
+    assert "nan" not in out.lower()
