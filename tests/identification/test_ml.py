@@ -7,16 +7,18 @@ that only finds the paper's rocket is a defect.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from identification.methods import fit
 from identification.ml import (
+    _filter,
     _hessian,
     _interval_maps,
     _parts,
     _prepare,
-    _roll_loglike,
     _state_space,
     maximum_likelihood,
     posterior_traces,
@@ -105,17 +107,7 @@ def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple, senso
     }
     parts = _parts(data, nat)
     assert parts is not None
-    fast = _roll_loglike(
-        parts.maps,
-        parts.ar,
-        parts.innovation_var,
-        parts.gyro_var,
-        data.y,
-        data.observed,
-        parts.obs_var,
-        parts.initial_mean,
-        parts.initial_cov,
-    )
+    fast = _filter(data, parts)  # the numba kernel with the roll model's sparse update
     assert np.all(np.isfinite(parts.obs_var))  # the gyro's variances filled in
     assert fast == pytest.approx(loglike(_state_space(data, parts)), rel=1e-12)
 
@@ -136,33 +128,13 @@ def test_the_gyro_variance_is_taken_at_the_predicted_rate() -> None:
     }
     parts = _parts(data, nat)
     assert parts is not None
-    _roll_loglike(
-        parts.maps,
-        parts.ar,
-        parts.innovation_var,
-        parts.gyro_var,
-        data.y,
-        data.observed,
-        parts.obs_var,
-        parts.initial_mean,
-        parts.initial_cov,
-    )
+    _filter(data, parts)
     # Two recordings that differ in one reading only: that reading's variance is the same.
     spiked = data.y.copy()
     spiked[500, 0] *= 1.5
     again = _parts(data, nat)
     assert again is not None
-    _roll_loglike(
-        again.maps,
-        again.ar,
-        again.innovation_var,
-        again.gyro_var,
-        spiked,
-        data.observed,
-        again.obs_var,
-        again.initial_mean,
-        again.initial_cov,
-    )
+    _filter(replace(data, y=spiked), again)
     assert again.obs_var[500, 0] == parts.obs_var[500, 0]
     assert again.obs_var[501, 0] != parts.obs_var[501, 0]  # later ones see it
     # Its size is g²·v² on average.
