@@ -26,25 +26,56 @@ from rollenv.history import EpisodeHistory
 if TYPE_CHECKING:
     from disturbances.bank import TraceBank
 
-__all__ = ["Controller", "Design", "EpisodeSpec", "Evaluation"]
+__all__ = ["Controller", "Design", "EpisodeSpec", "Evaluation", "FlightView"]
+
+
+class FlightView:
+    """What a flight computer has of the environment, and nothing else.
+
+    A deployable controller gets this in place of the environment: the
+    observation and action spaces, the control period and the environment's
+    configuration (its own sensors, servo and task).  Any other attribute --
+    the true state, the rocket, the ``u_d`` trace, ``unwrapped`` -- raises
+    ``AttributeError`` saying so, so nothing a real rocket would not tell its
+    controller can leak into one.
+    """
+
+    __slots__ = ("action_space", "config", "dt_s", "observation_space")
+
+    def __init__(self, env: RocketRollEnv) -> None:
+        self.config: RollConfig = env.config
+        self.observation_space = env.observation_space
+        self.action_space = env.action_space
+        self.dt_s: float = env.config.dt_s
+
+    def __getattr__(self, name: str) -> Any:
+        raise AttributeError(
+            f"a flight computer has no {name!r}: a deployable controller sees the observation, "
+            f"the spaces, the control period and the configuration only"
+        )
+
+    def __repr__(self) -> str:
+        return f"FlightView(task={self.config.task!r}, dt_s={self.dt_s:g})"
 
 
 class Controller(Protocol):
     """A roll controller for one :class:`rollenv.env.RocketRollEnv` episode at a time.
 
     The evaluation protocol calls :meth:`reset` after each ``env.reset`` and
-    :meth:`act` with every observation.  A deployable controller uses the
-    observation only; ``env`` is passed so that the oracle can read what no
-    flight computer has (the true state, the future ``u_d``).
+    :meth:`act` with every observation.  A deployable controller gets a
+    :class:`FlightView` as ``env``: the observation and its own configuration
+    are all it can use.  Only a controller whose class sets
+    ``sees_truth = True`` (the oracle, a bound) gets the environment itself,
+    to read what no flight computer has (the true state, the future ``u_d``).
     """
 
     #: Short name for tables and plots ("PID", "PPO", ...).
     name: str
 
-    def reset(self, env: RocketRollEnv) -> None:
+    def reset(self, env: Any) -> None:
         """Forget the last episode (integrators, filters); ``env`` has just been reset."""
 
-    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+    def act(self, obs: NDArray[np.float32], env: Any) -> NDArray[np.float32]:
         """The action, shape (1,) in [-1, 1], for observation ``obs``."""
         ...
 

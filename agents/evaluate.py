@@ -27,7 +27,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from agents.base import Controller, EpisodeSpec, Evaluation
+from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
 from agents.registry import default_policies, make_controller, policy_help
 from disturbances.bank import TraceBank
 from rocketroll_common.errors import UsageError
@@ -104,15 +104,19 @@ def protocol_episodes(
 
 
 def run_episode(env: RocketRollEnv, controller: Controller, spec: EpisodeSpec) -> EpisodeHistory:
-    """Run ``controller`` through episode ``spec`` of ``env``; its history, step by step."""
+    """Run ``controller`` through episode ``spec`` of ``env``; its history, step by step.
+
+    The controller sees a :class:`~agents.base.FlightView` of ``env`` unless it
+    declares ``sees_truth`` (the oracle)."""
     obs, _ = env.reset(seed=spec.seed, options=spec.options())
-    controller.reset(env)
+    handle: Any = env if getattr(controller, "sees_truth", False) else FlightView(env)
+    controller.reset(handle)
     recorder = HistoryRecorder(env.config.max_episode_steps + 1)
     core = env.core
     recorder.record(core, 0)
     truncated = False
     while not truncated:
-        obs, reward, _, truncated, _ = env.step(controller.act(obs, env))
+        obs, reward, _, truncated, _ = env.step(controller.act(obs, handle))
         recorder.record(core, 0, float(reward))
     return recorder.history(env.config.task, env.config.fin_range_deg, spec.trace)
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import Design
+from agents.base import Design, FlightView
 from disturbances.bank import TraceBank
-from rollenv.env import RocketRollEnv
+from identification.model import RollParams
 
 __all__ = ["NominalModel", "TrimController", "make_trim"]
 
@@ -33,20 +33,30 @@ class NominalModel:
         Asymmetry θ̄, ° (trim fin angle ``-θ̄``).
     source : str
         Where the numbers come from.
+    alpha_bar_per_deg_s : float
+        Slope ᾱ of the damping (eq. 48), for controllers that model ``a(θ)``
+        away from trim (:mod:`agents.observer`); 0 is constant damping.
     """
 
     a_per_s: float
     alpha: float
     theta_bar_deg: float
     source: str = "given"
+    alpha_bar_per_deg_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("a_per_s", "alpha"):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"NominalModel.{name} must be a positive number, got {value!r}")
-        if not np.isfinite(self.theta_bar_deg):
-            raise ValueError(f"NominalModel.theta_bar_deg must be finite, got {self.theta_bar_deg}")
+        for name in ("theta_bar_deg", "alpha_bar_per_deg_s"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"NominalModel.{name} must be finite, got {getattr(self, name)}")
+
+    @property
+    def params(self) -> RollParams:
+        """The rocket as :class:`~identification.model.RollParams` (eq. 49: ``β̄ = a``)."""
+        return RollParams(self.alpha, self.theta_bar_deg, self.a_per_s, self.alpha_bar_per_deg_s)
 
     @classmethod
     def from_bank(cls, bank: TraceBank) -> NominalModel:
@@ -54,9 +64,20 @@ class NominalModel:
         split's parameters are what an evaluation must not have seen)."""
         if len(bank) == 0:
             raise ValueError(f"{bank.description} has no traces to take a nominal model from")
-        p = np.array([[q.beta_bar_per_s, q.alpha, q.theta_bar_deg] for q in bank.params])
-        a, alpha, theta_bar = np.median(p, axis=0)
-        return cls(float(a), float(alpha), float(theta_bar), f"median of {bank.description}")
+        p = np.array(
+            [
+                [q.beta_bar_per_s, q.alpha, q.theta_bar_deg, q.alpha_bar_per_deg_s]
+                for q in bank.params
+            ]
+        )
+        a, alpha, theta_bar, alpha_bar = np.median(p, axis=0)
+        return cls(
+            float(a),
+            float(alpha),
+            float(theta_bar),
+            f"median of {bank.description}",
+            float(alpha_bar),
+        )
 
 
 class TrimController:
@@ -74,10 +95,10 @@ class TrimController:
         fin = min(max(-model.theta_bar_deg, -fin_range_deg), fin_range_deg)
         self._action = np.array([fin / fin_range_deg], dtype=np.float32)
 
-    def reset(self, env: RocketRollEnv) -> None:
+    def reset(self, env: FlightView) -> None:
         """Nothing to forget."""
 
-    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+    def act(self, obs: NDArray[np.float32], env: FlightView) -> NDArray[np.float32]:
         """The trim command, whatever ``obs`` says."""
         return self._action.copy()
 

@@ -85,6 +85,8 @@ class OracleController:
     """
 
     name = "oracle"
+    #: The evaluation passes it the environment itself, not a :class:`~agents.base.FlightView`.
+    sees_truth = True
 
     def __init__(
         self,

@@ -15,10 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import Design
+from agents.base import Design, FlightView
 from agents.nominal import NominalModel
 from rollenv.core import RollConfig
-from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs
 
 __all__ = ["DEFAULT_BANDWIDTH", "PIDController", "PIDGains", "make_pid"]
@@ -195,15 +194,13 @@ class PIDController:
         """Gains placed on ``model`` (:meth:`PIDGains.place`) for ``config``'s task."""
         return cls(PIDGains.place(model, config.task, omega, zeta, tf_s), config)
 
-    def reset(self, env: RocketRollEnv | None = None) -> None:
+    def reset(self, env: FlightView | None = None) -> None:
         """Zero the integral; the rate filter restarts from the next measurement."""
         self._integral = 0.0
         self._rate = math.nan
         self._command = math.nan
 
-    def act(
-        self, obs: NDArray[np.float32], env: RocketRollEnv | None = None
-    ) -> NDArray[np.float32]:
+    def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
         """The fin command for observation ``(error, rate, fin, last command)``."""
         g = self.gains
         error = float(obs[Obs.ERROR]) - self._offset

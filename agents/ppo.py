@@ -10,8 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import Design
-from rollenv.env import RocketRollEnv
+from agents.base import Design, FlightView
 from rollenv.layout import Obs
 
 __all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_ppo"]
@@ -155,11 +154,11 @@ class PPOController:
                 f"this PPO policy was trained on the {self.task!r} task, the env is {task!r}"
             )
 
-    def reset(self, env: RocketRollEnv) -> None:
+    def reset(self, env: FlightView) -> None:
         """Nothing to forget (the policy is memoryless); checks the env's task."""
         self.require_task(env.config.task)
 
-    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+    def act(self, obs: NDArray[np.float32], env: FlightView) -> NDArray[np.float32]:
         """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""
         if not self._direct:
             return self.predict(obs)

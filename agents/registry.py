@@ -100,6 +100,13 @@ register_controller(
     default=True,
 )
 register_controller(
+    "observer",
+    "agents.observer:make_observer",
+    summary="Kalman filter estimating u_d on the fly, cancelled, LQR on the estimate "
+    "(train split's nominal rocket and turbulence)",
+    default=True,
+)
+register_controller(
     "ppo",
     "agents.ppo:make_ppo",
     usage="ppo[:DIR]",

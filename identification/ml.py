@@ -63,10 +63,13 @@ from rocketroll_common.arrays import FloatArray, readonly_array
 __all__ = [
     "MAX_ORDER",
     "MLFit",
+    "interval_maps",
     "maximum_likelihood",
     "ml_method",
     "posterior_given",
     "posterior_traces",
+    "roll_transition",
+    "stationary_cov",
 ]
 
 #: Highest AR order of the turbulence tried.
@@ -273,7 +276,7 @@ def _pacf_from_ar(ar: FloatArray) -> FloatArray:
     return out
 
 
-def _stationary_cov(ar: FloatArray, innovation_sd: float) -> FloatArray:
+def stationary_cov(ar: FloatArray, innovation_sd: float) -> FloatArray:
     """Covariance of ``[u_d[k], ..., u_d[k-p+1]]`` of the stationary AR process."""
     p = ar.size
     companion = np.zeros((p, p))
@@ -316,7 +319,7 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
             obs_var[:, j] = data.angle_var
         else:  # eq. 52: Var = g²·v², filled in by the filter (:func:`_roll_loglike`)
             obs_var[:, j] = math.nan
-    u_cov = _stationary_cov(ar, nat["innovation_sd"])
+    u_cov = stationary_cov(ar, nat["innovation_sd"])
     initial_mean = np.zeros(m)
     initial_cov = np.zeros((m, m))
     initial_cov[2:, 2:] = u_cov
@@ -334,23 +337,68 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
     )
 
 
+def roll_transition(maps: FloatArray, ar: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The transition ``T[k]`` and intercept ``c[k]`` of the state
+    ``[v, φ, u_d[k], ..., u_d[k-p+1]]`` over each interval of ``maps``.
+
+    ``maps`` (n, 6): ``[E, G, f, A, B, g]`` per interval (:func:`interval_maps`);
+    ``ar``: the turbulence's AR coefficients.  Returns arrays of shapes
+    (n, m, m) and (n, m), ``m = 2 + p``.  The one place the model's state-space
+    form is written: the likelihood's sparse kernel (:func:`_predict_roll`) is
+    checked against it, and the observer-based controller of
+    :mod:`agents.observer` runs on it.
+    """
+    maps = np.atleast_2d(np.asarray(maps, dtype=float))
+    n, p = maps.shape[0], ar.size
+    m = 2 + p
+    transition = np.zeros((n, m, m))
+    transition[:, 0, 0] = maps[:, 0]
+    transition[:, 0, 2] = maps[:, 1]
+    transition[:, 1, 0] = maps[:, 3]
+    transition[:, 1, 1] = 1.0
+    transition[:, 1, 2] = maps[:, 4]
+    transition[:, 2, 2:] = ar
+    for i in range(1, p):
+        transition[:, 2 + i, 1 + i] = 1.0
+    intercept = np.zeros((n, m))
+    intercept[:, 0] = maps[:, 2]
+    intercept[:, 1] = maps[:, 5]
+    return transition, intercept
+
+
+def interval_maps(params: RollParams, theta_fine: FloatArray, per: int, h: float) -> FloatArray:
+    """``[E, G, f, A, B, g]`` of each sample interval of ``per`` substeps of ``h`` s
+    (module docstring) for the fin path ``theta_fine`` (one value per substep
+    boundary, ``n·per + 1`` of them) under the rocket ``params``."""
+    theta = np.ascontiguousarray(theta_fine, dtype=float)
+    if per < 1 or (theta.size - 1) % per:
+        raise ValueError(
+            f"theta_fine needs n·{per} + 1 values (a whole number of intervals), got {theta.size}"
+        )
+    return np.asarray(
+        _interval_maps(
+            params.alpha,
+            params.theta_bar_deg,
+            params.beta_bar_per_s,
+            params.alpha_bar_per_deg_s,
+            theta,
+            per,
+            h,
+        )
+    )
+
+
 def _state_space(data: _Data, parts: _Parts) -> LinearGaussian:
     """The model as a general :class:`LinearGaussian` (for the smoother)."""
     n, p = data.n, parts.ar.size
     m = 2 + p
-    maps = parts.maps
     transition = np.zeros((n, m, m))
-    transition[:-1, 0, 0] = maps[:, 0]
-    transition[:-1, 0, 2] = maps[:, 1]
-    transition[:-1, 1, 0] = maps[:, 3]
-    transition[:, 1, 1] = 1.0
-    transition[:-1, 1, 2] = maps[:, 4]
-    transition[:, 2, 2:] = parts.ar
-    for i in range(1, p):
-        transition[:, 2 + i, 1 + i] = 1.0
     intercept = np.zeros((n, m))
-    intercept[:-1, 0] = maps[:, 2]
-    intercept[:-1, 1] = maps[:, 5]
+    transition[:-1], intercept[:-1] = roll_transition(parts.maps, parts.ar)
+    transition[-1, 1, 1] = 1.0  # the last one is not used
+    transition[-1, 2, 2:] = parts.ar
+    for i in range(1, p):
+        transition[-1, 2 + i, 1 + i] = 1.0
     state_cov = np.zeros((m, m))
     state_cov[2, 2] = parts.innovation_var
     return LinearGaussian(
@@ -777,7 +825,7 @@ def _result(
     _filter(data, parts)  # the gyro's variances, as the likelihood had them
     ss = _state_space(data, parts)
     smoothed = smooth(ss)
-    u_cov = _stationary_cov(nat["ar"], nat["innovation_sd"])
+    u_cov = stationary_cov(nat["ar"], nat["innovation_sd"])
     return MLFit(
         model=model,
         params=RollParams(nat["alpha"], nat["theta_bar"], nat["beta_bar"], nat["alpha_bar"]),
@@ -840,7 +888,7 @@ def posterior_given(
         raise ValueError(f"sd_deg must be positive, got {sd_deg!r}")
     opts = IdentifyOptions() if options is None else options
     data = _prepare(measurements(recording, opts))
-    unit = math.sqrt(_stationary_cov(coefficients, 1.0)[0, 0])
+    unit = math.sqrt(stationary_cov(coefficients, 1.0)[0, 0])
     nat = {
         "alpha": params.alpha,
         "theta_bar": params.theta_bar_deg,

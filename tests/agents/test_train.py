@@ -16,6 +16,7 @@ import pytest
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecNormalize
 
+from agents.base import FlightView
 from agents.ppo import ObservationNormalizer, PPOController
 from agents.train import (
     COMMAND,
@@ -211,10 +212,11 @@ def test_controller_acts_like_predict_within_the_action_space(run):
     assert controller.name == "PPO" and controller.task == "angle"
     env = RocketRollEnv(bank=array_bank())
     obs, _ = env.reset(seed=0)
-    controller.reset(env)
+    view = FlightView(env)
+    controller.reset(view)
     actions = []
     for _ in range(100):
-        action = controller.act(obs, env)
+        action = controller.act(obs, view)
         assert action.dtype == np.float32 and action.shape == (1,)
         np.testing.assert_array_equal(action, controller.predict(obs))
         actions.append(float(action[0]))
@@ -222,9 +224,9 @@ def test_controller_acts_like_predict_within_the_action_space(run):
     assert all(-1.0 <= a <= 1.0 for a in actions)
     assert len(set(actions)) > 10  # it reacts to the observation
     extreme = np.array([-180.0, 250.0, -40.0, 40.0], np.float32)
-    np.testing.assert_array_equal(controller.act(extreme, env), controller.predict(extreme))
+    np.testing.assert_array_equal(controller.act(extreme, view), controller.predict(extreme))
     with pytest.raises(ValueError, match="'angle' task"):
-        controller.reset(RocketRollEnv(bank=array_bank(), task="rate"))
+        controller.reset(FlightView(RocketRollEnv(bank=array_bank(), task="rate")))
 
 
 def test_load_refuses_a_folder_without_a_model(tmp_path):

@@ -1,0 +1,470 @@
+"""Observer-based roll control: the turbulence estimated on the fly and cancelled.
+
+The paper treats the turbulence as an equivalent fin angle ``u_d`` (eq. 36:
+``θ + θ̄ + u_d`` drives the roll), which makes it a *matched* disturbance:
+whatever of it can be predicted, the fins can cancel.  This module does that
+with the identification's own state-space model (:mod:`identification.ml`),
+run forward in real time:
+
+* :class:`Turbulence` -- the autoregressive model of ``u_d`` on the control
+  grid, fitted to the train split's traces (pooled least squares, order by
+  AIC as in :mod:`identification.ml`), and a slow random-walk *offset* that
+  carries what is constant in an episode: the rocket's own θ̄ against the
+  nominal one, and any other steady mismatch.
+* :class:`RollObserver` -- a Kalman filter on ``[v, ψ, u_d[k], ...,
+  u_d[k-p+1], b]``: roll rate, angle relative to the setpoint, the AR lags
+  and the offset.  Its time update is the ML model's
+  (:func:`identification.ml.interval_maps` over the fin path the servo takes
+  to the command, :func:`identification.ml.roll_transition`,
+  :func:`identification.statespace.predict`), its measurement update the
+  ML's (:func:`identification.statespace.update`): the encoder as
+  quantisation noise ``q²/12`` about the count's middle, the gyro's
+  multiplicative noise of eq. 52 as ``g²·(v̂² + P_vv)``.  A setpoint step
+  shows as an innovation far outside the filter's band; the angle's variance
+  is then widened so the reading re-anchors it (the step is unknown, the
+  rest of the state is not).
+* :class:`ObserverController` -- LQR state feedback on the observer's
+  estimate (:func:`scipy.linalg.solve_discrete_are`), designed on the same
+  model linearised at trim with the fin as a state, so the cost weighs the
+  fin's move per step.  The gain on the turbulence states is the
+  disturbance-observer feedforward (about ``-1`` on ``û_d``: cancellation);
+  the offset state gives the integral action of an LQI without an integrator
+  that can wind up.
+
+Deployable: it reads the observation and its own configuration only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg
+
+from agents.base import Design, FlightView
+from agents.nominal import NominalModel
+from disturbances.bank import TraceBank
+from identification.ml import MAX_ORDER, interval_maps, roll_transition, stationary_cov
+from identification.model import RollParams
+from identification.statespace import predict, update
+from rocketroll_common.arrays import FloatArray
+from rollenv.core import RollConfig
+from rollenv.layout import Obs
+
+__all__ = [
+    "DEFAULT_WEIGHTS",
+    "ObserverController",
+    "RollObserver",
+    "Turbulence",
+    "make_observer",
+]
+
+#: Variance floor of a measurement (an ideal sensor stays regular), as in the ML.
+_VAR_FLOOR = 1e-8
+#: Variance added to the angle when a setpoint step is detected, °²: the reading decides.
+_DIFFUSE = 1e6
+#: Pole the LQR design gives the (constant) offset state.
+_OFFSET_POLE = 0.9999
+#: A reading on which the prior puts less probability than this is a setpoint step.
+_JUMP_MASS = 1e-9
+
+
+@dataclass(frozen=True)
+class Turbulence:
+    """``u_d = w + b``: an AR(p) process ``w`` on the control grid and a slow offset ``b``.
+
+    Attributes
+    ----------
+    ar : ndarray
+        AR coefficients ``a_1..a_p`` of ``w[k+1] = Σ a_i·w[k+1-i] + η``.
+    innovation_sd : float
+        SD of ``η``, °.
+    offset_sd : float
+        Prior SD of ``b`` at reset, °: how far a rocket's θ̄ (plus its trace's
+        mean ``u_d``) lies from the nominal one.
+    drift_sd : float
+        SD of ``b``'s random-walk step per control step, °.
+    dt_s : float
+        The grid, s.
+    source : str
+        What it was fitted to.
+    """
+
+    ar: FloatArray
+    innovation_sd: float
+    offset_sd: float
+    drift_sd: float
+    dt_s: float
+    source: str = "given"
+
+    def __post_init__(self) -> None:
+        ar = np.asarray(self.ar, dtype=float)
+        if ar.ndim != 1 or ar.size < 1 or not np.all(np.isfinite(ar)):
+            raise ValueError(f"Turbulence.ar must be one or more finite numbers, got {self.ar!r}")
+        companion = np.zeros((ar.size, ar.size))
+        companion[0] = ar
+        companion[1:, :-1] = np.eye(ar.size - 1)
+        if np.max(np.abs(np.linalg.eigvals(companion))) >= 1.0:
+            raise ValueError(f"Turbulence.ar {ar.tolist()} is not stationary")
+        for name in ("innovation_sd", "offset_sd", "drift_sd", "dt_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"Turbulence.{name} must be a number >= 0, got {value!r}")
+        object.__setattr__(self, "ar", ar)
+
+    @property
+    def order(self) -> int:
+        return int(self.ar.size)
+
+    @classmethod
+    def from_bank(
+        cls,
+        bank: TraceBank,
+        dt_s: float,
+        nominal: NominalModel,
+        *,
+        max_order: int = MAX_ORDER,
+        drift_sd: float = 0.01,
+    ) -> Turbulence:
+        """Fit to the traces of ``bank`` (the *train* split) on the ``dt_s`` grid.
+
+        Each trace is averaged over blocks of ``dt_s`` (the env holds ``u_d``
+        per sample; a control step sees the block's mean), its mean removed,
+        and the AR coefficients of orders 1..``max_order`` are fitted by
+        pooled least squares; the order of smallest AIC is kept.  The offset's
+        prior SD is the spread of the traces' rockets' θ̄ about ``nominal``'s
+        and of the traces' means, together.
+        """
+        if len(bank) == 0:
+            raise ValueError(f"{bank.description} has no traces to fit the turbulence to")
+        series = []
+        offsets = []
+        for trace, params in zip(bank.traces, bank.params, strict=True):
+            per = dt_s / trace.dt_s
+            if abs(per - round(per)) > 1e-9 * per or round(per) < 1:
+                raise ValueError(
+                    f"trace {trace.uid}: Δt {trace.dt_s:g} s does not divide the control step "
+                    f"{dt_s:g} s"
+                )
+            u = np.asarray(trace.u_d_deg, dtype=float)
+            k = round(per)
+            u = u[: u.size // k * k].reshape(-1, k).mean(axis=1)
+            offsets.append(params.theta_bar_deg + u.mean() - nominal.theta_bar_deg)
+            series.append(u - u.mean())
+        best: tuple[float, FloatArray, float] | None = None
+        for p in range(1, max_order + 1):
+            rows = [
+                np.column_stack([s[p - 1 - i : s.size - 1 - i] for i in range(p)]) for s in series
+            ]
+            x = np.vstack(rows)
+            y = np.concatenate([s[p:] for s in series])
+            coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+            var = float(np.mean((y - x @ coef) ** 2))
+            aic = y.size * math.log(var) + 2 * (p + 1)
+            if best is None or aic < best[0]:
+                best = (aic, coef, var)
+        assert best is not None
+        _, coef, var = best
+        return cls(
+            ar=coef,
+            innovation_sd=math.sqrt(var),
+            offset_sd=float(np.sqrt(np.mean(np.square(offsets)))),
+            drift_sd=drift_sd,
+            dt_s=dt_s,
+            source=f"AR({coef.size}) fitted to {bank.description}",
+        )
+
+
+class RollObserver:
+    """Kalman filter on ``[v, ψ, u_d[k], ..., u_d[k-p+1], b]`` from the flight sensors.
+
+    ``v`` roll rate (°/s); ``ψ`` roll angle minus the setpoint (°, angle task;
+    in the rate task the angle is not measured and ``ψ`` is not used);
+    ``u_d[k]`` the AR part of the turbulence acting over the coming control
+    step (after :meth:`update` its estimate is the AR prediction), then its
+    lags; ``b`` the offset.  :attr:`u_d` is ``û_d[k] + b̂``, the estimate of
+    what the coming step will meet; :attr:`u_d_last` the smoothed-by-one
+    estimate of what the last step met.
+
+    Parameters
+    ----------
+    rocket : RollParams
+        The nominal rocket (eq. 49).
+    turbulence : Turbulence
+        The turbulence model on the control grid.
+    config : RollConfig
+        The environment's settings: control step, servo, sensors, task.
+    """
+
+    def __init__(self, rocket: RollParams, turbulence: Turbulence, config: RollConfig) -> None:
+        if abs(turbulence.dt_s - config.dt_s) > 1e-9:
+            raise ValueError(
+                f"the turbulence model's grid ({turbulence.dt_s:g} s) is not the control "
+                f"step ({config.dt_s:g} s)"
+            )
+        self.rocket = rocket
+        self.turbulence = turbulence
+        self.per = round(config.dt_s / config.substep_s)
+        self.h = config.substep_s
+        self.max_move = config.rate_limit_dps * config.substep_s
+        self.fin_range = config.fin_range_deg
+        self.angle_task = config.task == "angle"
+        q = config.encoder_resolution_deg if config.sensors else 0.0
+        self.count = q
+        self.angle_var = max(q * q / 12.0, _VAR_FLOOR)
+        self.gyro_var = (config.gyro_noise_pct / 100.0) ** 2 if config.sensors else 0.0
+        # At least two lags, so the last step's u_d is a state (an AR(1) gets a zero a_2).
+        self.ar = np.pad(turbulence.ar, (0, max(0, 2 - turbulence.order)))
+        p = self.ar.size
+        self.m = 3 + p
+        self.bias = self.m - 1
+        self.state_cov = np.zeros((self.m, self.m))
+        self.state_cov[2, 2] = turbulence.innovation_sd**2
+        self.state_cov[self.bias, self.bias] = turbulence.drift_sd**2
+        self._prior_cov = np.zeros((self.m, self.m))
+        self._prior_cov[0, 0] = 1e4
+        self._prior_cov[1, 1] = _DIFFUSE
+        self._prior_cov[2 : 2 + p, 2 : 2 + p] = stationary_cov(self.ar, turbulence.innovation_sd)
+        self._prior_cov[self.bias, self.bias] = turbulence.offset_sd**2
+        self._gyro = np.array([0], dtype=np.intp)
+        self._y = np.zeros(1)
+        self._var = np.zeros(1)
+        self._gains = np.zeros((1, self.m))
+        self._work = np.zeros((self.m + 1, self.m))
+        self._fin = np.zeros(self.per + 1)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the prior: nothing measured yet."""
+        self.mean = np.zeros(self.m)
+        self.cov = self._prior_cov.copy()
+        self.steps = 0
+        self.setpoint_steps = 0
+
+    # ---------------------------------------------------------------- filter
+    def fin_path(self, fin_deg: float, command_deg: float) -> FloatArray:
+        """The fin angle at each substep boundary of one control step (the env's servo)."""
+        command = min(max(command_deg, -self.fin_range), self.fin_range)
+        reach = self.max_move * np.arange(self.per + 1)
+        np.clip(command - fin_deg, -reach, reach, out=self._fin)
+        self._fin += fin_deg
+        return self._fin
+
+    def step_model(self, fin_deg: float, command_deg: float) -> tuple[FloatArray, FloatArray]:
+        """``T``, ``c`` of one control step that starts with the fin at ``fin_deg``."""
+        maps = interval_maps(self.rocket, self.fin_path(fin_deg, command_deg), self.per, self.h)
+        t_roll, c_roll = roll_transition(maps, self.ar)
+        t = np.zeros((self.m, self.m))
+        c = np.zeros(self.m)
+        t[:-1, :-1] = t_roll[0]
+        c[:-1] = c_roll[0]
+        t[:, self.bias] = t[:, 2]  # b acts where u_d does ...
+        t[2:, self.bias] = 0.0  # ... but is no part of the AR recursion
+        t[self.bias, self.bias] = 1.0
+        return t, c
+
+    def predict(self, fin_deg: float, command_deg: float) -> None:
+        """Time update over the control step just taken (fin at its start, the command)."""
+        t, c = self.step_model(fin_deg, command_deg)
+        predict(self.mean, self.cov, t, c, self.state_cov, self._work)
+
+    def update(self, obs: NDArray[np.float32]) -> None:
+        """Measurement update with one observation (the env's ``Obs`` layout): the gyro,
+        then (angle task) the encoder."""
+        self._y[0] = float(obs[Obs.RATE])
+        self._var[0] = self.gyro_var * (self.mean[0] ** 2 + self.cov[0, 0]) + _VAR_FLOOR
+        update(self.mean, self.cov, self._y, self._gyro, self._var, self._gains)
+        if self.angle_task:
+            self._encoder(-float(obs[Obs.ERROR]))
+        self.steps += 1
+
+    def _encoder(self, reading: float) -> None:
+        """The encoder's update: ``reading = φ_q - setpoint`` with ``φ_q`` the angle
+        floored to a count, so ``ψ`` lies in ``[reading, reading + q)``.
+
+        The prior of ``ψ`` is truncated to that interval and its mean and
+        variance matched (the assumed-density update for a quantised
+        measurement; the rest of the state follows through its regression on
+        ``ψ``).  Unlike the white-noise model ``q²/12`` this knows that a
+        reading that does not change pins the angle to one count, and that a
+        count edge crossed is sharp.  A reading the prior puts (almost) no
+        mass on is a setpoint step: ``ψ`` is re-anchored on the count, the
+        rest of the state kept.
+        """
+        q = self.count
+        m, var = self.mean[1], self.cov[1, 1]
+        lo = m + _wrap(reading - m)
+        if q <= 0.0:  # no quantisation: an (almost) exact reading
+            self._update_angle(lo, 0.0)
+            return
+        sd = math.sqrt(var)
+        a, b = (lo - m) / sd, (lo + q - m) / sd
+        mass = _normal_cdf(b) - _normal_cdf(a)
+        if mass < _JUMP_MASS:
+            if self.steps > 0:
+                self.setpoint_steps += 1
+            self.cov[1, 1] += _DIFFUSE
+            sd = math.sqrt(self.cov[1, 1])
+            a, b = (lo - m) / sd, (lo + q - m) / sd
+            mass = _normal_cdf(b) - _normal_cdf(a)
+        pa, pb = _normal_pdf(a), _normal_pdf(b)
+        shift = (pa - pb) / mass
+        mean_t = m + sd * shift
+        var_t = sd * sd * max(1.0 + (a * pa - b * pb) / mass - shift * shift, 1e-6 / 12.0)
+        self._update_angle(mean_t, var_t)
+
+    def _update_angle(self, mean: float, var: float) -> None:
+        """Set ``ψ``'s mean and variance, the rest of the state by its regression on ``ψ``."""
+        p11 = self.cov[1, 1]
+        gain = self.cov[:, 1] / p11
+        self.mean += gain * (mean - self.mean[1])
+        self.cov -= np.outer(gain, gain) * (p11 - max(var, _VAR_FLOOR))
+        self.cov = 0.5 * (self.cov + self.cov.T)
+        self.mean[1] = _wrap(self.mean[1])
+
+    @property
+    def u_d(self) -> float:
+        """Estimate of ``u_d`` over the coming control step, ° (AR prediction plus offset)."""
+        return float(self.mean[2] + self.mean[self.bias])
+
+    @property
+    def u_d_last(self) -> float:
+        """Estimate of ``u_d`` over the control step just taken, ° (filtered: given the
+        rate it left behind)."""
+        return float(self.mean[3] + self.mean[self.bias])
+
+
+def _normal_cdf(x: float) -> float:
+    return 0.5 * math.erfc(-x / math.sqrt(2.0))
+
+
+def _normal_pdf(x: float) -> float:
+    return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
+
+
+def _wrap(angle: float) -> float:
+    """``angle`` in [-180, 180)."""
+    return (angle + 180.0) % 360.0 - 180.0
+
+
+# ----------------------------------------------------------------------------- control
+#: LQR weights per task: the cost per step is ``ψ² + rate·v² + move·Δθ²`` (angle task)
+#: or ``rate·(v - r)² + move·Δθ²`` (rate task).  Chosen on 20 train-split episodes of the
+#: default replay (``setpoint=zero`` for the angle task) as the least RMS error whose fin
+#: travel stays within the PID's on the same episodes: angle move 0.01 / 0.006 / 0.004
+#: gave 0.56° / 0.51° / 0.48° at 40 / 45 / 49 °/s (PID 0.94° at 49 °/s), a rate weight
+#: of 0.1 or 0.001 changed < 0.03°; rate task move 0.03 / 0.01 / 0.003 / 0.001 gave
+#: settled 1.24 / 1.12 / 1.07 / 1.07 °/s at 43 / 55 / 69 / 78 °/s (PID 1.44 at 75).
+DEFAULT_WEIGHTS: dict[str, dict[str, float]] = {
+    "angle": {"rate": 0.01, "move": 0.005},
+    "rate": {"rate": 1.0, "move": 0.003},
+}
+
+
+class ObserverController:
+    """Disturbance-observer feedforward with LQR state feedback (module docstring)."""
+
+    name = "observer"
+
+    def __init__(
+        self,
+        config: RollConfig,
+        rocket: NominalModel,
+        turbulence: Turbulence,
+        weights: dict[str, float] | None = None,
+    ) -> None:
+        self.config = config
+        self.rocket = rocket
+        self.turbulence = turbulence
+        self.observer = RollObserver(rocket.params, turbulence, config)
+        self.weights = {**DEFAULT_WEIGHTS[config.task], **(weights or {})}
+        self._range = config.fin_range_deg
+        self._angle = config.task == "angle"
+        self.gain = self._design()
+        self.reset()
+
+    def _design(self) -> FloatArray:
+        """LQR gain on ``[v, ψ, u_d lags, b, θ + θ̄]`` with the command as the input.
+
+        The model is the observer's at trim with the fin as a state (the fin
+        at the step's start), so the cost can weigh the move ``Δθ``.  The
+        servo moves the fin at its rate limit and then holds it: the step's
+        response is not linear in the move, and the design takes its secant
+        over a typical move (one SD of the turbulence's innovation: what a
+        cancelling fin moves per step), shared between the fin at the start
+        and the command so a fin at rest keeps the exact gain.
+        """
+        obs = self.observer
+        trim = -self.rocket.theta_bar_deg
+        t_rest, c_rest = obs.step_model(trim, trim)
+        move = max(self.turbulence.innovation_sd, 0.1)
+        _, c_moved = obs.step_model(trim, trim + move)
+        m = obs.m
+        n = m + 1
+        a = np.zeros((n, n))
+        a[:m, :m] = t_rest
+        # The offset is constant, uncontrollable and so not stabilisable: designed as a
+        # very slow AR(1) instead, its gain is that of a persistent disturbance.
+        a[obs.bias, obs.bias] = _OFFSET_POLE
+        b = np.zeros((n, 1))
+        for row in (0, 1):  # rate, angle: command share by the secant, the rest on the fin
+            to_command = (c_moved[row] - c_rest[row]) / move
+            b[row, 0] = to_command
+            a[row, m] = t_rest[row, 2] - to_command
+        b[m, 0] = 1.0
+        q = np.zeros((n, n))
+        w = self.weights
+        if self._angle:
+            q[1, 1] = 1.0
+        q[0, 0] = w["rate"]
+        # the move Δθ = command - fin state: cost move·(u - x_fin)², a cross term
+        r = np.array([[w["move"]]])
+        s = np.zeros((n, 1))
+        s[m, 0] = -w["move"]
+        q[m, m] += w["move"]
+        if not self._angle:  # ψ is not used in the rate task: leave it out of the design
+            keep = [i for i in range(n) if i != 1]
+            a, b, q, s = a[np.ix_(keep, keep)], b[keep], q[np.ix_(keep, keep)], s[keep]
+        x = linalg.solve_discrete_are(a, b, q, r, s=s)
+        k = np.linalg.solve(r + b.T @ x @ b, b.T @ x @ a + s.T)
+        gain = -k[0]
+        if not self._angle:
+            gain = np.insert(gain, 1, 0.0)
+        return np.asarray(gain)
+
+    def reset(self, env: FlightView | None = None) -> None:
+        """A new episode: the observer back to its prior."""
+        self.observer.reset()
+        self._last: tuple[float, float] | None = None
+
+    def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
+        """The fin command for observation ``obs``."""
+        ob = self.observer
+        if self._last is not None:
+            ob.predict(*self._last)
+        ob.update(obs)
+        fin = float(obs[Obs.FIN])
+        x = ob.mean.copy()
+        theta_bar = self.rocket.theta_bar_deg
+        if self._angle:
+            offset = 0.0
+        else:
+            setpoint = float(obs[Obs.ERROR]) + float(obs[Obs.RATE])
+            x[0] -= setpoint
+            offset = setpoint / self.rocket.alpha
+        state = np.append(x, fin + theta_bar - offset)
+        command = float(self.gain @ state) - theta_bar + offset
+        command = min(max(command, -self._range), self._range)
+        self._last = (fin, command)
+        return np.array([command / self._range], dtype=np.float32)
+
+
+def make_observer(design: Design) -> ObserverController:
+    """``--policy observer``: designed on the train split's nominal rocket and turbulence."""
+    design.no_argument("observer")
+    bank = design.train_bank
+    nominal = NominalModel.from_bank(bank)
+    turbulence = Turbulence.from_bank(bank, design.config.dt_s, nominal)
+    return ObserverController(design.config, nominal, turbulence)
