@@ -102,8 +102,7 @@ register_controller(
 register_controller(
     "observer",
     "agents.observer:make_observer",
-    summary="Kalman filter estimating u_d on the fly, cancelled, LQR on the estimate "
-    "(train split's nominal rocket and turbulence)",
+    summary="u_d estimated on the fly (Kalman filter) and cancelled, LQR on the estimate",
     default=True,
 )
 register_controller(
