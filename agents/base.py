@@ -40,13 +40,17 @@ class FlightView:
     controller can leak into one.
     """
 
-    __slots__ = ("action_space", "config", "dt_s", "observation_space")
+    __slots__ = ("action_space", "config", "observation_space")
 
     def __init__(self, env: RocketRollEnv) -> None:
         self.config: RollConfig = env.config
         self.observation_space = env.observation_space
         self.action_space = env.action_space
-        self.dt_s: float = env.config.dt_s
+
+    @property
+    def dt_s(self) -> float:
+        """The control period, s."""
+        return self.config.dt_s
 
     def __getattr__(self, name: str) -> Any:
         raise AttributeError(

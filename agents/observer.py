@@ -17,12 +17,12 @@ run forward in real time:
   (:func:`identification.ml.interval_maps` over the fin path the servo takes
   to the command, :func:`identification.ml.roll_transition`,
   :func:`identification.statespace.predict`), its measurement update the
-  ML's (:func:`identification.statespace.update`): the encoder as
-  quantisation noise ``q²/12`` about the count's middle, the gyro's
-  multiplicative noise of eq. 52 as ``g²·(v̂² + P_vv)``.  A setpoint step
-  shows as an innovation far outside the filter's band; the angle's variance
-  is then widened so the reading re-anchors it (the step is unknown, the
-  rest of the state is not).
+  ML's for the gyro (:func:`identification.statespace.update`, the
+  multiplicative noise of eq. 52 as ``g²·(v̂² + P_vv)``); the encoder as a
+  quantised measurement: the prior of the angle truncated to the count read
+  (:meth:`RollObserver._encoder`).  A setpoint step shows as a reading the
+  prior puts no mass on; the angle's variance is then widened so the reading
+  re-anchors it (the step is unknown, the rest of the state is not).
 * :class:`ObserverController` -- LQR state feedback on the observer's
   estimate (:func:`scipy.linalg.solve_discrete_are`), designed on the same
   model linearised at trim with the fin as a state, so the cost weighs the
@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
+from statsmodels.tsa.arima_process import ArmaProcess
 
 from agents.base import Design, FlightView
 from agents.nominal import NominalModel
@@ -103,10 +104,7 @@ class Turbulence:
         ar = np.asarray(self.ar, dtype=float)
         if ar.ndim != 1 or ar.size < 1 or not np.all(np.isfinite(ar)):
             raise ValueError(f"Turbulence.ar must be one or more finite numbers, got {self.ar!r}")
-        companion = np.zeros((ar.size, ar.size))
-        companion[0] = ar
-        companion[1:, :-1] = np.eye(ar.size - 1)
-        if np.max(np.abs(np.linalg.eigvals(companion))) >= 1.0:
+        if not ArmaProcess(ar=np.r_[1.0, -ar]).isstationary:
             raise ValueError(f"Turbulence.ar {ar.tolist()} is not stationary")
         for name in ("innovation_sd", "offset_sd", "drift_sd", "dt_s"):
             value = getattr(self, name)
@@ -211,9 +209,7 @@ class RollObserver:
         self.max_move = config.rate_limit_dps * config.substep_s
         self.fin_range = config.fin_range_deg
         self.angle_task = config.task == "angle"
-        q = config.encoder_resolution_deg if config.sensors else 0.0
-        self.count = q
-        self.angle_var = max(q * q / 12.0, _VAR_FLOOR)
+        self.count = config.encoder_resolution_deg if config.sensors else 0.0
         self.gyro_var = (config.gyro_noise_pct / 100.0) ** 2 if config.sensors else 0.0
         # At least two lags, so the last step's u_d is a state (an AR(1) gets a zero a_2).
         self.ar = np.pad(turbulence.ar, (0, max(0, 2 - turbulence.order)))

@@ -390,15 +390,10 @@ def interval_maps(params: RollParams, theta_fine: FloatArray, per: int, h: float
 
 def _state_space(data: _Data, parts: _Parts) -> LinearGaussian:
     """The model as a general :class:`LinearGaussian` (for the smoother)."""
-    n, p = data.n, parts.ar.size
-    m = 2 + p
-    transition = np.zeros((n, m, m))
-    intercept = np.zeros((n, m))
-    transition[:-1], intercept[:-1] = roll_transition(parts.maps, parts.ar)
-    transition[-1, 1, 1] = 1.0  # the last one is not used
-    transition[-1, 2, 2:] = parts.ar
-    for i in range(1, p):
-        transition[-1, 2 + i, 1 + i] = 1.0
+    m = 2 + parts.ar.size
+    # n samples, n - 1 intervals: the last transition is not used (an all-zero map).
+    maps = np.vstack([parts.maps, np.zeros((1, parts.maps.shape[1]))])
+    transition, intercept = roll_transition(maps, parts.ar)
     state_cov = np.zeros((m, m))
     state_cov[2, 2] = parts.innovation_var
     return LinearGaussian(
