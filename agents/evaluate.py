@@ -40,6 +40,7 @@ from rollenv.history import EpisodeHistory, HistoryRecorder
 
 __all__ = [
     "COMMAND",
+    "HEADLINE",
     "METRICS",
     "Args",
     "EpisodeSpec",
@@ -47,21 +48,42 @@ __all__ = [
     "evaluate",
     "markdown_table",
     "metrics",
+    "paired_difference",
     "protocol_episodes",
     "run",
 ]
 
 
-#: Metric name → (description, "max" if larger is worse else "min").
+#: Metric name → (description, "max" if larger is worse else "min").  The first is the
+#: headline (:data:`HEADLINE`).
 METRICS: dict[str, tuple[str, str]] = {
+    "regulation_rms_error": (
+        "headline: RMS error once each setpoint change is REGULATION_AFTER_S old",
+        "max",
+    ),
+    "settle_time_s": ("time from a setpoint change to within SETTLE_BAND for 1 s, s", "max"),
+    "settled_rms_error": ("RMS error in the last quarter of each setpoint period", "max"),
     "rms_error": ("RMS tracking error over the episode", "max"),
     "max_error": ("largest |tracking error|", "max"),
-    "settled_rms_error": ("RMS error in the last quarter of each setpoint period", "max"),
     "fin_travel_dps": ("fin travel per second, °/s", "max"),
     "rate_limit_pct": ("% of time the servo moves at its rate limit", "max"),
     "range_limit_pct": ("% of steps ending with the fin at its range limit", "max"),
     "return": ("sum of rewards", "min"),
 }
+
+#: The protocol's headline metric: the controller's turbulence rejection, not the rocket's slew.
+HEADLINE = "regulation_rms_error"
+
+#: Time after a setpoint change (or the episode's start) from which the error counts in the
+#: headline, per task, s.  The largest steps the schedules draw need up to 7.6 s (angle, a
+#: 163° step) and 0.9 s (rate, 18 °/s) even with the oracle's perfect preview -- the servo's
+#: rate and range limits and the rocket's top roll rate set them -- so before these times the
+#: error measures the rocket, after them the controller.  Never more than 3/4 of a period.
+REGULATION_AFTER_S: dict[str, float] = {"angle": 7.5, "rate": 2.0}
+
+#: Band (° or °/s) the error must enter and stay in for SETTLE_HOLD_S to count as settled.
+SETTLE_BAND: dict[str, float] = {"angle": 2.0, "rate": 2.0}
+SETTLE_HOLD_S = 1.0
 
 
 def env_on(config: RollConfig, bank: TraceBank) -> RocketRollEnv:
@@ -121,17 +143,49 @@ def run_episode(env: RocketRollEnv, controller: Controller, spec: EpisodeSpec) -
     return recorder.history(env.config.task, env.config.fin_range_deg, spec.trace)
 
 
+def _since_change(setpoint: np.ndarray) -> np.ndarray:
+    """Samples since the last setpoint change (or since the episode's start), per sample."""
+    index = np.arange(setpoint.size)
+    changed = np.flatnonzero(np.diff(setpoint) != 0) + 1
+    last = np.zeros(setpoint.size, dtype=int)
+    last[changed] = changed
+    return np.asarray(index - np.maximum.accumulate(last))
+
+
+def settle_times(rollout: EpisodeHistory, config: RollConfig) -> np.ndarray:
+    """Time from each setpoint change until the error stays within ``SETTLE_BAND`` for 1 s, s.
+
+    A step that does not settle before the next change (or the episode's end)
+    counts as the whole time it had (censored).  Empty if the setpoint never
+    changes.
+    """
+    inside = np.abs(rollout.error) < SETTLE_BAND[config.task]
+    hold = max(1, round(SETTLE_HOLD_S / config.dt_s))
+    changes = np.flatnonzero(np.diff(rollout.setpoint) != 0) + 1
+    ends = [*changes[1:].tolist(), inside.size][: changes.size]
+    times = []
+    for start, end in zip(changes.tolist(), ends, strict=True):
+        window = inside[start:end]
+        # run[j]: the window is inside for `hold` samples from j on
+        run = np.convolve(window, np.ones(hold), "valid") == hold if window.size >= hold else []
+        settled = np.flatnonzero(run)
+        times.append((settled[0] if settled.size else end - start) * config.dt_s)
+    return np.asarray(times, dtype=float)
+
+
 def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     """The protocol's metrics of one episode (see :data:`METRICS`).
 
-    Over the steps after reset: RMS and largest |error|; the settled RMS over
-    the last quarter of each setpoint period, 7.5-10 s after a change by
-    default (turbulence rejection with the slews, even of 180°, done; the
-    episode's last quarter if no period ends within it); fin travel ``Σ|Δθ|/T``; time
-    at the rate limit, the time the servo needs at 150 °/s to reach each
-    command, capped at the step (the servo is a pure rate limiter, so this is
-    the time it is moving, to within a substep); steps ending with
-    ``|θ| = 40°``; the return.
+    Over the steps after reset: the headline, the RMS error over the samples
+    at least ``REGULATION_AFTER_S`` (at most 3/4 of a period) after the last
+    setpoint change or the start; the mean time to settle after a setpoint
+    change (NaN if the setpoint never changes); the settled RMS over the last
+    quarter of each setpoint period, 7.5-10 s after a change by default (the
+    episode's last quarter if no period ends within it); RMS and largest
+    |error|; fin travel ``Σ|Δθ|/T``; time at the rate limit, the time the
+    servo needs at 150 °/s to reach each command, capped at the step (the
+    servo is a pure rate limiter, so this is the time it is moving, to within
+    a substep); steps ending with ``|θ| = 40°``; the return.
     """
     error = rollout.error[1:]
     fin = rollout.fin_deg
@@ -141,13 +195,20 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     settled = (steps % period) >= period - max(period // 4, 1)
     if not settled.any():  # a period as long as the episode: its last quarter
         settled = steps > len(error) - max(len(error) // 4, 1)
+    after = min(round(REGULATION_AFTER_S[config.task] / config.dt_s), (3 * period) // 4)
+    regulating = _since_change(rollout.setpoint)[1:] >= after
+    if not regulating.any():
+        regulating = settled
+    settle = settle_times(rollout, config)
     travel = np.abs(np.diff(fin))
     needed = np.abs(rollout.command_deg[1:] - fin[:-1]) / config.rate_limit_dps
     at_range = np.abs(fin[1:]) >= config.fin_range_deg * (1 - 1e-9)
     return {
+        "regulation_rms_error": float(np.sqrt(np.mean(error[regulating] ** 2))),
+        "settle_time_s": float(settle.mean()) if settle.size else float("nan"),
+        "settled_rms_error": float(np.sqrt(np.mean(error[settled] ** 2))),
         "rms_error": float(np.sqrt(np.mean(error**2))),
         "max_error": float(np.max(np.abs(error))),
-        "settled_rms_error": float(np.sqrt(np.mean(error[settled] ** 2))),
         "fin_travel_dps": float(travel.sum() / duration),
         "rate_limit_pct": float(100 * np.minimum(needed, config.dt_s).sum() / duration),
         "range_limit_pct": float(100 * np.mean(at_range)),
@@ -156,16 +217,41 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
 
 
 def aggregate(episodes: Sequence[dict[str, float]]) -> dict[str, dict[str, float]]:
-    """Mean, SD (ddof 1) and worst case of each metric over episodes."""
+    """Mean, SD (ddof 1) and worst case of each metric over the episodes that define it.
+
+    A metric no episode defines (the time to settle with the setpoint held)
+    aggregates to NaN."""
     out = {}
     for name, (_, worse) in METRICS.items():
         values = np.array([e[name] for e in episodes])
+        values = values[~np.isnan(values)]
+        if not values.size:
+            out[name] = {"mean": float("nan"), "sd": float("nan"), "worst": float("nan")}
+            continue
         out[name] = {
             "mean": float(values.mean()),
             "sd": float(values.std(ddof=1)) if values.size > 1 else 0.0,
             "worst": float(values.max() if worse == "max" else values.min()),
         }
     return out
+
+
+def paired_difference(
+    result: Evaluation, reference: Evaluation, metric: str = HEADLINE
+) -> tuple[float, float]:
+    """Mean and standard error of ``result − reference`` over their common episodes.
+
+    Both met the same episodes and gyro noise, so the per-episode difference
+    removes what the episodes share (how rough each trace is) and its SEM is
+    the one that says whether two controllers differ."""
+    mine = {e["episode"]: e[metric] for e in result.episodes}
+    theirs = {e["episode"]: e[metric] for e in reference.episodes}
+    common = sorted(set(mine) & set(theirs))
+    diff = np.array([mine[i] - theirs[i] for i in common])
+    diff = diff[~np.isnan(diff)]
+    if diff.size < 2:
+        return (float(diff.mean()) if diff.size else float("nan")), float("nan")
+    return float(diff.mean()), float(diff.std(ddof=1) / np.sqrt(diff.size))
 
 
 def evaluate(
@@ -198,27 +284,57 @@ def evaluate(
 
 
 # ------------------------------------------------------------------------- reports
+def _reference(results: Sequence[Evaluation]) -> Evaluation | None:
+    """The row the others are compared with: the PID if evaluated, else none."""
+    return next((r for r in results if r.name.split()[0] == "PID"), None)
+
+
 def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
-    """The results as a Markdown table (mean ± SD, worst case in brackets)."""
+    """The results as a Markdown table (mean ± SD, worst case in brackets).
+
+    The headline comes first, then its paired difference to the PID (mean ±
+    SEM over the common episodes, and how many SEMs that is)."""
     unit = "°" if config.task == "angle" else "°/s"
+    reference = _reference(results)
     head = (
-        f"| controller | RMS error ({unit}) | max error ({unit}) | settled RMS ({unit}) "
+        f"| controller | **regulation RMS** ({unit}) | vs PID ({unit}) | time to settle (s) "
+        f"| settled RMS ({unit}) | RMS error ({unit}) | max error ({unit}) "
         f"| fin travel (°/s) | at rate limit (%) | at range limit (%) | return |"
     )
-    lines = [head, "|" + "---|" * 8]
+    lines = [head, "|" + "---|" * 11]
     for r in results:
         a = r.aggregate
 
         def cell(name: str, digits: int = 2, agg: dict[str, dict[str, float]] = a) -> str:
             m = agg[name]
+            if np.isnan(m["mean"]):
+                return "–"
             return f"{m['mean']:.{digits}f} ± {m['sd']:.{digits}f} [{m['worst']:.{digits}f}]"
 
+        versus = "–"
+        if reference is not None and r is not reference:
+            mean, sem = paired_difference(r, reference)
+            if not np.isnan(sem):
+                z = f" ({abs(mean) / sem:.1f} SEM)" if sem > 0 else ""
+                versus = f"{mean:+.2f} ± {sem:.2f}{z}"
         lines.append(
-            f"| {r.name} | {cell('rms_error')} | {cell('max_error', 1)} "
-            f"| {cell('settled_rms_error')} | {cell('fin_travel_dps', 1)} "
-            f"| {cell('rate_limit_pct', 1)} | {cell('range_limit_pct', 1)} | {cell('return', 1)} |"
+            f"| {r.name} | {cell(HEADLINE)} | {versus} | {cell('settle_time_s', 1)} "
+            f"| {cell('settled_rms_error')} | {cell('rms_error')} | {cell('max_error', 1)} "
+            f"| {cell('fin_travel_dps', 1)} | {cell('rate_limit_pct', 1)} "
+            f"| {cell('range_limit_pct', 1)} | {cell('return', 1)} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _no_nan(value: Any) -> Any:
+    """``value`` with every NaN float replaced by None (JSON has no NaN)."""
+    if isinstance(value, float):
+        return None if np.isnan(value) else value
+    if isinstance(value, dict):
+        return {k: _no_nan(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_no_nan(v) for v in value]
+    return value
 
 
 def to_json(
@@ -234,9 +350,12 @@ def to_json(
             "config": asdict(config),
             "episodes": [asdict(s) for s in specs],
             "metrics": {k: v[0] for k, v in METRICS.items()},
+            "headline": HEADLINE,
         },
         "controllers": {
-            r.name: {"aggregate": r.aggregate, "episodes": r.episodes, "seconds": r.seconds}
+            r.name: _no_nan(
+                {"aggregate": r.aggregate, "episodes": r.episodes, "seconds": r.seconds}
+            )
             for r in results
         },
     }
@@ -345,7 +464,7 @@ def run(args: Args) -> list[Evaluation]:
                 out / "table.md": table,
                 out / "results.json": text + "\n",
                 out / "episode.png": episode_png,
-                out / "errors.png": plot_errors(results, config),
+                out / "errors.png": plot_errors(results, config, HEADLINE),
             }
         )
         print(f"wrote {out}/table.md, results.json, episode.png, errors.png")

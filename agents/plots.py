@@ -58,8 +58,10 @@ def plot_episode(results: Sequence[Evaluation], config: RollConfig) -> tuple[byt
     return png_bytes(fig, dpi=110), k
 
 
-def plot_errors(results: Sequence[Evaluation], config: RollConfig) -> bytes:
-    """Per controller: the distribution of |error| over all steps, and per-episode RMS (PNG)."""
+def plot_errors(
+    results: Sequence[Evaluation], config: RollConfig, metric: str = "regulation_rms_error"
+) -> bytes:
+    """Per controller: the distribution of |error| over all steps, and ``metric`` (PNG)."""
     unit = "°" if config.task == "angle" else "°/s"
     fig = new_figure(figsize=(11, 4.5))
     left, right = fig.subplots(1, 2)
@@ -75,7 +77,7 @@ def plot_errors(results: Sequence[Evaluation], config: RollConfig) -> bytes:
     left.set_ylabel("share of steps with a larger error")
     left.legend(frameon=False)
     left.grid(alpha=0.3, which="both")
-    rms = [[e["rms_error"] for e in r.episodes] for r in results]
+    rms = [[e[metric] for e in r.episodes] for r in results]
     positions = np.arange(len(results))
     right.boxplot(rms, positions=positions, widths=0.5, showfliers=False)
     rng = np.random.default_rng(0)
@@ -83,8 +85,9 @@ def plot_errors(results: Sequence[Evaluation], config: RollConfig) -> bytes:
         jitter = rng.uniform(-0.15, 0.15, len(values))
         right.scatter(i + jitter, values, s=12, color=colour, alpha=0.8, zorder=3)
     right.set_xticks(positions, [r.name for r in results])
-    right.set_ylabel(f"RMS error per episode ({unit})")
-    right.grid(alpha=0.3, axis="y")
+    right.set_yscale("log")
+    right.set_ylabel(f"{metric} per episode ({unit})")
+    right.grid(alpha=0.3, axis="y", which="both")
     n = len(results[0].episodes)
     fig.suptitle(f"Tracking error on {n} held-out episodes ({config.task} task)")
     fig.tight_layout()

@@ -8,19 +8,23 @@ import math
 import numpy as np
 import pytest
 
+from agents.base import Evaluation
 from agents.evaluate import (
     COMMAND,
+    HEADLINE,
     METRICS,
     env_on,
     evaluate,
     markdown_table,
     metrics,
+    paired_difference,
     protocol_episodes,
+    settle_times,
 )
 from agents.registry import make_controller
 from rocketroll.cli import main as rocketroll
 from rocketroll_common.settings import run_command
-from rollenv.bank import load_bank, make_config
+from rollenv.bank import load_bank, make_config, variant_config
 from rollenv.history import EpisodeHistory
 
 
@@ -107,12 +111,65 @@ def test_metrics_of_a_hand_made_episode(angle_config):
     assert m["rms_error"] == pytest.approx(math.sqrt((9 + 16 + 25 + 144) / 4))
     assert m["max_error"] == 12.0
     assert m["settled_rms_error"] == 5.0  # step 3 is the period's last quarter
+    # The headline: samples at least 3 steps (3/4 of a period) after the start, and the
+    # setpoint never changes: steps 3 and 4.
+    assert m["regulation_rms_error"] == pytest.approx(math.sqrt((25 + 144) / 2))
+    assert math.isnan(m["settle_time_s"])  # the setpoint never changes
     assert m["fin_travel_dps"] == pytest.approx(40.0 / 0.4)
     # Moving at 150 °/s: 0.1 s (40° asked), 0, 10°/150 °/s, 0.1 s -- of 0.4 s.
     assert m["rate_limit_pct"] == pytest.approx(100 * (0.1 + 10 / 150 + 0.1) / 0.4)
     assert m["range_limit_pct"] == 25.0
     assert m["return"] == -10.0
     assert set(m) == set(METRICS)
+
+
+def _step_episode(error: list[float], setpoint: list[float]) -> EpisodeHistory:
+    n = len(error)
+    return EpisodeHistory(
+        time_s=0.1 * np.arange(n),
+        angle_deg=np.zeros(n),
+        rate_dps=np.zeros(n),
+        fin_deg=np.zeros(n),
+        command_deg=np.zeros(n),
+        u_d_deg=np.zeros(n),
+        setpoint=np.array(setpoint, dtype=float),
+        error=np.array(error, dtype=float),
+        reward=np.zeros(n),
+        task="angle",
+    )
+
+
+def test_settle_time_and_regulation_window_of_a_hand_made_episode():
+    # 20-step periods (2 s); the setpoint changes at samples 20 and 40.  After the first
+    # change the error is in the 2° band from sample 23 on: 0.3 s.  After the second it
+    # enters at 42, leaves at 45 and is back from 46 on, for 14 samples (the hold is
+    # 10 samples, 1 s): 0.6 s.
+    cfg = make_config("RocketRoll-v0", {"setpoint_period_s": 2.0})
+    error = [0.0] * 20 + [50, 20, 5] + [1] * 17 + [40, 10, 1, 1, 1, 3] + [1] * 14
+    setpoint = [0.0] * 20 + [30.0] * 20 + [-10.0] * 20
+    rollout = _step_episode(error, setpoint)
+    assert settle_times(rollout, cfg).tolist() == pytest.approx([0.3, 0.6])
+    m = metrics(rollout, cfg)
+    assert m["settle_time_s"] == pytest.approx(0.45)
+    # The headline counts samples >= 15 (3/4 of the 20-step period, below 7.5 s) after
+    # each change or the start: samples 15-19 (error 0), 35-39 and 55-59 (error 1).
+    assert m["regulation_rms_error"] == pytest.approx(math.sqrt(10 / 15))
+    # A step that never settles counts the whole time it had; one that settles only as the
+    # next change comes too (its hold is cut short).
+    never = _step_episode([0.0] * 20 + [9.0] * 11 + [0.0] * 9, [0.0] * 20 + [30.0] * 20)
+    assert settle_times(never, cfg).tolist() == pytest.approx([2.0])
+
+
+def test_paired_difference_is_over_common_episodes():
+    def result(name, values):
+        episodes = [{"episode": i, HEADLINE: v} for i, v in enumerate(values)]
+        return Evaluation(name, episodes, {}, [])
+
+    a, b = result("a", [1.0, 2.0, 3.0]), result("b", [0.5, 1.0, 2.5])
+    mean, sem = paired_difference(a, b)
+    diff = np.array([0.5, 1.0, 0.5])
+    assert mean == pytest.approx(diff.mean())
+    assert sem == pytest.approx(diff.std(ddof=1) / math.sqrt(3))
 
 
 def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
@@ -190,3 +247,23 @@ def test_set_passes_environment_options_to_every_episode(tmp_path, default_db):
     assert results["protocol"]["settings"] == {"setpoint": "zero"}
     assert results["protocol"]["config"]["setpoint"] == "zero"
     assert all(set(e["setpoints"]) == {0.0} for e in results["protocol"]["episodes"])
+
+
+@pytest.mark.parametrize("env_id", ["RocketRoll-v0", "RocketRollRate-v0"])
+def test_the_headline_tells_pid_ppo_and_the_oracle_apart(env_id, default_db):
+    """The issue's requirement: on the protocol (20 test episodes, seed 0) the headline of
+    the PID, the committed PPO and the oracle differ pairwise by more than 3 SEM."""
+    cfg = variant_config(env_id, {"split": "test"})
+    bank = load_bank(cfg, None)
+    specs = protocol_episodes(cfg, 20, seed=0, bank=bank)
+    results = {
+        p: evaluate(cfg, make_controller(p, cfg, env_id), specs, bank=bank)
+        for p in ("pid", "ppo", "oracle")
+    }
+    for a, b in [("pid", "ppo"), ("pid", "oracle"), ("ppo", "oracle")]:
+        mean, sem = paired_difference(results[a], results[b])
+        assert abs(mean) > 3 * sem, (a, b, mean, sem)
+    # and the whole-episode RMS does not (what the headline replaced): within 1 %
+    rms = [r.aggregate["rms_error"]["mean"] for r in results.values()]
+    if env_id == "RocketRoll-v0":
+        assert max(rms) < 1.01 * min(rms)
