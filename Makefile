@@ -43,7 +43,7 @@ demo: $(VENV)/.installed
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
 	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
 	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
-	@echo "      $(DEMO)/env-random.png and the evaluations of trim, PID, the observer, PPO and the oracle"
+	@echo "      $(DEMO)/env-random.png and the evaluations of trim, PID, the observer, the MPC, PPO and the oracle"
 	@echo "      on held-out episodes in $(DEMO)/eval-angle/ and $(DEMO)/eval-rate/ (tables above)"
 
 lint: $(VENV)/.installed-dev

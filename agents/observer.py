@@ -381,16 +381,19 @@ class ObserverController:
         self.gain = self._design()
         self.reset()
 
-    def _design(self) -> FloatArray:
-        """LQR gain on ``[v, ψ, u_d lags, b, θ + θ̄]`` with the command as the input.
+    def design_model(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The design's linear model and cost: ``A, B, Q, R, S`` of ``x⁺ = A x + B u`` and
+        the stage cost ``x'Qx + u'Ru + 2x'Su``.
 
-        The model is the observer's at trim with the fin as a state (the fin
-        at the step's start), so the cost can weigh the move ``Δθ``.  The
-        servo moves the fin at its rate limit and then holds it: the step's
-        response is not linear in the move, and the design takes its secant
-        over a typical move (one SD of the turbulence's innovation: what a
-        cancelling fin moves per step), shared between the fin at the start
-        and the command so a fin at rest keeps the exact gain.
+        ``x = [v, ψ, u_d lags, b, θ + θ̄]`` (``ψ`` left out on the rate task)
+        and ``u`` the command plus ``θ̄``.  The model is the observer's at trim
+        with the fin as a state (the fin at the step's start), so the cost can
+        weigh the move ``Δθ``.  The servo moves the fin at its rate limit and
+        then holds it: the step's response is not linear in the move, and the
+        design takes its secant over a typical move (one SD of the
+        turbulence's innovation: what a cancelling fin moves per step), shared
+        between the fin at the start and the command so a fin at rest keeps
+        the exact gain.
         """
         obs = self.observer
         trim = -self.rocket.theta_bar_deg
@@ -421,22 +424,31 @@ class ObserverController:
         s[m, 0] = -w["move"]
         q[m, m] += w["move"]
         if not self._angle:  # ψ is not used in the rate task: leave it out of the design
-            keep = [i for i in range(n) if i != 1]
+            keep = self.design_states
             a, b, q, s = a[np.ix_(keep, keep)], b[keep], q[np.ix_(keep, keep)], s[keep]
+        return a, b, q, r, s
+
+    @property
+    def design_states(self) -> list[int]:
+        """Indices of the design's states in ``[v, ψ, u_d lags, b, θ + θ̄]``."""
+        n = self.observer.m + 1
+        return [i for i in range(n) if self._angle or i != 1]
+
+    def _design(self) -> FloatArray:
+        """LQR gain on ``[v, ψ, u_d lags, b, θ + θ̄]`` with the command as the input
+        (:meth:`design_model`; zero on ``ψ`` in the rate task)."""
+        a, b, q, r, s = self.design_model()
         x = linalg.solve_discrete_are(a, b, q, r, s=s)
+        self.riccati = x
         k = np.linalg.solve(r + b.T @ x @ b, b.T @ x @ a + s.T)
         gain = -k[0]
         if not self._angle:
             gain = np.insert(gain, 1, 0.0)
         return np.asarray(gain)
 
-    def reset(self, env: FlightView | None = None) -> None:
-        """A new episode: the observer back to its prior."""
-        self.observer.reset()
-        self._last: tuple[float, float] | None = None
-
-    def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
-        """The fin command for observation ``obs``."""
+    def design_state(self, obs: NDArray[np.float32]) -> tuple[FloatArray, float]:
+        """The filter's update with ``obs``, then the design's state (full layout) and the
+        shift ``θ̄ - offset`` from design input to fin command (``command = u - shift``)."""
         ob = self.observer
         if self._last is not None:
             ob.predict(*self._last)
@@ -450,9 +462,24 @@ class ObserverController:
             setpoint = float(obs[Obs.ERROR]) + float(obs[Obs.RATE])
             x[0] -= setpoint
             offset = setpoint / self.rocket.alpha
-        state = np.append(x, fin + theta_bar - offset)
-        command = float(self.gain @ state) - theta_bar + offset
-        command = min(max(command, -self._range), self._range)
+        shift = theta_bar - offset
+        return np.append(x, fin + shift), shift
+
+    def command(self, state: FloatArray, shift: float, fin: float) -> float:
+        """The fin command of the design's state (LQR), clipped to the fin's range."""
+        command = float(self.gain @ state) - shift
+        return min(max(command, -self._range), self._range)
+
+    def reset(self, env: FlightView | None = None) -> None:
+        """A new episode: the observer back to its prior."""
+        self.observer.reset()
+        self._last: tuple[float, float] | None = None
+
+    def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
+        """The fin command for observation ``obs``."""
+        state, shift = self.design_state(obs)
+        fin = float(obs[Obs.FIN])
+        command = self.command(state, shift, fin)
         self._last = (fin, command)
         return np.array([command / self._range], dtype=np.float32)
 

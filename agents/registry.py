@@ -106,6 +106,14 @@ register_controller(
     default=True,
 )
 register_controller(
+    "mpc",
+    "agents.mpc:make_mpc",
+    usage="mpc[:HORIZON]",
+    summary="the observer's estimate, a plan over HORIZON steps (default 20) within the "
+    "servo's rate and range limits, solved by OSQP each step",
+    default=True,
+)
+register_controller(
     "ppo",
     "agents.ppo:make_ppo",
     usage="ppo[:DIR]",

@@ -54,3 +54,10 @@ def test_ml_bias_fits_each_seed_three_ways(default_db: Path) -> None:
         assert f"  {line}" in out
     # The two seeds' offsets are numbers with a spread, not NaN.
     assert "nan" not in out.lower()
+
+
+def test_mpc_speed_times_both_controllers_on_both_tasks(default_db: Path) -> None:
+    out = run_script("mpc_speed.py", "--episodes", "1", "--horizon", "5", db=default_db)
+    for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
+        assert f"{env_id:<20} observer" in out and f"{env_id:<20} mpc:5" in out
+    assert out.count("vs target 10 ms:") == 2

@@ -210,6 +210,7 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
         (["--policy", "lqr"], "--policy lqr: unknown controller 'lqr'"),
         (["--policy", "pid:fast"], "pid:OMEGA needs a number"),
         (["--policy", "trim:1"], "takes no argument"),
+        (["--policy", "mpc:0"], "mpc:HORIZON must be >= 1 step, got 0"),
         (["--episodes", "0"], "--episodes: must be in [1, 100000], got 0"),
         (["--env-id", "CartPole-v1"], "--env-id"),
         (["--set", "split=train"], "--set split=... is not allowed"),

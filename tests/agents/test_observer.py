@@ -92,7 +92,7 @@ def _hold(name: str, env_id: str, setpoint: float):
         yield cfg, run_episode(env, controller, spec)
 
 
-HOLDERS = ["pid", "observer", "oracle"]
+HOLDERS = ["pid", "observer", "mpc", "oracle"]
 PPO_OFFSET = pytest.param(
     "ppo",
     marks=pytest.mark.xfail(
@@ -113,7 +113,7 @@ def test_controllers_hold_an_angle_within_one_encoder_count(name, setpoint, defa
         assert held.max() <= cfg.encoder_resolution_deg, (rollout.trace, held.max())
 
 
-@pytest.mark.parametrize("name", ["pid", "observer", "ppo", "oracle"])
+@pytest.mark.parametrize("name", ["pid", "observer", "mpc", "ppo", "oracle"])
 def test_controllers_hold_a_rate_to_the_gyro_noise(name, default_db):
     """Rate task, no turbulence: after 5 s the true rate error's RMS is within 2 SDs
     of the gyro's noise at the setpoint (2 % of 8 °/s = 0.16 °/s) and its mean within

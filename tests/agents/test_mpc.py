@@ -1,0 +1,83 @@
+"""The MPC: the observer's LQR where no limit binds, the servo's limits where they do."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from agents.evaluate import env_on, protocol_episodes, run_episode
+from agents.mpc import MPCController
+from agents.registry import make_controller
+from rollenv.bank import load_bank, variant_config
+
+
+@pytest.fixture(scope="module", params=["RocketRoll-v0", "RocketRollRate-v0"])
+def pair(request, default_db):
+    env_id = request.param
+    cfg = variant_config(env_id, {"split": "test"})
+    return cfg, make_controller("observer", cfg, env_id), make_controller("mpc", cfg, env_id)
+
+
+def test_where_no_limit_binds_the_first_move_is_the_lqrs(pair):
+    """Terminal cost = the LQR's Riccati matrix: the unconstrained plan's first move is the
+    LQR's, for any horizon (checked on random small states: fin near trim, errors of a
+    few degrees, so neither the range nor the rate limit binds)."""
+    cfg, observer, mpc = pair
+    assert isinstance(mpc, MPCController)
+    rng = np.random.default_rng(3)
+    n = observer.gain.size
+    for _ in range(20):
+        state = rng.normal(0.0, 0.3, n)
+        fin = float(state[-1]) - observer.rocket.theta_bar_deg  # shift θ̄: fin = x - θ̄
+        lqr = observer.command(state, observer.rocket.theta_bar_deg, fin)
+        planned = mpc.command(state, observer.rocket.theta_bar_deg, fin)
+        assert abs(lqr - fin) < cfg.rate_limit_dps * cfg.dt_s  # the LQR's move is feasible
+        assert planned == pytest.approx(lqr, abs=1e-3)
+
+
+def test_where_a_limit_binds_the_plan_keeps_to_it(pair):
+    """A large error: the LQR asks for a move beyond what the servo does in one step (and
+    the range); the plan's first move is exactly the servo's step, within the range."""
+    cfg, observer, mpc = pair
+    step = cfg.rate_limit_dps * cfg.dt_s
+    state = np.zeros(observer.gain.size)
+    state[0 if cfg.task == "rate" else 1] = 40.0  # 40 °/s or 40° off the setpoint
+    shift = observer.rocket.theta_bar_deg
+    fin = -shift  # at trim
+    lqr = observer.command(state, shift, fin)
+    planned = mpc.command(state, shift, fin)
+    assert abs(lqr - fin) > step  # the LQR would ask for more ...
+    assert abs(planned - fin) == pytest.approx(step, abs=1e-4)  # ... the servo's step
+    assert np.sign(planned - fin) == np.sign(lqr - fin)
+    plan = mpc.plan(state, shift, fin) - shift
+    assert np.all(np.abs(plan) <= cfg.fin_range_deg + 1e-4)
+    assert np.all(np.abs(np.diff(np.concatenate([[fin], plan]))) <= step + 1e-4)
+
+
+def test_protocol_episodes_keep_the_servo_limits_and_every_qp_solves(pair):
+    cfg, _, mpc = pair
+    bank = load_bank(cfg, None)
+    env = env_on(cfg, bank)
+    step = cfg.rate_limit_dps * cfg.dt_s
+    before = mpc.solves
+    for spec in protocol_episodes(cfg, 3, seed=0, bank=bank):
+        rollout = run_episode(env, mpc, spec)
+        moves = rollout.command_deg[1:] - rollout.fin_deg[:-1]
+        assert np.abs(moves).max() <= step + 1e-3
+        assert np.abs(rollout.command_deg).max() <= cfg.fin_range_deg
+    assert mpc.solves - before == 3 * cfg.max_episode_steps
+    assert mpc.fallbacks == 0
+
+
+def test_the_mpc_pickles_and_takes_a_horizon(default_db):
+    cfg = variant_config("RocketRoll-v0", {"split": "test"})
+    mpc = make_controller("mpc:5", cfg, "RocketRoll-v0")
+    assert mpc.name == "MPC N=5" and mpc.horizon == 5
+    clone = pickle.loads(pickle.dumps(mpc))
+    obs = np.array([2.0, 1.0, -4.0, -4.0], dtype=np.float32)
+    np.testing.assert_array_equal(mpc.act(obs, None), clone.act(obs, None))
+    for bad, message in [("mpc:0", "must be >= 1"), ("mpc:x", "whole number")]:
+        with pytest.raises(ValueError, match=message):
+            make_controller(bad, cfg, "RocketRoll-v0")
