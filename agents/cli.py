@@ -1,4 +1,4 @@
-"""``rocketroll`` commands of the agents layer: ``train``, ``eval``, ``tune``.
+"""``rocketroll`` commands of the agents layer: ``train``, ``eval``, ``seeds``, ``tune``.
 
 The commands themselves live beside what they run (:data:`agents.train.COMMAND`,
 :data:`agents.evaluate.COMMAND`, :data:`agents.tune.COMMAND`, each a settings
@@ -8,7 +8,7 @@ train ppo`` are one command; this module only groups them.
 
 from __future__ import annotations
 
-from agents import evaluate, train, tune
+from agents import evaluate, seeds, train, tune
 from rocketroll_common.settings import Command
 
 __all__ = ["COMMANDS"]
@@ -22,6 +22,7 @@ COMMANDS: dict[str, Command] = {
         subcommands=(train.COMMAND,),
     ),
     "eval": evaluate.COMMAND,
+    "seeds": seeds.COMMAND,
     "tune": Command(
         "tune",
         "re-tune a controller's design on train episodes (the PID's bandwidth)",

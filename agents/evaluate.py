@@ -30,6 +30,7 @@ import numpy as np
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
 from agents.registry import default_policies, make_controller, policy_help
 from disturbances.bank import TraceBank
+from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting, to_argv
 from rollenv import VARIANTS
@@ -326,17 +327,6 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _no_nan(value: Any) -> Any:
-    """``value`` with every NaN float replaced by None (JSON has no NaN)."""
-    if isinstance(value, float):
-        return None if np.isnan(value) else value
-    if isinstance(value, dict):
-        return {k: _no_nan(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_no_nan(v) for v in value]
-    return value
-
-
 def to_json(
     results: Sequence[Evaluation],
     config: RollConfig,
@@ -353,7 +343,7 @@ def to_json(
             "headline": HEADLINE,
         },
         "controllers": {
-            r.name: _no_nan(
+            r.name: nan_to_none(
                 {"aggregate": r.aggregate, "episodes": r.episodes, "seconds": r.seconds}
             )
             for r in results

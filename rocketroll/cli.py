@@ -35,6 +35,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "env": ("rollenv.cli", "run RocketRoll episodes (Gymnasium environment)"),
     "train": ("agents.cli", "train a controller (PPO, Stable-Baselines3)"),
     "eval": ("agents.cli", "evaluate controllers on held-out episodes (table, JSON, plots)"),
+    "seeds": (
+        "agents.cli",
+        "a learned controller over training seeds: mean, IQM, bootstrap CIs, P(beats PID)",
+    ),
     "tune": (
         "agents.cli",
         "re-tune a controller's design on train episodes (the PID's bandwidth)",
