@@ -39,6 +39,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "agents.cli",
         "a learned controller over training seeds: mean, IQM, bootstrap CIs, P(beats PID)",
     ),
+    "robustness": (
+        "agents.cli",
+        "controllers designed once, evaluated on surrogates, randomised rockets, stronger "
+        "turbulence and other methods' replays",
+    ),
     "tune": (
         "agents.cli",
         "re-tune a controller's design on train episodes (the PID's bandwidth)",
