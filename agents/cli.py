@@ -18,9 +18,9 @@ __all__ = ["COMMANDS"]
 COMMANDS: dict[str, Command] = {
     "train": Command(
         "train",
-        "train a controller (PPO, Stable-Baselines3)",
+        "train a controller (PPO, SAC, TD3; Stable-Baselines3)",
         description=train.__doc__ or "",
-        subcommands=(train.COMMAND,),
+        subcommands=(train.COMMAND, train.SAC_COMMAND, train.TD3_COMMAND),
     ),
     "eval": evaluate.COMMAND,
     "seeds": seeds.COMMAND,

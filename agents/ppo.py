@@ -1,4 +1,5 @@
-"""``PPOController``: a PPO policy trained by :mod:`agents.train`, as a :class:`Controller`."""
+"""``PPOController``: a policy trained by :mod:`agents.train` (PPO, SAC or TD3), as a
+:class:`Controller`; with the observation history it was trained with (:mod:`agents.memory`)."""
 
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import Design, FlightView
+from agents.memory import History
 from rollenv.layout import Obs
 
-__all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_ppo"]
+__all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_learned", "make_ppo"]
 
 
 #: Where the committed policies are: one folder per environment id.
@@ -35,9 +37,11 @@ class ObservationNormalizer:
     record : dict
         The contents of ``normalize.json``: ``norm_obs`` and, when True,
         ``mean``, ``var``, ``clip_obs``, ``epsilon``.
+    size : int
+        Values per observation (``len(Obs)``, more with a history).
     """
 
-    def __init__(self, record: dict[str, Any]) -> None:
+    def __init__(self, record: dict[str, Any], size: int = len(Obs)) -> None:
         self.enabled = bool(record.get("norm_obs", False))
         if self.enabled:
             try:
@@ -47,7 +51,7 @@ class ObservationNormalizer:
                 self.epsilon = float(record["epsilon"])
             except KeyError as exc:
                 raise ValueError(f"normalize.json lacks {exc.args[0]!r}") from exc
-            n = len(Obs)
+            n = size
             if self.mean.shape != (n,) or self.var.shape != (n,):
                 raise ValueError(
                     f"normalize.json: mean and var must hold {n} values, got {self.mean.shape} "
@@ -103,8 +107,15 @@ class PPOController:
         self.model = model
         self.normalizer = normalizer
         self.settings = settings
+        self.algorithm: str = settings.get("algorithm", "ppo")
+        self.name = self.algorithm.upper()
         env_settings = settings.get("env_settings") or {}
         self.task: str | None = env_settings.get("task")
+        k = int((settings.get("hyperparameters") or {}).get("history", 0) or 0)
+        self.history: History | None = None
+        if k:
+            self.history = History(1, len(Obs), 1, k)
+        self._dim = int(np.prod(model.observation_space.shape))
         policy = model.policy
         policy.set_training_mode(False)
         self._policy = policy
@@ -114,8 +125,10 @@ class PPOController:
         # is what predict() returns for these policies (gSDE too, unsquashed: its mode is the
         # mean); anything else goes through predict().
         gaussian = (DiagGaussianDistribution, StateDependentNoiseDistribution)
-        self._direct = isinstance(policy.action_dist, gaussian) and not policy.squash_output
-        self._obs = torch.zeros((1, len(Obs)), dtype=torch.float32)
+        self._direct = (
+            isinstance(getattr(policy, "action_dist", None), gaussian) and not policy.squash_output
+        )
+        self._obs = torch.zeros((1, self._dim), dtype=torch.float32)
         low = np.asarray(model.action_space.low, dtype=np.float32)
         high = np.asarray(model.action_space.high, dtype=np.float32)
         self._low, self._high = low, high
@@ -129,40 +142,56 @@ class PPOController:
         FileNotFoundError
             ``model.zip`` or ``normalize.json`` is missing.
         """
-        from stable_baselines3 import PPO
+        from agents.train import algorithm_class
 
         folder = Path(path)
         model_file = folder / "model.zip"
         norm_file = folder / "normalize.json"
         for required in (model_file, norm_file):
             if not required.is_file():
-                raise FileNotFoundError(f"{required}: not found (a PPO training output?)")
-        normalizer = ObservationNormalizer(json.loads(norm_file.read_text(encoding="utf-8")))
+                raise FileNotFoundError(f"{required}: not found (a `rocketroll train` output?)")
         settings_file = folder / "settings.json"
         settings: dict[str, Any] = (
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
+        k = int((settings.get("hyperparameters") or {}).get("history", 0) or 0)
+        size = len(Obs) * (k + 1) + k  # the observation and k past observations and actions
+        record = json.loads(norm_file.read_text(encoding="utf-8"))
+        normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
         custom = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
-        model = PPO.load(model_file, device="cpu", custom_objects=custom)
+        algorithm = str(settings.get("algorithm", "ppo"))
+        model = algorithm_class(algorithm).load(model_file, device="cpu", custom_objects=custom)
         return cls(model, normalizer, settings)
 
     def require_task(self, task: str) -> None:
         """Refuse (``ValueError``) to act for a task the policy was not trained on."""
         if self.task is not None and task != self.task:
             raise ValueError(
-                f"this PPO policy was trained on the {self.task!r} task, the env is {task!r}"
+                f"this {self.name} policy was trained on the {self.task!r} task, the env is "
+                f"{task!r}"
             )
 
     def reset(self, env: FlightView) -> None:
-        """Nothing to forget (the policy is memoryless); checks the env's task."""
+        """Forget the observation history (if it has one); checks the env's task."""
         self.require_task(env.config.task)
+        if self.history is not None:
+            self.history.clear()
 
     def act(self, obs: NDArray[np.float32], env: FlightView) -> NDArray[np.float32]:
         """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""
+        raw = np.asarray(obs, dtype=np.float32).reshape(1, len(Obs))
+        seen = raw if self.history is None else self.history.augment(raw)
+        action = self._action(seen)
+        if self.history is not None:
+            self.history.push(raw, action.reshape(1, -1))
+        return action
+
+    def _action(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
+        """The deterministic action for the policy's observation ``seen`` (with history)."""
         if not self._direct:
-            return self.predict(obs)
-        normalized = self.normalizer(np.asarray(obs).reshape(1, len(Obs)))
+            return self._predict(seen)
+        normalized = self.normalizer(seen)
         torch = self._torch
         policy = self._policy
         with torch.no_grad():
@@ -177,9 +206,12 @@ class PPOController:
         return np.clip(action, self._low, self._high).astype(np.float32)
 
     def predict(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches)."""
-        normalized = self.normalizer(np.asarray(obs).reshape(1, len(Obs)))
-        action, _ = self.model.predict(normalized, deterministic=True)
+        """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches),
+        for a policy without history."""
+        return self._predict(np.asarray(obs, dtype=np.float32).reshape(1, self._dim))
+
+    def _predict(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
+        action, _ = self.model.predict(self.normalizer(seen), deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(1)
 
 
@@ -189,15 +221,41 @@ def _zero(_: float) -> float:
 
 def make_ppo(design: Design) -> PPOController:
     """``--policy ppo[:DIR]``: a training output, or the committed policy of the env id."""
-    path = Path(design.arg) if design.arg else COMMITTED / design.env_id
+    return make_learned(design, "ppo")
+
+
+def make_learned(design: Design, algorithm: str) -> PPOController:
+    """``--policy ALGO[:DIR]``: a ``rocketroll train ALGO`` output (PPO: by default the
+    committed policy of the env id)."""
+    if design.arg:
+        path = Path(design.arg)
+    elif algorithm == "ppo":
+        path = COMMITTED / design.env_id
+    else:
+        raise ValueError(f"--policy {algorithm}:DIR needs the folder of a training run")
     try:
-        ppo = PPOController.load(path)
+        learned = PPOController.load(path)
     except FileNotFoundError as exc:
         raise ValueError(str(exc)) from None
+    if learned.algorithm != algorithm:
+        raise ValueError(
+            f"--policy {algorithm}:{path}: that run trained {learned.algorithm.upper()}, not "
+            f"{algorithm.upper()} (use --policy {learned.algorithm}:{path})"
+        )
     try:
-        ppo.require_task(design.config.task)
+        learned.require_task(design.config.task)
     except ValueError as exc:
-        raise ValueError(f"--policy ppo:{path}: {exc} ({design.env_id})") from None
+        raise ValueError(f"--policy {algorithm}:{path}: {exc} ({design.env_id})") from None
     if design.arg:
-        ppo.name = f"PPO {path.name}"
-    return ppo
+        learned.name = f"{learned.name} {path.name}"
+    return learned
+
+
+def make_sac(design: Design) -> PPOController:
+    """``--policy sac:DIR``."""
+    return make_learned(design, "sac")
+
+
+def make_td3(design: Design) -> PPOController:
+    """``--policy td3:DIR``."""
+    return make_learned(design, "td3")

@@ -122,6 +122,18 @@ register_controller(
     default=True,
 )
 register_controller(
+    "sac",
+    "agents.ppo:make_sac",
+    usage="sac:DIR",
+    summary="a trained SAC policy (DIR: a `rocketroll train sac` output)",
+)
+register_controller(
+    "td3",
+    "agents.ppo:make_td3",
+    usage="td3:DIR",
+    summary="a trained TD3 policy (DIR: a `rocketroll train td3` output)",
+)
+register_controller(
     "oracle",
     "agents.oracle:make_oracle",
     summary="perfect preview of u_d on the true rocket (a bound, not deployable)",

@@ -51,7 +51,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -73,23 +73,50 @@ __all__ = [
     "train",
 ]
 
-#: The hyperparameter file shipped with the package.
-DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
+#: The hyperparameter files shipped with the package, one per algorithm.
+HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
+#: PPO's (``rocketroll train ppo``'s default).
+DEFAULT_HYPERPARAMS = HYPERPARAMS_DIR / "ppo.yml"
 
-#: Keys of a YAML entry that are not PPO keywords.
-SCRIPT_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
-#: PPO keywords the script sets itself (from the command line), not the YAML file.
+#: ``rocketroll train ALGO`` → the Stable-Baselines3 class.
+ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
+
+#: Keys of a YAML entry that are not keywords of the algorithm: ``history`` (steps of
+#: past observations and actions in the observation, :mod:`agents.memory`), and for the
+#: off-policy algorithms the exploration noise (``noise_type: normal``, ``noise_std``) as
+#: rl-baselines3-zoo writes it.
+SCRIPT_KEYS = (
+    "n_envs",
+    "n_timesteps",
+    "policy",
+    "normalize",
+    "env_kwargs",
+    "history",
+    "noise_type",
+    "noise_std",
+)
+#: Keywords the script sets itself (from the command line), not the YAML file.
 SCRIPT_SET = ("seed", "verbose")
 
 
-def ppo_keywords() -> tuple[str, ...]:
-    """Every keyword of Stable-Baselines3's ``PPO`` a YAML entry may set (its signature,
-    less what the script sets: ``seed``, ``verbose``, ``env``)."""
-    from stable_baselines3 import PPO
+def algorithm_class(algo: str) -> Any:
+    """The Stable-Baselines3 class of ``algo`` (``"ppo"``, ``"sac"``, ``"td3"``)."""
+    import stable_baselines3
 
-    names = inspect.signature(PPO.__init__).parameters
+    return getattr(stable_baselines3, ALGORITHMS[algo])
+
+
+def algorithm_keywords(algo: str = "ppo") -> tuple[str, ...]:
+    """Every keyword of the SB3 class of ``algo`` a YAML entry may set (its signature,
+    less what the script sets: ``seed``, ``verbose``, ``env``)."""
+    names = inspect.signature(algorithm_class(algo).__init__).parameters
     given = ("self", "policy", "env", "_init_setup_model", *SCRIPT_SET)  # policy: a script key
     return tuple(n for n in names if n not in given)
+
+
+def ppo_keywords() -> tuple[str, ...]:
+    """:func:`algorithm_keywords` of PPO."""
+    return algorithm_keywords("ppo")
 
 
 #: ``VecNormalize`` arguments a YAML ``normalize`` mapping may set.
@@ -107,6 +134,9 @@ def _variant_ids() -> tuple[str, ...]:
 @dataclass(frozen=True)
 class Args:
     """Arguments of a training run (``rocketroll train ppo --help``)."""
+
+    #: The algorithm (``rocketroll train ALGO``); :class:`SACArgs`, :class:`TD3Args` set theirs.
+    ALGO: ClassVar[str] = "ppo"
 
     env_id: str = setting(
         "RocketRoll-v0",
@@ -131,7 +161,7 @@ class Args:
         le=1_000_000,
     )
     out: Path | None = setting(
-        None, "output folder (default: runs/ppo/<env-id>/seed<seed>)", output="folder"
+        None, "output folder (default: runs/<algorithm>/<env-id>/seed<seed>)", output="folder"
     )
     db: str | None = setting(
         None,
@@ -207,10 +237,16 @@ class Hyperparameters:
     env_kwargs : dict
         RocketRoll settings for the training and evaluation envs.
     ppo : dict
-        PPO keywords as written in the file (schedules as ``"lin_<x>"``,
-        the activation as a name).
+        The algorithm's keywords as written in the file (schedules as
+        ``"lin_<x>"``, the activation as a name); the name is PPO's, the first.
     source : str
         The file.
+    algo : str
+        The algorithm the entry is for.
+    history : int
+        Steps of past observations and actions beside the observation (0: none).
+    noise : tuple or None
+        ``("normal", sd)``: Gaussian exploration noise on the action (SAC, TD3).
     """
 
     env_id: str
@@ -221,23 +257,29 @@ class Hyperparameters:
     env_kwargs: dict[str, Any]
     ppo: dict[str, Any]
     source: str
+    algo: str = "ppo"
+    history: int = 0
+    noise: tuple[str, float] | None = None
 
 
 # ----------------------------------------------------------------------------- arguments
-def parse_args(argv: Sequence[str]) -> Args:
-    """:class:`Args` from command-line words (as ``rocketroll train ppo`` reads them)."""
-    args: Args = parse(Args, argv, prog="rocketroll train ppo")
+def parse_args(argv: Sequence[str], cls: type[Args] = Args) -> Args:
+    """:class:`Args` (or ``cls``) from command-line words (as ``rocketroll train ALGO``
+    reads them)."""
+    args: Args = parse(cls, argv, prog=f"rocketroll train {cls.ALGO}")
     return args
 
 
 def command_of(args: Args) -> str:
-    """The ``rocketroll train ppo`` command line that reproduces ``args``."""
-    return shlex.join(["rocketroll", "train", "ppo", *to_argv(args)])
+    """The ``rocketroll train ALGO`` command line that reproduces ``args``."""
+    return shlex.join(["rocketroll", "train", args.ALGO, *to_argv(args)])
 
 
 # ------------------------------------------------------------------------ hyperparameters
-def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperparameters:
-    """The entry ``env_id`` of the YAML file ``path``, checked key by key.
+def load_hyperparameters(
+    path: str | os.PathLike[str], env_id: str, algo: str = "ppo"
+) -> Hyperparameters:
+    """The entry ``env_id`` of the YAML file ``path`` for ``algo``, checked key by key.
 
     Raises
     ------
@@ -280,23 +322,33 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
             f"{where}: {set_here[0]!r} is set by the command line (--{set_here[0]}), not the "
             "hyperparameter file"
         )
-    keywords = ppo_keywords()
+    keywords = algorithm_keywords(algo)
     unknown = sorted(set(entry) - set(SCRIPT_KEYS) - set(keywords))
     if unknown:
         raise UsageError(
             f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; known: "
             f"{', '.join(SCRIPT_KEYS + keywords)}"
         )
-    counts: dict[str, int | None] = {"n_envs": 1, "n_timesteps": None}
-    for key in ("n_envs", "n_timesteps"):
+    counts: dict[str, int | None] = {"n_envs": 1, "n_timesteps": None, "history": 0}
+    for key in ("n_envs", "n_timesteps", "history"):
         if key not in entry:
             continue
         value = entry[key]
         if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
             raise UsageError(f"{where}: {key} must be a whole number, got {value!r}")
-        if value < 1:
+        if value < (0 if key == "history" else 1):
             raise UsageError(f"{where}: {key} must be positive, got {value!r}")
         counts[key] = int(value)
+    noise = None
+    if "noise_type" in entry or "noise_std" in entry:
+        kind, sd = entry.get("noise_type"), entry.get("noise_std")
+        if algo == "ppo":
+            raise UsageError(f"{where}: noise_type/noise_std are for SAC and TD3, not PPO")
+        if kind != "normal":
+            raise UsageError(f"{where}: noise_type must be 'normal', got {kind!r}")
+        if isinstance(sd, bool) or not isinstance(sd, int | float) or not 0 < sd < 10:
+            raise UsageError(f"{where}: noise_std must be a number in (0, 10), got {sd!r}")
+        noise = ("normal", float(sd))
     normalize = entry.get("normalize", False)
     if normalize is True:
         normalize = {}
@@ -325,6 +377,9 @@ def load_hyperparameters(path: str | os.PathLike[str], env_id: str) -> Hyperpara
         env_kwargs=dict(env_kwargs),
         ppo=ppo,
         source=str(path),
+        algo=algo,
+        history=counts["history"] or 0,
+        noise=noise,
     )
 
 
@@ -404,7 +459,8 @@ def make_env(
     db: str | os.PathLike[str] | None = None,
     training: bool = True,
 ) -> tuple[Any, Any, Any]:
-    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``.
+    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``, with
+    ``VecHistory`` over the adapter when the entry asks for ``history``.
 
     The monitor is inside, so it records the raw returns whatever
     ``VecNormalize`` does to rewards.  ``training=False`` (evaluation):
@@ -430,7 +486,12 @@ def make_env(
         adapter = RollVecEnv(n_envs, hp.env_id, db=db, seed=seed, split=split, **hp.env_kwargs)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
-    env: Any = VecMonitor(adapter)
+    env: Any = adapter
+    if hp.history:
+        from agents.vecenv import VecHistory
+
+        env = VecHistory(env, hp.history)
+    env = VecMonitor(env)
     normalize = None
     if hp.normalize is not None:
         norm = dict(hp.normalize)
@@ -630,29 +691,28 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         A bad argument or hyperparameter (named).
     """
     started = time.perf_counter()
-    hp = load_hyperparameters(args.hyperparams, args.env_id)
+    algo = args.ALGO
+    hp = load_hyperparameters(args.hyperparams, args.env_id, algo)
     n_envs = args.envs if args.envs is not None else hp.n_envs
     timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
     if timesteps is None:
         raise UsageError(f"--timesteps is needed: {hp.source}, {hp.env_id} has no n_timesteps")
     ppo_kwargs = ppo_arguments(hp)
     ppo_kwargs.setdefault("device", "cpu")
-    n_steps = int(ppo_kwargs.get("n_steps", 2048))
-    batch_size = int(ppo_kwargs.get("batch_size", 64))
-    if (n_steps * n_envs) % batch_size != 0 or n_steps * n_envs < 2:
-        raise UsageError(
-            f"--envs {n_envs} x n_steps {n_steps} = {n_steps * n_envs} steps per rollout is not "
-            f"a multiple of batch_size {batch_size} ({hp.source}, {hp.env_id})"
-        )
+    if algo == "ppo":
+        n_steps = int(ppo_kwargs.get("n_steps", 2048))
+        batch_size = int(ppo_kwargs.get("batch_size", 64))
+        if (n_steps * n_envs) % batch_size != 0 or n_steps * n_envs < 2:
+            raise UsageError(
+                f"--envs {n_envs} x n_steps {n_steps} = {n_steps * n_envs} steps per rollout is "
+                f"not a multiple of batch_size {batch_size} ({hp.source}, {hp.env_id})"
+            )
     out = (
-        args.out
-        if args.out is not None
-        else Path("runs") / "ppo" / args.env_id / f"seed{args.seed}"
+        args.out if args.out is not None else Path("runs") / algo / args.env_id / f"seed{args.seed}"
     )
     out = Path(out)
 
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     # Seeding: torch and SB3 (python, numpy, torch, the action space, the env) and the
@@ -678,19 +738,30 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("resume", args.resume if args.resume is not None else "-"),
         ("policy", hp.policy),
         ("normalize", hp.normalize if hp.normalize is not None else "off"),
+        ("history", f"{hp.history} steps" if hp.history else "off"),
+        *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.ppo[k]) for k in hp.ppo),
         ("env_kwargs", hp.env_kwargs or "-"),
         ("database", adapter.bank.description),
     ]
-    print(f"PPO on {args.env_id}")
+    print(f"{ALGORITHMS[algo]} on {args.env_id}")
     _print_table(rows)
 
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval").mkdir(exist_ok=True)
     if args.resume is not None:
-        model = _resume(args.resume, train_env, normalize, ppo_kwargs["device"])
+        model = _resume(args.resume, train_env, normalize, ppo_kwargs["device"], algo)
     else:
-        model = PPO(hp.policy, train_env, seed=args.seed, verbose=args.verbose, **ppo_kwargs)
+        if hp.noise is not None:
+            from stable_baselines3.common.noise import NormalActionNoise
+
+            dims = int(np.prod(train_env.action_space.shape))
+            ppo_kwargs["action_noise"] = NormalActionNoise(
+                np.zeros(dims), np.full(dims, hp.noise[1])
+            )
+        model = algorithm_class(algo)(
+            hp.policy, train_env, seed=args.seed, verbose=args.verbose, **ppo_kwargs
+        )
     start_steps = int(model.num_timesteps)
     model.set_logger(_logger(out, args, ppo_kwargs.get("tensorboard_log"), start_steps))
     held_out = _make_eval_callback_class()(
@@ -711,7 +782,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             CheckpointCallback(
                 save_freq=max(args.checkpoint_freq // n_envs, 1),
                 save_path=str(out / "checkpoints"),
-                name_prefix="ppo",
+                name_prefix=algo,
                 save_vecnormalize=normalize is not None,
             )
         )
@@ -731,11 +802,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     except KeyboardInterrupt:
         # Named by the env-steps collected, as SB3's own checkpoints are: a rollout cut
         # short (at most n_steps x n_envs steps) is counted but collected again on resume.
-        saved = _checkpoint(model, normalize, out / "checkpoints")
+        saved = _checkpoint(model, normalize, out / "checkpoints", algo)
         again = to_argv(dataclasses.replace(args, resume=saved, out=out))
         raise Interrupted(
             f"after {model.num_timesteps:,} env-steps; saved the resumable checkpoint {saved} "
-            f"(go on with: {shlex.join(['rocketroll', 'train', 'ppo', *again])})"
+            f"(go on with: {shlex.join(['rocketroll', 'train', algo, *again])})"
         ) from None
     train_s = time.perf_counter() - learn_started
     trained = int(model.num_timesteps) - start_steps  # by this run (a resumed one: since then)
@@ -754,6 +825,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     wall_s = time.perf_counter() - started
     settings = {
         "env_id": args.env_id,
+        "algorithm": algo,
         "result": "model.zip is the final model; the test split was not used to select it",
         "args": _jsonable(dataclasses.asdict(args)),
         "hyperparameters": _jsonable(
@@ -763,6 +835,8 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 "policy": hp.policy,
                 "normalize": hp.normalize,
                 "env_kwargs": hp.env_kwargs,
+                **({"history": hp.history} if hp.history else {}),
+                **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.ppo,
             }
         ),
@@ -825,38 +899,38 @@ def _logger(out: Path, args: Args, tensorboard_log: str | None, start_steps: int
     if args.verbose:
         formats.append(make_output_format("stdout", str(out / "logs")))
     if tensorboard_log is not None:
-        run = f"PPO_{args.env_id}_seed{args.seed}"
+        run = f"{ALGORITHMS[args.ALGO]}_{args.env_id}_seed{args.seed}"
         formats.append(make_output_format("tensorboard", str(Path(tensorboard_log) / run)))
     return Logger(folder=str(out / "logs"), output_formats=formats)
 
 
-def _normalization_file(checkpoint: Path) -> Path:
+def _normalization_file(checkpoint: Path, algo: str = "ppo") -> Path:
     """The ``VecNormalize`` pickle SB3's ``CheckpointCallback`` saves beside ``checkpoint``."""
     return checkpoint.with_name(
-        checkpoint.name.replace("ppo_", "ppo_vecnormalize_", 1)
+        checkpoint.name.replace(f"{algo}_", f"{algo}_vecnormalize_", 1)
     ).with_suffix(".pkl")
 
 
-def _checkpoint(model: Any, normalize: Any, folder: Path) -> Path:
+def _checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> Path:
     """Save a resumable checkpoint as SB3's ``CheckpointCallback`` names them."""
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"ppo_{model.num_timesteps}_steps.zip"
+    path = folder / f"{algo}_{model.num_timesteps}_steps.zip"
     model.save(path)
     if normalize is not None:
-        normalize.save(str(_normalization_file(path)))
+        normalize.save(str(_normalization_file(path, algo)))
     return path
 
 
-def _resume(checkpoint: Path, train_env: Any, normalize: Any, device: str) -> Any:
+def _resume(
+    checkpoint: Path, train_env: Any, normalize: Any, device: str, algo: str = "ppo"
+) -> Any:
     """The model of ``checkpoint`` on ``train_env``, with its normalisation statistics
     (a checkpoint's ``ppo_vecnormalize_N_steps.pkl``, or a finished run's
     ``vecnormalize.pkl`` beside its ``model.zip``)."""
     import pickle
 
-    from stable_baselines3 import PPO
-
     checkpoint = Path(checkpoint)
-    stats = _normalization_file(checkpoint)
+    stats = _normalization_file(checkpoint, algo)
     if not stats.is_file():
         stats = checkpoint.with_name(VECNORMALIZE_FILE)
     if normalize is None and stats.is_file():
@@ -864,12 +938,13 @@ def _resume(checkpoint: Path, train_env: Any, normalize: Any, device: str) -> An
             f"--resume {checkpoint}: it was trained with VecNormalize ({stats.name} is beside "
             "it) but the hyperparameters say normalize: false"
         )
-    model = PPO.load(checkpoint, env=train_env, device=device)
+    model = algorithm_class(algo).load(checkpoint, env=train_env, device=device)
     if normalize is not None:
         if not stats.is_file():
             raise UsageError(
                 f"--resume {checkpoint}: its VecNormalize statistics "
-                f"{_normalization_file(checkpoint).name} (or {VECNORMALIZE_FILE}) are not beside it"
+                f"{_normalization_file(checkpoint, algo).name} (or {VECNORMALIZE_FILE}) are not "
+                "beside it"
             )
         with stats.open("rb") as handle:
             saved = pickle.load(handle)
@@ -883,11 +958,46 @@ def _train(args: Args) -> int:
     return 0
 
 
+@dataclass(frozen=True)
+class SACArgs(Args):
+    """Arguments of a training run (``rocketroll train sac --help``)."""
+
+    ALGO: ClassVar[str] = "sac"
+    hyperparams: Path = setting(
+        HYPERPARAMS_DIR / "sac.yml", "YAML file of hyperparameters keyed by environment id"
+    )
+
+
+@dataclass(frozen=True)
+class TD3Args(Args):
+    """Arguments of a training run (``rocketroll train td3 --help``)."""
+
+    ALGO: ClassVar[str] = "td3"
+    hyperparams: Path = setting(
+        HYPERPARAMS_DIR / "td3.yml", "YAML file of hyperparameters keyed by environment id"
+    )
+
+
 #: ``rocketroll train ppo``.
 COMMAND = Command(
     "ppo",
     "train PPO on a RocketRoll environment (Stable-Baselines3)",
     Args,
+    _train,
+    __doc__ or "",
+)
+#: ``rocketroll train sac`` and ``rocketroll train td3``: the same script, off-policy.
+SAC_COMMAND = Command(
+    "sac",
+    "train SAC on a RocketRoll environment (Stable-Baselines3)",
+    SACArgs,
+    _train,
+    __doc__ or "",
+)
+TD3_COMMAND = Command(
+    "td3",
+    "train TD3 on a RocketRoll environment (Stable-Baselines3)",
+    TD3Args,
     _train,
     __doc__ or "",
 )

@@ -17,18 +17,21 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 from numpy.typing import NDArray
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
+    VecEnvWrapper,
 )
 
+from agents.memory import History, history_space
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
 
-__all__ = ["ENV_ATTRIBUTES", "RollVecEnv", "StepReturn"]
+__all__ = ["ENV_ATTRIBUTES", "RollVecEnv", "StepReturn", "VecHistory"]
 
 #: What ``step`` and ``step_wait`` return: observations, rewards, dones, infos.
 StepReturn = tuple[
@@ -42,66 +45,67 @@ ENV_ATTRIBUTES = ("render_mode", "config", "bank", "env_id", "spec", "metadata")
 class RollVecEnv(VecEnv):
     """``num_envs`` RocketRoll environments as one Stable-Baselines3 ``VecEnv``.
 
-    Spaces, dynamics, rewards, settings and reset options are those of
-    :class:`rollenv.env.RocketRollEnv` (the core is shared); only the vector
-    API is SB3's:
+        Spaces, dynamics, rewards, settings and reset options are those of
+        :class:`rollenv.env.RocketRollEnv` (the core is shared); only the vector
+        API is SB3's:
 
-    * ``reset()`` returns the observations, shape ``(num_envs, len(Obs))`` float32,
-      and fills ``self.reset_infos``.  Seeds set by :meth:`seed` and options
-      set by ``set_options`` apply to that reset only, as in SB3's
-      ``DummyVecEnv``.
-    * ``step(actions)`` returns observations, rewards (float32, as
-      ``DummyVecEnv``), ``dones`` (bool) and one info dict per env.  An env
-      whose episode ends (truncation after ``max_episode_steps``; the
-      rocket never terminates) is reset *in the same step*: ``dones[i]`` is
-      True, ``infos[i]["terminal_observation"]`` is its last observation,
-      ``infos[i]["TimeLimit.truncated"]`` is True (so PPO bootstraps the
-      value), and ``obs[i]`` is the first observation of its new episode.
-    * Every info holds ``"tracking_error"``: the true tracking error of that
-      step (°, or °/s), as the single env's info, for evaluation; nothing
-      else, to keep the per-step cost low.
+        * ``reset()`` returns the observations, shape ``(num_envs, len(Obs))`` float32,
+          and fills ``self.reset_infos``.  Seeds set by :meth:`seed` and options
+          set by ``set_options`` apply to that reset only, as in SB3's
+          ``DummyVecEnv``.
+        * ``step(actions)`` returns observations, rewards (float32, as
+          ``DummyVecEnv``), ``dones`` (bool) and one info dict per env.  An env
+          whose episode ends (truncation after ``max_episode_steps``; the
+          rocket never terminates) is reset *in the same step*: ``dones[i]`` is
+          True, ``infos[i]["terminal_observation"]`` is its last observation,
+          ``infos[i]["TimeLimit.truncated"]`` is True (so PPO bootstraps the
+          value), and ``obs[i]`` is the first observation of its new episode.
+        * Every info holds ``"tracking_error"``: the true tracking error of that
+          step (°, or °/s), as the single env's info, for evaluation; nothing
+          else, to keep the per-step cost low.
 
-    All randomness -- trace windows, setpoints, initial angles, gyro noise --
-    comes from one ``np.random.Generator``, so the same seed gives the same
-    rollout bit for bit.  With ``num_envs=1`` the rollout equals a
-    ``RocketRollEnv`` reset with the same seed (and ``reset()`` at each
-    truncation), step for step.
+        All randomness -- trace windows, setpoints, initial angles, gyro noise --
+        comes from one ``np.random.Generator``, so the same seed gives the same
+        rollout bit for bit.  With ``num_envs=1`` the rollout equals a
+        ``RocketRollEnv`` reset with the same seed (and ``reset()`` at each
+        truncation), step for step.
 
-    Parameters
-    ----------
-    num_envs : int
-        Batch size.
-    env_id : str
-        A registered variant (``"RocketRoll-v0"``: angle task,
-        ``"RocketRollRate-v0"``: rate task, ...); its options, ``task`` among
-        them, come with it (:func:`rollenv.bank.variant_config`).
-    bank : TraceBank, optional
-        Traces to replay instead of the database's.
-    db : path, optional
-        Database file (default: ``$ROCKETROLL_DB`` or the default database).
-    seed : int, optional
-        Seed of the generator until :meth:`seed` reseeds it.
-    **settings
-        Any field of :class:`rollenv.core.RollConfig` (``split``,
-        ``episode_s``, ``setpoint``, ...), as for ``gym.make``.
+        Parameters
+        ----------
+        num_envs : int
+            Batch size.
+        env_id : str
+            A registered variant (``"RocketRoll-v0"``: angle task,
+            ``"RocketRollRate-v0"``: rate task, ...); its options, ``task`` among
+            them, come with it (:func:`rollenv.bank.variant_config`).
+        bank : TraceBank, optional
+            Traces to replay instead of the database's.
+        db : path, optional
+            Database file (default: ``$ROCKETROLL_DB`` or the default database).
+        seed : int, optional
+            Seed of the generator until :meth:`seed` reseeds it.
+        **settings
+            Any field of :class:`rollenv.core.RollConfig` (``split``,
+            ``episode_s``, ``setpoint``, ...), as for ``gym.make``.
 
-    Notes
-    -----
-    The batch is stepped with the serial kernel: next to torch's threads,
-    numba's parallel kernel oversubscribes the cores and is slower.
+        Notes
+        -----
+        The batch is stepped with the serial kernel: next to torch's threads,
+        numba's parallel kernel oversubscribes the cores and is slower.
 
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from disturbances.bank import TraceBank
-    >>> bank = TraceBank.from_arrays([np.zeros(700)], dt_s=0.1)
-    >>> venv = RollVecEnv(2, bank=bank, seed=0)
-    >>> obs = venv.reset()
-    >>> obs.shape, obs.dtype
-    ((2, 4), dtype('float32'))
-    >>> obs, rewards, dones, infos = venv.step(np.zeros((2, 1), np.float32))
-    >>> rewards.dtype, dones.tolist(), sorted(infos[0])
-    (dtype('float32'), [False, False], ['tracking_error'])
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from agents.memory import History, history_space
+    from disturbances.bank import TraceBank
+        >>> bank = TraceBank.from_arrays([np.zeros(700)], dt_s=0.1)
+        >>> venv = RollVecEnv(2, bank=bank, seed=0)
+        >>> obs = venv.reset()
+        >>> obs.shape, obs.dtype
+        ((2, 4), dtype('float32'))
+        >>> obs, rewards, dones, infos = venv.step(np.zeros((2, 1), np.float32))
+        >>> rewards.dtype, dones.tolist(), sorted(infos[0])
+        (dtype('float32'), [False, False], ['tracking_error'])
     """
 
     def __init__(
@@ -292,3 +296,48 @@ class RollVecEnv(VecEnv):
 def _same_arguments(a: dict[str, Any], b: dict[str, Any]) -> bool:
     """Whether two checked reset-argument dicts are equal (values may be arrays)."""
     return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+class VecHistory(VecEnvWrapper):
+    """An SB3 ``VecEnv`` whose observations carry ``k`` steps of history (:class:`History`).
+
+    An env whose episode ends starts its new one without history; its
+    ``terminal_observation`` carries the history it ended with (for value
+    bootstrapping).
+    """
+
+    def __init__(self, venv: VecEnv, k: int) -> None:
+        assert isinstance(venv.observation_space, spaces.Box)
+        assert isinstance(venv.action_space, spaces.Box)
+        obs_space, act_space = venv.observation_space, venv.action_space
+        super().__init__(venv, observation_space=history_space(obs_space, act_space, k))
+        self.history = History(
+            venv.num_envs, int(np.prod(obs_space.shape)), int(np.prod(act_space.shape)), k
+        )
+        self._low, self._high = act_space.low, act_space.high
+        self._last: NDArray[np.float32] | None = None
+        self._actions: NDArray[Any] | None = None
+
+    def reset(self) -> NDArray[np.float32]:
+        obs = np.asarray(self.venv.reset(), dtype=np.float32)
+        self.history.clear()
+        self._last = obs
+        return self.history.augment(obs)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.clip(np.asarray(actions, dtype=np.float32), self._low, self._high)
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        assert self._last is not None and self._actions is not None
+        self.history.push(self._last, self._actions)
+        for i in np.flatnonzero(dones).tolist():
+            terminal = infos[i].get("terminal_observation")
+            if terminal is not None:
+                infos[i]["terminal_observation"] = self.history.augment(
+                    np.asarray(terminal).reshape(1, -1), slice(i, i + 1)
+                )[0]
+            self.history.clear(i)
+        self._last = np.asarray(obs, dtype=np.float32)
+        return self.history.augment(self._last), rewards, dones, infos

@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "the disturbance database: build, list, show, add, surrogate, export, import, migrate",
     ),
     "env": ("rollenv.cli", "run RocketRoll episodes (Gymnasium environment)"),
-    "train": ("agents.cli", "train a controller (PPO, Stable-Baselines3)"),
+    "train": ("agents.cli", "train a controller (PPO, SAC, TD3; Stable-Baselines3)"),
     "eval": ("agents.cli", "evaluate controllers on held-out episodes (table, JSON, plots)"),
     "seeds": (
         "agents.cli",

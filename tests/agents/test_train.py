@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import io
 import json
+import re
 import shlex
 import shutil
 import sys
@@ -324,3 +326,100 @@ def test_the_shipped_hyperparameters_load_for_both_tasks():
         assert hp.n_timesteps is not None, env_id
         assert hp.policy == "MlpPolicy" and hp.n_envs >= 1 and hp.n_timesteps >= 100_000
         assert (hp.ppo["n_steps"] * hp.n_envs) % hp.ppo["batch_size"] == 0
+
+
+# ------------------------------------------------------------------ SAC, TD3, memory
+TINY_OFF_POLICY = """\
+RocketRoll-v0:
+  n_envs: 2
+  n_timesteps: 240
+  policy: MlpPolicy
+  normalize: {norm_obs: true, norm_reward: true}
+  history: 3
+  learning_starts: 100
+  batch_size: 32
+  buffer_size: 1000
+  policy_kwargs: {net_arch: [16, 16]}
+"""
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_off_policy_runs_with_history_act_as_they_were_trained(algo, small_db, tmp_path):
+    """A tiny SAC/TD3 run with 3 steps of history: settings.json records both, and the
+    controller, which keeps its own history, acts on an episode exactly as the model's
+    predict() on the training stack's observation (VecHistory, VecNormalize)."""
+    from agents.train import SAC_COMMAND, TD3_COMMAND, load_hyperparameters, make_env
+
+    text = TINY_OFF_POLICY + ("  noise_type: normal\n  noise_std: 0.2\n" if algo == "td3" else "")
+    hyperparams = tmp_path / f"{algo}.yml"
+    hyperparams.write_text(text, encoding="utf-8")
+    out = tmp_path / "run"
+    argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
+    argv += ["--eval-freq", "0", "--eval-episodes", "2", "--checkpoint-freq", "0"]
+    argv += ["--no-progress-bar"]
+    command = SAC_COMMAND if algo == "sac" else TD3_COMMAND
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        assert run_command(command, argv, f"rocketroll train {algo}") == 0
+    assert f"{algo.upper()} on RocketRoll-v0" in printed.getvalue()
+    assert "history" in printed.getvalue()
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["algorithm"] == algo and settings["hyperparameters"]["history"] == 3
+    assert settings["equivalent_command"].startswith(f"rocketroll train {algo} ")
+    if algo == "td3":
+        assert settings["hyperparameters"]["noise_std"] == 0.2
+    controller = PPOController.load(out)
+    assert controller.name == algo.upper() and controller.history is not None
+    # The training stack, one env, frozen statistics: what the policy saw in training.
+    hp = load_hyperparameters(hyperparams, "RocketRoll-v0", algo)
+    _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
+    stored = json.loads((out / "normalize.json").read_text())
+    normalize.obs_rms.mean = np.array(stored["mean"])
+    normalize.obs_rms.var = np.array(stored["var"])
+    seen = stack.reset()
+    assert seen.shape == (1, 4 * 4 + 3)  # the observation, 3 past ones, 3 past actions
+    raw = stack.unnormalize_obs(seen)[0, :4]
+    view = FlightView(RocketRollEnv(bank=array_bank()))
+    controller.reset(view)
+    for _ in range(30):
+        expected, _ = controller.model.predict(seen, deterministic=True)
+        action = controller.act(raw, view)
+        np.testing.assert_allclose(action, expected.reshape(1), rtol=0, atol=1e-6)
+        seen, _, _, _ = stack.step(action.reshape(1, 1))
+        raw = stack.unnormalize_obs(seen)[0, :4]
+
+
+def test_a_policy_is_loaded_only_under_its_own_algorithm(run, tmp_path, default_db):
+    from agents.registry import make_controller
+    from rollenv.bank import variant_config
+
+    cfg = variant_config("RocketRoll-v0", {"split": "test"})
+    with pytest.raises(ValueError, match=r"that run trained PPO, not SAC"):
+        make_controller(f"sac:{run[0]}", cfg, "RocketRoll-v0")
+    with pytest.raises(ValueError, match=r"--policy td3:DIR needs the folder"):
+        make_controller("td3", cfg, "RocketRoll-v0")
+
+
+@pytest.mark.parametrize(
+    ("extra", "algo", "message"),
+    [
+        ("  noise_type: normal\n  noise_std: 0.1\n", "ppo", "are for SAC and TD3, not PPO"),
+        ("  noise_type: ou\n  noise_std: 0.1\n", "sac", "noise_type must be 'normal'"),
+        ("  history: -1\n", "ppo", "history must be positive"),
+        ("  n_epochs: 3\n", "sac", "unknown key(s) 'n_epochs'"),
+    ],
+)
+def test_bad_algorithm_settings_are_named(extra, algo, message, tmp_path):
+    path = tmp_path / "hp.yml"
+    base = TINY if algo == "ppo" else TINY_OFF_POLICY.replace("  history: 3\n", "")
+    path.write_text(base + extra, encoding="utf-8")
+    with pytest.raises(UsageError, match=re.escape(message)):
+        load_hyperparameters(path, "RocketRoll-v0", algo)
+
+
+def test_the_shipped_off_policy_and_memory_hyperparameters_load():
+    from agents.train import HYPERPARAMS_DIR
+
+    for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
+        for name, algo in (("sac", "sac"), ("td3", "td3"), ("ppo-history", "ppo")):
+            hp = load_hyperparameters(HYPERPARAMS_DIR / f"{name}.yml", env_id, algo)
+            assert hp.history >= 1 and hp.n_timesteps is not None, (name, env_id)

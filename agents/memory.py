@@ -1,0 +1,70 @@
+"""Memory for a memoryless policy: the last observations and actions beside the current one.
+
+A flight computer's observation (encoder error, gyro rate, fin angle) does not
+say where the rocket is within an encoder count, nor what the turbulence has
+been doing; the PID's integral and the observer's state carry that.  An MLP
+policy gets the same chance from a window of its own past:
+``[o_t, o_{t-1}, ..., o_{t-k}, a_{t-1}, ..., a_{t-k}]`` (zeros before the
+episode's start).  :class:`History` keeps that window for a batch of
+environments; :class:`agents.vecenv.VecHistory` wraps an SB3 ``VecEnv`` with it for
+training,
+and :class:`agents.ppo.PPOController` keeps one of its own when acting, so the
+policy sees the same vector in training and in the evaluation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+__all__ = ["History", "history_space"]
+
+Float32Array = NDArray[np.float32]
+
+
+def history_space(observation: spaces.Box, action: spaces.Box, k: int) -> spaces.Box:
+    """The observation space of ``k`` steps of history beside the current observation."""
+    low = np.concatenate([np.tile(observation.low, k + 1), np.tile(action.low, k)])
+    high = np.concatenate([np.tile(observation.high, k + 1), np.tile(action.high, k)])
+    return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+
+class History:
+    """The last ``k`` observations and actions of ``n`` environments.
+
+    >>> h = History(n=1, obs_dim=2, act_dim=1, k=2)
+    >>> h.augment(np.array([[1.0, 2.0]])).tolist()
+    [[1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]]
+    >>> h.push(np.array([[1.0, 2.0]]), np.array([[0.5]]))
+    >>> h.augment(np.array([[3.0, 4.0]])).tolist()
+    [[3.0, 4.0, 1.0, 2.0, 0.0, 0.0, 0.5, 0.0]]
+    """
+
+    def __init__(self, n: int, obs_dim: int, act_dim: int, k: int) -> None:
+        if k < 1:
+            raise ValueError(f"history must be >= 1 step, got {k}")
+        self.k = k
+        self._obs = np.zeros((n, k, obs_dim), dtype=np.float32)
+        self._act = np.zeros((n, k, act_dim), dtype=np.float32)
+
+    def clear(self, rows: Any = slice(None)) -> None:
+        """Forget the history of ``rows`` (all by default): a new episode."""
+        self._obs[rows] = 0.0
+        self._act[rows] = 0.0
+
+    def push(self, obs: NDArray[Any], actions: NDArray[Any]) -> None:
+        """Record the observation each env acted on and the action it took."""
+        self._obs[:, 1:] = self._obs[:, :-1]
+        self._act[:, 1:] = self._act[:, :-1]
+        self._obs[:, 0] = obs
+        self._act[:, 0] = np.asarray(actions).reshape(self._act.shape[0], -1)
+
+    def augment(self, obs: NDArray[Any], rows: Any = slice(None)) -> Float32Array:
+        """``obs`` (of ``rows``) with its history: ``[o_t, past obs..., past actions...]``."""
+        obs = np.asarray(obs, dtype=np.float32)
+        past_obs = self._obs[rows].reshape(obs.shape[0], -1)
+        past_act = self._act[rows].reshape(obs.shape[0], -1)
+        return np.concatenate([obs, past_obs, past_act], axis=1)
