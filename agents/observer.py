@@ -57,6 +57,7 @@ from rollenv.layout import Obs
 __all__ = [
     "DEFAULT_WEIGHTS",
     "ObserverController",
+    "ObserverFeatures",
     "RollObserver",
     "Turbulence",
     "make_observer",
@@ -482,6 +483,55 @@ class ObserverController:
         command = self.command(state, shift, fin)
         self._last = (fin, command)
         return np.array([command / self._range], dtype=np.float32)
+
+
+class ObserverFeatures:
+    """The observer's estimate as extra observation values for a learned policy.
+
+    One :class:`RollObserver` per environment, designed on the train split as
+    the observer controller is; per step the filter takes the observation (and
+    the step the last command made) and yields ``[v̂, ψ̂, û_d]`` (``ψ̂`` is 0 on
+    the rate task, where no encoder anchors it).  Used by
+    :class:`agents.vecenv.VecObserver` in training and by the learned
+    controller when acting, the same code in both.
+    """
+
+    SIZE = 3
+
+    def __init__(self, config: RollConfig, rocket: NominalModel, turbulence: Turbulence, n: int):
+        self._range = config.fin_range_deg
+        self._angle = config.task == "angle"
+        self.filters = [RollObserver(rocket.params, turbulence, config) for _ in range(n)]
+        self._last: list[tuple[float, float] | None] = [None] * n
+
+    @classmethod
+    def from_bank(cls, config: RollConfig, train_bank: TraceBank, n: int) -> ObserverFeatures:
+        """Designed on ``train_bank`` (the *train* split), for ``n`` environments."""
+        nominal = NominalModel.from_bank(train_bank)
+        turbulence = Turbulence.from_bank(train_bank, config.dt_s, nominal)
+        return cls(config, nominal, turbulence, n)
+
+    def clear(self, i: int | None = None) -> None:
+        """A new episode for env ``i`` (all by default)."""
+        for k in range(len(self.filters)) if i is None else (i,):
+            self.filters[k].reset()
+            self._last[k] = None
+
+    def one(self, i: int, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Env ``i``'s filter takes ``obs``; its features."""
+        f = self.filters[i]
+        last = self._last[i]
+        if last is not None:
+            f.predict(*last)
+        f.update(obs)
+        psi = float(f.mean[1]) if self._angle else 0.0
+        return np.array([f.mean[0], psi, f.u_d], dtype=np.float32)
+
+    def record(self, obs: NDArray[np.float32], actions: NDArray[np.float32]) -> None:
+        """The step each env is about to take: the fin it starts from and its command."""
+        actions = np.clip(np.asarray(actions, dtype=np.float64).reshape(len(self.filters)), -1, 1)
+        for i in range(len(self.filters)):
+            self._last[i] = (float(obs[i, Obs.FIN]), float(actions[i]) * self._range)
 
 
 def make_observer(design: Design) -> ObserverController:

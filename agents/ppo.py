@@ -13,6 +13,9 @@ from numpy.typing import NDArray
 
 from agents.base import Design, FlightView
 from agents.memory import History
+from agents.observer import ObserverFeatures
+from disturbances.bank import TraceBank
+from rollenv.core import RollConfig
 from rollenv.layout import Obs
 
 __all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_learned", "make_ppo"]
@@ -111,10 +114,15 @@ class PPOController:
         self.name = self.algorithm.upper()
         env_settings = settings.get("env_settings") or {}
         self.task: str | None = env_settings.get("task")
-        k = int((settings.get("hyperparameters") or {}).get("history", 0) or 0)
+        hyper = settings.get("hyperparameters") or {}
+        k = int(hyper.get("history", 0) or 0)
+        #: The policy reads the observer's estimate: :meth:`attach_observer` before acting.
+        self.needs_observer = bool(hyper.get("observer", False))
+        self.features: ObserverFeatures | None = None
+        width = len(Obs) + (ObserverFeatures.SIZE if self.needs_observer else 0)
         self.history: History | None = None
         if k:
-            self.history = History(1, len(Obs), 1, k)
+            self.history = History(1, width, 1, k)
         self._dim = int(np.prod(model.observation_space.shape))
         policy = model.policy
         policy.set_training_mode(False)
@@ -154,8 +162,10 @@ class PPOController:
         settings: dict[str, Any] = (
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
-        k = int((settings.get("hyperparameters") or {}).get("history", 0) or 0)
-        size = len(Obs) * (k + 1) + k  # the observation and k past observations and actions
+        hyper = settings.get("hyperparameters") or {}
+        k = int(hyper.get("history", 0) or 0)
+        width = len(Obs) + (ObserverFeatures.SIZE if hyper.get("observer") else 0)
+        size = width * (k + 1) + k  # the observation and k past observations and actions
         record = json.loads(norm_file.read_text(encoding="utf-8"))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
@@ -172,19 +182,38 @@ class PPOController:
                 f"{task!r}"
             )
 
+    def attach_observer(self, config: RollConfig, train_bank: TraceBank) -> None:
+        """Build the observer whose estimate the policy reads, on the *train* split (as
+        training did); ``--policy`` does this."""
+        self.features = ObserverFeatures.from_bank(config, train_bank, 1)
+
     def reset(self, env: FlightView) -> None:
-        """Forget the observation history (if it has one); checks the env's task."""
+        """Forget the history and the observer's state (if it has them); checks the task."""
         self.require_task(env.config.task)
         if self.history is not None:
             self.history.clear()
+        if self.features is not None:
+            self.features.clear()
 
     def act(self, obs: NDArray[np.float32], env: FlightView) -> NDArray[np.float32]:
         """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""
         raw = np.asarray(obs, dtype=np.float32).reshape(1, len(Obs))
-        seen = raw if self.history is None else self.history.augment(raw)
+        seen = raw
+        if self.needs_observer:
+            if self.features is None:
+                raise RuntimeError(
+                    "this policy reads the observer's estimate: call attach_observer(config, "
+                    "train_bank) first (--policy does)"
+                )
+            seen = np.concatenate([raw, self.features.one(0, raw[0])[None]], axis=1)
+        if self.history is not None:
+            seen_now = seen
+            seen = self.history.augment(seen_now)
         action = self._action(seen)
         if self.history is not None:
-            self.history.push(raw, action.reshape(1, -1))
+            self.history.push(seen_now, action.reshape(1, -1))
+        if self.features is not None:
+            self.features.record(raw, action)
         return action
 
     def _action(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -246,6 +275,8 @@ def make_learned(design: Design, algorithm: str) -> PPOController:
         learned.require_task(design.config.task)
     except ValueError as exc:
         raise ValueError(f"--policy {algorithm}:{path}: {exc} ({design.env_id})") from None
+    if learned.needs_observer:
+        learned.attach_observer(design.config, design.train_bank)
     if design.arg:
         learned.name = f"{learned.name} {path.name}"
     return learned

@@ -82,7 +82,9 @@ DEFAULT_HYPERPARAMS = HYPERPARAMS_DIR / "ppo.yml"
 ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 
 #: Keys of a YAML entry that are not keywords of the algorithm: ``history`` (steps of
-#: past observations and actions in the observation, :mod:`agents.memory`), and for the
+#: past observations and actions in the observation, :mod:`agents.memory`), ``observer``
+#: (true: the observer's estimate ``[v̂, ψ̂, û_d]`` in the observation,
+#: :class:`agents.observer.ObserverFeatures`, designed on the train split), and for the
 #: off-policy algorithms the exploration noise (``noise_type: normal``, ``noise_std``) as
 #: rl-baselines3-zoo writes it.
 SCRIPT_KEYS = (
@@ -92,6 +94,7 @@ SCRIPT_KEYS = (
     "normalize",
     "env_kwargs",
     "history",
+    "observer",
     "noise_type",
     "noise_std",
 )
@@ -247,6 +250,8 @@ class Hyperparameters:
         Steps of past observations and actions beside the observation (0: none).
     noise : tuple or None
         ``("normal", sd)``: Gaussian exploration noise on the action (SAC, TD3).
+    observer : bool
+        The observer's estimate in the observation.
     """
 
     env_id: str
@@ -260,6 +265,7 @@ class Hyperparameters:
     algo: str = "ppo"
     history: int = 0
     noise: tuple[str, float] | None = None
+    observer: bool = False
 
 
 # ----------------------------------------------------------------------------- arguments
@@ -363,6 +369,9 @@ def load_hyperparameters(
                 f"{where}: unknown normalize key(s) {', '.join(map(repr, bad))}; known: "
                 f"{', '.join(NORMALIZE_KEYS)}"
             )
+    observer = entry.get("observer", False)
+    if not isinstance(observer, bool):
+        raise UsageError(f"{where}: observer must be true or false, got {observer!r}")
     env_kwargs = entry.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
         raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
@@ -380,6 +389,7 @@ def load_hyperparameters(
         algo=algo,
         history=counts["history"] or 0,
         noise=noise,
+        observer=observer,
     )
 
 
@@ -460,7 +470,8 @@ def make_env(
     training: bool = True,
 ) -> tuple[Any, Any, Any]:
     """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``, with
-    ``VecHistory`` over the adapter when the entry asks for ``history``.
+    ``VecObserver`` and ``VecHistory`` over the adapter when the entry asks for
+    ``observer`` and ``history``.
 
     The monitor is inside, so it records the raw returns whatever
     ``VecNormalize`` does to rewards.  ``training=False`` (evaluation):
@@ -487,6 +498,17 @@ def make_env(
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
+    if hp.observer:
+        from agents.observer import ObserverFeatures
+        from agents.vecenv import VecObserver
+        from rollenv.bank import load_bank, variant_config
+
+        train_bank = adapter.bank
+        if split != "train":  # the observer is designed on the train split, always
+            train_config = variant_config(hp.env_id, {**hp.env_kwargs, "split": "train"})
+            train_bank = load_bank(train_config, db)
+        features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs)
+        env = VecObserver(env, features)
     if hp.history:
         from agents.vecenv import VecHistory
 
@@ -739,6 +761,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("policy", hp.policy),
         ("normalize", hp.normalize if hp.normalize is not None else "off"),
         ("history", f"{hp.history} steps" if hp.history else "off"),
+        ("observer estimate", "in the observation" if hp.observer else "off"),
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.ppo[k]) for k in hp.ppo),
         ("env_kwargs", hp.env_kwargs or "-"),
@@ -836,6 +859,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 "normalize": hp.normalize,
                 "env_kwargs": hp.env_kwargs,
                 **({"history": hp.history} if hp.history else {}),
+                **({"observer": True} if hp.observer else {}),
                 **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.ppo,
             }

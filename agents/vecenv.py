@@ -31,7 +31,7 @@ from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
 
-__all__ = ["ENV_ATTRIBUTES", "RollVecEnv", "StepReturn", "VecHistory"]
+__all__ = ["ENV_ATTRIBUTES", "RollVecEnv", "StepReturn", "VecHistory", "VecObserver"]
 
 #: What ``step`` and ``step_wait`` return: observations, rewards, dones, infos.
 StepReturn = tuple[
@@ -45,67 +45,66 @@ ENV_ATTRIBUTES = ("render_mode", "config", "bank", "env_id", "spec", "metadata")
 class RollVecEnv(VecEnv):
     """``num_envs`` RocketRoll environments as one Stable-Baselines3 ``VecEnv``.
 
-        Spaces, dynamics, rewards, settings and reset options are those of
-        :class:`rollenv.env.RocketRollEnv` (the core is shared); only the vector
-        API is SB3's:
+    Spaces, dynamics, rewards, settings and reset options are those of
+    :class:`rollenv.env.RocketRollEnv` (the core is shared); only the vector
+    API is SB3's:
 
-        * ``reset()`` returns the observations, shape ``(num_envs, len(Obs))`` float32,
-          and fills ``self.reset_infos``.  Seeds set by :meth:`seed` and options
-          set by ``set_options`` apply to that reset only, as in SB3's
-          ``DummyVecEnv``.
-        * ``step(actions)`` returns observations, rewards (float32, as
-          ``DummyVecEnv``), ``dones`` (bool) and one info dict per env.  An env
-          whose episode ends (truncation after ``max_episode_steps``; the
-          rocket never terminates) is reset *in the same step*: ``dones[i]`` is
-          True, ``infos[i]["terminal_observation"]`` is its last observation,
-          ``infos[i]["TimeLimit.truncated"]`` is True (so PPO bootstraps the
-          value), and ``obs[i]`` is the first observation of its new episode.
-        * Every info holds ``"tracking_error"``: the true tracking error of that
-          step (°, or °/s), as the single env's info, for evaluation; nothing
-          else, to keep the per-step cost low.
+    * ``reset()`` returns the observations, shape ``(num_envs, len(Obs))`` float32,
+      and fills ``self.reset_infos``.  Seeds set by :meth:`seed` and options
+      set by ``set_options`` apply to that reset only, as in SB3's
+      ``DummyVecEnv``.
+    * ``step(actions)`` returns observations, rewards (float32, as
+      ``DummyVecEnv``), ``dones`` (bool) and one info dict per env.  An env
+      whose episode ends (truncation after ``max_episode_steps``; the
+      rocket never terminates) is reset *in the same step*: ``dones[i]`` is
+      True, ``infos[i]["terminal_observation"]`` is its last observation,
+      ``infos[i]["TimeLimit.truncated"]`` is True (so PPO bootstraps the
+      value), and ``obs[i]`` is the first observation of its new episode.
+    * Every info holds ``"tracking_error"``: the true tracking error of that
+      step (°, or °/s), as the single env's info, for evaluation; nothing
+      else, to keep the per-step cost low.
 
-        All randomness -- trace windows, setpoints, initial angles, gyro noise --
-        comes from one ``np.random.Generator``, so the same seed gives the same
-        rollout bit for bit.  With ``num_envs=1`` the rollout equals a
-        ``RocketRollEnv`` reset with the same seed (and ``reset()`` at each
-        truncation), step for step.
+    All randomness -- trace windows, setpoints, initial angles, gyro noise --
+    comes from one ``np.random.Generator``, so the same seed gives the same
+    rollout bit for bit.  With ``num_envs=1`` the rollout equals a
+    ``RocketRollEnv`` reset with the same seed (and ``reset()`` at each
+    truncation), step for step.
 
-        Parameters
-        ----------
-        num_envs : int
-            Batch size.
-        env_id : str
-            A registered variant (``"RocketRoll-v0"``: angle task,
-            ``"RocketRollRate-v0"``: rate task, ...); its options, ``task`` among
-            them, come with it (:func:`rollenv.bank.variant_config`).
-        bank : TraceBank, optional
-            Traces to replay instead of the database's.
-        db : path, optional
-            Database file (default: ``$ROCKETROLL_DB`` or the default database).
-        seed : int, optional
-            Seed of the generator until :meth:`seed` reseeds it.
-        **settings
-            Any field of :class:`rollenv.core.RollConfig` (``split``,
-            ``episode_s``, ``setpoint``, ...), as for ``gym.make``.
+    Parameters
+    ----------
+    num_envs : int
+        Batch size.
+    env_id : str
+        A registered variant (``"RocketRoll-v0"``: angle task,
+        ``"RocketRollRate-v0"``: rate task, ...); its options, ``task`` among
+        them, come with it (:func:`rollenv.bank.variant_config`).
+    bank : TraceBank, optional
+        Traces to replay instead of the database's.
+    db : path, optional
+        Database file (default: ``$ROCKETROLL_DB`` or the default database).
+    seed : int, optional
+        Seed of the generator until :meth:`seed` reseeds it.
+    **settings
+        Any field of :class:`rollenv.core.RollConfig` (``split``,
+        ``episode_s``, ``setpoint``, ...), as for ``gym.make``.
 
-        Notes
-        -----
-        The batch is stepped with the serial kernel: next to torch's threads,
-        numba's parallel kernel oversubscribes the cores and is slower.
+    Notes
+    -----
+    The batch is stepped with the serial kernel: next to torch's threads,
+    numba's parallel kernel oversubscribes the cores and is slower.
 
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from agents.memory import History, history_space
-    from disturbances.bank import TraceBank
-        >>> bank = TraceBank.from_arrays([np.zeros(700)], dt_s=0.1)
-        >>> venv = RollVecEnv(2, bank=bank, seed=0)
-        >>> obs = venv.reset()
-        >>> obs.shape, obs.dtype
-        ((2, 4), dtype('float32'))
-        >>> obs, rewards, dones, infos = venv.step(np.zeros((2, 1), np.float32))
-        >>> rewards.dtype, dones.tolist(), sorted(infos[0])
-        (dtype('float32'), [False, False], ['tracking_error'])
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from disturbances.bank import TraceBank
+    >>> bank = TraceBank.from_arrays([np.zeros(700)], dt_s=0.1)
+    >>> venv = RollVecEnv(2, bank=bank, seed=0)
+    >>> obs = venv.reset()
+    >>> obs.shape, obs.dtype
+    ((2, 4), dtype('float32'))
+    >>> obs, rewards, dones, infos = venv.step(np.zeros((2, 1), np.float32))
+    >>> rewards.dtype, dones.tolist(), sorted(infos[0])
+    (dtype('float32'), [False, False], ['tracking_error'])
     """
 
     def __init__(
@@ -341,3 +340,51 @@ class VecHistory(VecEnvWrapper):
             self.history.clear(i)
         self._last = np.asarray(obs, dtype=np.float32)
         return self.history.augment(self._last), rewards, dones, infos
+
+
+class VecObserver(VecEnvWrapper):
+    """An SB3 ``VecEnv`` whose observations carry the observer's estimate
+    (:class:`agents.observer.ObserverFeatures`: ``[v̂, ψ̂, û_d]`` after the 4 values)."""
+
+    def __init__(self, venv: VecEnv, features: Any) -> None:
+        assert isinstance(venv.observation_space, spaces.Box)
+        space = venv.observation_space
+        big = np.full(features.SIZE, np.float32(1e6))
+        observation_space = spaces.Box(
+            np.concatenate([space.low, -big]).astype(np.float32),
+            np.concatenate([space.high, big]).astype(np.float32),
+            dtype=np.float32,
+        )
+        super().__init__(venv, observation_space=observation_space)
+        self.features = features
+        self._size = int(observation_space.shape[0])
+        self._last: NDArray[np.float32] | None = None
+
+    def _with(self, i: int, obs: NDArray[Any]) -> NDArray[np.float32]:
+        obs = np.asarray(obs, dtype=np.float32)
+        return np.concatenate([obs, self.features.one(i, obs)])
+
+    def reset(self) -> NDArray[np.float32]:
+        obs = np.asarray(self.venv.reset(), dtype=np.float32)
+        self.features.clear()
+        self._last = obs
+        return np.stack([self._with(i, o) for i, o in enumerate(obs)])
+
+    def step_async(self, actions: np.ndarray) -> None:
+        assert self._last is not None
+        self.features.record(self._last, actions)
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        obs = np.asarray(obs, dtype=np.float32)
+        out = np.empty((obs.shape[0], self._size), dtype=np.float32)
+        for i in range(obs.shape[0]):
+            if dones[i]:
+                terminal = infos[i].get("terminal_observation")
+                if terminal is not None:
+                    infos[i]["terminal_observation"] = self._with(i, terminal)
+                self.features.clear(i)
+            out[i] = self._with(i, obs[i])
+        self._last = obs
+        return out, rewards, dones, infos

@@ -343,21 +343,34 @@ RocketRoll-v0:
 """
 
 
-@pytest.mark.parametrize("algo", ["sac", "td3"])
-def test_off_policy_runs_with_history_act_as_they_were_trained(algo, small_db, tmp_path):
-    """A tiny SAC/TD3 run with 3 steps of history: settings.json records both, and the
-    controller, which keeps its own history, acts on an episode exactly as the model's
-    predict() on the training stack's observation (VecHistory, VecNormalize)."""
-    from agents.train import SAC_COMMAND, TD3_COMMAND, load_hyperparameters, make_env
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db, tmp_path):
+    """A tiny SAC/TD3 run with 3 steps of history (PPO: 3 steps and the observer's
+    estimate): settings.json records them, and the controller, which keeps its own history
+    and observer, acts on an episode exactly as the model's predict() on the training
+    stack's observation (VecObserver, VecHistory, VecNormalize)."""
+    from agents.train import (
+        COMMAND,
+        SAC_COMMAND,
+        TD3_COMMAND,
+        load_hyperparameters,
+        make_env,
+    )
+    from rollenv.bank import load_bank, variant_config
 
-    text = TINY_OFF_POLICY + ("  noise_type: normal\n  noise_std: 0.2\n" if algo == "td3" else "")
+    text = {
+        "sac": TINY_OFF_POLICY,
+        "td3": TINY_OFF_POLICY + "  noise_type: normal\n  noise_std: 0.2\n",
+        "ppo": TINY.replace("  n_timesteps: 256\n", "  n_timesteps: 128\n")
+        + "  history: 3\n  observer: true\n",
+    }[algo]
     hyperparams = tmp_path / f"{algo}.yml"
     hyperparams.write_text(text, encoding="utf-8")
     out = tmp_path / "run"
     argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
     argv += ["--eval-freq", "0", "--eval-episodes", "2", "--checkpoint-freq", "0"]
     argv += ["--no-progress-bar"]
-    command = SAC_COMMAND if algo == "sac" else TD3_COMMAND
+    command = {"sac": SAC_COMMAND, "td3": TD3_COMMAND, "ppo": COMMAND}[algo]
     with contextlib.redirect_stdout(io.StringIO()) as printed:
         assert run_command(command, argv, f"rocketroll train {algo}") == 0
     assert f"{algo.upper()} on RocketRoll-v0" in printed.getvalue()
@@ -367,8 +380,14 @@ def test_off_policy_runs_with_history_act_as_they_were_trained(algo, small_db, t
     assert settings["equivalent_command"].startswith(f"rocketroll train {algo} ")
     if algo == "td3":
         assert settings["hyperparameters"]["noise_std"] == 0.2
+    observer = algo == "ppo"
+    assert settings["hyperparameters"].get("observer", False) is observer
     controller = PPOController.load(out)
     assert controller.name == algo.upper() and controller.history is not None
+    assert controller.needs_observer is observer
+    if observer:
+        train_config = variant_config("RocketRoll-v0", {"split": "train"})
+        controller.attach_observer(train_config, load_bank(train_config, small_db))
     # The training stack, one env, frozen statistics: what the policy saw in training.
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0", algo)
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
@@ -376,7 +395,8 @@ def test_off_policy_runs_with_history_act_as_they_were_trained(algo, small_db, t
     normalize.obs_rms.mean = np.array(stored["mean"])
     normalize.obs_rms.var = np.array(stored["var"])
     seen = stack.reset()
-    assert seen.shape == (1, 4 * 4 + 3)  # the observation, 3 past ones, 3 past actions
+    width = 4 + (3 if observer else 0)  # the observation (and the observer's estimate)
+    assert seen.shape == (1, width * 4 + 3)  # it, 3 past ones, 3 past actions
     raw = stack.unnormalize_obs(seen)[0, :4]
     view = FlightView(RocketRollEnv(bank=array_bank()))
     controller.reset(view)
@@ -420,6 +440,11 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
     from agents.train import HYPERPARAMS_DIR
 
     for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
-        for name, algo in (("sac", "sac"), ("td3", "td3"), ("ppo-history", "ppo")):
+        for name, algo in [
+            ("sac", "sac"),
+            ("td3", "td3"),
+            ("ppo-history", "ppo"),
+            ("ppo-observer", "ppo"),
+        ]:
             hp = load_hyperparameters(HYPERPARAMS_DIR / f"{name}.yml", env_id, algo)
             assert hp.history >= 1 and hp.n_timesteps is not None, (name, env_id)
