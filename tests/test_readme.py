@@ -127,3 +127,25 @@ def test_a_committed_policy_is_reproduced_by_its_recorded_command(
     theirs_norm = json.loads((folder / "normalize.json").read_text(encoding="utf-8"))
     np.testing.assert_array_equal(ours_norm["mean"], theirs_norm["mean"])
     np.testing.assert_array_equal(ours_norm["var"], theirs_norm["var"])
+
+
+def _readme_table_after(header: str, rows: int) -> list[str]:
+    lines = README.splitlines()
+    start = lines.index(header)
+    return lines[start : start + rows]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ["RocketRoll-v0", "RocketRollRate-v0"])
+def test_the_seed_statistics_and_robustness_tables(
+    env_id: str, default_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`make demo`'s seed statistics (the five committed PPO runs) and robustness tables,
+    as the README prints them (about a minute per task)."""
+    runs = ["--run", f"ppo:agents/policies/{env_id}"]
+    for seed in range(1, 5):
+        runs += ["--run", f"ppo:agents/policies/seeds/{env_id}/ppo/seed{seed}"]
+    for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
+        assert rocketroll(argv) == 0
+        printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
+        assert printed == _readme_table_after(printed[0], len(printed)), argv[0]

@@ -243,7 +243,7 @@ def test_arguments_parse_into_the_dataclass_with_help_from_its_fields():
     assert (args.env_id, args.timesteps, args.envs) == ("RocketRollRate-v0", 5000, 4)
     assert parse_args(["--no-progress-bar"]).progress_bar is False
     assert parse_args(["--out", "x/y"]).out == Path("x/y")
-    assert set(flags(Args)) == {f for f in Args.__dataclass_fields__}
+    assert set(flags(Args)) == {f.name for f in dataclasses.fields(Args)}
     helptext = COMMAND.parser("rocketroll train ppo").format_help()
     assert "seed of torch" in helptext and "--resume" in helptext
 
