@@ -154,7 +154,8 @@ def _since_change(setpoint: np.ndarray) -> np.ndarray:
 
 
 def settle_times(rollout: EpisodeHistory, config: RollConfig) -> np.ndarray:
-    """Time from each setpoint change until the error stays within ``SETTLE_BAND`` for 1 s, s.
+    """Time from each setpoint change until the error stays within ``SETTLE_BAND`` for 1 s
+    (10 consecutive control steps), s.
 
     A step that does not settle before the next change (or the episode's end)
     counts as the whole time it had (censored).  Empty if the setpoint never

@@ -185,6 +185,9 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
         }
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+    names = [c.name for c in controllers]
+    if len(set(names)) < len(names):
+        raise UsageError(f"two --policy values give controllers of one name: {', '.join(names)}")
     unit = "°" if design.task == "angle" else "°/s"
     print(
         f"rocketroll robustness: {args.env_id}, split={args.split}, {args.episodes} episodes "

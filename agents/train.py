@@ -98,6 +98,23 @@ SCRIPT_KEYS = (
     "noise_type",
     "noise_std",
 )
+#: Environment settings the observer's design depends on (its bank, sensors, servo): an
+#: entry with ``observer: true`` may not change them in ``env_kwargs``, since the acting
+#: controller designs its observer on the evaluated environment's train split.
+OBSERVER_DESIGN = (
+    "method",
+    "disturbance",
+    "model",
+    "dt_s",
+    "substep_s",
+    "rate_limit_dps",
+    "fin_range_deg",
+    "sensors",
+    "encoder_counts",
+    "gyro_noise_pct",
+    "gyro_range_dps",
+    "episode_s",
+)
 #: Keywords the script sets itself (from the command line), not the YAML file.
 SCRIPT_SET = ("seed", "verbose")
 
@@ -372,6 +389,12 @@ def load_hyperparameters(
     observer = entry.get("observer", False)
     if not isinstance(observer, bool):
         raise UsageError(f"{where}: observer must be true or false, got {observer!r}")
+    redesign = sorted(set(entry.get("env_kwargs") or {}) & set(OBSERVER_DESIGN))
+    if observer and redesign:
+        raise UsageError(
+            f"{where}: observer: true with env_kwargs {redesign[0]!r}: the observer is designed "
+            "on the train split of the environment evaluated, which that setting changes"
+        )
     env_kwargs = entry.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
         raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
@@ -633,16 +656,31 @@ def evaluate_held_out(model: Any, eval_env: Any, adapter: Any, seed: int) -> dic
 
 
 # ----------------------------------------------------------------------------- outputs
-def normalization_record(venv: Any) -> dict[str, Any]:
-    """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
+def observation_names(history: int = 0, observer: bool = False) -> list[str]:
+    """The names of the policy's observation: the env's, the observer's estimate, then the
+    history (``name@t-k``, and ``action@t-k``).
+
+    >>> observation_names(1)[4:]
+    ['tracking_error@t-1', 'roll_rate_dps@t-1', 'fin_deg@t-1', 'fin_cmd_deg@t-1', 'action@t-1']
+    >>> len(observation_names(2, observer=True))  # (4 + 3) x 3 + 2
+    23
+    """
     from rollenv.layout import OBSERVATION_NAMES
 
+    now = [*OBSERVATION_NAMES, *(("v_hat_dps", "psi_hat_deg", "u_d_hat_deg") if observer else ())]
+    past = [f"{name}@t-{k}" for k in range(1, history + 1) for name in now]
+    return now + past + [f"action@t-{k}" for k in range(1, history + 1)]
+
+
+def normalization_record(venv: Any, history: int = 0, observer: bool = False) -> dict[str, Any]:
+    """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
+    names = observation_names(history, observer)
     if venv is None or not venv.norm_obs:
-        return {"norm_obs": False, "observation_names": list(OBSERVATION_NAMES)}
+        return {"norm_obs": False, "observation_names": names}
     rms = venv.obs_rms
     return {
         "norm_obs": True,
-        "observation_names": list(OBSERVATION_NAMES),
+        "observation_names": names,
         "mean": [float(x) for x in rms.mean],
         "var": [float(x) for x in rms.var],
         "count": float(rms.count),
@@ -807,6 +845,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 save_path=str(out / "checkpoints"),
                 name_prefix=algo,
                 save_vecnormalize=normalize is not None,
+                save_replay_buffer=algo != "ppo",  # SAC/TD3 go on with what they collected
             )
         )
     learn_started = time.perf_counter()
@@ -837,7 +876,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     # The result: the final model and its observation statistics (as JSON, and as SB3's
     # VecNormalize pickle for `VecNormalize.load`).
     model.save(out / "model.zip")
-    norm_record = normalization_record(normalize)
+    norm_record = normalization_record(normalize, hp.history, hp.observer)
     (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
     if normalize is not None:
         from stable_baselines3.common.vec_env import sync_envs_normalization
@@ -935,13 +974,23 @@ def _normalization_file(checkpoint: Path, algo: str = "ppo") -> Path:
     ).with_suffix(".pkl")
 
 
+def _replay_buffer_file(checkpoint: Path, algo: str) -> Path:
+    """The replay buffer SB3's ``CheckpointCallback`` saves beside an off-policy ``checkpoint``."""
+    return checkpoint.with_name(
+        checkpoint.name.replace(f"{algo}_", f"{algo}_replay_buffer_", 1)
+    ).with_suffix(".pkl")
+
+
 def _checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> Path:
-    """Save a resumable checkpoint as SB3's ``CheckpointCallback`` names them."""
+    """Save a resumable checkpoint as SB3's ``CheckpointCallback`` names them (the model,
+    its ``VecNormalize`` statistics, and for SAC/TD3 the replay buffer)."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{algo}_{model.num_timesteps}_steps.zip"
     model.save(path)
     if normalize is not None:
         normalize.save(str(_normalization_file(path, algo)))
+    if algo != "ppo":
+        model.save_replay_buffer(_replay_buffer_file(path, algo))
     return path
 
 
@@ -950,10 +999,19 @@ def _resume(
 ) -> Any:
     """The model of ``checkpoint`` on ``train_env``, with its normalisation statistics
     (a checkpoint's ``ppo_vecnormalize_N_steps.pkl``, or a finished run's
-    ``vecnormalize.pkl`` beside its ``model.zip``)."""
+    ``vecnormalize.pkl`` beside its ``model.zip``) and, for SAC/TD3, its replay buffer
+    (a checkpoint's ``sac_replay_buffer_N_steps.pkl``: a finished run keeps none, so
+    only checkpoints resume; without it training would restart its learning on a few
+    fresh transitions)."""
     import pickle
 
     checkpoint = Path(checkpoint)
+    buffer = _replay_buffer_file(checkpoint, algo)
+    if algo != "ppo" and not buffer.is_file():
+        raise UsageError(
+            f"--resume {checkpoint}: {algo.upper()} goes on from a checkpoint with its replay "
+            f"buffer beside it ({buffer.name}); a finished run's model.zip has none"
+        )
     stats = _normalization_file(checkpoint, algo)
     if not stats.is_file():
         stats = checkpoint.with_name(VECNORMALIZE_FILE)
@@ -974,6 +1032,8 @@ def _resume(
             saved = pickle.load(handle)
         normalize.obs_rms = saved.obs_rms
         normalize.ret_rms = saved.ret_rms
+    if algo != "ppo":
+        model.load_replay_buffer(buffer)
     return model
 
 

@@ -45,9 +45,10 @@ def test_each_condition_runs_the_default_design_on_its_own_episodes(tmp_path, de
         (["--condition", "windy"], "--condition 'windy': unknown"),
         (["--condition", "default", "--condition", "default"], "--condition default is given"),
         (["--episodes", "1"], "--episodes: must be in [2, 100000], got 1"),
+        (["--policy", "mpc", "--policy", "mpc:20"], "two --policy values give controllers"),
     ],
 )
-def test_bad_arguments_exit_2_and_write_nothing(argv, message, tmp_path, capsys):
+def test_bad_arguments_exit_2_and_write_nothing(argv, message, tmp_path, capsys, default_db):
     out = tmp_path / "rob"
     assert run_command(COMMAND, [*argv, "--out", str(out)], "python -m agents.robustness") == 2
     assert message in capsys.readouterr().err

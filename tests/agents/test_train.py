@@ -448,3 +448,37 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
         ]:
             hp = load_hyperparameters(HYPERPARAMS_DIR / f"{name}.yml", env_id, algo)
             assert hp.history >= 1 and hp.n_timesteps is not None, (name, env_id)
+
+
+def test_sac_resumes_from_a_checkpoint_with_its_replay_buffer(small_db, tmp_path):
+    from agents.train import SACArgs
+
+    hyperparams = tmp_path / "sac.yml"
+    hyperparams.write_text(TINY_OFF_POLICY, encoding="utf-8")
+    args = SACArgs(
+        hyperparams=hyperparams,
+        db=str(small_db),
+        out=tmp_path / "run",
+        eval_freq=0,
+        eval_episodes=1,
+        checkpoint_freq=120,
+        progress_bar=False,
+    )
+    with contextlib.redirect_stdout(io.StringIO()):
+        train(args)
+    checkpoint = tmp_path / "run" / "checkpoints" / "sac_120_steps.zip"
+    assert (checkpoint.parent / "sac_replay_buffer_120_steps.pkl").is_file()
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        train(dataclasses.replace(args, resume=checkpoint, out=tmp_path / "more", timesteps=280))
+    assert "resumed at 120" in printed.getvalue()
+    with pytest.raises(UsageError, match=r"replay buffer beside it .* model\.zip has none"):
+        train(dataclasses.replace(args, resume=tmp_path / "run" / "model.zip", timesteps=300))
+
+
+def test_the_observer_refuses_env_kwargs_that_change_its_design(tmp_path):
+    path = tmp_path / "hp.yml"
+    path.write_text(TINY + "  observer: true\n  env_kwargs: {method: paper}\n", encoding="utf-8")
+    with pytest.raises(UsageError, match="observer: true with env_kwargs 'method'"):
+        load_hyperparameters(path, "RocketRoll-v0")
+    path.write_text(TINY + "  observer: true\n  env_kwargs: {setpoint_range: 20}\n", "utf-8")
+    assert load_hyperparameters(path, "RocketRoll-v0").observer
