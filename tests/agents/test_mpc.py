@@ -74,6 +74,7 @@ def test_protocol_episodes_keep_the_servo_limits_and_every_qp_solves(pair):
 def test_the_mpc_pickles_and_takes_a_horizon(default_db):
     cfg = variant_config("RocketRoll-v0", {"split": "test"})
     mpc = make_controller("mpc:5", cfg, "RocketRoll-v0")
+    assert isinstance(mpc, MPCController)
     assert mpc.name == "MPC N=5" and mpc.horizon == 5
     clone = pickle.loads(pickle.dumps(mpc))
     obs = np.array([2.0, 1.0, -4.0, -4.0], dtype=np.float32)

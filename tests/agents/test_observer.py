@@ -139,7 +139,7 @@ PPO_OFFSET = pytest.param(
     marks=pytest.mark.xfail(
         strict=True,
         reason="the committed angle PPO policy holds a ~4° offset between slews "
-        "(memoryless: README, Baselines); issue 15 asks for memory",
+        "(README, Baselines: its reward is dominated by the slews)",
     ),
 )
 

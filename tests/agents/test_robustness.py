@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from agents.evaluate import HEADLINE, evaluate, protocol_episodes
+from agents.pid import PIDController
 from agents.registry import make_controller
 from agents.robustness import COMMAND, CONDITIONS
 from rocketroll.cli import main as rocketroll
@@ -31,6 +32,7 @@ def test_each_condition_runs_the_default_design_on_its_own_episodes(tmp_path, de
     bank = load_bank(paper_cfg, None)
     pid = make_controller("pid", default_cfg, "RocketRoll-v0")
     redesigned = make_controller("pid", paper_cfg, "RocketRoll-v0")
+    assert isinstance(pid, PIDController) and isinstance(redesigned, PIDController)
     assert pid.gains != redesigned.gains  # the two designs differ, so the check can fail
     specs = protocol_episodes(paper_cfg, 2, 0, bank=bank)
     expected = [e[HEADLINE] for e in evaluate(paper_cfg, pid, specs, bank=bank).episodes]

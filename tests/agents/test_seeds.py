@@ -22,8 +22,10 @@ def test_mean_iqm_and_probability_of_improvement_by_hand():
     # below the PID's score on the same episode, ties half: episode 0: 1 of 2, episode 1:
     # a tie (0.5), episode 2: 2 of 2, episode 3: 0 -> (0.5 + 0.25 + 1 + 0) / 4
     assert s.p_beats == pytest.approx((0.5 + 0.25 + 1.0 + 0.0) / 4)
+    assert s.p_beats is not None and s.p_beats_ci is not None
     assert s.run_means.tolist() == [2.5, 6.5]
-    for value, (low, high) in [(s.mean, s.mean_ci), (s.iqm, s.iqm_ci), (s.p_beats, s.p_beats_ci)]:
+    checks = [(s.mean, s.mean_ci), (s.iqm, s.iqm_ci), (s.p_beats, s.p_beats_ci)]
+    for value, (low, high) in checks:
         assert low <= value <= high
 
 
