@@ -42,9 +42,11 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll eval --env-id RocketRollRate-v0 --episodes 20 --seed 0 --out $(DEMO)/eval-rate
 	$(BIN)/rocketroll seeds --env-id RocketRoll-v0 --run ppo:agents/policies/RocketRoll-v0 \
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRoll-v0/ppo/seed$(s)) \
+		$(foreach s,0 1 2 3 4,--run ppo-zero=ppo:agents/policies/seeds/RocketRoll-v0/ppo-zero/seed$(s)) \
 		--out $(DEMO)/seeds-angle
 	$(BIN)/rocketroll seeds --env-id RocketRollRate-v0 --run ppo:agents/policies/RocketRollRate-v0 \
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRollRate-v0/ppo/seed$(s)) \
+		$(foreach s,0 1 2 3 4,--run sac:agents/policies/seeds/RocketRollRate-v0/sac/seed$(s)) \
 		--out $(DEMO)/seeds-rate
 	$(BIN)/rocketroll robustness --env-id RocketRoll-v0 --out $(DEMO)/robustness-angle
 	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
@@ -52,8 +54,9 @@ demo: $(VENV)/.installed
 	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
 	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
 	@echo "      $(DEMO)/env-random.png and the evaluations of trim, PID, the observer, the MPC, PPO and the oracle"
-	@echo "      on held-out episodes in $(DEMO)/eval-angle/ and $(DEMO)/eval-rate/, PPO over five"
-	@echo "      training seeds in $(DEMO)/seeds-angle/ and seeds-rate/, and every controller under"
+	@echo "      on held-out episodes in $(DEMO)/eval-angle/ and $(DEMO)/eval-rate/, PPO, PPO trained"
+	@echo "      at a zero setpoint and SAC over five training seeds each in $(DEMO)/seeds-angle/"
+	@echo "      and seeds-rate/, and every controller under"
 	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/ (tables above)"
 
 lint: $(VENV)/.installed-dev

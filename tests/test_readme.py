@@ -140,11 +140,16 @@ def _readme_table_after(header: str, rows: int) -> list[str]:
 def test_the_seed_statistics_and_robustness_tables(
     env_id: str, default_db: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """`make demo`'s seed statistics (the five committed PPO runs) and robustness tables,
-    as the README prints them (about a minute per task)."""
+    """`make demo`'s seed statistics (five committed runs each of PPO and of PPO trained at
+    a zero setpoint / SAC) and robustness tables, as the README prints them (about a
+    minute per task)."""
+    seeds = f"agents/policies/seeds/{env_id}"
     runs = ["--run", f"ppo:agents/policies/{env_id}"]
     for seed in range(1, 5):
-        runs += ["--run", f"ppo:agents/policies/seeds/{env_id}/ppo/seed{seed}"]
+        runs += ["--run", f"ppo:{seeds}/ppo/seed{seed}"]
+    other = "ppo-zero=ppo:{}/ppo-zero/seed{}" if env_id == "RocketRoll-v0" else "sac:{}/sac/seed{}"
+    for seed in range(5):
+        runs += ["--run", other.format(seeds, seed)]
     for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
         assert rocketroll(argv) == 0
         printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]

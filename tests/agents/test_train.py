@@ -448,6 +448,10 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
         ]:
             hp = load_hyperparameters(HYPERPARAMS_DIR / f"{name}.yml", env_id, algo)
             assert hp.history >= 1 and hp.n_timesteps is not None, (name, env_id)
+    zero = load_hyperparameters(HYPERPARAMS_DIR / "ppo-zero.yml", "RocketRoll-v0")
+    assert zero.env_kwargs == {"setpoint": "zero"}
+    plain = load_hyperparameters(DEFAULT_HYPERPARAMS, "RocketRoll-v0")
+    assert (zero.ppo, zero.n_envs, zero.n_timesteps) == (plain.ppo, plain.n_envs, plain.n_timesteps)
 
 
 def test_sac_resumes_from_a_checkpoint_with_its_replay_buffer(small_db, tmp_path):
