@@ -40,11 +40,11 @@ def test_closed_loop_scores_each_replay_against_the_truth(default_db: Path, tmp_
     out = run_script("closed_loop.py", *settings, "--csv", str(serial), db=default_db)
     for replay in ("paper", "output-error", "ml", "ml posterior"):
         assert f"  {replay}: " in out
-    assert "angle-zero" in out and "settled_rms_error" in out
+    assert "angle-zero" in out and "settled_rms_error" in out and "regulation_rms_error" in out
     # Recordings scored in worker processes give the same rows, in the same order.
     run_script("closed_loop.py", *settings, "--jobs", "2", "--csv", str(parallel), db=default_db)
     rows = serial.read_text().splitlines()
-    assert len(rows) == 1 + 2 * 4 * 2 * 2  # header; seeds x replays x controllers x metrics
+    assert len(rows) == 1 + 2 * 4 * 2 * 3  # header; seeds x replays x controllers x metrics
     assert parallel.read_text().splitlines() == rows
 
 
