@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
 from agents.registry import default_policies, make_controller, policy_help
@@ -46,10 +47,14 @@ __all__ = [
     "Args",
     "EpisodeSpec",
     "Evaluation",
+    "check_unique_names",
+    "env_id_setting",
     "evaluate",
+    "headline_scores",
     "markdown_table",
     "metrics",
     "paired_difference",
+    "pid_result",
     "protocol_episodes",
     "run",
 ]
@@ -286,9 +291,15 @@ def evaluate(
 
 
 # ------------------------------------------------------------------------- reports
-def _reference(results: Sequence[Evaluation]) -> Evaluation | None:
-    """The row the others are compared with: the PID if evaluated, else none."""
+def pid_result(results: Sequence[Evaluation]) -> Evaluation | None:
+    """The row the others are compared with: the (first) PID if evaluated, else none."""
     return next((r for r in results if r.name.split()[0] == "PID"), None)
+
+
+def headline_scores(result: Evaluation) -> NDArray[np.float64]:
+    """The headline of each episode of ``result``, in episode order."""
+    episodes = sorted(result.episodes, key=lambda e: e["episode"])
+    return np.array([e[HEADLINE] for e in episodes])
 
 
 def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
@@ -297,7 +308,7 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
     The headline comes first, then its paired difference to the PID (mean ±
     SEM over the common episodes, and how many SEMs that is)."""
     unit = "°" if config.task == "angle" else "°/s"
-    reference = _reference(results)
+    reference = pid_result(results)
     head = (
         f"| controller | **regulation RMS** ({unit}) | vs PID ({unit}) | time to settle (s) "
         f"| settled RMS ({unit}) | RMS error ({unit}) | max error ({unit}) "
@@ -357,16 +368,29 @@ def _variant_ids() -> tuple[str, ...]:
     return VARIANTS.names()
 
 
-@dataclass(frozen=True)
-class Args:
-    """``rocketroll eval`` / ``python -m agents.evaluate``."""
-
-    env_id: str = setting(
+def env_id_setting() -> Any:
+    """The ``--env-id`` setting of the commands that run the protocol (eval, seeds,
+    robustness)."""
+    return setting(
         "RocketRoll-v0",
         "environment id: RocketRoll-v0 (angle task), RocketRollRate-v0 (rate task), ...",
         choices=_variant_ids,
         always=True,
     )
+
+
+def check_unique_names(controllers: Sequence[Controller]) -> None:
+    """Refuse (``UsageError``) two controllers of one name: their rows would merge."""
+    names = [c.name for c in controllers]
+    if len(set(names)) < len(names):
+        raise UsageError(f"two --policy values give controllers of one name: {', '.join(names)}")
+
+
+@dataclass(frozen=True)
+class Args:
+    """``rocketroll eval`` / ``python -m agents.evaluate``."""
+
+    env_id: str = env_id_setting()
     policy: list[str] = setting(
         default_factory=default_policies,
         help=lambda: f"controller to evaluate, in table order (repeatable): {policy_help()}",
@@ -418,9 +442,7 @@ def run(args: Args) -> list[Evaluation]:
         controllers = [make_controller(p, config, args.env_id, db=args.db) for p in args.policy]
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
-    names = [c.name for c in controllers]
-    if len(set(names)) < len(names):
-        raise UsageError(f"two --policy values give controllers of one name: {', '.join(names)}")
+    check_unique_names(controllers)
     print(f"rocketroll eval: {args.env_id}, split={args.split}, {args.episodes} episodes, ")
     print(f"  seed={args.seed}, policies: {', '.join(args.policy)}")
     draws = {"posterior": "posterior draws", "replay": "identified traces"}

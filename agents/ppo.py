@@ -114,12 +114,11 @@ class PPOController:
         self.name = self.algorithm.upper()
         env_settings = settings.get("env_settings") or {}
         self.task: str | None = env_settings.get("task")
-        hyper = settings.get("hyperparameters") or {}
-        k = int(hyper.get("history", 0) or 0)
+        k, observer = _layout(settings)
         #: The policy reads the observer's estimate: :meth:`attach_observer` before acting.
-        self.needs_observer = bool(hyper.get("observer", False))
+        self.needs_observer = observer
         self.features: ObserverFeatures | None = None
-        width = len(Obs) + (ObserverFeatures.SIZE if self.needs_observer else 0)
+        width = len(Obs) + (ObserverFeatures.SIZE if observer else 0)
         self.history: History | None = None
         if k:
             self.history = History(1, width, 1, k)
@@ -150,7 +149,7 @@ class PPOController:
         FileNotFoundError
             ``model.zip`` or ``normalize.json`` is missing.
         """
-        from agents.train import algorithm_class
+        from agents.train import algorithm_class, observation_names
 
         folder = Path(path)
         model_file = folder / "model.zip"
@@ -162,10 +161,7 @@ class PPOController:
         settings: dict[str, Any] = (
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
-        hyper = settings.get("hyperparameters") or {}
-        k = int(hyper.get("history", 0) or 0)
-        width = len(Obs) + (ObserverFeatures.SIZE if hyper.get("observer") else 0)
-        size = width * (k + 1) + k  # the observation and k past observations and actions
+        size = len(observation_names(*_layout(settings)))  # with history and observer
         record = json.loads(norm_file.read_text(encoding="utf-8"))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
@@ -242,6 +238,13 @@ class PPOController:
     def _predict(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
         action, _ = self.model.predict(self.normalizer(seen), deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(1)
+
+
+def _layout(settings: dict[str, Any]) -> tuple[int, bool]:
+    """Steps of history and whether the observer's estimate is observed, from a run's
+    ``settings.json``."""
+    hyper = settings.get("hyperparameters") or {}
+    return int(hyper.get("history", 0) or 0), bool(hyper.get("observer", False))
 
 
 def _zero(_: float) -> float:

@@ -38,12 +38,18 @@ from typing import Any, Literal
 import numpy as np
 
 from agents.base import Controller
-from agents.evaluate import HEADLINE, evaluate, protocol_episodes
+from agents.evaluate import (
+    HEADLINE,
+    check_unique_names,
+    env_id_setting,
+    evaluate,
+    headline_scores,
+    protocol_episodes,
+)
 from agents.registry import default_policies, make_controller, policy_help
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv import VARIANTS
 from rollenv.bank import load_bank, variant_config
 
 __all__ = ["COMMAND", "CONDITIONS", "Args", "run"]
@@ -59,24 +65,11 @@ CONDITIONS: dict[str, dict[str, Any]] = {
 }
 
 
-def _variant_ids() -> tuple[str, ...]:
-    return VARIANTS.names()
-
-
-def _condition_names() -> tuple[str, ...]:
-    return tuple(CONDITIONS)
-
-
 @dataclass(frozen=True)
 class Args:
     """``rocketroll robustness`` / ``python -m agents.robustness``."""
 
-    env_id: str = setting(
-        "RocketRoll-v0",
-        "environment id: RocketRoll-v0 (angle task), RocketRollRate-v0 (rate task), ...",
-        choices=_variant_ids,
-        always=True,
-    )
+    env_id: str = env_id_setting()
     policy: list[str] = setting(
         default_factory=lambda: [p for p in default_policies() if p != "trim"],
         help=lambda: f"controller, in table order (repeatable): {policy_help()}",
@@ -185,9 +178,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
         }
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
-    names = [c.name for c in controllers]
-    if len(set(names)) < len(names):
-        raise UsageError(f"two --policy values give controllers of one name: {', '.join(names)}")
+    check_unique_names(controllers)
     unit = "°" if design.task == "angle" else "°/s"
     print(
         f"rocketroll robustness: {args.env_id}, split={args.split}, {args.episodes} episodes "
@@ -203,7 +194,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
         print(f"  {condition}: {bank.description}")
         for controller in controllers:
             result = evaluate(config, controller, specs, bank=bank, progress=True)
-            scores[controller.name][condition] = np.array([e[HEADLINE] for e in result.episodes])
+            scores[controller.name][condition] = headline_scores(result)
     table = markdown_table(scores, args.condition, unit)
     print(table, end="")
     if args.out is not None:

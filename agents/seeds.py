@@ -48,12 +48,18 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from agents.base import Evaluation
-from agents.evaluate import HEADLINE, evaluate, protocol_episodes
+from agents.evaluate import (
+    HEADLINE,
+    env_id_setting,
+    evaluate,
+    headline_scores,
+    pid_result,
+    protocol_episodes,
+)
 from agents.registry import make_controller
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv import VARIANTS
 from rollenv.bank import load_bank, variant_config
 
 __all__ = [
@@ -177,20 +183,11 @@ def learner_stats(
 
 
 # ----------------------------------------------------------------------------- CLI
-def _variant_ids() -> tuple[str, ...]:
-    return VARIANTS.names()
-
-
 @dataclass(frozen=True)
 class Args:
     """``rocketroll seeds`` / ``python -m agents.seeds``."""
 
-    env_id: str = setting(
-        "RocketRoll-v0",
-        "environment id: RocketRoll-v0 (angle task), RocketRollRate-v0 (rate task), ...",
-        choices=_variant_ids,
-        always=True,
-    )
+    env_id: str = env_id_setting()
     run: list[str] = setting(
         default_factory=list,
         help="a trained run, as --policy takes it (ppo:DIR), optionally LABEL=POLICY; runs of "
@@ -258,10 +255,6 @@ def _training_record(policy: str) -> tuple[float | None, float | None]:
     return record.get("wall_time_s"), record.get("env_steps_per_s")
 
 
-def _scores(result: Evaluation) -> FloatArray:
-    return np.array([e[HEADLINE] for e in sorted(result.episodes, key=lambda e: e["episode"])])
-
-
 def markdown_table(
     learners: Sequence[LearnerStats], references: Sequence[Evaluation], unit: str
 ) -> str:
@@ -289,7 +282,7 @@ def markdown_table(
             f"| {num(float(np.mean(rates)) if rates else None, 0)} |"
         )
     for r in references:
-        score = _scores(r)
+        score = headline_scores(r)
         lines.append(f"| {r.name} | 1 | {score.mean():.2f} | {iqm(score):.2f} | – | – | – | – |")
     return "\n".join(lines) + "\n"
 
@@ -324,7 +317,7 @@ def plot(
         right.step(ordered, share, where="post", color=colour, lw=2.2, label=label)
     for k, r in enumerate(references):
         colour = thin[k % len(thin)]
-        score = _scores(r)
+        score = headline_scores(r)
         left.axhline(score.mean(), color=colour, ls="--", lw=1.2, label=r.name)
         ordered = np.sort(score)
         share = np.arange(1, ordered.size + 1) / ordered.size
@@ -368,7 +361,7 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
     bank = load_bank(config, args.db)
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
     evaluated_refs = [evaluate(config, c, specs, bank=bank, progress=True) for c in references]
-    pid = next((r for r in evaluated_refs if r.name.split()[0] == "PID"), None)
+    pid = pid_result(evaluated_refs)
     learners = []
     for label, ctrls in controllers.items():
         results = [evaluate(config, c, specs, bank=bank, progress=True) for c in ctrls]
@@ -377,8 +370,8 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
             learner_stats(
                 label,
                 groups[label],
-                np.stack([_scores(r) for r in results]),
-                None if pid is None else _scores(pid),
+                np.stack([headline_scores(r) for r in results]),
+                None if pid is None else headline_scores(pid),
                 seed=args.seed,
                 train_seconds=[w for w, _ in records],
                 env_steps_per_s=[s for _, s in records],
@@ -415,7 +408,7 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
                 }
                 for s in learners
             },
-            "references": {r.name: _scores(r).tolist() for r in evaluated_refs},
+            "references": {r.name: headline_scores(r).tolist() for r in evaluated_refs},
         }
         title = f"{args.env_id}: headline over training seeds ({args.episodes} test episodes)"
         write_all_atomic(
