@@ -454,6 +454,12 @@ class ObserverController:
         if self._last is not None:
             ob.predict(*self._last)
         ob.update(obs)
+        return self.state_of(obs)
+
+    def state_of(self, obs: NDArray[np.float32]) -> tuple[FloatArray, float]:
+        """The design's state and shift (:meth:`design_state`) of the filter as it stands,
+        after its update with ``obs``."""
+        ob = self.observer
         fin = float(obs[Obs.FIN])
         x = ob.mean.copy()
         theta_bar = self.rocket.theta_bar_deg
@@ -486,7 +492,8 @@ class ObserverController:
 
 
 class ObserverFeatures:
-    """The observer's estimate as extra observation values for a learned policy.
+    """The observer's estimate as extra observation values for a learned policy, and
+    (``residual > 0``) the observer controller's command as the base its action adds to.
 
     One :class:`RollObserver` per environment, designed on the train split as
     the observer controller is; per step the filter takes the observation (and
@@ -494,22 +501,49 @@ class ObserverFeatures:
     the rate task, where no encoder anchors it).  Used by
     :class:`agents.vecenv.VecObserver` in training and by the learned
     controller when acting, the same code in both.
+
+    With ``residual`` the filters are those of one :class:`ObserverController`
+    per environment, and the action a policy chooses is a *residual* (Silver
+    et al. 2018, "Residual policy learning"; Johannink et al. 2019): the fin
+    command applied is the observer controller's plus ``residual`` × the
+    action (both as fractions of the fin's range), clipped to the range
+    (:meth:`record` returns it).  A policy whose action is 0 is the observer
+    controller, so learning starts from it instead of from nothing.
     """
 
     SIZE = 3
 
-    def __init__(self, config: RollConfig, rocket: NominalModel, turbulence: Turbulence, n: int):
+    def __init__(
+        self,
+        config: RollConfig,
+        rocket: NominalModel,
+        turbulence: Turbulence,
+        n: int,
+        residual: float = 0.0,
+    ):
+        if not (math.isfinite(residual) and 0.0 <= residual <= 2.0):
+            raise ValueError(f"residual must be a number in [0, 2], got {residual!r}")
         self._range = config.fin_range_deg
         self._angle = config.task == "angle"
-        self.filters = [RollObserver(rocket.params, turbulence, config) for _ in range(n)]
+        self.residual = float(residual)
+        self.controllers: list[ObserverController] = []
+        if residual:
+            self.controllers = [ObserverController(config, rocket, turbulence) for _ in range(n)]
+            self.filters = [c.observer for c in self.controllers]
+        else:
+            self.filters = [RollObserver(rocket.params, turbulence, config) for _ in range(n)]
         self._last: list[tuple[float, float] | None] = [None] * n
+        #: The observer controller's command per env for the coming step, fraction of the range.
+        self.base = np.zeros(n)
 
     @classmethod
-    def from_bank(cls, config: RollConfig, train_bank: TraceBank, n: int) -> ObserverFeatures:
+    def from_bank(
+        cls, config: RollConfig, train_bank: TraceBank, n: int, residual: float = 0.0
+    ) -> ObserverFeatures:
         """Designed on ``train_bank`` (the *train* split), for ``n`` environments."""
         nominal = NominalModel.from_bank(train_bank)
         turbulence = Turbulence.from_bank(train_bank, config.dt_s, nominal)
-        return cls(config, nominal, turbulence, n)
+        return cls(config, nominal, turbulence, n, residual)
 
     def clear(self, i: int | None = None) -> None:
         """A new episode for env ``i`` (all by default)."""
@@ -518,20 +552,30 @@ class ObserverFeatures:
             self._last[k] = None
 
     def one(self, i: int, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        """Env ``i``'s filter takes ``obs``; its features."""
+        """Env ``i``'s filter takes ``obs``; its features (and, residual, the base command)."""
         f = self.filters[i]
         last = self._last[i]
         if last is not None:
             f.predict(*last)
         f.update(obs)
+        if self.controllers:
+            controller = self.controllers[i]
+            state, shift = controller.state_of(obs)
+            fin = float(obs[Obs.FIN])
+            self.base[i] = controller.command(state, shift, fin) / self._range
         psi = float(f.mean[1]) if self._angle else 0.0
         return np.array([f.mean[0], psi, f.u_d], dtype=np.float32)
 
-    def record(self, obs: NDArray[np.float32], actions: NDArray[np.float32]) -> None:
-        """The step each env is about to take: the fin it starts from and its command."""
+    def record(self, obs: NDArray[np.float32], actions: NDArray[np.float32]) -> NDArray[np.float32]:
+        """The step each env is about to take, from the policy's ``actions``: the fin it
+        starts from and the command applied, which is returned (the actions themselves,
+        clipped to [-1, 1], or with ``residual`` the base command plus the residual)."""
         actions = np.clip(np.asarray(actions, dtype=np.float64).reshape(len(self.filters)), -1, 1)
+        if self.controllers:
+            actions = np.clip(self.base + self.residual * actions, -1.0, 1.0)
         for i in range(len(self.filters)):
             self._last[i] = (float(obs[i, Obs.FIN]), float(actions[i]) * self._range)
+        return actions.astype(np.float32).reshape(-1, 1)
 
 
 def make_observer(design: Design) -> ObserverController:

@@ -114,9 +114,11 @@ class PPOController:
         self.name = self.algorithm.upper()
         env_settings = settings.get("env_settings") or {}
         self.task: str | None = env_settings.get("task")
-        k, observer = _layout(settings)
+        k, observer, residual = _layout(settings)
         #: The policy reads the observer's estimate: :meth:`attach_observer` before acting.
         self.needs_observer = observer
+        #: The policy's action is a residual on the observer controller's command, × this.
+        self.residual = residual
         self.features: ObserverFeatures | None = None
         width = len(Obs) + (ObserverFeatures.SIZE if observer else 0)
         self.history: History | None = None
@@ -161,7 +163,8 @@ class PPOController:
         settings: dict[str, Any] = (
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
-        size = len(observation_names(*_layout(settings)))  # with history and observer
+        history, observer, _ = _layout(settings)
+        size = len(observation_names(history, observer))  # with history and observer
         record = json.loads(norm_file.read_text(encoding="utf-8"))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
@@ -181,7 +184,7 @@ class PPOController:
     def attach_observer(self, config: RollConfig, train_bank: TraceBank) -> None:
         """Build the observer whose estimate the policy reads, on the *train* split (as
         training did); ``--policy`` does this."""
-        self.features = ObserverFeatures.from_bank(config, train_bank, 1)
+        self.features = ObserverFeatures.from_bank(config, train_bank, 1, self.residual)
 
     def reset(self, env: FlightView) -> None:
         """Forget the history and the observer's state (if it has them); checks the task."""
@@ -208,8 +211,8 @@ class PPOController:
         action = self._action(seen)
         if self.history is not None:
             self.history.push(seen_now, action.reshape(1, -1))
-        if self.features is not None:
-            self.features.record(raw, action)
+        if self.features is not None:  # the command applied (a residual adds the base)
+            return self.features.record(raw, action).reshape(1)
         return action
 
     def _action(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -240,11 +243,13 @@ class PPOController:
         return np.asarray(action, dtype=np.float32).reshape(1)
 
 
-def _layout(settings: dict[str, Any]) -> tuple[int, bool]:
-    """Steps of history and whether the observer's estimate is observed, from a run's
-    ``settings.json``."""
+def _layout(settings: dict[str, Any]) -> tuple[int, bool, float]:
+    """Steps of history, whether the observer's estimate is observed, and the residual's
+    scale (0: the action is the command), from a run's ``settings.json``."""
     hyper = settings.get("hyperparameters") or {}
-    return int(hyper.get("history", 0) or 0), bool(hyper.get("observer", False))
+    residual = float(hyper.get("residual", 0.0) or 0.0)
+    observer = bool(hyper.get("observer", False)) or residual > 0
+    return int(hyper.get("history", 0) or 0), observer, residual
 
 
 def _zero(_: float) -> float:

@@ -84,8 +84,10 @@ ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 #: Keys of a YAML entry that are not keywords of the algorithm: ``history`` (steps of
 #: past observations and actions in the observation, :mod:`agents.memory`), ``observer``
 #: (true: the observer's estimate ``[v̂, ψ̂, û_d]`` in the observation,
-#: :class:`agents.observer.ObserverFeatures`, designed on the train split), and for the
-#: off-policy algorithms the exploration noise (``noise_type: normal``, ``noise_std``) as
+#: :class:`agents.observer.ObserverFeatures`, designed on the train split), ``residual``
+#: (a scale in (0, 1]: the action is a residual added to the observer controller's command,
+#: × the scale; implies ``observer``), and for the off-policy algorithms the exploration
+#: noise (``noise_type: normal``, ``noise_std``) as
 #: rl-baselines3-zoo writes it.
 SCRIPT_KEYS = (
     "n_envs",
@@ -95,6 +97,7 @@ SCRIPT_KEYS = (
     "env_kwargs",
     "history",
     "observer",
+    "residual",
     "noise_type",
     "noise_std",
 )
@@ -269,6 +272,9 @@ class Hyperparameters:
         ``("normal", sd)``: Gaussian exploration noise on the action (SAC, TD3).
     observer : bool
         The observer's estimate in the observation.
+    residual : float
+        0, or the scale of the action as a residual on the observer controller's
+        command (:class:`agents.observer.ObserverFeatures`).
     """
 
     env_id: str
@@ -283,6 +289,7 @@ class Hyperparameters:
     history: int = 0
     noise: tuple[str, float] | None = None
     observer: bool = False
+    residual: float = 0.0
 
 
 # ----------------------------------------------------------------------------- arguments
@@ -389,6 +396,18 @@ def load_hyperparameters(
     observer = entry.get("observer", False)
     if not isinstance(observer, bool):
         raise UsageError(f"{where}: observer must be true or false, got {observer!r}")
+    residual = entry.get("residual", 0.0)
+    if isinstance(residual, bool) or not isinstance(residual, int | float):
+        raise UsageError(f"{where}: residual must be a number in (0, 1], got {residual!r}")
+    if residual:
+        if not 0 < residual <= 1:
+            raise UsageError(f"{where}: residual must be a number in (0, 1], got {residual!r}")
+        if "observer" in entry and not observer:
+            raise UsageError(
+                f"{where}: residual acts on the observer controller, whose estimate the policy "
+                "reads: observer: false contradicts it"
+            )
+        observer = True
     redesign = sorted(set(entry.get("env_kwargs") or {}) & set(OBSERVER_DESIGN))
     if observer and redesign:
         raise UsageError(
@@ -413,6 +432,7 @@ def load_hyperparameters(
         history=counts["history"] or 0,
         noise=noise,
         observer=observer,
+        residual=float(residual),
     )
 
 
@@ -530,7 +550,7 @@ def make_env(
         if split != "train":  # the observer is designed on the train split, always
             train_config = variant_config(hp.env_id, {**hp.env_kwargs, "split": "train"})
             train_bank = load_bank(train_config, db)
-        features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs)
+        features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs, hp.residual)
         env = VecObserver(env, features)
     if hp.history:
         from agents.vecenv import VecHistory
@@ -800,6 +820,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("normalize", hp.normalize if hp.normalize is not None else "off"),
         ("history", f"{hp.history} steps" if hp.history else "off"),
         ("observer estimate", "in the observation" if hp.observer else "off"),
+        *((("residual", f"x {hp.residual:g} on the observer's command"),) if hp.residual else ()),
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.ppo[k]) for k in hp.ppo),
         ("env_kwargs", hp.env_kwargs or "-"),
@@ -899,6 +920,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 "env_kwargs": hp.env_kwargs,
                 **({"history": hp.history} if hp.history else {}),
                 **({"observer": True} if hp.observer else {}),
+                **({"residual": hp.residual} if hp.residual else {}),
                 **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.ppo,
             }

@@ -344,7 +344,9 @@ class VecHistory(VecEnvWrapper):
 
 class VecObserver(VecEnvWrapper):
     """An SB3 ``VecEnv`` whose observations carry the observer's estimate
-    (:class:`agents.observer.ObserverFeatures`: ``[v̂, ψ̂, û_d]`` after the 4 values)."""
+    (:class:`agents.observer.ObserverFeatures`: ``[v̂, ψ̂, û_d]`` after the 4 values);
+    with a residual ``features``, the env below gets the observer controller's command
+    plus the residual the policy chose."""
 
     def __init__(self, venv: VecEnv, features: Any) -> None:
         assert isinstance(venv.observation_space, spaces.Box)
@@ -372,8 +374,7 @@ class VecObserver(VecEnvWrapper):
 
     def step_async(self, actions: np.ndarray) -> None:
         assert self._last is not None
-        self.features.record(self._last, actions)
-        self.venv.step_async(actions)
+        self.venv.step_async(self.features.record(self._last, actions))
 
     def step_wait(self) -> Any:
         obs, rewards, dones, infos = self.venv.step_wait()

@@ -11,6 +11,7 @@ import shlex
 import shutil
 import sys
 from pathlib import Path
+from typing import Any
 from unittest import mock
 
 import numpy as np
@@ -26,6 +27,7 @@ from agents.train import (
     VECNORMALIZE_FILE,
     Args,
     load_hyperparameters,
+    make_env,
     parse_args,
     train,
 )
@@ -37,6 +39,7 @@ from rocketroll.cli import command
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import flags, run_command
 from rollenv.env import RocketRollEnv
+from rollenv.layout import Obs
 from tests.rollenv.conftest import array_bank
 
 TINY = """\
@@ -452,6 +455,9 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
     assert zero.env_kwargs == {"setpoint": "zero"}
     plain = load_hyperparameters(DEFAULT_HYPERPARAMS, "RocketRoll-v0")
     assert (zero.ppo, zero.n_envs, zero.n_timesteps) == (plain.ppo, plain.n_envs, plain.n_timesteps)
+    residual = load_hyperparameters(HYPERPARAMS_DIR / "ppo-residual.yml", "RocketRoll-v0")
+    assert residual.residual == 0.25 and residual.observer
+    assert residual.env_kwargs == {"setpoint": "zero"}
 
 
 def test_sac_resumes_from_a_checkpoint_with_its_replay_buffer(small_db, tmp_path):
@@ -486,3 +492,115 @@ def test_the_observer_refuses_env_kwargs_that_change_its_design(tmp_path):
         load_hyperparameters(path, "RocketRoll-v0")
     path.write_text(TINY + "  observer: true\n  env_kwargs: {setpoint_range: 20}\n", "utf-8")
     assert load_hyperparameters(path, "RocketRoll-v0").observer
+
+
+# ------------------------------------------------------------------ residual on the observer
+@pytest.fixture(scope="module")
+def residual_run(small_db: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A tiny PPO run whose action is a residual (× 0.25) on the observer controller's."""
+    folder = tmp_path_factory.mktemp("residual")
+    hyperparams = folder / "residual.yml"
+    hyperparams.write_text(TINY + "  residual: 0.25\n", encoding="utf-8")
+    out = folder / "run"
+    argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
+    argv += ["--eval-freq", "0", "--eval-episodes", "2", "--checkpoint-freq", "0"]
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        assert run_command(COMMAND, [*argv, "--no-progress-bar"], "rocketroll train ppo") == 0
+    assert "x 0.25 on the observer's command" in printed.getvalue()
+    return out, hyperparams
+
+
+def _observer_on_train(small_db: Path) -> tuple[Any, Any]:
+    from agents.nominal import NominalModel
+    from agents.observer import ObserverController, Turbulence
+    from rollenv.bank import load_bank, variant_config
+
+    train_config = variant_config("RocketRoll-v0", {"split": "train"})
+    bank = load_bank(train_config, small_db)
+    nominal = NominalModel.from_bank(bank)
+    turbulence = Turbulence.from_bank(bank, train_config.dt_s, nominal)
+    return ObserverController(train_config, nominal, turbulence), (train_config, bank)
+
+
+def test_a_residual_policy_adds_its_action_to_the_observer_controllers(residual_run, small_db):
+    """The learned controller of a residual run applies the observer controller's command
+    plus 0.25 × the model's predict() on the training stack's observation, step by step;
+    the stack below applies the same (else the observations would part)."""
+    from agents.observer import ObserverFeatures
+
+    out, hyperparams = residual_run
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["hyperparameters"]["residual"] == 0.25
+    controller = PPOController.load(out)
+    assert controller.residual == 0.25 and controller.needs_observer
+    reference, (train_config, bank) = _observer_on_train(small_db)
+    controller.attach_observer(train_config, bank)
+    hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
+    assert hp.observer and hp.residual == 0.25
+    _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
+    assert isinstance(stack.venv.venv.features, ObserverFeatures)
+    stored = json.loads((out / "normalize.json").read_text())
+    normalize.obs_rms.mean = np.array(stored["mean"])
+    normalize.obs_rms.var = np.array(stored["var"])
+    seen = stack.reset()
+    assert seen.shape == (1, 7)
+    raw = stack.unnormalize_obs(seen)[0, :4].astype(np.float32)
+    view = FlightView(RocketRollEnv(bank=array_bank()))
+    controller.reset(view)
+    reference.reset()
+    limit = reference.config.fin_range_deg
+    moved = 0.0
+    for step in range(40):
+        residual, _ = controller.model.predict(seen, deterministic=True)
+        state, shift = reference.design_state(raw)
+        base = reference.command(state, shift, float(raw[Obs.FIN])) / limit
+        expected = np.clip(base + 0.25 * float(residual[0, 0]), -1.0, 1.0)
+        action = controller.act(raw, view)
+        np.testing.assert_allclose(action, [expected], rtol=0, atol=1e-6, err_msg=f"step {step}")
+        moved = max(moved, abs(float(residual[0, 0])))
+        reference._last = (float(raw[Obs.FIN]), float(action[0]) * limit)
+        seen, _, _, _ = stack.step(residual.reshape(1, 1))
+        raw = stack.unnormalize_obs(seen)[0, :4].astype(np.float32)
+    assert moved > 1e-4  # the residual was not nothing
+
+
+def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, small_db):
+    """With its action net zeroed, a residual policy flies an episode exactly as the
+    observer controller does."""
+    import torch
+
+    out, _ = residual_run
+    controller = PPOController.load(out)
+    with torch.no_grad():
+        controller.model.policy.action_net.weight.zero_()
+        controller.model.policy.action_net.bias.zero_()
+    reference, (train_config, bank) = _observer_on_train(small_db)
+    controller.attach_observer(train_config, bank)
+    actions = []
+    for agent in (controller, reference):
+        env = RocketRollEnv(bank=array_bank())
+        obs, _ = env.reset(seed=3)
+        agent.reset(FlightView(env))
+        taken = []
+        for _ in range(150):
+            action = agent.act(obs, FlightView(env))
+            taken.append(float(action[0]))
+            obs, *_ = env.step(action)
+        actions.append(taken)
+    np.testing.assert_array_equal(actions[0], actions[1])
+    assert np.ptp(actions[1]) > 0.05  # the observer did steer
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ("  residual: 1.5\n", "residual must be a number in (0, 1], got 1.5"),
+        ("  residual: yes\n", "residual must be a number in (0, 1], got True"),
+        ("  residual: 0.2\n  observer: false\n", "observer: false contradicts it"),
+    ],
+)
+def test_bad_residual_settings_are_named(extra, message, tmp_path):
+    path = tmp_path / "hp.yml"
+    path.write_text(TINY + extra, encoding="utf-8")
+    with pytest.raises(UsageError, match=re.escape(message)):
+        load_hyperparameters(path, "RocketRoll-v0")
