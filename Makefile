@@ -43,6 +43,7 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll seeds --env-id RocketRoll-v0 --run ppo:agents/policies/RocketRoll-v0 \
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRoll-v0/ppo/seed$(s)) \
 		$(foreach s,0 1 2 3 4,--run ppo-zero=ppo:agents/policies/seeds/RocketRoll-v0/ppo-zero/seed$(s)) \
+		$(foreach s,0 1 2 3 4,--run ppo-residual=ppo:agents/policies/seeds/RocketRoll-v0/ppo-residual/seed$(s)) \
 		--out $(DEMO)/seeds-angle
 	$(BIN)/rocketroll seeds --env-id RocketRollRate-v0 --run ppo:agents/policies/RocketRollRate-v0 \
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRollRate-v0/ppo/seed$(s)) \
@@ -55,7 +56,8 @@ demo: $(VENV)/.installed
 	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
 	@echo "      $(DEMO)/env-random.png and the evaluations of trim, PID, the observer, the MPC, PPO and the oracle"
 	@echo "      on held-out episodes in $(DEMO)/eval-angle/ and $(DEMO)/eval-rate/, PPO, PPO trained"
-	@echo "      at a zero setpoint and SAC over five training seeds each in $(DEMO)/seeds-angle/"
+	@echo "      at a zero setpoint, PPO as a residual on the observer and SAC over five training"
+	@echo "      seeds each in $(DEMO)/seeds-angle/"
 	@echo "      and seeds-rate/, and every controller under"
 	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/ (tables above)"
 

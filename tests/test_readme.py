@@ -141,15 +141,17 @@ def test_the_seed_statistics_and_robustness_tables(
     env_id: str, default_db: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """`make demo`'s seed statistics (five committed runs each of PPO and of PPO trained at
-    a zero setpoint / SAC) and robustness tables, as the README prints them (about a
-    minute per task)."""
+    a zero setpoint and as a residual on the observer / SAC) and robustness tables, as the
+    README prints them (about a minute per task)."""
     seeds = f"agents/policies/seeds/{env_id}"
     runs = ["--run", f"ppo:agents/policies/{env_id}"]
     for seed in range(1, 5):
         runs += ["--run", f"ppo:{seeds}/ppo/seed{seed}"]
-    other = "ppo-zero=ppo:{}/ppo-zero/seed{}" if env_id == "RocketRoll-v0" else "sac:{}/sac/seed{}"
-    for seed in range(5):
-        runs += ["--run", other.format(seeds, seed)]
+    others = ["sac:{}/sac/seed{}"]
+    if env_id == "RocketRoll-v0":
+        others = ["ppo-zero=ppo:{}/ppo-zero/seed{}", "ppo-residual=ppo:{}/ppo-residual/seed{}"]
+    for other in others:
+        runs += [w for seed in range(5) for w in ("--run", other.format(seeds, seed))]
     for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
         assert rocketroll(argv) == 0
         printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
