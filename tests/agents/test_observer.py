@@ -133,7 +133,9 @@ def _hold(name: str, env_id: str, setpoint: float):
         yield cfg, run_episode(env, controller, spec)
 
 
-HOLDERS = ["pid", "observer", "mpc", "oracle"]
+#: PPO as a residual on the observer (agents/hyperparams/ppo-residual.yml), seed 0.
+RESIDUAL = "ppo:agents/policies/seeds/RocketRoll-v0/ppo-residual/seed0"
+HOLDERS = ["pid", "observer", "mpc", "oracle", RESIDUAL]
 PPO_OFFSET = pytest.param(
     "ppo",
     marks=pytest.mark.xfail(
