@@ -1,5 +1,5 @@
 """``rocketroll`` commands of the agents layer: ``train``, ``eval``, ``seeds``, ``robustness``,
-``tune``.
+``sweep``, ``tune``.
 
 The commands themselves live beside what they run (:data:`agents.train.COMMAND`,
 :data:`agents.evaluate.COMMAND`, :data:`agents.tune.COMMAND`, each a settings
@@ -9,7 +9,7 @@ train ppo`` are one command; this module only groups them.
 
 from __future__ import annotations
 
-from agents import evaluate, robustness, seeds, train, tune
+from agents import evaluate, robustness, seeds, sweep, train, tune
 from rocketroll_common.settings import Command
 
 __all__ = ["COMMANDS"]
@@ -25,6 +25,7 @@ COMMANDS: dict[str, Command] = {
     "eval": evaluate.COMMAND,
     "seeds": seeds.COMMAND,
     "robustness": robustness.COMMAND,
+    "sweep": sweep.COMMAND,
     "tune": Command(
         "tune",
         "re-tune a controller's design on train episodes (the PID's bandwidth)",

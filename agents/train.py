@@ -1107,6 +1107,8 @@ TD3_COMMAND = Command(
     _train,
     __doc__ or "",
 )
+#: The arguments class of each algorithm (``rocketroll sweep`` trains through these).
+TRAIN_ARGS: dict[str, type[Args]] = {"ppo": Args, "sac": SACArgs, "td3": TD3Args}
 
 if __name__ == "__main__":
     sys.exit(run_command(COMMAND, sys.argv[1:], "python -m agents.train"))

@@ -44,6 +44,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "controllers designed once, evaluated on surrogates, randomised rockets, stronger "
         "turbulence and other methods' replays",
     ),
+    "sweep": (
+        "agents.cli",
+        "sweeps over controllers, settings, seeds and tasks, resumable, into a results store",
+    ),
     "tune": (
         "agents.cli",
         "re-tune a controller's design on train episodes (the PID's bandwidth)",
