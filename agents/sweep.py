@@ -757,9 +757,155 @@ def _run(args: RunArgs) -> int:
     return 1 if failed else 0
 
 
+@dataclass(frozen=True)
+class ReportArgs:
+    """``rocketroll sweep report``."""
+
+    sweep_dir: Path = setting(
+        help="the sweep's folder (holding results.sqlite)", positional=True, metavar="DIR"
+    )
+    name: str | None = setting(None, "only the trials of this sweep name (default: all)")
+    out: Path | None = setting(
+        None,
+        "folder for report.md and one report-N.png per table (default: DIR)",
+        output="folder",
+    )
+    seed: int = setting(0, "seed of the bootstrap", ge=0, le=2**31 - 1)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]]:
+    """The sweep's statistics: one table per env id and settings point.
+
+    In each, a learned controller's trials of one label (its name and grid
+    values) are one learner's runs, one per training seed, summarised as
+    ``rocketroll seeds`` does (:func:`agents.seeds.learner_stats`: mean, IQM,
+    95 % stratified-bootstrap intervals, P(beats PID) against the table's
+    ``pid`` trial); every other controller is a reference row.  Failed trials
+    are counted, not scored.  Per learned controller, ``best`` is the label
+    of the lowest mean headline.
+    """
+    from agents.base import Evaluation
+    from agents.evaluate import HEADLINE
+    from agents.seeds import learner_stats
+
+    tables: dict[tuple[str, str], dict[str, Any]] = {}
+    for row in rows:
+        spec = row["spec"]
+        key = (row["env_id"], json.dumps(spec["settings"], sort_keys=True))
+        table = tables.setdefault(
+            key,
+            {
+                "env_id": row["env_id"],
+                "settings": spec["settings"],
+                "learned": {},
+                "references": [],
+                "failed": [],
+            },
+        )
+        if row["status"] != "done":
+            table["failed"].append(row["controller"])
+        elif spec["train"]:
+            table["learned"].setdefault(row["controller"], []).append(row)
+        else:
+            table["references"].append(row)
+    out = []
+    for _, table in sorted(tables.items()):
+        refs = [
+            Evaluation(
+                r["controller"],
+                [{"episode": i, HEADLINE: v} for i, v in enumerate(r["episode_headline"])],
+                {},
+                [],
+            )
+            for r in table["references"]
+        ]
+        pid = next(
+            (r for r in table["references"] if (r["spec"]["policy"] or "").split(":")[0] == "pid"),
+            None,
+        )
+        learners = []
+        for label, runs in sorted(table["learned"].items()):
+            runs = sorted(runs, key=lambda r: r["seed"])
+            scores = np.array([r["episode_headline"] for r in runs], dtype=float)
+            reference = None if pid is None else np.array(pid["episode_headline"], dtype=float)
+            learners.append(
+                learner_stats(
+                    label,
+                    [f"seed {r['seed']}" for r in runs],
+                    scores,
+                    reference,
+                    seed=seed,
+                    train_seconds=[r["train_s"] for r in runs],
+                    env_steps_per_s=[r["env_steps_per_s"] for r in runs],
+                )
+            )
+        best: dict[str, str] = {}
+        for stats in sorted(learners, key=lambda s: s.mean):
+            name = table["learned"][stats.name][0]["spec"]["controller"]
+            best.setdefault(name, stats.name)
+        out.append({**table, "learners": learners, "reference_results": refs, "best": best})
+    return out
+
+
+def _report(args: ReportArgs) -> int:
+    from agents.seeds import markdown_table, plot
+    from rocketroll_common.files import write_all_atomic
+    from rollenv.bank import variant_config
+
+    store_path = args.sweep_dir / "results.sqlite"
+    if not store_path.is_file():
+        raise UsageError(f"{store_path}: no results store (run `rocketroll sweep run` first)")
+    with ResultStore(store_path) as store:
+        rows = store.rows(args.name)
+    if not rows:
+        raise UsageError(
+            f"{store_path}: no trials{f' of sweep {args.name!r}' if args.name else ''}"
+        )
+    out = args.out if args.out is not None else args.sweep_dir
+    text = [f"# Sweep report: {store_path}\n"]
+    files: dict[str | os.PathLike[str], str | bytes] = {}
+    for n, table in enumerate(report(rows, args.seed), start=1):
+        task = variant_config(table["env_id"], table["settings"]).task
+        unit = "°" if task == "angle" else "°/s"
+        where = ", ".join(f"{k}={v}" for k, v in sorted(table["settings"].items()))
+        title = f"{table['env_id']}" + (f" ({where})" if where else "")
+        text.append(f"## {n}. {title}\n")
+        text.append(markdown_table(table["learners"], table["reference_results"], unit))
+        for name, label in sorted(table["best"].items()):
+            text.append(f"best settings of {name}: {label}  ")
+        if table["failed"]:
+            text.append(f"failed trials (not scored): {', '.join(table['failed'])}  ")
+        text.append("")
+        if table["learners"]:
+            png = out / f"report-{n}.png"
+            files[png] = plot(table["learners"], table["reference_results"], unit, title)
+            text.append(f"![{title}: learners over seeds and the references]({png.name})\n")
+    document = "\n".join(text)
+    print(document, end="")
+    files[out / "report.md"] = document
+    write_all_atomic(files)
+    print(
+        f"wrote {out / 'report.md'}"
+        + (f" and {len(files) - 1} figure(s)" if len(files) > 1 else "")
+    )
+    return 0
+
+
 COMMAND = Command(
     "sweep",
     "sweeps over controllers, settings, seeds and tasks; a results store",
     description=__doc__ or "",
-    subcommands=(Command("run", "run (or resume) a sweep spec", RunArgs, _run, __doc__ or ""),),
+    subcommands=(
+        Command("run", "run (or resume) a sweep spec", RunArgs, _run, __doc__ or ""),
+        Command(
+            "report",
+            "tables and plots of a sweep: seeds' statistics, P(beats PID), best settings",
+            ReportArgs,
+            _report,
+            (report.__doc__ or "").split("\n\n", 1)[-1],
+        ),
+    ),
 )

@@ -232,3 +232,32 @@ def test_the_same_sweep_on_ray_gives_the_same_results(tmp_path, default_db):
         assert row["headline_mean"] == mine["headline_mean"]
         assert row["episode_headline"] == mine["episode_headline"]
         assert row["metrics"] == mine["metrics"]
+
+
+def test_the_report_summarises_seeds_against_the_pid(tmp_path, default_db):
+    """Two PPO seeds and the PID: the report's learner is the two runs, its P(beats PID)
+    is the share of run x episode scores below the PID's on the same episode, and
+    `rocketroll sweep report` writes report.md with the table and a figure."""
+    spec = load_spec(_spec(tmp_path, TWO_TRIALS.replace("seeds: [3]", "seeds: [3, 4]")))
+    out = tmp_path / "out"
+    assert all(r["status"] == "done" for r in run_sweep(spec, out, progress=False))
+    from agents.sweep import report
+
+    with ResultStore(out / "results.sqlite") as store:
+        rows = store.rows()
+    (table,) = report(rows)
+    (learner,) = table["learners"]
+    assert learner.name == "ppo" and learner.runs == ["seed 3", "seed 4"]
+    pid = next(r for r in rows if r["controller"] == "pid")["episode_headline"]
+    ppo = [r["episode_headline"] for r in sorted(rows, key=lambda r: str(r["seed"])) if r["seed"]]
+    wins = [(a < b) + 0.5 * (a == b) for run in ppo for a, b in zip(run, pid, strict=True)]
+    assert learner.p_beats == pytest.approx(sum(wins) / len(wins))
+    assert learner.mean == pytest.approx(sum(map(sum, ppo)) / 4)
+    assert table["best"] == {"ppo": "ppo"}
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        assert run_command(command("sweep"), ["report", str(out)], "rocketroll sweep") == 0
+    assert "| ppo | 2 |" in printed.getvalue() and "| pid | 1 |" in printed.getvalue()
+    assert (out / "report.md").is_file() and (out / "report-1.png").stat().st_size > 10_000
+    with contextlib.redirect_stderr(io.StringIO()) as errors:
+        assert run_command(command("sweep"), ["report", str(tmp_path)], "rocketroll sweep") == 2
+    assert "results.sqlite: no results store" in errors.getvalue()
