@@ -131,21 +131,42 @@ def protocol_episodes(
     return specs
 
 
-def run_episode(env: RocketRollEnv, controller: Controller, spec: EpisodeSpec) -> EpisodeHistory:
+def run_episode(
+    env: RocketRollEnv,
+    controller: Controller,
+    spec: EpisodeSpec,
+    transitions: dict[str, list[Any]] | None = None,
+) -> EpisodeHistory:
     """Run ``controller`` through episode ``spec`` of ``env``; its history, step by step.
 
     The controller sees a :class:`~agents.base.FlightView` of ``env`` unless it
-    declares ``sees_truth`` (the oracle)."""
+    declares ``sees_truth`` (the oracle).  ``transitions``, if given, gets what
+    an agent saw and did, as Gymnasium returned it: ``observations`` (one more
+    than the steps), ``actions``, ``rewards``, ``terminations``,
+    ``truncations`` (lists, appended to)."""
     obs, _ = env.reset(seed=spec.seed, options=spec.options())
     handle: Any = env if getattr(controller, "sees_truth", False) else FlightView(env)
     controller.reset(handle)
     recorder = HistoryRecorder(env.config.max_episode_steps + 1)
     core = env.core
     recorder.record(core, 0)
+    keep = transitions is not None
+    if transitions is not None:
+        for key in ("observations", "actions", "rewards", "terminations", "truncations"):
+            transitions.setdefault(key, [])
+        transitions["observations"].append(obs)
     truncated = False
     while not truncated:
-        obs, reward, _, truncated, _ = env.step(controller.act(obs, handle))
+        action = controller.act(obs, handle)
+        obs, reward, terminated, truncated, _ = env.step(action)
         recorder.record(core, 0, float(reward))
+        if keep:
+            assert transitions is not None
+            transitions["observations"].append(obs)
+            transitions["actions"].append(np.asarray(action, dtype=np.float32).copy())
+            transitions["rewards"].append(float(reward))
+            transitions["terminations"].append(bool(terminated))
+            transitions["truncations"].append(bool(truncated))
     return recorder.history(env.config.task, env.config.fin_range_deg, spec.trace)
 
 
@@ -269,8 +290,11 @@ def evaluate(
     db: str | os.PathLike[str] | None = None,
     bank: TraceBank | None = None,
     progress: bool = False,
+    transitions: list[dict[str, Any]] | None = None,
 ) -> Evaluation:
-    """Run ``controller`` through every episode of ``specs``."""
+    """Run ``controller`` through every episode of ``specs``; with ``transitions``, append
+    each episode's observations, actions, rewards, ... there (:func:`run_episode`), with its
+    ``seed`` and ``options``."""
     bank = load_bank(config, db) if bank is None else bank
     env = env_on(config, bank)
     rollouts, episodes = [], []
@@ -281,7 +305,11 @@ def evaluate(
 
         iterator = tqdm(specs, desc=f"{controller.name:>6}", unit="ep", leave=False)
     for spec in iterator:
-        rollout = run_episode(env, controller, spec)
+        steps: dict[str, Any] | None = None
+        if transitions is not None:
+            steps = {"seed": spec.seed, "options": spec.options()}
+            transitions.append(steps)
+        rollout = run_episode(env, controller, spec, steps)
         rollouts.append(rollout)
         episodes.append({"episode": spec.index, **metrics(rollout, config)})
     env.close()
@@ -422,6 +450,12 @@ class Args:
         flag="--set",
         metavar="KEY=VALUE",
     )
+    minari: str | None = setting(
+        None,
+        "also save every episode as a Minari dataset per controller, PREFIX-<controller>-v0 "
+        "(offline RL; the optional extra rocketroll[minari])",
+        metavar="PREFIX",
+    )
 
     def __post_init__(self) -> None:
         check(self)
@@ -443,6 +477,10 @@ def run(args: Args) -> list[Evaluation]:
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
     check_unique_names(controllers)
+    if args.minari is not None:  # refuse before any work
+        from agents.datasets import check_minari
+
+        check_minari(args.minari, [c.name for c in controllers])
     print(f"rocketroll eval: {args.env_id}, split={args.split}, {args.episodes} episodes, ")
     print(f"  seed={args.seed}, policies: {', '.join(args.policy)}")
     draws = {"posterior": "posterior draws", "replay": "identified traces"}
@@ -452,7 +490,14 @@ def run(args: Args) -> list[Evaluation]:
     )
     bank = load_bank(config, args.db)
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
-    results = [evaluate(config, c, specs, bank=bank, progress=True) for c in controllers]
+    steps: dict[str, list[dict[str, Any]]] = {c.name: [] for c in controllers}
+    keep = args.minari is not None
+    results = [
+        evaluate(
+            config, c, specs, bank=bank, progress=True, transitions=steps[c.name] if keep else None
+        )
+        for c in controllers
+    ]
     table = markdown_table(results, config)
     print(table, end="")
     if args.out is not None:
@@ -481,6 +526,16 @@ def run(args: Args) -> list[Evaluation]:
             }
         )
         print(f"wrote {out}/table.md, results.json, episode.png, errors.png")
+    if args.minari is not None:
+        from agents.datasets import write_minari
+
+        env_settings = {**args.settings, "split": args.split}
+        about = (
+            f"rocketroll eval on {args.env_id} ({args.episodes} protocol episodes, seed "
+            f"{args.seed}, {args.split} split)"
+        )
+        ids = write_minari(args.minari, steps, args.env_id, env_settings, about)
+        print(f"wrote Minari datasets {', '.join(ids)} (minari.load_dataset)")
     return results
 
 

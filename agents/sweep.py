@@ -16,7 +16,7 @@ the disturbance sets and the training seeds::
       - {name: pid, policy: pid}             # any --policy of rocketroll eval
       - name: ppo
         train: ppo                           # ppo, sac or td3: trained per trial
-        hyperparams: agents/hyperparams/ppo.yml
+        hyperparams: ../agents/hyperparams/ppo.yml   # relative to the spec (or the cwd)
         timesteps: 100000                    # optional, the entry's n_timesteps otherwise
         grid: {learning_rate: [0.0001, 0.0003]}   # hyperparameters searched over
 
@@ -263,8 +263,8 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         if "hyperparams" not in entry:
             raise UsageError(f"{where}: hyperparams (the YAML file of the recipe) is missing")
         hyperparams = Path(str(entry["hyperparams"]))
-        if not hyperparams.is_absolute() and not hyperparams.is_file():
-            hyperparams = path.parent / hyperparams  # relative to the spec, else the cwd
+        if not hyperparams.is_absolute() and (path.parent / hyperparams).is_file():
+            hyperparams = path.parent / hyperparams  # relative to the spec, else to the cwd
         if not hyperparams.is_file():
             raise UsageError(f"{where}: hyperparams {entry['hyperparams']}: no such file")
         timesteps = entry.get("timesteps")
