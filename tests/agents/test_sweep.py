@@ -261,3 +261,14 @@ def test_the_report_summarises_seeds_against_the_pid(tmp_path, default_db):
     with contextlib.redirect_stderr(io.StringIO()) as errors:
         assert run_command(command("sweep"), ["report", str(tmp_path)], "rocketroll sweep") == 2
     assert "results.sqlite: no results store" in errors.getvalue()
+
+
+def test_the_shipped_sweep_spec_loads():
+    """sweeps/pid-ppo-seeds.yml (the README's): PID, observer, five PPO seeds, both tasks."""
+    from agents.sweep import expand
+
+    spec = load_spec(Path(__file__).resolve().parents[2] / "sweeps" / "pid-ppo-seeds.yml")
+    trials = expand(spec)
+    assert len(trials) == 2 * (1 + 1 + 5)
+    assert {t.controller.name for t in trials} == {"pid", "observer", "ppo"}
+    assert all(Path(t.controller.hyperparams).is_file() for t in trials if t.controller.learned)
