@@ -150,8 +150,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     print("|---|---|---|" + "---|" * len(names) + "---|")
     for label, envs, rate, reach, (wall, steps, head) in rows:
-        cells = " | ".join("not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names)
-        print(f"| {label} | {envs} | {rate:,.0f} | {cells} | {head:.2f} at {wall:.0f} s ({steps:,}) |")
+        cells = " | ".join(
+            "not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names
+        )
+        best = f"{head:.2f} at {wall:.0f} s ({steps:,})"
+        print(f"| {label} | {envs} | {rate:,.0f} | {cells} | {best} |")
     if args.png is not None:
         from rocketroll_common.plotting import new_figure, png_bytes
 
