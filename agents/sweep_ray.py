@@ -12,6 +12,8 @@ experiment's state, so the callback carries only a key into :data:`SINKS`
 from __future__ import annotations
 
 import json
+import logging
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -56,6 +58,10 @@ def run(
     """Run ``run_trial(trial, root, db)`` for each of ``trials`` (:func:`agents.sweep.run_trial`
     and its trials) on the Ray cluster at ``address`` (``"auto"``: this machine's, or a new
     local instance; an initialised Ray as it is); ``take`` gets each record."""
+    # Quiet: the sweep prints its own progress; no TensorBoard/CSV loggers per trial.
+    os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
+    logging.getLogger("ray.tune").setLevel(logging.WARNING)
     if not ray.is_initialized():
         ray.init(address=None if address == "auto" else address, log_to_driver=False)
     key = id(take)

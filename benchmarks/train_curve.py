@@ -121,7 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for item in args.recipe or DEFAULT_RECIPES:
         label, _, path = item.partition("=")
         hp = load_hyperparameters(path, args.env_id)
-        steps = args.timesteps or hp.n_timesteps
+        steps = int(args.timesteps or hp.n_timesteps or 1_000_000)
         _, venv, normalize = make_env(hp, hp.n_envs, args.seed, split="train")
         model = PPO(hp.policy, venv, seed=args.seed, **ppo_arguments(hp))
         scorer = Scorer(args.eval_every, score, normalize, config.task)
@@ -153,8 +153,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         cells = " | ".join(
             "not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names
         )
-        best = f"{head:.2f} at {wall:.0f} s ({steps:,})"
-        print(f"| {label} | {envs} | {rate:,.0f} | {cells} | {best} |")
+        at = f"{head:.2f} at {wall:.0f} s ({steps:,})"
+        print(f"| {label} | {envs} | {rate:,.0f} | {cells} | {at} |")
     if args.png is not None:
         from rocketroll_common.plotting import new_figure, png_bytes
 

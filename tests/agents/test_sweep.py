@@ -271,4 +271,6 @@ def test_the_shipped_sweep_spec_loads():
     trials = expand(spec)
     assert len(trials) == 2 * (1 + 1 + 5)
     assert {t.controller.name for t in trials} == {"pid", "observer", "ppo"}
-    assert all(Path(t.controller.hyperparams).is_file() for t in trials if t.controller.learned)
+    assert all(
+        Path(str(t.controller.hyperparams)).is_file() for t in trials if t.controller.learned
+    )
