@@ -896,7 +896,7 @@ def _report(args: ReportArgs) -> int:
 
 COMMAND = Command(
     "sweep",
-    "sweeps over controllers, settings, seeds and tasks; a results store",
+    "sweeps over controllers, settings, seeds and tasks, resumable, into a results store",
     description=__doc__ or "",
     subcommands=(
         Command("run", "run (or resume) a sweep spec", RunArgs, _run, __doc__ or ""),
