@@ -46,12 +46,22 @@ def check_minari(prefix: str, controllers: Sequence[str]) -> dict[str, str]:
         raise UsageError(
             "--minari needs Minari, an optional extra: pip install 'rocketroll[minari]'"
         ) from exc
-    if not _ID.match(prefix) or prefix.endswith(("/", "-")):
-        raise UsageError(
-            f"--minari {prefix!r}: a dataset name (letters, digits, _ . - /), as in "
-            "rocketroll/angle-test"
-        )
+    from minari.dataset.minari_dataset import parse_dataset_id
+
     ids = {name: dataset_id(prefix, name) for name in controllers}
+    for made in ids.values():
+        try:
+            if not _ID.match(prefix):
+                raise ValueError(prefix)
+            parse_dataset_id(made)
+        except ValueError:
+            raise UsageError(
+                f"--minari {prefix!r}: not a dataset name Minari takes ([NAMESPACE/]NAME, as "
+                f"in rocketroll/angle-test; {made} would be malformed)"
+            ) from None
+    same = sorted({i for i in ids.values() if list(ids.values()).count(i) > 1})
+    if same:
+        raise UsageError(f"--minari {prefix}: two controllers would both be dataset {same[0]}")
     existing = set(minari.list_local_datasets())
     taken = sorted(i for i in ids.values() if i in existing)
     if taken:
@@ -94,6 +104,7 @@ def write_minari(
                 EpisodeBuffer(
                     id=k,
                     seed=int(run["seed"]),
+                    options=run["options"],
                     observations=np.asarray(run["observations"], dtype=np.float32),
                     actions=np.asarray(run["actions"], dtype=np.float32),
                     rewards=list(run["rewards"]),

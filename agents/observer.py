@@ -521,8 +521,8 @@ class ObserverFeatures:
         n: int,
         residual: float = 0.0,
     ):
-        if not (math.isfinite(residual) and 0.0 <= residual <= 2.0):
-            raise ValueError(f"residual must be a number in [0, 2], got {residual!r}")
+        if not (math.isfinite(residual) and 0.0 <= residual <= 1.0):
+            raise ValueError(f"residual must be a number in [0, 1], got {residual!r}")
         self._range = config.fin_range_deg
         self._angle = config.task == "angle"
         self.residual = float(residual)

@@ -49,6 +49,7 @@ import io
 import itertools
 import json
 import os
+import shutil
 import sqlite3
 import subprocess
 import time
@@ -210,6 +211,20 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
     if not isinstance(settings_in, dict):
         raise UsageError(f"{path}: settings must be a mapping of setting -> values")
     settings = {str(k): _values(v, f"{path}: settings.{k}") for k, v in settings_in.items()}
+    fixed = sorted({"split", "task"} & set(settings))
+    if fixed:
+        raise UsageError(
+            f"{path}: settings.{fixed[0]}: not a setting to search (the task follows env_ids, "
+            "the evaluation's split is the test split)"
+        )
+    from rollenv.bank import variant_config
+
+    for env_id in env_ids:
+        for point in _points(settings):
+            try:
+                variant_config(env_id, {**point, "split": "test"})
+            except (TypeError, ValueError) as exc:
+                raise UsageError(f"{path}: settings {point} on {env_id}: {exc}") from None
     search = document.get("search") or {"kind": "grid"}
     if not isinstance(search, dict) or search.get("kind") not in ("grid", "random"):
         raise UsageError(f"{path}: search must be {{kind: grid}} or {{kind: random, trials: N}}")
@@ -246,6 +261,12 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         grid = {str(k): _values(v, f"{where}: grid.{k}") for k, v in grid_in.items()}
         if "policy" in entry:
             policy = str(entry["policy"])
+            kind, sep, arg = policy.partition(":")
+            if sep and arg and not Path(arg).is_absolute():  # a run's folder: made absolute,
+                for base in (path.parent, Path.cwd()):  # so workers anywhere find it
+                    if (base / arg).exists():
+                        policy = f"{kind}:{(base / arg).resolve()}"
+                        break
             if policy.split(":", 1)[0] not in CONTROLLERS.names():
                 raise UsageError(
                     f"{where}: unknown policy {policy!r}; one of {', '.join(CONTROLLERS.names())}"
@@ -271,10 +292,11 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         if timesteps is not None:
             timesteps = _whole(timesteps, f"{where}: timesteps", low=1)
         for env_id in env_ids:  # fail now, not in the middle of the sweep
-            try:
-                _entry_with(hyperparams, env_id, str(algo), {k: v[0] for k, v in grid.items()})
-            except UsageError as exc:
-                raise UsageError(f"{where}: {exc}") from None
+            for point in _points(grid):
+                try:
+                    _entry_with(hyperparams, env_id, str(algo), point)
+                except UsageError as exc:
+                    raise UsageError(f"{where}: {exc}") from None
         controllers.append(
             ControllerSpec(
                 cname,
@@ -350,6 +372,9 @@ class Trial:
     seed: int | None
     episodes: int
     eval_seed: int
+    #: A learned controller's effective hyperparameter entry (its file's, with the grid's
+    #: values and the settings as env_kwargs): what the id hashes, not the file's path.
+    recipe: dict[str, Any] | None = None
 
     def spec(self) -> dict[str, Any]:
         """The trial as plain data (what the store keeps and the id hashes)."""
@@ -366,13 +391,17 @@ class Trial:
             "seed": self.seed,
             "episodes": self.episodes,
             "eval_seed": self.eval_seed,
+            "recipe": self.recipe,
         }
 
     @property
     def id(self) -> str:
-        """16 hex digits of the SHA-256 of :meth:`spec` (the sweep's name not included:
-        the same trial in two sweeps is the same experiment)."""
-        text = json.dumps(self.spec(), sort_keys=True, default=str)
+        """16 hex digits of the SHA-256 of :meth:`spec` without the recipe file's path (its
+        content is in ``recipe``: an edited file makes new trials, a moved one does not; the
+        sweep's name is not in it either: the same trial in two sweeps is one experiment)."""
+        spec = self.spec()
+        del spec["hyperparams"]
+        text = json.dumps(spec, sort_keys=True, default=str)
         return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
     @property
@@ -394,31 +423,41 @@ def _points(axes: dict[str, list[Any]]) -> list[dict[str, Any]]:
 
 def expand(spec: SweepSpec) -> list[Trial]:
     """The trials of ``spec``: the full grid, or (``kind: random``) ``trials`` of its
-    points drawn without replacement with ``search_seed``, in grid order."""
-    trials = []
+    points drawn without replacement with ``search_seed``, in grid order.  A random
+    sample of ``k`` points is the first ``k`` of one seeded permutation, so a larger
+    sample contains a smaller one.  Repeated points (a value listed twice) are one trial."""
+    trials: dict[str, Trial] = {}
     for env_id in spec.env_ids:
         for settings in _points(spec.settings):
             for controller in spec.controllers:
                 seeds: Sequence[int | None] = spec.seeds if controller.learned else [None]
                 for params in _points(controller.grid):
-                    for seed in seeds:
-                        trials.append(
-                            Trial(
-                                spec.name,
-                                env_id,
-                                controller,
-                                params,
-                                settings,
-                                seed,
-                                spec.episodes,
-                                spec.eval_seed,
-                            )
+                    recipe = None
+                    if controller.learned:
+                        assert controller.hyperparams is not None and controller.train
+                        recipe = _entry_with(
+                            Path(controller.hyperparams), env_id, controller.train, params
                         )
-    if spec.kind == "random" and spec.trials is not None and spec.trials < len(trials):
-        rng = np.random.default_rng(spec.search_seed)
-        keep = np.sort(rng.choice(len(trials), size=spec.trials, replace=False))
-        trials = [trials[i] for i in keep]
-    return trials
+                        if settings:  # the disturbance set is trained on too
+                            recipe["env_kwargs"] = {**(recipe.get("env_kwargs") or {}), **settings}
+                    for seed in seeds:
+                        trial = Trial(
+                            spec.name,
+                            env_id,
+                            controller,
+                            params,
+                            settings,
+                            seed,
+                            spec.episodes,
+                            spec.eval_seed,
+                            recipe,
+                        )
+                        trials.setdefault(trial.id, trial)
+    found = list(trials.values())
+    if spec.kind == "random" and spec.trials is not None and spec.trials < len(found):
+        order = np.random.default_rng(spec.search_seed).permutation(len(found))
+        found = [found[i] for i in np.sort(order[: spec.trials])]
+    return found
 
 
 def _git_revision() -> str | None:
@@ -437,15 +476,9 @@ def _git_revision() -> str | None:
     return rev or None
 
 
-def run_trial(trial: Trial, root: str | os.PathLike[str], db: str | None = None) -> dict[str, Any]:
-    """Train (a learned controller) and evaluate one trial; its store record.
-
-    Never raises for the trial's own failure: the record then has status
-    ``failed`` and the error (its last traceback lines).  Output of training
-    and evaluation is captured, not printed (trials may run side by side).
-    """
-    began = time.perf_counter()
-    record: dict[str, Any] = {
+def _record(trial: Trial) -> dict[str, Any]:
+    """A trial's record before its result: what it is and what ran it."""
+    return {
         "id": trial.id,
         "sweep": trial.sweep,
         "env_id": trial.env_id,
@@ -455,6 +488,22 @@ def run_trial(trial: Trial, root: str | os.PathLike[str], db: str | None = None)
         "version": __version__,
         "git_revision": _git_revision(),
     }
+
+
+def failed_record(trial: Trial, error: str, wall_s: float = 0.0) -> dict[str, Any]:
+    """The record of a trial that gave no result of its own (its worker died)."""
+    return {**_record(trial), "status": "failed", "error": error, "wall_s": wall_s}
+
+
+def run_trial(trial: Trial, root: str | os.PathLike[str], db: str | None = None) -> dict[str, Any]:
+    """Train (a learned controller) and evaluate one trial; its store record.
+
+    Never raises for the trial's own failure: the record then has status
+    ``failed`` and the error (its last traceback lines).  Output of training
+    and evaluation is captured, not printed (trials may run side by side).
+    """
+    began = time.perf_counter()
+    record = _record(trial)
     folder = Path(root) / "trials" / trial.id
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
@@ -482,11 +531,10 @@ def _train_and_evaluate(trial: Trial, folder: Path, db: str | None) -> dict[str,
     if c.learned:
         from agents.train import TRAIN_ARGS, train
 
-        assert c.hyperparams is not None and c.train is not None
-        entry = _entry_with(Path(c.hyperparams), trial.env_id, c.train, trial.params)
-        if trial.settings:  # the disturbance set is trained on too
-            entry["env_kwargs"] = {**(entry.get("env_kwargs") or {}), **trial.settings}
-        folder.mkdir(parents=True, exist_ok=True)
+        assert trial.recipe is not None and c.train is not None
+        entry = trial.recipe
+        shutil.rmtree(folder, ignore_errors=True)  # a retried trial starts afresh
+        folder.mkdir(parents=True)
         hyperparams = folder / "hyperparams.yml"
         hyperparams.write_text(yaml.safe_dump({trial.env_id: entry}), encoding="utf-8")
         run = folder / "run"
@@ -651,6 +699,7 @@ def run_sweep(
         from disturbances.default import default_path
 
         db = str(default_path())
+    db = str(Path(db).resolve())  # Ray runs each trial in a folder of its own
     trials = expand(spec)
     with ResultStore(root / "results.sqlite") as store:
         done = store.done()
@@ -668,11 +717,16 @@ def run_sweep(
                     f"{record['error'].splitlines()[0]}"
                 )
 
+        errors: dict[str, str] = {}
         if ray:
-            _on_ray(todo, root, db, ray, take)
+            errors = _on_ray(todo, root, db, ray, take)
         else:
             for record in _execute(todo, root, db, jobs):
                 take(record)
+        seen = {r["id"] for r in records}
+        for trial in todo:  # a worker that died: its trial failed, to be retried
+            if trial.id not in seen:
+                take(failed_record(trial, errors.get(trial.id, "no result came back")))
         bar.close()
     return records
 
@@ -691,9 +745,12 @@ def _execute(
             yield run_trial(trial, root, db)
         return
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(run_trial, t, root, db) for t in trials]
+        futures = {pool.submit(run_trial, t, root, db): t for t in trials}
         for future in as_completed(futures):
-            yield future.result()
+            try:
+                yield future.result()
+            except Exception as exc:  # the worker died (memory, a signal): the trial failed
+                yield failed_record(futures[future], f"{type(exc).__name__}: {exc}")
 
 
 def _on_ray(
@@ -702,17 +759,23 @@ def _on_ray(
     db: str,
     address: str,
     take: Callable[[dict[str, Any]], None],
-) -> None:
+) -> dict[str, str]:
     """The trials as Ray Tune trials (one CPU each); ``take`` gets each record as its trial
-    ends (:mod:`agents.sweep_ray`)."""
+    ends (:mod:`agents.sweep_ray`); the errors of trials that gave none, by trial id."""
     try:
         from agents import sweep_ray
     except ImportError as exc:
         raise UsageError(
             "--ray needs Ray Tune, an optional extra: pip install 'rocketroll[ray]'"
         ) from exc
-    if trials:
-        sweep_ray.run(trials, run_trial, root, db, address, take)
+    if address.startswith("ray://"):
+        raise UsageError(
+            f"--ray {address}: Ray Client runs Tune away from this process, where the results "
+            "store is; run the sweep on the cluster's head node (--ray auto) instead"
+        )
+    if not trials:
+        return {}
+    return sweep_ray.run(trials, run_trial, root, db, address, take)
 
 
 # ----------------------------------------------------------------------------- command
@@ -733,8 +796,8 @@ class RunArgs:
     progress: bool = setting(True, "show the progress bar")
     ray: str | None = setting(
         None,
-        "run the trials on Ray Tune: 'auto' (this machine's cluster, or a local instance), "
-        "a cluster ADDRESS (ray://HOST:10001 or HOST:6379); the optional extra rocketroll[ray]",
+        "run the trials on Ray Tune: 'auto' (this machine's cluster, or a local instance) or "
+        "a cluster's ADDRESS (HOST:6379); the optional extra rocketroll[ray]",
         metavar="ADDRESS",
     )
 
@@ -747,9 +810,10 @@ def _run(args: RunArgs) -> int:
     out = args.out if args.out is not None else Path("runs") / "sweeps" / spec.name
     trials = expand(spec)
     print(f"rocketroll sweep: {spec.name} ({spec.source}), {len(trials)} trials, out {out}")
+    with ResultStore(out / "results.sqlite") as store:
+        skipped = len({t.id for t in trials} & store.done())
     records = run_sweep(spec, out, jobs=args.jobs, db=args.db, progress=args.progress, ray=args.ray)
     failed = [r for r in records if r["status"] == "failed"]
-    skipped = len(trials) - len(records)
     print(
         f"ran {len(records)} trials ({len(failed)} failed), skipped {skipped} already done; "
         f"results in {out / 'results.sqlite'}"
@@ -791,14 +855,22 @@ def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]
     from agents.evaluate import HEADLINE
     from agents.seeds import learner_stats
 
-    tables: dict[tuple[str, str], dict[str, Any]] = {}
+    tables: dict[tuple[str, str, int, int], dict[str, Any]] = {}
     for row in rows:
         spec = row["spec"]
-        key = (row["env_id"], json.dumps(spec["settings"], sort_keys=True))
+        # one table per protocol: the same episodes for every row in it
+        key = (
+            row["env_id"],
+            json.dumps(spec["settings"], sort_keys=True),
+            int(spec["episodes"]),
+            int(spec["eval_seed"]),
+        )
         table = tables.setdefault(
             key,
             {
                 "env_id": row["env_id"],
+                "episodes": key[2],
+                "eval_seed": key[3],
                 "settings": spec["settings"],
                 "learned": {},
                 "references": [],
@@ -807,8 +879,12 @@ def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]
         )
         if row["status"] != "done":
             table["failed"].append(row["controller"])
-        elif spec["train"]:
-            table["learned"].setdefault(row["controller"], []).append(row)
+        elif spec["train"]:  # one learner: one recipe (label and content), its seeds
+            recipe = {k: v for k, v in spec.items() if k not in ("seed", "hyperparams")}
+            version = hashlib.sha256(
+                json.dumps(recipe, sort_keys=True, default=str).encode("utf-8")
+            ).hexdigest()[:6]
+            table["learned"].setdefault((row["controller"], version), []).append(row)
         else:
             table["references"].append(row)
     out = []
@@ -822,13 +898,16 @@ def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]
             )
             for r in table["references"]
         ]
-        pid = next(
-            (r for r in table["references"] if (r["spec"]["policy"] or "").split(":")[0] == "pid"),
-            None,
-        )
+        pids = [r for r in table["references"] if (r["spec"]["policy"] or "").startswith("pid")]
+        pid = min(pids, key=lambda r: (r["spec"]["policy"] != "pid", r["id"]), default=None)
+        labels = [label for label, _ in table["learned"]]
         learners = []
-        for label, runs in sorted(table["learned"].items()):
+        names: dict[str, tuple[str, str]] = {}
+        for (label, version), runs in sorted(table["learned"].items()):
             runs = sorted(runs, key=lambda r: r["seed"])
+            if labels.count(label) > 1:  # the same label from two versions of a recipe
+                label = f"{label} [{version}]"
+            names[label] = (runs[0]["controller"], version)
             scores = np.array([r["episode_headline"] for r in runs], dtype=float)
             reference = None if pid is None else np.array(pid["episode_headline"], dtype=float)
             learners.append(
@@ -844,7 +923,7 @@ def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]
             )
         best: dict[str, str] = {}
         for stats in sorted(learners, key=lambda s: s.mean):
-            name = table["learned"][stats.name][0]["spec"]["controller"]
+            name = table["learned"][names[stats.name]][0]["spec"]["controller"]
             best.setdefault(name, stats.name)
         out.append({**table, "learners": learners, "reference_results": refs, "best": best})
     return out
@@ -872,6 +951,7 @@ def _report(args: ReportArgs) -> int:
         unit = "°" if task == "angle" else "°/s"
         where = ", ".join(f"{k}={v}" for k, v in sorted(table["settings"].items()))
         title = f"{table['env_id']}" + (f" ({where})" if where else "")
+        title += f", {table['episodes']} test episodes, seed {table['eval_seed']}"
         text.append(f"## {n}. {title}\n")
         text.append(markdown_table(table["learners"], table["reference_results"], unit))
         for name, label in sorted(table["best"].items()):

@@ -54,10 +54,11 @@ def run(
     db: str,
     address: str,
     take: Callable[[dict[str, Any]], None],
-) -> None:
+) -> dict[str, str]:
     """Run ``run_trial(trial, root, db)`` for each of ``trials`` (:func:`agents.sweep.run_trial`
     and its trials) on the Ray cluster at ``address`` (``"auto"``: this machine's, or a new
-    local instance; an initialised Ray as it is); ``take`` gets each record."""
+    local instance; an initialised Ray as it is); ``take`` gets each record.  Returns the
+    errors of the trials that reported none (a worker that died), by trial id."""
     # Quiet: the sweep prints its own progress; no TensorBoard/CSV loggers per trial.
     os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
@@ -82,6 +83,12 @@ def run(
         ),
     )
     try:
-        tuner.fit()
+        results = tuner.fit()
     finally:
         del SINKS[key]
+    errors = {}
+    for i in range(len(results)):
+        result = results[i]
+        if result.error is not None and result.config:
+            errors[result.config["trial"].id] = f"{type(result.error).__name__}: {result.error}"
+    return errors

@@ -68,6 +68,7 @@ def test_a_spec_expands_to_its_grid_and_a_random_sample_of_it(tmp_path):
         (lr, e, s) for lr in (0.001, 0.0003) for e in (1, 2) for s in (0, 1)
     }
     assert trials[0].id == expand(spec)[0].id  # the id is the spec's, stable
+    assert spec.name == "tiny" and {t.sweep for t in trials} == {"tiny"}
     grid_text = (tmp_path / "spec.yml").read_text(encoding="utf-8")
     random_text = grid_text + "search: {kind: random, trials: 5, seed: 1}\n"
     sample = expand(load_spec(_spec(tmp_path, random_text)))
@@ -274,3 +275,62 @@ def test_the_shipped_sweep_spec_loads():
     assert all(
         Path(str(t.controller.hyperparams)).is_file() for t in trials if t.controller.learned
     )
+
+
+def test_trial_ids_follow_the_recipe_s_content_and_repeats_are_one_trial(tmp_path):
+    """An edited recipe makes new trials, the same recipe in another place does not; a
+    value listed twice is one trial; a larger random sample holds a smaller one."""
+    base = TWO_TRIALS.replace("seeds: [3]", "seeds: [3, 3, 4]")
+    first = {t.id for t in expand(load_spec(_spec(tmp_path, base)))}
+    assert len(first) == 3  # pid, ppo seeds 3 and 4
+    moved = tmp_path / "elsewhere"
+    moved.mkdir()
+    (moved / "tiny-ppo.yml").write_text(TINY_PPO, encoding="utf-8")
+    (moved / "spec.yml").write_text(base, encoding="utf-8")
+    assert {t.id for t in expand(load_spec(moved / "spec.yml"))} == first
+    (moved / "tiny-ppo.yml").write_text(TINY_PPO.replace("n_epochs: 1", "n_epochs: 2"), "utf-8")
+    edited = {t.id for t in expand(load_spec(moved / "spec.yml"))}
+    assert len(edited & first) == 1  # only the PID's trial is the same
+    grid = base.replace("seeds: [3, 3, 4]", "seeds: [0, 1, 2, 3, 4, 5, 6, 7]")
+    small, large = (
+        {
+            t.id
+            for t in expand(
+                load_spec(_spec(tmp_path, grid + f"search: {{kind: random, trials: {k}}}\n"))
+            )
+        }
+        for k in (3, 6)
+    )
+    assert len(small) == 3 and len(large) == 6 and small <= large
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ("settings: {split: [train]}\n", "settings.split: not a setting to search"),
+        ("settings: {nope: [1]}\n", "settings {'nope': 1} on RocketRoll-v0"),
+    ],
+)
+def test_bad_settings_are_named_before_any_trial(settings, message, tmp_path):
+    with pytest.raises(UsageError, match=re.escape(message)):
+        load_spec(_spec(tmp_path, TWO_TRIALS + settings))
+
+
+def test_a_trial_whose_worker_died_is_stored_as_failed(tmp_path, monkeypatch, default_db):
+    """No record from a worker (killed, out of memory): the trial is stored as failed, so
+    the next run retries it."""
+    import agents.sweep as sweep
+
+    spec = load_spec(
+        _spec(
+            tmp_path,
+            TWO_TRIALS.replace(
+                "  - name: ppo\n    train: ppo\n    hyperparams: tiny-ppo.yml\n", ""
+            ),
+        )
+    )
+    monkeypatch.setattr(sweep, "_execute", lambda *args: iter(()))
+    (record,) = run_sweep(spec, tmp_path / "out", progress=False)
+    assert record["status"] == "failed" and record["error"] == "no result came back"
+    with ResultStore(tmp_path / "out" / "results.sqlite") as store:
+        assert store.done() == set() and len(store.rows()) == 1
