@@ -150,7 +150,6 @@ def run_episode(
     recorder = HistoryRecorder(env.config.max_episode_steps + 1)
     core = env.core
     recorder.record(core, 0)
-    keep = transitions is not None
     if transitions is not None:
         for key in ("observations", "actions", "rewards", "terminations", "truncations"):
             transitions.setdefault(key, [])
@@ -160,8 +159,7 @@ def run_episode(
         action = controller.act(obs, handle)
         obs, reward, terminated, truncated, _ = env.step(action)
         recorder.record(core, 0, float(reward))
-        if keep:
-            assert transitions is not None
+        if transitions is not None:
             transitions["observations"].append(obs)
             transitions["actions"].append(np.asarray(action, dtype=np.float32).copy())
             transitions["rewards"].append(float(reward))

@@ -44,6 +44,7 @@ raises records its error and the sweep goes on.  ``--jobs N`` runs trials in
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import io
 import itertools
@@ -460,6 +461,7 @@ def expand(spec: SweepSpec) -> list[Trial]:
     return found
 
 
+@functools.cache  # once per process: every trial of a run comes from the same checkout
 def _git_revision() -> str | None:
     """The checkout's commit (with ``-dirty`` for uncommitted changes), None outside git."""
     root = Path(__file__).resolve().parent.parent
@@ -683,9 +685,11 @@ def run_sweep(
     db: str | None = None,
     progress: bool = True,
     ray: str | None = None,
+    trials: Sequence[Trial] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run every trial of ``spec`` not yet done in ``OUT/results.sqlite``; the records of
-    this run (finished and failed), in the order they ended.
+    """Run every trial of ``spec`` (``trials``: its :func:`expand`, if already made) not yet
+    done in ``OUT/results.sqlite``; the records of this run (finished and failed), in the
+    order they ended.
 
     ``ray``: run the trials as Ray Tune trials on the cluster at that address
     (``"auto"``: the running cluster this machine belongs to, or a local
@@ -700,7 +704,8 @@ def run_sweep(
 
         db = str(default_path())
     db = str(Path(db).resolve())  # Ray runs each trial in a folder of its own
-    trials = expand(spec)
+    if trials is None:
+        trials = expand(spec)
     with ResultStore(root / "results.sqlite") as store:
         done = store.done()
         todo = [t for t in trials if t.id not in done]
@@ -812,7 +817,9 @@ def _run(args: RunArgs) -> int:
     print(f"rocketroll sweep: {spec.name} ({spec.source}), {len(trials)} trials, out {out}")
     with ResultStore(out / "results.sqlite") as store:
         skipped = len({t.id for t in trials} & store.done())
-    records = run_sweep(spec, out, jobs=args.jobs, db=args.db, progress=args.progress, ray=args.ray)
+    records = run_sweep(
+        spec, out, jobs=args.jobs, db=args.db, progress=args.progress, ray=args.ray, trials=trials
+    )
     failed = [r for r in records if r["status"] == "failed"]
     print(
         f"ran {len(records)} trials ({len(failed)} failed), skipped {skipped} already done; "
@@ -902,12 +909,12 @@ def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]
         pid = min(pids, key=lambda r: (r["spec"]["policy"] != "pid", r["id"]), default=None)
         labels = [label for label, _ in table["learned"]]
         learners = []
-        names: dict[str, tuple[str, str]] = {}
+        controller_of: dict[str, str] = {}  # learner's label -> its spec's controller
         for (label, version), runs in sorted(table["learned"].items()):
             runs = sorted(runs, key=lambda r: r["seed"])
             if labels.count(label) > 1:  # the same label from two versions of a recipe
                 label = f"{label} [{version}]"
-            names[label] = (runs[0]["controller"], version)
+            controller_of[label] = runs[0]["spec"]["controller"]
             scores = np.array([r["episode_headline"] for r in runs], dtype=float)
             reference = None if pid is None else np.array(pid["episode_headline"], dtype=float)
             learners.append(
@@ -923,8 +930,7 @@ def report(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str, Any]
             )
         best: dict[str, str] = {}
         for stats in sorted(learners, key=lambda s: s.mean):
-            name = table["learned"][names[stats.name]][0]["spec"]["controller"]
-            best.setdefault(name, stats.name)
+            best.setdefault(controller_of[stats.name], stats.name)
         out.append({**table, "learners": learners, "reference_results": refs, "best": best})
     return out
 
