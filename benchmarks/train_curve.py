@@ -1,29 +1,37 @@
 """Learning curves against wall time: how fast a PPO recipe reaches the committed policy's and
-the PID's score on the evaluation protocol's headline.
+the PID's score on the evaluation protocol's headline, over training seeds.
 
-For each recipe (a hyperparameter file's entry for ``--env-id``) this trains
-PPO exactly as ``agents/train.py`` builds it (``make_env``, ``ppo_arguments``,
-1 torch thread) and every ``--eval-every`` env-steps stops the clock and
+For each recipe (``--recipe LABEL=YAML[@THREADS]``: a hyperparameter file's
+entry for ``--env-id`` and its torch threads) and each ``--seeds`` value this
+trains PPO exactly as ``agents/train.py`` builds it (``make_env``,
+``ppo_arguments``) and every ``--eval-every`` env-steps stops the clock and
 scores the deterministic policy on the protocol (test split, ``--episodes``
-episodes, seed 0; the headline of :mod:`agents.evaluate`).  The references
-are measured in the same run: the committed policy of the env id and the
-PID.  It prints per recipe the env-steps/s of training (evaluations not
-counted), the wall time at which its headline first reached the committed
-policy's and the PID's, and its best; and writes a PNG of headline against
-training wall time, all recipes side by side.  Exit status 0 whatever the
-numbers.
+episodes, seed 0; the headline of :mod:`agents.evaluate`).  The references are
+measured in the same run: the committed policy of the env id and the PID.  The
+seeds run one recipe after the other (seed 0 of every recipe, then seed 1, ...),
+so a busy spell of a shared machine falls on all recipes alike.
+
+It prints one row per recipe and seed (env-steps/s of training with the
+evaluations not counted, the training wall time at which the headline first
+reached the committed policy's and the PID's, the best), then per recipe the
+median over seeds and how many seeds reached each score; a seed that never
+reaches a score counts as slower than every seed that does.  ``--png`` draws
+headline against training wall time, every seed of every recipe.  Exit status
+0 whatever the numbers.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/train_curve.py                   # ppo.yml against ppo-fast.yml
-    .venv/bin/python benchmarks/train_curve.py --recipe fast=agents/hyperparams/ppo-fast.yml \\
-        --timesteps 3000000 --png build/curve.png
+    .venv/bin/python benchmarks/train_curve.py                # ppo.yml@1 vs ppo-fast.yml@2
+    .venv/bin/python benchmarks/train_curve.py --recipe fast=agents/hyperparams/ppo-fast.yml@2 \\
+        --timesteps 2000000 --seeds 0 1 2 3 4 --png build/curve.png
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import statistics
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,25 +39,15 @@ from typing import Any
 
 import numpy as np
 import torch
+from _recipes import DEFAULT_RECIPES, parse_recipe
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.ppo import ObservationNormalizer, PPOController
 from agents.registry import make_controller
-from agents.train import (
-    HYPERPARAMS_DIR,
-    load_hyperparameters,
-    make_env,
-    normalization_record,
-    ppo_arguments,
-)
+from agents.train import load_hyperparameters, make_env, normalization_record, ppo_arguments
 from rollenv.bank import load_bank, variant_config
-
-DEFAULT_RECIPES = (
-    f"ppo.yml={HYPERPARAMS_DIR / 'ppo.yml'}",
-    f"ppo-fast.yml={HYPERPARAMS_DIR / 'ppo-fast.yml'}",
-)
 
 
 class Scorer(BaseCallback):
@@ -83,23 +81,34 @@ class Scorer(BaseCallback):
         return True
 
 
+def _median_time(times: list[float | None]) -> str:
+    """The median of first-reach times, a seed that never reached counting as infinite."""
+    reached = sum(t is not None for t in times)
+    med = statistics.median(math.inf if t is None else t for t in times)
+    cell = "not reached" if math.isinf(med) else f"{med:.0f} s"
+    return f"{cell} ({reached}/{len(times)})"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env-id", default="RocketRoll-v0", help="environment id")
     parser.add_argument(
         "--recipe",
         action="append",
-        metavar="LABEL=YAML",
-        help="a hyperparameter file to train with (repeatable; default: ppo.yml and ppo-fast.yml)",
+        metavar="LABEL=YAML[@THREADS]",
+        help="a hyperparameter file to train with and its torch threads (repeatable; default: "
+        "ppo.yml@1 and ppo-fast.yml@2)",
     )
-    parser.add_argument("--timesteps", type=int, help="env-steps per recipe (default: the YAML's)")
+    parser.add_argument("--timesteps", type=int, help="env-steps per run (default: the YAML's)")
     parser.add_argument("--eval-every", type=int, default=100_000, help="env-steps between scores")
     parser.add_argument("--episodes", type=int, default=20, help="protocol episodes per score")
-    parser.add_argument("--seed", type=int, default=0, help="training seed")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds (0)")
     parser.add_argument("--png", type=Path, help="write the curves here")
-    parser.add_argument("--torch-threads", type=int, default=1, help="torch threads (1)")
+    parser.add_argument(
+        "--torch-threads", type=int, default=1, help="threads of a recipe without @THREADS (1)"
+    )
     args = parser.parse_args(argv)
-    torch.set_num_threads(args.torch_threads)
+    recipes = [parse_recipe(item, args.torch_threads) for item in args.recipe or DEFAULT_RECIPES]
 
     config = variant_config(args.env_id, {"split": "test"})
     bank = load_bank(config, None)
@@ -112,66 +121,95 @@ def main(argv: Sequence[str] | None = None) -> int:
         "committed PPO": score(make_controller("ppo", config, args.env_id)),
         "PID": score(make_controller("pid", config, args.env_id)),
     }
+    names = list(references)
     unit = "°" if config.task == "angle" else "°/s"
-    print(f"{args.env_id}: headline on {args.episodes} test episodes (seed 0)")
+    print(
+        f"{args.env_id}: headline on {args.episodes} test episodes (seed 0), {os.cpu_count()} CPUs"
+    )
     for name, value in references.items():
         print(f"  {name:<14} {value:.2f} {unit}")
-    curves: dict[str, list[tuple[float, int, float]]] = {}
-    rows = []
-    for item in args.recipe or DEFAULT_RECIPES:
-        label, _, path = item.partition("=")
-        hp = load_hyperparameters(path, args.env_id)
-        steps = int(args.timesteps or hp.n_timesteps or 1_000_000)
-        _, venv, normalize = make_env(hp, hp.n_envs, args.seed, split="train")
-        model = PPO(hp.policy, venv, seed=args.seed, **ppo_arguments(hp))
-        scorer = Scorer(args.eval_every, score, normalize, config.task)
-        began = time.perf_counter()
-        model.learn(total_timesteps=steps, callback=scorer)
-        train_s = time.perf_counter() - began - scorer.paused
-        venv.close()
-        curves[label] = scorer.curve
-        reach = {
-            name: next((w for w, _, h in scorer.curve if h <= value), None)
-            for name, value in references.items()
-        }
-        best = min(scorer.curve, key=lambda c: c[2])
-        rows.append((label, hp.n_envs, model.num_timesteps / train_s, reach, best))
-        print(
-            f"  {label}: {model.num_timesteps:,} env-steps in {train_s:.1f} s "
-            f"({model.num_timesteps / train_s:,.0f} env-steps/s, scores not counted)",
-            flush=True,
-        )
+    curves: dict[tuple[str, int], list[tuple[float, int, float]]] = {}
+    rows: dict[str, list[tuple[int, float, dict[str, float | None], tuple[float, int, float]]]]
+    rows = {r.label: [] for r in recipes}
+    for seed in args.seeds:
+        for recipe in recipes:
+            hp = load_hyperparameters(recipe.path, args.env_id)
+            steps = int(args.timesteps or hp.n_timesteps or 1_000_000)
+            torch.set_num_threads(recipe.threads)
+            _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
+            model = PPO(hp.policy, venv, seed=seed, device="cpu", **ppo_arguments(hp))
+            scorer = Scorer(args.eval_every, score, normalize, config.task)
+            began = time.perf_counter()
+            model.learn(total_timesteps=steps, callback=scorer)
+            train_s = time.perf_counter() - began - scorer.paused
+            venv.close()
+            curves[recipe.label, seed] = scorer.curve
+            reach = {
+                name: next((w for w, _, h in scorer.curve if h <= value), None)
+                for name, value in references.items()
+            }
+            best = min(scorer.curve, key=lambda c: c[2])
+            rate = model.num_timesteps / train_s
+            rows[recipe.label].append((seed, rate, reach, best))
+            cells = ", ".join(
+                f"{n} {'not reached' if reach[n] is None else f'after {reach[n]:.0f} s'}"
+                for n in names
+            )
+            print(
+                f"  {recipe.label} seed {seed}: {model.num_timesteps:,} env-steps in "
+                f"{train_s:.1f} s ({rate:,.0f} env-steps/s, {recipe.threads} thread(s)); "
+                f"{cells}; best {best[2]:.2f} {unit}",
+                flush=True,
+            )
     print()
-    names = list(references)
     print(
-        "| recipe | envs | env-steps/s | "
+        "| recipe | threads | seed | env-steps/s | "
         + " | ".join(f"wall to {n} ({references[n]:.2f} {unit})" for n in names)
         + f" | best ({unit}) at |"
     )
-    print("|---|---|---|" + "---|" * len(names) + "---|")
-    for label, envs, rate, reach, (wall, steps, head) in rows:
-        cells = " | ".join(
-            "not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names
-        )
-        at = f"{head:.2f} at {wall:.0f} s ({steps:,})"
-        print(f"| {label} | {envs} | {rate:,.0f} | {cells} | {at} |")
+    print("|---|---|---|---|" + "---|" * len(names) + "---|")
+    for recipe in recipes:
+        for seed, rate, reach, (wall, steps, head) in rows[recipe.label]:
+            cells = " | ".join(
+                "not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names
+            )
+            at = f"{head:.2f} at {wall:.0f} s ({steps:,})"
+            print(f"| {recipe.label} | {recipe.threads} | {seed} | {rate:,.0f} | {cells} | {at} |")
+        if len(args.seeds) > 1:
+            runs = rows[recipe.label]
+            rate = statistics.median(r[1] for r in runs)
+            cells = " | ".join(_median_time([r[2][n] for r in runs]) for n in names)
+            best_median = statistics.median(r[3][2] for r in runs)
+            print(
+                f"| **{recipe.label}, median of {len(runs)}** | {recipe.threads} | – | "
+                f"{rate:,.0f} | {cells} | {best_median:.2f} |"
+            )
     if args.png is not None:
         from rocketroll_common.plotting import new_figure, png_bytes
 
         fig = new_figure(figsize=(7.5, 4.5))
         ax = fig.subplots()
-        for label, curve in curves.items():
+        colors = {r.label: f"C{i}" for i, r in enumerate(recipes)}
+        for (label, seed), curve in curves.items():
             data = np.array(curve)
-            ax.plot(data[:, 0], data[:, 2], marker="o", ms=3, label=label)
+            first = seed == args.seeds[0]
+            ax.plot(
+                data[:, 0],
+                data[:, 2],
+                marker="o",
+                ms=2.5,
+                lw=1,
+                color=colors[label],
+                alpha=0.8,
+                label=f"{label} ({len(args.seeds)} seed(s))" if first else None,
+            )
         for (name, value), style in zip(references.items(), ("--", ":"), strict=False):
             ax.axhline(value, color="black", ls=style, lw=1, label=f"{name} {value:.2f} {unit}")
         ax.set_yscale("log")
-        ax.set_xlabel(
-            f"training wall time (s, scoring not counted; {os.cpu_count()} cores, "
-            f"{args.torch_threads} torch thread(s))"
-        )
+        ax.set_xlabel(f"training wall time (s, scoring not counted; {os.cpu_count()} cores)")
         ax.set_ylabel(f"headline: regulation RMS ({unit})")
-        ax.set_title(f"{args.env_id}: PPO learning curves against wall time (seed {args.seed})")
+        seeds = ", ".join(map(str, args.seeds))
+        ax.set_title(f"{args.env_id}: PPO learning curves against wall time (seeds {seeds})")
         ax.grid(alpha=0.3, which="both")
         ax.legend(frameon=False, fontsize=8)
         fig.tight_layout()

@@ -1,27 +1,32 @@
-"""Wall time and env-steps/s of PPO training on RocketRoll, against the adapter stepping alone.
+"""Wall time and env-steps/s of PPO training on RocketRoll: recipes before and after, side by
+side in the same run, each against its environment stepping alone.
 
-In one run, with the hyperparameters of ``agents/hyperparams/ppo.yml`` for
-``--env-id`` (``--timesteps`` and ``--envs`` overridable), this measures:
+For each recipe (``--recipe LABEL=YAML[@THREADS]``, repeatable; default: the
+committed policy's ``ppo.yml`` with 1 torch thread, *before*, and the throughput
+recipe ``ppo-fast.yml`` with 2, *after*) this measures, in one run:
 
 * **PPO training**: ``PPO.learn`` on ``VecNormalize(VecMonitor(RollVecEnv))``
   exactly as ``agents/train.py`` builds it (no evaluation, no checkpoints,
   no progress bar), split into rollout collection (env steps plus the
-  policy's forward passes, timed by a callback) and the gradient updates;
-* **the reference in the same run**: the adapter alone
-  (:class:`agents.vecenv.RollVecEnv`, same ``num_envs``) stepping with random
+  policy's forward passes, timed by a callback) and the gradient updates.
+  The recipes train in alternating blocks (``--blocks``; ``learn`` continued
+  with ``reset_num_timesteps=False``), so a busy spell of a shared machine
+  slows all of them alike;
+* **the reference in the same run**: each recipe's adapter alone
+  (:class:`agents.vecenv.RollVecEnv`, its ``num_envs``) stepping with random
   actions drawn beforehand, and the same through the wrappers PPO sees;
-  timed in blocks before *and* after the training run (median over all
-  blocks), so a busy spell of a shared machine shows as spread.
+  timed in blocks before *and* after training (median over all blocks).
 
-The ``share`` column is each row's time for PPO's number of env-steps as a
-fraction of PPO's wall time: what the environment costs of a training run,
-and so how much is PPO's own overhead (policy inference, GAE, updates).
-Exit status 0 whatever the timings.
+The ``env share`` column is the environment's (with wrappers) time for PPO's
+number of env-steps as a fraction of PPO's wall time; ``speed-up`` is each
+recipe's env-steps/s over the first recipe's.  Exit status 0 whatever the
+timings.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/train_speed.py                      # the YAML budget (minutes)
-    .venv/bin/python benchmarks/train_speed.py --timesteps 200000   # a quick measurement
+    .venv/bin/python benchmarks/train_speed.py                      # before/after, 0.5 M each
+    .venv/bin/python benchmarks/train_speed.py --env-id RocketRollRate-v0 \\
+        --recipe agents/hyperparams/ppo.yml@1 --recipe fast=agents/hyperparams/ppo-fast.yml@1
 """
 
 from __future__ import annotations
@@ -33,15 +38,17 @@ import statistics
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import stable_baselines3
 import torch
+from _recipes import DEFAULT_RECIPES, Recipe, parse_recipe
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
-from agents.train import DEFAULT_HYPERPARAMS, load_hyperparameters, make_env, ppo_arguments
+from agents.train import load_hyperparameters, make_env, ppo_arguments
 from agents.vecenv import RollVecEnv
 
 
@@ -82,81 +89,112 @@ def _stepper(venv: Any, steps: int, seed: int) -> Callable[[], float]:
     return run
 
 
+@dataclass
+class _Run:
+    """One recipe's model, timers and reference steppers."""
+
+    recipe: Recipe
+    n_envs: int
+    model: Any
+    timer: RolloutTimer
+    alone: Callable[[], float]
+    wrapped: Callable[[], float]
+    ppo_s: float = 0.0
+    rates: dict[str, list[float]] = field(default_factory=lambda: {"alone": [], "wrapped": []})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env-id", default="RocketRoll-v0", help="environment id")
-    parser.add_argument("--timesteps", type=int, help="env-steps to train (default: the YAML's)")
-    parser.add_argument("--envs", type=int, help="environments (default: the YAML's)")
-    parser.add_argument("--hyperparams", default=str(DEFAULT_HYPERPARAMS), help="YAML file")
-    parser.add_argument("--torch-threads", type=int, default=1, help="torch threads (1)")
-    parser.add_argument("--ref-steps", type=int, default=5000, help="batched steps per ref block")
+    parser.add_argument(
+        "--recipe",
+        action="append",
+        metavar="LABEL=YAML[@THREADS]",
+        help="a hyperparameter file and its torch threads (repeatable; default: ppo.yml@1 and "
+        "ppo-fast.yml@2)",
+    )
+    parser.add_argument(
+        "--timesteps", type=int, default=500_000, help="env-steps per recipe (500000)"
+    )
+    parser.add_argument("--blocks", type=int, default=5, help="alternating training blocks (5)")
+    parser.add_argument("--ref-steps", type=int, default=2000, help="batched steps per ref block")
     parser.add_argument("--repeats", type=int, default=3, help="ref blocks before and after (3)")
     parser.add_argument("--seed", type=int, default=0)
     ns = parser.parse_args(argv)
+    if ns.timesteps < 1 or ns.blocks < 1:
+        raise SystemExit("--timesteps and --blocks must be positive")
+    recipes = [parse_recipe(item, 1) for item in ns.recipe or DEFAULT_RECIPES]
 
-    hp = load_hyperparameters(ns.hyperparams, ns.env_id)
-    n_envs = ns.envs or hp.n_envs
-    timesteps = ns.timesteps or hp.n_timesteps
-    if timesteps is None:
-        raise SystemExit(f"--timesteps is needed: {hp.source} has no n_timesteps for {ns.env_id}")
-    torch.set_num_threads(ns.torch_threads)
     print(
-        f"python {platform.python_version()}, numpy {np.__version__}, torch {torch.__version__} "
-        f"({ns.torch_threads} thread(s)), stable-baselines3 {stable_baselines3.__version__}, "
-        f"{os.cpu_count()} CPU(s), {platform.machine()}"
+        f"python {platform.python_version()}, numpy {np.__version__}, torch {torch.__version__}, "
+        f"stable-baselines3 {stable_baselines3.__version__}, {os.cpu_count()} CPU(s), "
+        f"{platform.machine()}"
     )
-    print(f"{ns.env_id}: {timesteps:,} env-steps, {n_envs} envs, hyperparameters of {hp.source}\n")
-
-    alone = _stepper(RollVecEnv(n_envs, ns.env_id, seed=ns.seed), ns.ref_steps, ns.seed)
-    _, wrapped_env, _ = make_env(hp, n_envs, ns.seed, split="train")
-    wrapped = _stepper(wrapped_env, ns.ref_steps, ns.seed)
-    refs = {"RollVecEnv alone, random actions": alone, "  + VecMonitor, VecNormalize": wrapped}
-    rates: dict[str, list[float]] = {name: [] for name in refs}
-    for run in refs.values():  # numba compile or cache load, first-touch costs
-        run()
+    print(f"{ns.env_id}: {ns.timesteps:,} env-steps per recipe in {ns.blocks} alternating blocks\n")
+    runs = []
+    for recipe in recipes:
+        hp = load_hyperparameters(recipe.path, ns.env_id)
+        alone = _stepper(RollVecEnv(hp.n_envs, ns.env_id, seed=ns.seed), ns.ref_steps, ns.seed)
+        _, wrapped_env, _ = make_env(hp, hp.n_envs, ns.seed, split="train")
+        wrapped = _stepper(wrapped_env, ns.ref_steps, ns.seed)
+        alone()  # numba compile or cache load, first-touch costs
+        wrapped()
+        _, env, _ = make_env(hp, hp.n_envs, ns.seed, split="train")
+        torch.set_num_threads(recipe.threads)
+        model = PPO(hp.policy, env, seed=ns.seed, device="cpu", **ppo_arguments(hp))
+        runs.append(_Run(recipe, hp.n_envs, model, RolloutTimer(), alone, wrapped))
+        print(
+            f"  {recipe.label}: {hp.n_envs} envs x {model.n_steps} steps, batch "
+            f"{model.batch_size}, {model.n_epochs} epochs, {recipe.threads} torch thread(s) "
+            f"({recipe.path})"
+        )
 
     def measure() -> None:
         for _ in range(ns.repeats):
-            for name, run in refs.items():
-                rates[name].append(ns.ref_steps * n_envs / run())
+            for run in runs:
+                torch.set_num_threads(run.recipe.threads)
+                run.rates["alone"].append(ns.ref_steps * run.n_envs / run.alone())
+                run.rates["wrapped"].append(ns.ref_steps * run.n_envs / run.wrapped())
 
     measure()
-    _, env, _ = make_env(hp, n_envs, ns.seed, split="train")
-    model = PPO(hp.policy, env, seed=ns.seed, device="cpu", **ppo_arguments(hp))
-    timer = RolloutTimer()
-    t0 = time.perf_counter()
-    model.learn(total_timesteps=timesteps, callback=timer)
-    ppo_s = time.perf_counter() - t0
-    steps = int(model.num_timesteps)
+    for block in range(ns.blocks):
+        for run in runs:
+            torch.set_num_threads(run.recipe.threads)
+            target = ns.timesteps * (block + 1) // ns.blocks
+            chunk = target - run.model.num_timesteps
+            if chunk <= 0:  # a rollout larger than a block: the next block catches up
+                continue
+            t0 = time.perf_counter()
+            run.model.learn(total_timesteps=chunk, callback=run.timer, reset_num_timesteps=False)
+            run.ppo_s += time.perf_counter() - t0
     measure()
 
-    header = f"{'task':<36} {'env-steps/s':>12} {'spread':>7} {'time s':>8} {'share':>6}"
+    header = (
+        f"\n{'recipe':<16} {'envs':>5} {'thr':>3} {'env-steps':>10} {'wall s':>7} "
+        f"{'env-steps/s':>12} {'rollout':>8} {'updates':>8} {'env alone/s':>12} "
+        f"{'+wrappers/s':>12} {'env share':>9} {'speed-up':>8}"
+    )
     print(header)
-    print("-" * len(header))
-    print(f"{'PPO.learn (total)':<36} {steps / ppo_s:>12,.0f} {'':>7} {ppo_s:>8.1f} {1:>6.0%}")
-    update_s = ppo_s - timer.collect_s
+    print("-" * (len(header) - 1))
+    first = 0.0
+    for run in runs:
+        steps = int(run.model.num_timesteps)
+        rate = steps / run.ppo_s
+        first = first or rate
+        alone_rate = statistics.median(run.rates["alone"])
+        wrapped_rate = statistics.median(run.rates["wrapped"])
+        print(
+            f"{run.recipe.label:<16} {run.n_envs:>5} {run.recipe.threads:>3} {steps:>10,} "
+            f"{run.ppo_s:>7.1f} {rate:>12,.0f} {run.timer.collect_s / run.ppo_s:>8.0%} "
+            f"{1 - run.timer.collect_s / run.ppo_s:>8.0%} {alone_rate:>12,.0f} "
+            f"{wrapped_rate:>12,.0f} {steps / wrapped_rate / run.ppo_s:>9.1%} {rate / first:>7.1f}x"
+        )
+    spreads = [(max(r) - min(r)) / statistics.median(r) for run in runs for r in run.rates.values()]
     print(
-        f"{'  rollout collection':<36} {steps / timer.collect_s:>12,.0f} {'':>7} "
-        f"{timer.collect_s:>8.1f} {timer.collect_s / ppo_s:>6.0%}"
-    )
-    print(
-        f"{'  gradient updates (the rest)':<36} {'':>12} {'':>7} {update_s:>8.1f} "
-        f"{update_s / ppo_s:>6.0%}"
-    )
-    for name, r in rates.items():
-        med = statistics.median(r)
-        spread = (max(r) - min(r)) / med
-        env_s = steps / med
-        print(f"{name:<36} {med:>12,.0f} {spread:>6.0%} {env_s:>8.1f} {env_s / ppo_s:>6.0%}")
-    env_share = steps / statistics.median(rates["  + VecMonitor, VecNormalize"]) / ppo_s
-    print(
-        f"\n{steps:,} env-steps in {ppo_s:.1f} s: {steps / ppo_s:,.0f} env-steps/s; the "
-        f"environment (with wrappers) is {env_share:.1%} of it, PPO's own work "
-        f"{1 - env_share:.1%}"
-    )
-    print(
-        "time s for the reference rows: PPO's env-steps at that rate; spread: (best - worst) / "
-        "median over the blocks before and after training"
+        "\nrollout / updates: shares of PPO's wall time (rollout = env steps + the policy's "
+        "forward passes + the buffer);\nenv alone, +wrappers: medians of the reference blocks "
+        f"before and after training (largest spread (best - worst) / median: {max(spreads):.0%});"
+        "\nenv share: the environment with its wrappers at that rate, as a share of PPO's wall time"
     )
     return 0
 

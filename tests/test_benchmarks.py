@@ -61,3 +61,58 @@ def test_mpc_speed_times_both_controllers_on_both_tasks(default_db: Path) -> Non
     for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
         assert f"{env_id:<20} observer" in out and f"{env_id:<20} mpc:5" in out
     assert out.count("vs target 10 ms:") == 2
+
+
+def test_train_speed_times_two_recipes_side_by_side(default_db: Path, tmp_path: Path) -> None:
+    # Two small recipes (one rollout each per block) in alternating blocks: a row each, the
+    # second's speed-up over the first, and the threads each trained with.
+    small = tmp_path / "small.yml"
+    small.write_text(
+        "RocketRoll-v0:\n  n_envs: 4\n  n_steps: 64\n  batch_size: 64\n  n_epochs: 1\n"
+        "  normalize: true\n"
+    )
+    out = run_script(
+        "train_speed.py",
+        "--timesteps", "512", "--blocks", "2", "--ref-steps", "20", "--repeats", "1",
+        "--recipe", f"one={small}@1", "--recipe", f"two={small}@2",
+        db=default_db,
+    )  # fmt: skip
+    rows = [line.split() for line in out.splitlines() if line.startswith(("one ", "two "))]
+    assert [r[0] for r in rows] == ["one", "two"]
+    assert [r[2] for r in rows] == ["1", "2"]  # torch threads
+    assert [r[3] for r in rows] == ["512", "512"]  # env-steps: 2 blocks of one rollout (256)
+    assert rows[0][-1] == "1.0x"
+
+
+def test_train_speed_names_a_bad_recipe(default_db: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "train_speed.py"), "--recipe", "x=nowhere.yml"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO), "ROCKETROLL_DB": str(default_db)},
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode != 0
+    assert "--recipe x=nowhere.yml: nowhere.yml: no such file" in done.stderr
+
+
+def test_train_curve_scores_each_seed_and_the_median(default_db: Path, tmp_path: Path) -> None:
+    small = tmp_path / "small.yml"
+    small.write_text(
+        "RocketRoll-v0:\n  n_envs: 4\n  n_steps: 64\n  batch_size: 64\n  n_epochs: 1\n"
+        "  normalize: true\n"
+    )
+    png = tmp_path / "curve.png"
+    out = run_script(
+        "train_curve.py",
+        "--timesteps", "512", "--eval-every", "256", "--episodes", "2", "--seeds", "0", "1",
+        "--recipe", f"tiny={small}@1", "--png", str(png),
+        db=default_db,
+    )  # fmt: skip
+    rows = [line for line in out.splitlines() if line.startswith("| tiny |")]
+    assert [r.split("|")[3].strip() for r in rows] == ["0", "1"]  # one row per seed
+    median = next(line for line in out.splitlines() if "tiny, median of 2" in line)
+    assert median.count("/2)") == 2  # seeds that reached each reference, of 2
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
