@@ -223,7 +223,8 @@ class Args:
     progress_bar: bool = setting(True, "show SB3's progress bar (rich)")
     torch_threads: int = setting(
         1,
-        "torch's intra-op threads (1 was faster than 2 on a 2-core machine, with the env on one)",
+        "torch's intra-op threads: on a 2-core machine 1 suits ppo.yml's small batches, 2 "
+        "ppo-fast.yml's big ones (benchmarks/train_speed.py)",
         ge=1,
         le=1024,
     )
