@@ -1,0 +1,1087 @@
+"""The flight the tunnel stands in for: a 1-D vertical ascent and its roll-model scales.
+
+The paper identifies the roll model at one operating point, the wind tunnel's
+airspeed of "roughly 50 km/h" at sea-level density (§4).  In flight the
+airspeed ``V`` and the density ``ρ`` change, and with them the coefficients
+of eq. 7-8 (§4: "the dynamic pressure q in equation (5) will also
+increase").  This module gives the flight: airspeed ``V(t)``, altitude
+``h(t)``, dynamic pressure ``q(t)``, Mach number and density of a sounding
+rocket like the paper's (5 kg, 1.3 m, "maximum velocity [...] approximately
+600 km/h and it can reach up to 2 km in altitude", §1), and the factors that
+carry the tunnel's identified ``a`` and ``α`` to each instant of it.
+
+* :func:`isa`: the International Standard Atmosphere, 0-20 km.
+* :class:`AscentSpec`, :data:`DEFAULT_ASCENT`, :func:`load_ascent_yaml`: a
+  rocket and its motor.
+* :func:`simulate_ascent` -> :class:`FlightProfile`: the point-mass vertical
+  ascent from the pad to apogee (:func:`load_profile_csv` reads a recorded one).
+* :meth:`FlightProfile.scales` / :func:`roll_scales`: gain ``V/V_ref`` and
+  damping ``ρV/(ρ_ref·V_ref)`` (eq. 4-8).
+* :func:`plot_profile`: the profile in four panels.
+
+Model (the textbook 1-D point-mass ascent, with the motor's mass model of OpenRocket
+and RockSim)::
+
+    m(t)·dV/dt = T(t) − ½·ρ(h)·V²·C_D·A − m(t)·g0,      dh/dt = V
+    m(t) = m_dry + m_prop·(1 − I(t)/I_total),          I(t) = ∫₀ᵗ T dt'
+
+flown straight up in still air (airspeed = vertical speed), with a constant,
+subsonic drag coefficient, and held on the pad until the thrust exceeds the
+weight.  Altitudes are geopotential (the ISA's own coordinate), which is also
+why ``g0`` is constant: at 2 km the geometric altitude is 0.6 m higher.
+
+References
+----------
+ISO 2533:1975, *Standard Atmosphere*. International Organization for
+Standardization, Geneva, 1975.
+
+*U.S. Standard Atmosphere, 1976*. NOAA, NASA and USAF, NOAA-S/T 76-1562,
+Washington D.C., 1976.
+
+S. Niskanen, *Development of an Open Source model rocket simulation software*
+(the OpenRocket technical documentation), M.Sc. thesis, Helsinki University of
+Technology, 2009: the flight simulation, and the motor's propellant mass
+taken as proportional to the impulse still to be delivered (RockSim makes the
+same assumption for a motor given as a RASP ``.eng`` thrust curve).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identification.recording import parse_number
+from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_common.errors import SettingError, UsageError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "DEFAULT_ASCENT",
+    "G0_MPS2",
+    "ISA_MAX_ALTITUDE_M",
+    "ISA_MIN_ALTITUDE_M",
+    "ISA_SEA_LEVEL_DENSITY_KGM3",
+    "PROFILE_COLUMNS",
+    "TUNNEL_AIRSPEED_MPS",
+    "AscentSpec",
+    "Atmosphere",
+    "FlightProfile",
+    "FlightState",
+    "isa",
+    "load_ascent_yaml",
+    "load_profile_csv",
+    "plot_profile",
+    "roll_scales",
+    "simulate_ascent",
+]
+
+# --------------------------------------------------------------------------- ISA constants
+# ISO 2533:1975 / U.S. Standard Atmosphere 1976: the defining constants.
+#: Standard acceleration of gravity, m/s².
+G0_MPS2 = 9.80665
+#: Specific gas constant of dry air, J/(kg·K) (R* / M0 = 8314.32 / 28.9644).
+R_AIR_JPKGK = 287.05287
+#: Ratio of specific heats of air.
+GAMMA_AIR = 1.4
+#: Sea-level temperature, K.
+T0_K = 288.15
+#: Sea-level pressure, Pa.
+P0_PA = 101_325.0
+#: Temperature lapse rate of the troposphere, K/m.
+LAPSE_K_PER_M = 0.0065
+#: Base of the isothermal layer (tropopause), geopotential m.
+TROPOPAUSE_M = 11_000.0
+#: Highest altitude :func:`isa` covers (top of the isothermal layer), m.
+ISA_MAX_ALTITUDE_M = 20_000.0
+#: Lowest altitude :func:`isa` accepts, m: below the lowest dry land (the Dead Sea
+#: shore, about -430 m); the troposphere's formula itself holds further down.
+ISA_MIN_ALTITUDE_M = -500.0
+#: Temperature of the isothermal layer, K.
+T11_K = T0_K - LAPSE_K_PER_M * TROPOPAUSE_M
+#: Pressure at the tropopause, Pa (22 632.06).
+P11_PA = P0_PA * (T11_K / T0_K) ** (G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK))
+#: ISA sea-level density, kg/m³ (1.2250): the tunnel's reference density ρ0.
+ISA_SEA_LEVEL_DENSITY_KGM3 = P0_PA / (R_AIR_JPKGK * T0_K)
+
+#: The wind tunnel's airspeed, m/s: "roughly 50 km/h" (paper §4).  The
+#: identified ``a`` and ``α`` hold at this airspeed and sea-level density.
+TUNNEL_AIRSPEED_MPS = 50.0 / 3.6
+
+
+# --------------------------------------------------------------------------- atmosphere
+@dataclass(frozen=True, eq=False)
+class Atmosphere:
+    """The ISA at some altitudes (floats for a scalar altitude, else arrays of its shape).
+
+    Attributes
+    ----------
+    temperature_k : float or ndarray
+        Air temperature, K.
+    pressure_pa : float or ndarray
+        Static pressure, Pa.
+    density_kgm3 : float or ndarray
+        Air density ρ, kg/m³.
+    speed_of_sound_mps : float or ndarray
+        Speed of sound ``sqrt(γ·R·T)``, m/s.
+    """
+
+    temperature_k: FloatArray | float
+    pressure_pa: FloatArray | float
+    density_kgm3: FloatArray | float
+    speed_of_sound_mps: FloatArray | float
+
+    def __repr__(self) -> str:
+        def show(value: FloatArray | float) -> str:
+            return f"{value:.6g}" if isinstance(value, float) else f"array{np.shape(value)}"
+
+        return (
+            f"Atmosphere(T={show(self.temperature_k)} K, p={show(self.pressure_pa)} Pa, "
+            f"ρ={show(self.density_kgm3)} kg/m³, a={show(self.speed_of_sound_mps)} m/s)"
+        )
+
+
+def _isa_arrays(h: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """T, p, ρ, a at geopotential altitudes ``h`` (m), unchecked (both layers)."""
+    low = h <= TROPOPAUSE_M
+    temperature = np.where(low, T0_K - LAPSE_K_PER_M * h, T11_K)
+    exponent = G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK)
+    pressure = np.where(
+        low,
+        P0_PA * (temperature / T0_K) ** exponent,
+        P11_PA * np.exp(-G0_MPS2 * (h - TROPOPAUSE_M) / (R_AIR_JPKGK * T11_K)),
+    )
+    density = pressure / (R_AIR_JPKGK * temperature)
+    speed = np.sqrt(GAMMA_AIR * R_AIR_JPKGK * temperature)
+    return temperature, pressure, density, speed
+
+
+def _isa_density(h: float) -> float:
+    """ρ at one altitude (m), clipped into the ISA's range: the integrator's hot path."""
+    h = min(max(h, ISA_MIN_ALTITUDE_M), ISA_MAX_ALTITUDE_M)
+    if h <= TROPOPAUSE_M:
+        t = T0_K - LAPSE_K_PER_M * h
+        p = P0_PA * (t / T0_K) ** (G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK))
+    else:
+        t = T11_K
+        p = P11_PA * math.exp(-G0_MPS2 * (h - TROPOPAUSE_M) / (R_AIR_JPKGK * T11_K))
+    return p / (R_AIR_JPKGK * t)
+
+
+def isa(h_m: ArrayLike) -> Atmosphere:
+    """The International Standard Atmosphere at geopotential altitude ``h_m``.
+
+    Parameters
+    ----------
+    h_m : float or array_like
+        Geopotential altitude, m, in [-500, 20 000] (troposphere and the
+        isothermal layer above it).  Any shape.
+
+    Returns
+    -------
+    Atmosphere
+        Temperature, pressure, density and speed of sound: floats for a scalar
+        ``h_m``, arrays of its shape otherwise.
+
+    Raises
+    ------
+    UsageError
+        If an altitude is not finite or lies outside [-500, 20 000] m.
+
+    Notes
+    -----
+    Troposphere (``h ≤ 11 km``), with ``L = 0.0065 K/m``::
+
+        T = T0 − L·h,    p = p0·(T/T0)^(g0/(L·R))
+
+    Isothermal layer (11-20 km)::
+
+        T = T11 = 216.65 K,    p = p11·exp(−g0·(h − 11 000)/(R·T11))
+
+    and ``ρ = p/(R·T)``, ``a = sqrt(γ·R·T)``, with T0 = 288.15 K,
+    p0 = 101 325 Pa, R = 287.05287 J/(kg·K), g0 = 9.80665 m/s², γ = 1.4.
+    The altitude is geopotential; the geometric altitude ``z = r·h/(r − h)``
+    (``r`` = 6 356 766 m) is 0.6 m higher at 2 km.
+
+    References
+    ----------
+    ISO 2533:1975, *Standard Atmosphere* (the same model up to 32 km).
+    *U.S. Standard Atmosphere, 1976*, NOAA-S/T 76-1562, Part 1 (the
+    equations) and Part 4 (the tables, to which the tests compare).
+
+    Examples
+    --------
+    >>> round(isa(0.0).density_kgm3, 4), round(isa(11_000.0).temperature_k, 2)
+    (1.225, 216.65)
+    """
+    h = np.asarray(h_m, dtype=float)
+    bad = ~np.isfinite(h) | (h < ISA_MIN_ALTITUDE_M) | (h > ISA_MAX_ALTITUDE_M)
+    if np.any(bad):
+        value = float(h.ravel()[int(np.argmax(bad.ravel()))])
+        raise UsageError(
+            f"h_m: {value:g} m is outside the standard atmosphere's range "
+            f"[{ISA_MIN_ALTITUDE_M:g}, {ISA_MAX_ALTITUDE_M:g}] m (troposphere and the "
+            "isothermal layer)"
+        )
+    columns = _isa_arrays(h)
+    if h.ndim == 0:
+        return Atmosphere(*(float(c) for c in columns))
+    return Atmosphere(*columns)
+
+
+# --------------------------------------------------------------------------- the rocket
+def _finite(name: str, value: Any) -> float:
+    """``value`` as a float, or a :class:`SettingError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise SettingError(name, f"must be a number, not {value!r}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise SettingError(name, f"must be finite, not {number!r}")
+    return number
+
+
+@dataclass(frozen=True)
+class AscentSpec:
+    """A sounding rocket and its motor, for :func:`simulate_ascent`.
+
+    Attributes
+    ----------
+    dry_mass_kg : float
+        Mass without propellant (airframe, avionics, empty motor case), kg, > 0.
+    propellant_mass_kg : float
+        Propellant at liftoff, kg, > 0; burnt in proportion to the impulse
+        delivered.
+    thrust_time_s : tuple of float
+        Knots of the thrust curve, s: starting at 0, strictly increasing, at
+        least two; the last is burnout.
+    thrust_n : tuple of float
+        Thrust at each knot, N, ≥ 0, linear in between; 0 at the last knot.
+    drag_coefficient : float
+        ``C_D``, constant (subsonic), on the reference area, ≥ 0.
+    diameter_m : float
+        Body diameter, m, > 0; reference area ``π·d²/4``.
+    length_m : float
+        Overall length, m, > 0 (informational: the paper's rocket is 1.3 m).
+    launch_altitude_m : float
+        Altitude of the pad, geopotential m above sea level, in the ISA's range.
+
+    Raises
+    ------
+    rocketroll_common.errors.SettingError
+        (a :class:`UsageError`) naming the field and what is wrong.
+    """
+
+    dry_mass_kg: float
+    propellant_mass_kg: float
+    thrust_time_s: tuple[float, ...]
+    thrust_n: tuple[float, ...]
+    drag_coefficient: float
+    diameter_m: float
+    length_m: float = 1.3
+    launch_altitude_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, low, strict in (
+            ("dry_mass_kg", 0.0, True),
+            ("propellant_mass_kg", 0.0, True),
+            ("drag_coefficient", 0.0, False),
+            ("diameter_m", 0.0, True),
+            ("length_m", 0.0, True),
+        ):
+            value = _finite(f"AscentSpec.{name}", getattr(self, name))
+            if value < low or (strict and value == low):
+                raise SettingError(
+                    f"AscentSpec.{name}",
+                    f"must be {'>' if strict else '>='} {low:g}, not {value:g}",
+                )
+            object.__setattr__(self, name, value)
+        altitude = _finite("AscentSpec.launch_altitude_m", self.launch_altitude_m)
+        if not ISA_MIN_ALTITUDE_M <= altitude < ISA_MAX_ALTITUDE_M:
+            raise SettingError(
+                "AscentSpec.launch_altitude_m",
+                f"{altitude:g} m is outside the standard atmosphere's range "
+                f"[{ISA_MIN_ALTITUDE_M:g}, {ISA_MAX_ALTITUDE_M:g}) m",
+            )
+        object.__setattr__(self, "launch_altitude_m", altitude)
+        for name in ("thrust_time_s", "thrust_n"):
+            raw = getattr(self, name)
+            if isinstance(raw, str | bytes) or not isinstance(raw, Sequence | np.ndarray):
+                raise SettingError(f"AscentSpec.{name}", f"must be a sequence, not {raw!r}")
+            values = tuple(_finite(f"AscentSpec.{name}[{i}]", v) for i, v in enumerate(raw))
+            object.__setattr__(self, name, values)
+        times, thrust = self.thrust_time_s, self.thrust_n
+        if len(times) != len(thrust):
+            raise SettingError(
+                "AscentSpec.thrust_n",
+                f"has {len(thrust)} values for {len(times)} knots in thrust_time_s",
+            )
+        if len(times) < 2:
+            raise SettingError("AscentSpec.thrust_time_s", "needs at least two knots")
+        if times[0] != 0.0:
+            raise SettingError(
+                "AscentSpec.thrust_time_s", f"must start at 0 s (ignition), not {times[0]:g}"
+            )
+        for i in range(1, len(times)):
+            if times[i] <= times[i - 1]:
+                raise SettingError(
+                    "AscentSpec.thrust_time_s",
+                    f"must increase strictly: knot {i} ({times[i]:g} s) is not after "
+                    f"knot {i - 1} ({times[i - 1]:g} s)",
+                )
+        for i, value in enumerate(thrust):
+            if value < 0.0:
+                raise SettingError("AscentSpec.thrust_n", f"knot {i} is negative ({value:g} N)")
+        if thrust[-1] != 0.0:
+            raise SettingError(
+                "AscentSpec.thrust_n",
+                f"must end at 0 N (burnout), not {thrust[-1]:g} N at {times[-1]:g} s",
+            )
+        if self.total_impulse_ns <= 0.0:
+            raise SettingError("AscentSpec.thrust_n", "the motor delivers no impulse")
+
+    # -- derived quantities
+    @property
+    def burnout_s(self) -> float:
+        """Time of the last thrust knot (thrust 0), s."""
+        return self.thrust_time_s[-1]
+
+    @property
+    def liftoff_mass_kg(self) -> float:
+        """Dry plus propellant mass, kg."""
+        return self.dry_mass_kg + self.propellant_mass_kg
+
+    @property
+    def reference_area_m2(self) -> float:
+        """``π·d²/4``, m²."""
+        return math.pi * self.diameter_m**2 / 4.0
+
+    @property
+    def total_impulse_ns(self) -> float:
+        """``∫ T dt`` over the burn, N·s (trapezoid: exact for the piecewise-linear curve)."""
+        return float(self._knot_impulse()[-1])
+
+    def _knot_impulse(self) -> FloatArray:
+        times = np.asarray(self.thrust_time_s)
+        thrust = np.asarray(self.thrust_n)
+        steps = 0.5 * (thrust[1:] + thrust[:-1]) * np.diff(times)
+        return np.concatenate([[0.0], np.cumsum(steps)])
+
+    def thrust_at(self, t_s: ArrayLike) -> FloatArray:
+        """Thrust, N, at times ``t_s`` (s from ignition; 0 before ignition and after burnout)."""
+        t = np.asarray(t_s, dtype=float)
+        return np.interp(t, self.thrust_time_s, self.thrust_n, left=0.0, right=0.0)
+
+    def impulse_at(self, t_s: ArrayLike) -> FloatArray:
+        """Impulse delivered by ``t_s``, N·s: exact (quadratic) within each linear piece."""
+        times = np.asarray(self.thrust_time_s)
+        thrust = np.asarray(self.thrust_n)
+        t = np.clip(np.asarray(t_s, dtype=float), 0.0, times[-1])
+        i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, times.size - 2)
+        tau = t - times[i]
+        slope = (thrust[i + 1] - thrust[i]) / (times[i + 1] - times[i])
+        return np.asarray(self._knot_impulse()[i] + thrust[i] * tau + 0.5 * slope * tau**2)
+
+    def mass_at(self, t_s: ArrayLike) -> FloatArray:
+        """Mass, kg: ``m_dry + m_prop·(1 − I(t)/I_total)`` (OpenRocket's and RockSim's model)."""
+        burnt = self.impulse_at(t_s) / self.total_impulse_ns
+        return np.asarray(self.dry_mass_kg + self.propellant_mass_kg * (1.0 - burnt))
+
+
+#: A 5-kg, 1.3-m sounding rocket like the paper's (§1: "maximum velocity [...]
+#: approximately 600 km/h", apogee "up to 2 km").  :func:`simulate_ascent` flies
+#: it to a peak of 603 km/h (167.6 m/s, Mach 0.50, max q 15.8 kPa) at 6.9 s and
+#: an apogee of 2.01 km at 21.4 s.
+#:
+#: It is a plausible stand-in, not a measured rocket or motor: the paper gives
+#: only the mass, the length, the peak speed and the apogee, and these numbers
+#: were tuned by simulation to meet the last two.  Airframe 76 mm in diameter
+#: (a common "3-inch" body tube) with ``C_D = 0.42``; 4.35 kg dry plus 0.65 kg
+#: of propellant (a specific impulse of 196 s, usual for composite propellant).
+#: The motor is a J-class (640-1280 N·s) boost-sustain curve of 1252 N·s: a
+#: 0.6-s boost of about 800 N to 104 m/s, then a 6-s sustain plateau of
+#: 108-120 N, a little above weight plus drag, that carries the rocket to its
+#: peak speed at the tail-off (burnout 7.2 s at 940 m).  A short (2-3 s) burn
+#: cannot meet both of the paper's numbers: even without drag, a rocket that
+#: peaks at 167 m/s coasts only ``V²/2g`` = 1.4 km, and a short burn adds a few
+#: hundred metres, so the burn must be long and slow.
+DEFAULT_ASCENT = AscentSpec(
+    dry_mass_kg=4.35,
+    propellant_mass_kg=0.65,
+    thrust_time_s=(0.0, 0.05, 0.3, 0.6, 0.8, 6.8, 7.2),
+    thrust_n=(0.0, 860.0, 800.0, 740.0, 120.0, 108.0, 0.0),
+    drag_coefficient=0.42,
+    diameter_m=0.076,
+    length_m=1.3,
+    launch_altitude_m=0.0,
+)
+
+
+# --------------------------------------------------------------------------- the profile
+def _column(values: ArrayLike) -> FloatArray:
+    return readonly_array(np.asarray(values, dtype=float))
+
+
+@dataclass(frozen=True, eq=False)
+class FlightState:
+    """A :class:`FlightProfile` interpolated at some times (:meth:`FlightProfile.at`).
+
+    Each field is a float for a scalar time, else an array of the times' shape;
+    units as in :class:`FlightProfile`.
+    """
+
+    t_s: FloatArray | float
+    altitude_m: FloatArray | float
+    airspeed_mps: FloatArray | float
+    mass_kg: FloatArray | float
+    density_kgm3: FloatArray | float
+    dynamic_pressure_pa: FloatArray | float
+    mach: FloatArray | float
+
+
+#: The columns of a :class:`FlightProfile` (and of a :class:`FlightState`), in order.
+PROFILE_COLUMNS = (
+    "t_s",
+    "altitude_m",
+    "airspeed_mps",
+    "mass_kg",
+    "density_kgm3",
+    "dynamic_pressure_pa",
+    "mach",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class FlightProfile:
+    """Airspeed, altitude and air of one ascent, sampled in time.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n,)
+        Time from ignition (or the recording's clock), s, increasing.
+    altitude_m : ndarray, shape (n,)
+        Geopotential altitude above sea level, m.
+    airspeed_mps : ndarray, shape (n,)
+        Airspeed ``V``, m/s, ≥ 0.
+    mass_kg : ndarray, shape (n,)
+        Rocket mass, kg (NaN when unknown: a recorded profile).
+    density_kgm3 : ndarray, shape (n,)
+        ISA density ``ρ(h)``, kg/m³.
+    dynamic_pressure_pa : ndarray, shape (n,)
+        ``q = ½·ρ·V²`` (eq. 5), Pa.
+    mach : ndarray, shape (n,)
+        ``V / a(h)``.
+    burnout_s : float
+        End of thrust, s (NaN when unknown).
+    apogee_s, apogee_m : float
+        Time, s, and altitude, m, of the highest point.
+    max_speed_mps : float
+        Highest airspeed, m/s.
+    source : str
+        Where the profile came from (the simulation and its rocket, or a file).
+
+    Arrays are read-only; all have one length (≥ 2).
+    """
+
+    t_s: FloatArray
+    altitude_m: FloatArray
+    airspeed_mps: FloatArray
+    mass_kg: FloatArray
+    density_kgm3: FloatArray
+    dynamic_pressure_pa: FloatArray
+    mach: FloatArray
+    burnout_s: float
+    apogee_s: float
+    apogee_m: float
+    max_speed_mps: float
+    source: str
+
+    def __post_init__(self) -> None:
+        n = np.size(self.t_s)
+        for name in PROFILE_COLUMNS:
+            column = _column(getattr(self, name))
+            if column.ndim != 1 or column.size != n:
+                raise UsageError(
+                    f"FlightProfile.{name}: must be 1-D with {n} samples like t_s, "
+                    f"not of shape {column.shape}"
+                )
+            object.__setattr__(self, name, column)
+        if n < 2:
+            raise UsageError(f"FlightProfile.t_s: needs at least 2 samples, not {n}")
+        if not (np.all(np.isfinite(self.t_s)) and np.all(np.diff(self.t_s) > 0)):
+            raise UsageError("FlightProfile.t_s: must be finite and strictly increasing")
+        if not (np.all(np.isfinite(self.airspeed_mps)) and np.all(self.airspeed_mps >= 0)):
+            raise UsageError("FlightProfile.airspeed_mps: must be finite and >= 0")
+        for name in ("burnout_s", "apogee_s", "apogee_m", "max_speed_mps"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    def __repr__(self) -> str:
+        return (
+            f"FlightProfile(n={self.t_s.size}, t=[{self.t_s[0]:g}, {self.t_s[-1]:g}] s, "
+            f"max V={self.max_speed_mps:.1f} m/s ({self.max_speed_mps * 3.6:.0f} km/h), "
+            f"apogee={self.apogee_m:.0f} m at {self.apogee_s:.2f} s, "
+            f"burnout={self.burnout_s:.2f} s, max Mach={self.max_mach:.3f}, "
+            f"source={self.source!r})"
+        )
+
+    @property
+    def max_mach(self) -> float:
+        """Highest Mach number."""
+        return float(np.max(self.mach))
+
+    @property
+    def max_dynamic_pressure_pa(self) -> float:
+        """Highest dynamic pressure ("max q"), Pa."""
+        return float(np.max(self.dynamic_pressure_pa))
+
+    def at(self, t_s: ArrayLike) -> FlightState:
+        """Every column linearly interpolated (:func:`numpy.interp`) at ``t_s``.
+
+        Parameters
+        ----------
+        t_s : float or array_like
+            Times, s, finite.  Before the first sample or after the last the
+            first or last sample is held (the profile ends at apogee).
+
+        Returns
+        -------
+        FlightState
+            Floats for a scalar ``t_s``, arrays of its shape otherwise.
+        """
+        t = np.asarray(t_s, dtype=float)
+        if not np.all(np.isfinite(t)):
+            raise UsageError("t_s: times must be finite")
+        values = {name: np.interp(t, self.t_s, getattr(self, name)) for name in PROFILE_COLUMNS}
+        values["t_s"] = t
+        if t.ndim == 0:
+            return FlightState(**{k: float(v) for k, v in values.items()})
+        return FlightState(**values)
+
+    def scales(
+        self,
+        v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
+        rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Gain and damping factors of the roll model at each sample (:func:`roll_scales`).
+
+        Parameters
+        ----------
+        v_ref_mps : float
+            Airspeed at which ``a`` and ``α`` were identified, m/s (default: the
+            tunnel's 50 km/h, paper §4).
+        rho_ref_kgm3 : float
+            Density there, kg/m³ (default: ISA sea level).
+
+        Returns
+        -------
+        gain, damping : ndarray, shape (n,)
+            ``α(t)/α0 = V/V_ref`` and ``a(t)/a0 = ρV/(ρ_ref·V_ref)``.
+
+        Notes
+        -----
+        From eq. 4-8 (derived in :func:`roll_scales`): the damping constant
+        ``c = q·S·d²·|C_P|/(2·v_M) ∝ ρ·V`` and the fin torque constant
+        ``b = q·S·d·C_δ ∝ ρ·V²`` with ``q = ½·ρ·V²`` (eq. 5), so
+        ``a = c/I ∝ ρ·V`` and ``α = b/c ∝ V``.
+        """
+        return roll_scales(self.airspeed_mps, self.density_kgm3, v_ref_mps, rho_ref_kgm3)
+
+
+def roll_scales(
+    airspeed_mps: ArrayLike,
+    density_kgm3: ArrayLike,
+    v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
+    rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+) -> tuple[FloatArray, FloatArray]:
+    """How the identified roll model's gain ``α`` and damping ``a`` scale with ``V`` and ``ρ``.
+
+    Parameters
+    ----------
+    airspeed_mps : array_like
+        Airspeed ``V``, m/s, ≥ 0.
+    density_kgm3 : array_like
+        Air density ``ρ``, kg/m³, > 0 (broadcast against ``airspeed_mps``).
+    v_ref_mps : float
+        Airspeed of the identification, m/s (the tunnel's 50 km/h).
+    rho_ref_kgm3 : float
+        Density of the identification, kg/m³ (ISA sea level).
+
+    Returns
+    -------
+    gain : ndarray
+        ``α/α0 = V/V_ref``.
+    damping : ndarray
+        ``a/a0 = ρ·V/(ρ_ref·V_ref)``.
+
+    Notes
+    -----
+    Eq. 7-8 with the dynamic pressure of eq. 5, ``q = ½·ρ·v_M²``::
+
+        I·dv/dt = −c·v + b·θ + τ_d,   c = q·S·d²·|C_P|/(2·v_M) = ρ·v_M·S·d²·|C_P|/4,
+                                      b = q·S·d·C_δ = ½·ρ·v_M²·S·d·C_δ
+
+    so ``c ∝ ρ·V`` and ``b ∝ ρ·V²`` at constant coefficients ``C_P``, ``C_δ``
+    (subsonic: the paper's §4 warns they change past about Mach 0.8).  The
+    identified model (eq. 21-22, 30) has ``a = c/I`` and ``α = b/c``::
+
+        a ∝ ρ·V,     α ∝ V,     a·α = b/I ∝ ρ·V²
+
+    with the inertia ``I`` taken as constant (the burning propellant changes it
+    a little).  At the tunnel's operating point both factors are 1.
+
+    References
+    ----------
+    The paper, eq. 4-8 and §4 ("the dynamic pressure q in equation (5) will
+    also increase"; the tunnel's airspeed "roughly 50 km/h").
+
+    Examples
+    --------
+    >>> gain, damping = roll_scales(600 / 3.6, ISA_SEA_LEVEL_DENSITY_KGM3)
+    >>> round(float(gain), 6), round(float(damping), 6)
+    (12.0, 12.0)
+    """
+    if not (math.isfinite(v_ref_mps) and v_ref_mps > 0):
+        raise UsageError(f"v_ref_mps: must be finite and > 0, not {v_ref_mps!r}")
+    if not (math.isfinite(rho_ref_kgm3) and rho_ref_kgm3 > 0):
+        raise UsageError(f"rho_ref_kgm3: must be finite and > 0, not {rho_ref_kgm3!r}")
+    speed = np.asarray(airspeed_mps, dtype=float)
+    density = np.asarray(density_kgm3, dtype=float)
+    if not (np.all(np.isfinite(speed)) and np.all(speed >= 0)):
+        raise UsageError("airspeed_mps: must be finite and >= 0")
+    if not (np.all(np.isfinite(density)) and np.all(density > 0)):
+        raise UsageError("density_kgm3: must be finite and > 0")
+    gain = speed / v_ref_mps
+    return np.asarray(gain), np.asarray(gain * density / rho_ref_kgm3)
+
+
+# --------------------------------------------------------------------------- simulation
+def _liftoff_s(spec: AscentSpec) -> float:
+    """First time the thrust exceeds the weight (the rocket leaves the pad), s."""
+    from scipy.optimize import brentq
+
+    def excess(t: ArrayLike) -> FloatArray:
+        return np.asarray(spec.thrust_at(t) - spec.mass_at(t) * G0_MPS2)
+
+    grid = np.linspace(0.0, spec.burnout_s, 20_001)
+    above = excess(grid) > 0
+    if not np.any(above):
+        raise UsageError(
+            f"AscentSpec: the thrust never exceeds the liftoff weight "
+            f"({spec.liftoff_mass_kg * G0_MPS2:.1f} N, peak thrust {max(spec.thrust_n):g} N): "
+            "the rocket does not leave the pad"
+        )
+    k = int(np.argmax(above))
+    if k == 0:
+        return 0.0
+    return float(brentq(lambda t: float(excess(t)), grid[k - 1], grid[k], xtol=1e-12))
+
+
+def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> FlightProfile:
+    """Fly ``spec`` straight up from the pad to apogee.
+
+    Parameters
+    ----------
+    spec : AscentSpec
+        The rocket and its motor (default: :data:`DEFAULT_ASCENT`).
+    dt_s : float
+        Sampling interval of the profile, s, in (0, 1].
+
+    Returns
+    -------
+    FlightProfile
+        Samples every ``dt_s`` from ignition (t = 0) and, as the last sample,
+        the apogee itself (so the last interval is at most ``dt_s``).
+        ``source`` says ``simulated``.
+
+    Raises
+    ------
+    UsageError
+        If ``spec`` is not an :class:`AscentSpec`, ``dt_s`` is out of range, the
+        rocket never leaves the pad, falls back before burnout, or climbs
+        above the ISA's 20 km.
+
+    Notes
+    -----
+    The 1-D point-mass ascent (the motor's mass as in OpenRocket and RockSim)::
+
+        m(t)·dV/dt = T(t) − ½·ρ(h)·V²·C_D·A − m(t)·g0,     dh/dt = V
+        m(t) = m_dry + m_prop·(1 − I(t)/I_total)
+
+    ``ρ(h)`` from :func:`isa`.  The rocket stays on the pad (``V = 0``) until
+    ``T > m·g0``.  :func:`scipy.integrate.solve_ivp` (DOP853, rtol 1e-10)
+    integrates each linear piece of the thrust curve separately, so its
+    kinks are never stepped over, and the coast until ``V = 0`` (a terminal
+    event); the profile is the solver's dense output on the time grid.
+
+    References
+    ----------
+    Niskanen (2009), the OpenRocket technical documentation; the paper, §1
+    (a 5-kg, 1.3-m rocket, about 600 km/h and 2 km) and eq. 5 (``q``).
+
+    Examples
+    --------
+    >>> profile = simulate_ascent(DEFAULT_ASCENT)
+    >>> round(profile.max_speed_mps * 3.6, -1), round(profile.apogee_m, -2)
+    (600.0, 2000.0)
+    """
+    from scipy.integrate import solve_ivp
+
+    if not isinstance(spec, AscentSpec):
+        raise UsageError(f"spec: must be an AscentSpec, not {type(spec).__name__}")
+    if not (isinstance(dt_s, int | float) and math.isfinite(dt_s) and 0 < dt_s <= 1.0):
+        raise UsageError(f"dt_s: must be in (0, 1] s, not {dt_s!r}")
+
+    area_cd = spec.reference_area_m2 * spec.drag_coefficient
+    knots_t = np.asarray(spec.thrust_time_s)
+    knots_f = np.asarray(spec.thrust_n)
+
+    def rhs(t: float, y: FloatArray) -> list[float]:
+        h, v = float(y[0]), float(y[1])
+        thrust = float(np.interp(t, knots_t, knots_f, left=0.0, right=0.0))
+        mass = float(spec.mass_at(t))
+        drag = 0.5 * _isa_density(h) * v * abs(v) * area_cd
+        return [v, (thrust - drag) / mass - G0_MPS2]
+
+    def stops(t: float, y: FloatArray) -> float:
+        return float(y[1])
+
+    stops.terminal = True  # type: ignore[attr-defined]
+    stops.direction = -1  # type: ignore[attr-defined]
+
+    liftoff = _liftoff_s(spec)
+    edges = [liftoff, *(float(t) for t in knots_t if t > liftoff)]
+    y = np.array([spec.launch_altitude_m, 0.0])
+    pieces = []
+    options: dict[str, Any] = {"method": "DOP853", "rtol": 1e-10, "atol": [1e-7, 1e-9]}
+    for start, end in itertools.pairwise(edges):
+        sol = solve_ivp(rhs, (start, end), y, dense_output=True, events=stops, **options)
+        if sol.status == 1:
+            raise UsageError(
+                f"AscentSpec: the rocket stops climbing at {float(sol.t_events[0][0]):.2f} s, "
+                f"before burnout ({spec.burnout_s:g} s): the thrust falls below the weight "
+                "(a 1-D ascent cannot fly that)"
+            )
+        pieces.append((start, end, sol.sol))
+        y = sol.y[:, -1]
+    burnout_speed = float(y[1])
+    horizon = spec.burnout_s + burnout_speed / G0_MPS2 + 10.0  # drag only shortens the coast
+    coast = solve_ivp(rhs, (spec.burnout_s, horizon), y, dense_output=True, events=stops, **options)
+    if coast.status != 1:  # pragma: no cover - the horizon bounds the coast
+        raise RuntimeError("simulate_ascent: the coast did not reach apogee")
+    apogee_s = float(coast.t_events[0][0])
+    pieces.append((spec.burnout_s, apogee_s, coast.sol))
+
+    n = int(np.floor(apogee_s / dt_s * (1 + 1e-12)))
+    grid = dt_s * np.arange(n + 1)
+    t: FloatArray = np.append(grid[grid < apogee_s - 1e-9 * dt_s], apogee_s)
+    altitude = np.full(t.shape, spec.launch_altitude_m)
+    speed = np.zeros(t.shape)
+    for start, end, dense in pieces:
+        inside = (t >= start) & (t <= end)
+        if np.any(inside):
+            states = dense(t[inside])
+            altitude[inside] = states[0]
+            speed[inside] = states[1]
+    speed[-1] = 0.0  # the apogee event: V = 0 to the solver's tolerance
+    speed = np.maximum(speed, 0.0)
+    if altitude.max() > ISA_MAX_ALTITUDE_M:
+        raise UsageError(
+            f"AscentSpec: the rocket climbs to {altitude.max():.0f} m, above the standard "
+            f"atmosphere's {ISA_MAX_ALTITUDE_M:g} m"
+        )
+    air = isa(altitude)
+    density = np.asarray(air.density_kgm3)
+    return FlightProfile(
+        t_s=t,
+        altitude_m=altitude,
+        airspeed_mps=speed,
+        mass_kg=spec.mass_at(t),
+        density_kgm3=density,
+        dynamic_pressure_pa=0.5 * density * speed**2,
+        mach=speed / np.asarray(air.speed_of_sound_mps),
+        burnout_s=spec.burnout_s,
+        apogee_s=apogee_s,
+        apogee_m=float(coast.y_events[0][0][0]),
+        max_speed_mps=float(speed.max()),
+        source=(
+            f"simulated: 1-D vertical ascent, {spec.liftoff_mass_kg:g} kg, "
+            f"{spec.total_impulse_ns:.0f} N·s, C_D {spec.drag_coefficient:g}, "
+            f"d {spec.diameter_m * 1000:g} mm"
+        ),
+    )
+
+
+# --------------------------------------------------------------------------- user files
+#: YAML keys of :func:`load_ascent_yaml` -> AscentSpec field (the thrust curve is one key).
+_YAML_FIELDS = (
+    "dry_mass_kg",
+    "propellant_mass_kg",
+    "thrust_curve",
+    "drag_coefficient",
+    "diameter_m",
+    "length_m",
+    "launch_altitude_m",
+)
+_YAML_REQUIRED = _YAML_FIELDS[:5]
+
+
+def load_ascent_yaml(path: str | os.PathLike[str]) -> AscentSpec:
+    """An :class:`AscentSpec` from a small YAML file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A YAML mapping whose keys are the :class:`AscentSpec` fields, the
+        thrust curve as a list of ``[t_s, thrust_n]`` pairs under
+        ``thrust_curve``::
+
+            dry_mass_kg: 4.35
+            propellant_mass_kg: 0.65
+            drag_coefficient: 0.42
+            diameter_m: 0.076
+            length_m: 1.3            # optional (1.3)
+            launch_altitude_m: 0.0   # optional (0)
+            thrust_curve:            # [s, N], from 0 s, ending at 0 N
+              - [0.0, 0.0]
+              - [0.05, 860.0]
+              ...
+
+    Returns
+    -------
+    AscentSpec
+
+    Raises
+    ------
+    UsageError
+        Naming the file, the line where known, and the key: unreadable or
+        invalid YAML, a missing or unknown key, a value of the wrong type or
+        out of range.
+
+    Examples
+    --------
+    ``identification/data/ascent-default.yml`` is :data:`DEFAULT_ASCENT`.
+    """
+    import yaml
+
+    where = os.fspath(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"{where}: cannot read: {exc}") from exc
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise UsageError(f"{where}: not valid YAML: {exc}") from None
+    if not isinstance(data, Mapping) or not isinstance(node, yaml.MappingNode):
+        raise UsageError(f"{where}: must be a mapping of AscentSpec fields (key: value)")
+    lines = {
+        str(key.value): int(key.start_mark.line) + 1
+        for key, _ in node.value
+        if isinstance(key, yaml.ScalarNode)
+    }
+
+    def at(key: str) -> str:
+        return f"{where}:{lines[key]}" if key in lines else where
+
+    for key in data:
+        if key not in _YAML_FIELDS:
+            raise UsageError(
+                f"{at(str(key))}: unknown key {key!r} (known: {', '.join(_YAML_FIELDS)})"
+            )
+    for key in _YAML_REQUIRED:
+        if key not in data:
+            raise UsageError(f"{where}: missing key {key!r}")
+    curve = data["thrust_curve"]
+    if not isinstance(curve, list) or not all(
+        isinstance(pair, list) and len(pair) == 2 for pair in curve
+    ):
+        raise UsageError(f"{at('thrust_curve')}: thrust_curve must be a list of [t_s, thrust_n]")
+    values = {key: data[key] for key in _YAML_FIELDS if key in data and key != "thrust_curve"}
+    try:
+        return AscentSpec(
+            thrust_time_s=tuple(pair[0] for pair in curve),
+            thrust_n=tuple(pair[1] for pair in curve),
+            **values,
+        )
+    except SettingError as exc:
+        name, _, knot = exc.setting.removeprefix("AscentSpec.").partition("[")
+        if name.startswith("thrust_"):
+            part = "times" if name == "thrust_time_s" else "thrusts"
+            part += f" (pair {knot.rstrip(']')})" if knot else ""
+            raise UsageError(f"{at('thrust_curve')}: thrust_curve {part}: {exc.problem}") from None
+        raise UsageError(f"{at(name)}: {name}: {exc.problem}") from None
+
+
+def load_profile_csv(
+    path: str | os.PathLike[str], *, launch_altitude_m: float = 0.0
+) -> FlightProfile:
+    """A :class:`FlightProfile` from a recorded airspeed log (CSV).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Comma-separated text with a header row naming the columns ``time_s``
+        and ``airspeed_mps`` (m/s, ≥ 0) and optionally ``altitude_m``
+        (geopotential m above sea level).  Other columns are ignored; blank
+        lines and lines starting with ``#`` are skipped.  Times increase
+        strictly; at least two rows.
+    launch_altitude_m : float
+        Altitude of the first sample, m, when the file has no ``altitude_m``.
+
+    Returns
+    -------
+    FlightProfile
+        Without ``altitude_m`` the altitude is the cumulative trapezoid of the
+        airspeed (a vertical flight) from ``launch_altitude_m``; density, ``q``
+        and Mach from :func:`isa` at that altitude; mass and burnout NaN;
+        apogee the highest sample.
+
+    Raises
+    ------
+    UsageError
+        Naming the file and, for a bad cell, its line: a missing column, a
+        cell that is not a number, a time that does not increase, a negative
+        airspeed, an altitude outside the ISA's range.
+    """
+    from scipy.integrate import cumulative_trapezoid
+
+    where = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8", newline="") as handle:
+            reader = csv.reader(handle)
+            raw = [(reader.line_num, row) for row in reader]  # line_num: where the row ends
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise UsageError(f"{where}: cannot read: {exc}") from exc
+    rows = [(n, r) for n, r in raw if r and any(c.strip() for c in r)]
+    rows = [(n, r) for n, r in rows if not r[0].lstrip().startswith("#")]
+    if not rows:
+        raise UsageError(f"{where}: empty: expected a header row with time_s,airspeed_mps")
+    header_line, header = rows[0]
+    names = [cell.strip() for cell in header]
+    for name in ("time_s", "airspeed_mps"):
+        if name not in names:
+            raise UsageError(
+                f"{where}:{header_line}: missing column {name!r} (header: {', '.join(names)})"
+            )
+    wanted = [c for c in ("time_s", "airspeed_mps", "altitude_m") if c in names]
+    for name in wanted:
+        if names.count(name) > 1:
+            raise UsageError(f"{where}:{header_line}: column {name!r} appears more than once")
+    index = {name: names.index(name) for name in wanted}
+    data: dict[str, list[float]] = {name: [] for name in wanted}
+    lines = []
+    for lineno, row in rows[1:]:
+        if len(row) != len(names):
+            raise UsageError(
+                f"{where}:{lineno}: {len(row)} cells for the header's {len(names)} columns"
+            )
+        for name in wanted:
+            cell = row[index[name]]
+            try:
+                value = parse_number(cell)
+            except ValueError:
+                raise UsageError(f"{where}:{lineno}: {name} is {cell!r}, not a number") from None
+            if not math.isfinite(value):
+                raise UsageError(f"{where}:{lineno}: {name} is {cell.strip()}, not finite")
+            data[name].append(value)
+        lines.append(lineno)
+    if len(lines) < 2:
+        raise UsageError(f"{where}: needs at least 2 data rows, has {len(lines)}")
+    t = np.asarray(data["time_s"])
+    speed = np.asarray(data["airspeed_mps"])
+    for k in np.flatnonzero(np.diff(t) <= 0)[:1]:
+        raise UsageError(
+            f"{where}:{lines[k + 1]}: time_s {t[k + 1]:g} does not increase (previous {t[k]:g})"
+        )
+    for k in np.flatnonzero(speed < 0)[:1]:
+        raise UsageError(f"{where}:{lines[k]}: airspeed_mps {speed[k]:g} is negative")
+    if "altitude_m" in data:
+        altitude = np.asarray(data["altitude_m"])
+        origin = f"{where} (time_s, airspeed_mps, altitude_m)"
+    else:
+        start = _finite("launch_altitude_m", launch_altitude_m)
+        altitude = start + cumulative_trapezoid(speed, t, initial=0.0)
+        origin = f"{where} (time_s, airspeed_mps; altitude integrated from {start:g} m)"
+    outside = (altitude < ISA_MIN_ALTITUDE_M) | (altitude > ISA_MAX_ALTITUDE_M)
+    for k in np.flatnonzero(outside)[:1]:
+        raise UsageError(
+            f"{where}:{lines[k]}: altitude {altitude[k]:g} m is outside the standard "
+            f"atmosphere's range [{ISA_MIN_ALTITUDE_M:g}, {ISA_MAX_ALTITUDE_M:g}] m"
+        )
+    air = isa(altitude)
+    density = np.asarray(air.density_kgm3)
+    top = int(np.argmax(altitude))
+    return FlightProfile(
+        t_s=t,
+        altitude_m=altitude,
+        airspeed_mps=speed,
+        mass_kg=np.full(t.shape, np.nan),
+        density_kgm3=density,
+        dynamic_pressure_pa=0.5 * density * speed**2,
+        mach=speed / np.asarray(air.speed_of_sound_mps),
+        burnout_s=math.nan,
+        apogee_s=float(t[top]),
+        apogee_m=float(altitude[top]),
+        max_speed_mps=float(speed.max()),
+        source=f"recorded: {origin}",
+    )
+
+
+# --------------------------------------------------------------------------- figure
+def plot_profile(profile: FlightProfile) -> Figure:
+    """The profile in four panels sharing the time axis: V, h, q and Mach.
+
+    Parameters
+    ----------
+    profile : FlightProfile
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        On a headless Agg canvas (:mod:`rocketroll_common.plotting`): four axes
+        (airspeed in km/h with m/s on a secondary scale, altitude in m,
+        dynamic pressure in kPa, Mach), dashed lines at burnout (when known)
+        and apogee.  Save it with :func:`rocketroll_common.plotting.png_bytes`.
+    """
+    from rocketroll_common.plotting import new_figure
+
+    if not isinstance(profile, FlightProfile):
+        raise UsageError(f"profile: must be a FlightProfile, not {type(profile).__name__}")
+    fig = new_figure(figsize=(7.5, 8.0), layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True)
+    t = profile.t_s
+    panels = (
+        (profile.airspeed_mps * 3.6, "airspeed V (km/h)"),
+        (profile.altitude_m, "altitude h (m)"),
+        (profile.dynamic_pressure_pa / 1000.0, "dynamic pressure q (kPa)"),
+        (profile.mach, "Mach"),
+    )
+    for ax, (values, label) in zip(axes, panels, strict=True):
+        ax.plot(t, values, color="C0", lw=1.5)
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+        marks = [(profile.burnout_s, "burnout", "C1"), (profile.apogee_s, "apogee", "C2")]
+        for when, name, color in marks:
+            if math.isfinite(when):
+                ax.axvline(when, color=color, ls="--", lw=1.0, label=name)
+    axes[0].secondary_yaxis("right", functions=(lambda x: x / 3.6, lambda x: x * 3.6)).set_ylabel(
+        "m/s"
+    )
+    axes[0].legend(loc="upper right", fontsize="small")
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(
+        f"Flight profile: max {profile.max_speed_mps * 3.6:.0f} km/h, apogee "
+        f"{profile.apogee_m:.0f} m, max Mach {profile.max_mach:.2f}\n{profile.source}",
+        fontsize="medium",
+    )
+    return fig
