@@ -141,7 +141,7 @@ class TraceBank:
         params: RollParams | None = None,
     ) -> TraceBank:
         """A bank of bare arrays (tests, user-made disturbances)."""
-        from disturbances.rows import checksum
+        from disturbances.rows import checksum, plain_statistics
         from identification.model import PAPER_THETA, model_of
         from rocketroll_common.arrays import readonly_array
 
@@ -163,13 +163,7 @@ class TraceBank:
                     dt_s=float(dt_s),
                     t0_s=0.0,
                     checksum=digest,
-                    statistics={
-                        "mean_deg": float(u.mean()),
-                        "sd_deg": float(u.std()),
-                        "q05_deg": float(np.percentile(u, 5)),
-                        "q95_deg": float(np.percentile(u, 95)),
-                        "normality_p": None,
-                    },
+                    statistics=plain_statistics(u),
                     validation=None,
                     u_d_deg=u,
                     params=p,

@@ -55,6 +55,7 @@ __all__ = [
     "content_hash",
     "identified_uid",
     "json_safe",
+    "plain_statistics",
     "posterior_uid",
     "split_of",
     "surrogate_uid",
@@ -322,6 +323,19 @@ def posterior_uid(source_uid: str, seed: int) -> str:
 
 #: Keys of a trace's ``statistics``.
 STATISTICS = ("mean_deg", "sd_deg", "q05_deg", "q95_deg", "normality_p")
+
+
+def plain_statistics(u_d_deg: FloatArray) -> dict[str, float | None]:
+    """A trace's ``statistics`` without the normality test (``normality_p`` None): for
+    traces made in memory (bare arrays, flown traces), not stored."""
+    u = np.asarray(u_d_deg, dtype=float)
+    return {
+        "mean_deg": float(u.mean()),
+        "sd_deg": float(u.std()),
+        "q05_deg": float(np.percentile(u, 5)),
+        "q95_deg": float(np.percentile(u, 95)),
+        "normality_p": None,
+    }
 
 
 @dataclass(frozen=True, eq=False)
