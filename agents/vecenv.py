@@ -125,7 +125,8 @@ class RollVecEnv(VecEnv):
             raise ValueError("RollVecEnv does not render; render a single RocketRoll env")
         self.env_id = env_id
         self.config = variant_config(env_id, settings)
-        self.bank = load_bank(self.config, db) if bank is None else bank
+        # in flight a given tunnel bank becomes its flights (load_bank's are already)
+        self.bank = load_bank(self.config, db) if bank is None else self.config.flights(bank)
         self._batch = RollBatch(self.config, self.bank, int(num_envs), parallel=False)
         self.render_mode: str | None = None
         self.spec = None

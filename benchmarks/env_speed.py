@@ -11,7 +11,10 @@ update), this measures:
   serial kernel, the default) and the same with ``parallel=True`` (numba's
   threads) against Gymnasium's ``CartPoleVectorEnv(num_envs=4096)``:
   **target: >= 10 M env-steps/s**; the CartPole row shows what this machine
-  does with a numpy-batched classic-control env.
+  does with a numpy-batched classic-control env;
+* ``RocketRollFlight-v0``, single and at 4096 envs, against the tunnel's rows:
+  **target: at least 0.8 x** (issue 17: the rocket changes every step, the
+  traces are flown, the angle is the integrated gyro).
 
 With ``--against REF`` the RocketRoll rows are also timed in a worktree of
 ``REF`` (e.g. the last landed commit), block by block alternating with this
@@ -52,6 +55,9 @@ import rollenv  # noqa: F401  (registers RocketRoll-v0)
 
 SINGLE_TARGET = 1.0  # RocketRoll-v0 / Pendulum-v1
 VECTOR_TARGET = 10e6  # env-steps/s at 4096 envs
+#: The flight env (per-step rocket, flown traces, integrated gyro) against the tunnel's.
+FLIGHT_ID = "RocketRollFlight-v0"
+FLIGHT_TARGET = 0.8
 #: Largest slowdown against --against REF that still passes, as a fraction.
 AGAINST_TOLERANCE = 0.05
 
@@ -138,6 +144,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         ns.seed,
         discrete=False,
     )
+    # The flight rows (an --against checkout older than the flight env serves the others).
+    flying = FLIGHT_ID in gym.registry
+    if flying:
+        flight_single = _single_runner(FLIGHT_ID, ns.single_steps, ns.seed)
+        flight_vector = _vector_runner(
+            lambda: gym.make_vec(FLIGHT_ID, num_envs=ns.num_envs),
+            ns.vector_steps,
+            ns.seed,
+            discrete=False,
+        )
     pendulum = _single_runner("Pendulum-v1", ns.single_steps, ns.seed)
     cartpole = _vector_runner(
         lambda: CartPoleVectorEnv(num_envs=ns.num_envs), ns.vector_steps, ns.seed, discrete=True
@@ -153,13 +169,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         ),
         f"CartPoleVectorEnv x {ns.num_envs}": (cartpole, ns.vector_steps * ns.num_envs),
     }
+    if flying:
+        tasks[f"{FLIGHT_ID} (gym.make)"] = (flight_single, ns.single_steps)
+        tasks[f"{FLIGHT_ID} x {ns.num_envs} (make_vec)"] = (
+            flight_vector,
+            ns.vector_steps * ns.num_envs,
+        )
     warm = time.perf_counter()
     for run, _ in tasks.values():  # first calls: numba compile or cache load, page faults
         run()
     warmup = time.perf_counter() - warm
     if serving:
         return serve({name: run for name, (run, _) in tasks.items()})
-    ours = [name for name in tasks if name.lstrip().startswith(("RocketRoll", "same"))]
+    ours = [name for name in tasks if name.lstrip().startswith(("RocketRoll-v0", "same"))]
     remote, commit = start_against(__file__, words, ns.against)
     rates: dict[str, list[float]] = {name: [] for name in tasks}
     before: dict[str, list[float]] = {name: [] for name in ours}
@@ -174,13 +196,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     names = list(tasks)
     med = {name: statistics.median(r) for name, r in rates.items()}
     print(f"setup (database, construction) {setup:.1f} s; untimed warm-up pass {warmup:.1f} s\n")
-    header = f"{'task':<36} {'blocks':>6} {'median steps/s':>15} {'best steps/s':>13} {'spread':>7}"
+    header = f"{'task':<38} {'blocks':>6} {'median steps/s':>15} {'best steps/s':>13} {'spread':>7}"
     print(header)
     print("-" * len(header))
     for name in names:
         r = rates[name]
         spread = (max(r) - min(r)) / med[name]
-        print(f"{name:<36} {len(r):>6} {med[name]:>15,.0f} {max(r):>13,.0f} {spread:>6.0%}")
+        print(f"{name:<38} {len(r):>6} {med[name]:>15,.0f} {max(r):>13,.0f} {spread:>6.0%}")
     ratio = med[names[0]] / med[names[1]]
     vec = med[names[2]]
     vec_parallel = med[names[3]]
@@ -202,21 +224,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"({vec_parallel / vec:.2f} x serial): "
         f"{'PASS' if vec_parallel >= VECTOR_TARGET else 'FAIL'}"
     )
+    flight_single_ratio = med[names[5]] / med[names[0]]
+    flight_vector_ratio = med[names[6]] / vec
+    ok_flight = min(flight_single_ratio, flight_vector_ratio) >= FLIGHT_TARGET
+    print(
+        f"flight: {FLIGHT_ID} / RocketRoll-v0 = {flight_single_ratio:.2f} single, "
+        f"{flight_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}, issue 17): "
+        f"{'PASS' if ok_flight else 'FAIL'}"
+    )
     ok_against = True
     if remote is not None:
         print(f"\nthis checkout against {ns.against} ({commit[:12]}), same blocks alternating:")
-        print(f"{'task':<36} {'this steps/s':>14} {'REF steps/s':>13} {'change':>8}  verdict")
+        print(f"{'task':<38} {'this steps/s':>14} {'REF steps/s':>13} {'change':>8}  verdict")
         for name in ours:
             old = statistics.median(before[name])
             change = med[name] / old - 1.0
             ok = change >= -AGAINST_TOLERANCE
             ok_against &= ok
             print(
-                f"{name:<36} {med[name]:>14,.0f} {old:>13,.0f} {change:>+7.1%}  "
+                f"{name:<38} {med[name]:>14,.0f} {old:>13,.0f} {change:>+7.1%}  "
                 f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})"
             )
     print("spread: (best - worst) / median over the blocks; a large spread means a busy machine")
-    return 1 if ns.strict and not (ok_single and ok_vector and ok_against) else 0
+    return 1 if ns.strict and not (ok_single and ok_vector and ok_flight and ok_against) else 0
 
 
 if __name__ == "__main__":

@@ -60,7 +60,10 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     posterior, ``method="ml"``); ``config.method`` (the paper's by default);
     ``config.model``; ``config.split``.
     Banks are cached per file state and selection, so a vector of
-    environments in one process loads the traces once.
+    environments in one process loads the traces once.  For a flight
+    (``config.flight``) the bank holds the flights
+    (:meth:`rollenv.core.RollConfig.flights`): one trace per flight, exactly
+    one episode long.
     """
     kind = {"surrogate": "surrogate", "posterior": "posterior"}.get(
         str(config.disturbance), "identified"
@@ -87,6 +90,7 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
                 if len(_CACHE) >= 16:
                     _CACHE.clear()
                 _CACHE[key] = bank
+            bank = config.flights(bank)  # in flight: one trace per flight (cached there)
     finally:
         database.close()
     return bank

@@ -48,6 +48,7 @@ from disturbances.bank import TraceBank
 from identification.compiled import piece
 from identification.methods import METHODS, has_posterior
 from identification.model import MODEL_NAMES, RollParams, Servo
+from rollenv.flight import FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
     OBSERVATION_NAMES,
     Cfg,
@@ -77,6 +78,11 @@ TASKS = ("angle", "rate")
 DISTURBANCES = ("replay", "surrogate", "posterior", "none")
 SETPOINTS = ("steps", "zero")
 SPLITS = ("train", "test")
+ANGLE_SENSORS = ("encoder", "gyro")
+FLIGHT_TURBULENCE = ("tunnel", "dryden")
+GUST_SEVERITIES = ("light", "moderate", "severe")
+#: Episode length of the tunnel (no ``flight``), s.
+TUNNEL_EPISODE_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -93,14 +99,35 @@ class RollConfig:
     substep_s : float
         Integration substep δt, s (the paper's 0.01 s); ``dt_s`` must be a
         whole number of substeps and so must the traces' Δt.
-    episode_s : float
+    episode_s : float or None
         Episode length, s; the environment truncates after
-        ``round(episode_s / dt_s)`` steps.
+        ``round(episode_s / dt_s)`` steps.  Default (None): 60 s in the
+        tunnel, the whole flight (to apogee) with ``flight``; a flight may be
+        cut shorter, not longer.
     rate_limit_dps, fin_range_deg : float
         Servo slew-rate limit (eq. 23: 150 °/s) and fin range (±40°).
     sensors : bool
-        Sensor model on: encoder quantisation and gyro noise.  Off: the
-        observation holds the true angle and rate.
+        Sensor model on: encoder quantisation (or the integrated gyro) and
+        gyro noise.  Off: the observation holds the true angle and rate.
+    angle_sensor : str
+        Where the measured angle comes from: ``"encoder"`` (the tunnel rig's
+        shaft encoder, quantised) or ``"gyro"`` (a flight computer: the gyro's
+        readings summed over each control step, ``φ̂ += Δt·v̂``, from the true
+        angle at the start -- noise and the rectangle rule make it drift).
+    flight : str or None
+        None: the wind tunnel (constant airspeed).  Else the ascent the rocket
+        flies (:func:`rollenv.flight.flight_profile`: ``"default"``, a rocket
+        YAML or a recorded ``V(t)`` CSV): the episode runs from 50 km/h to
+        apogee and the rocket's gain and damping follow the airspeed and air
+        density every control step (:mod:`rollenv.flight`).
+    flight_turbulence : str
+        With ``flight``: ``"tunnel"`` (default) flies the database's traces
+        (``disturbance`` chooses which), time-compressed and scaled by
+        :mod:`disturbances.flight`; ``"dryden"`` draws the standard
+        atmosphere's roll gust instead (:mod:`disturbances.dryden`).
+    gust_severity : str
+        ``"light"``, ``"moderate"`` or ``"severe"`` (the Dryden model's
+        turbulence levels; ``flight_turbulence="dryden"`` only).
     encoder_counts : int
         Encoder counts per revolution (256: 1.40625° resolution); 0 turns
         quantisation off.
@@ -151,13 +178,17 @@ class RollConfig:
     task: str = "angle"
     dt_s: float = 0.1
     substep_s: float = 0.01
-    episode_s: float = 60.0
+    episode_s: float | None = None
     rate_limit_dps: float = Servo().rate_limit_dps
     fin_range_deg: float = Servo().range_deg
     sensors: bool = True
     encoder_counts: int = 256
     gyro_noise_pct: float = 2.0
     gyro_range_dps: float = 250.0
+    angle_sensor: str = "encoder"
+    flight: str | None = None
+    flight_turbulence: str = "tunnel"
+    gust_severity: str = "light"
     disturbance: str | None = None
     disturbance_scale: float = 1.0
     model: str = "theta"
@@ -192,12 +223,18 @@ class RollConfig:
             ("model", MODEL_NAMES),
             ("setpoint", SETPOINTS),
             ("split", SPLITS),
+            ("angle_sensor", ANGLE_SENSORS),
+            ("flight_turbulence", FLIGHT_TURBULENCE),
+            ("gust_severity", GUST_SEVERITIES),
         ):
             value = getattr(self, name)
             if value not in allowed:
                 raise ValueError(
                     f"{name} must be one of {', '.join(map(repr, allowed))}, not {value!r}"
                 )
+        if self.flight is not None and not isinstance(self.flight, str):
+            raise TypeError(f"flight must be a profile name or path, got {self.flight!r}")
+        self._resolve_episode()
         positive = (
             "dt_s",
             "substep_s",
@@ -240,14 +277,69 @@ class RollConfig:
             raise ValueError(
                 f"dt_s = {self.dt_s:g} s must be a whole number of substeps of {self.substep_s:g} s"
             )
-        steps = self.episode_s / self.dt_s
+        steps = self.episode_length_s / self.dt_s
         if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * steps:
             raise ValueError(
                 f"episode_s = {self.episode_s:g} s must be a whole number of control steps "
                 f"of {self.dt_s:g} s"
             )
 
+    def _resolve_episode(self) -> None:
+        """``episode_s`` from the tunnel's default or the flight's length (a given one no
+        longer than the flight)."""
+        given = self.episode_s
+        if given is not None and (
+            isinstance(given, bool) or not isinstance(given, numbers.Real) or not given > 0
+        ):
+            raise ValueError(f"episode_s must be a positive number, got {given!r}")
+        if self.flight is None:
+            object.__setattr__(self, "episode_s", TUNNEL_EPISODE_S if given is None else given)
+            return
+        for name in ("dt_s", "substep_s"):  # the schedule needs them; checked again below
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        full = self.flight_schedule
+        assert full is not None
+        if given is None:
+            object.__setattr__(self, "episode_s", full.duration_s)
+        elif given > full.duration_s + 1e-9:
+            raise ValueError(
+                f"episode_s = {given:g} s is longer than the flight ({full.duration_s:g} s "
+                f"from {full.v_ref_mps * 3.6:.0f} km/h to apogee)"
+            )
+
     # ------------------------------------------------------------ derived values
+    @property
+    def episode_length_s(self) -> float:
+        """``episode_s``, resolved (a float once the configuration exists)."""
+        assert self.episode_s is not None
+        return float(self.episode_s)
+
+    @property
+    def flight_schedule(self) -> FlightSchedule | None:
+        """The flight on this configuration's grid (None in the tunnel)."""
+        if self.flight is None:
+            return None
+        return flight_schedule(self.flight, self.dt_s, self.substep_s)
+
+    def flights(self, bank: TraceBank) -> TraceBank:
+        """The traces this configuration replays from ``bank``: ``bank`` itself in the
+        tunnel; in flight its flights (:func:`rollenv.flight.for_flight`: the tunnel traces
+        flown or Dryden's gusts, one episode each; cached)."""
+        schedule = self.flight_schedule
+        if schedule is None:
+            return bank
+        return for_flight(
+            bank,
+            schedule,
+            steps=self.max_episode_steps,
+            substeps=self.substeps,
+            turbulence=self.flight_turbulence,
+            severity=self.gust_severity,
+            split=self.split,
+        )
+
     @property
     def substeps(self) -> int:
         """Substeps per control step."""
@@ -256,7 +348,7 @@ class RollConfig:
     @property
     def max_episode_steps(self) -> int:
         """Control steps per episode."""
-        return round(self.episode_s / self.dt_s)
+        return round(self.episode_length_s / self.dt_s)
 
     @property
     def setpoint_max(self) -> float:
@@ -312,6 +404,7 @@ class RollConfig:
         cfg[Cfg.SETPOINT_PERIOD] = self.setpoint_period_steps
         cfg[Cfg.ERROR_MAX] = observation_bounds(self)[0][Obs.ERROR]
         cfg[Cfg.U_PER] = 1.0  # set by RollBatch from the bank's Δt
+        cfg[Cfg.ANGLE_GYRO] = 1.0 if self.sensors and self.angle_sensor == "gyro" else 0.0
         return cfg
 
 
@@ -341,6 +434,13 @@ def _wrap(angle_deg: float) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
+def _gyro(rate: float, eps: float, cfg: FloatArray) -> float:
+    """The gyro's reading of ``rate`` (eq. 52's noise with the draw ``eps``, clipped)."""
+    gyro = cfg[Cfg.GYRO_RANGE]
+    return min(max((1.0 + cfg[Cfg.GYRO_ETA] * eps) * rate, -gyro), gyro)
+
+
+@numba.njit(cache=True, nogil=True)
 def _observe_one(
     i: int,
     state: FloatArray,
@@ -354,11 +454,11 @@ def _observe_one(
     angle = state[i, State.ANGLE]
     res = cfg[Cfg.ENCODER_RES]
     measured_angle = angle
-    if res > 0.0:
+    if cfg[Cfg.ANGLE_GYRO] > 0.0:
+        measured_angle = state[i, State.GYRO_ANGLE]
+    elif res > 0.0:
         measured_angle = math.floor(angle / res + 1e-9) * res
-    measured_rate = (1.0 + cfg[Cfg.GYRO_ETA] * eps) * rate
-    gyro = cfg[Cfg.GYRO_RANGE]
-    measured_rate = min(max(measured_rate, -gyro), gyro)
+    measured_rate = _gyro(rate, eps, cfg)
     if cfg[Cfg.TASK_RATE] > 0.0:
         error = setpoint - rate
         measured_error = setpoint - measured_rate
@@ -485,6 +585,8 @@ def _step_envs(
         state[i, State.COMMAND] = command
         cursor[i, Cursor.STEP] = step + 1
         u_now[i] = u
+        if cfg[Cfg.ANGLE_GYRO] > 0.0:  # the flight computer sums the gyro's reading
+            state[i, State.GYRO_ANGLE] += n_sub * h * _gyro(v, eps[k], cfg)
         sp = setpoints[i, min((step + 1) // period, last_sp)]
         err = _observe_one(i, state, sp, eps[k], cfg, obs)
         error[i] = err
@@ -550,6 +652,8 @@ class RollBatch:
     ) -> None:
         if n < 1:
             raise ValueError(f"the batch needs at least one environment, got {n}")
+        bank = config.flights(bank)  # in flight, a tunnel bank is flown first
+        schedule = config.flight_schedule
         self.config = config
         self.bank = bank
         self.n = n
@@ -580,8 +684,14 @@ class RollBatch:
         self._cursor_views()
         self.params = np.zeros((n, len(Param)))
         # Multipliers of the rocket's parameters (Scale columns): row 0 is the constant
-        # rocket (all ones, stride 0); a per-step schedule gets a block of its own.
+        # rocket (all ones, stride 0); in flight rows 1.. are the flight's, shared by every
+        # env (stride 1); a schedule given at reset gets a block of its own after those.
         self.scales = np.ones((1, len(Scale)))
+        self._default_scale = (0, 0)  # (start, stride) of an env without its own schedule
+        if schedule is not None:
+            self.scales = np.vstack([self.scales, schedule.scales[: config.max_episode_steps]])
+            self._default_scale = (1, 1)
+        self._base_rows = self.scales.shape[0]
         self._scales_shared = False
         self.trace = np.zeros(n, dtype=np.int64)
         self.start = np.zeros(n, dtype=np.int64)
@@ -682,13 +792,16 @@ class RollBatch:
         p = self.params[index]
         gain = self.scales[self.scale_start[index], Scale.GAIN]
         u0 = self.cfg[Cfg.U_SCALE] * self.u_flat[self.u_start[index]]
-        if rate_dps is None:  # the steady rate for the initial fin angle (eq. 16, 36)
+        if rate_dps is None and cfg.flight is not None:  # off the launch rail: not rolling
+            self.state[index, State.RATE] = 0.0
+        elif rate_dps is None:  # the steady rate for the initial fin angle (eq. 16, 36)
             self.state[index, State.RATE] = (
                 p[:, Param.ALPHA] * gain * (fin + p[:, Param.THETA_BAR] + u0)
             )
         else:
             self.state[index, State.RATE] = float(rate_dps)
         self.state[index, State.ANGLE] = angles
+        self.state[index, State.GYRO_ANGLE] = angles  # aligned on the pad
         self.state[index, State.FIN] = fin
         self.state[index, State.COMMAND] = fin
         self.step_count[index] = 0
@@ -785,8 +898,7 @@ class RollBatch:
     def _set_scales(self, index: IntArray, scales: FloatArray | None) -> None:
         """Give the envs in ``index`` the constant rocket, or the multipliers ``scales``."""
         if scales is None:
-            self.scale_start[index] = 0
-            self.scale_stride[index] = 0
+            self.scale_start[index], self.scale_stride[index] = self._default_scale
             return
         values = np.asarray(scales, dtype=np.float64)
         steps = self.config.max_episode_steps
@@ -802,7 +914,7 @@ class RollBatch:
             raise ValueError("scales must be finite and positive")
         self._own_scales()
         for i in np.asarray(index).tolist():
-            first = 1 + i * steps
+            first = self._base_rows + i * steps
             self.scales[first : first + steps] = values
             self.scale_start[i] = first
             self.scale_stride[i] = 1
@@ -810,18 +922,21 @@ class RollBatch:
     def _own_scales(self) -> None:
         """A table of multipliers this batch may write: one block of rows per env.
 
-        The first schedule grows the one-row table; a table shared by
-        :meth:`copy_env` is copied first, each env's schedule into its block.
+        The first schedule grows the table of the constant rocket (and the
+        flight's rows); a table shared by :meth:`copy_env` is copied first,
+        each env's own schedule into its block.
         """
         steps = self.config.max_episode_steps
-        size = 1 + self.n * steps
+        base = self._base_rows
+        size = base + self.n * steps
         if not self._scales_shared and self.scales.shape[0] == size:
             return
         old = self.scales
         table = np.ones((size, len(Scale)))
+        table[:base] = old[:base]
         k = np.arange(steps)
-        for i in np.flatnonzero(self.scale_stride).tolist():
-            first = 1 + i * steps
+        for i in np.flatnonzero(self.scale_start >= base).tolist():
+            first = base + i * steps
             table[first : first + steps] = old[self.scale_start[i] + k * self.scale_stride[i]]
             self.scale_start[i] = first
             self.scale_stride[i] = 1

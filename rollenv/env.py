@@ -193,9 +193,13 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
       ``disturbance_scale`` (1.0); ``model`` "theta" | "constant";
       ``domain_randomization`` (False: α, θ̄, β̄, ᾱ drawn each reset uniformly
       over the range found among the bank's traces);
-    * timing: ``dt_s`` (0.1), ``substep_s`` (0.01), ``episode_s`` (60);
-    * sensors: ``sensors`` (True), ``encoder_counts`` (256),
-      ``gyro_noise_pct`` (2), ``gyro_range_dps`` (250);
+    * timing: ``dt_s`` (0.1), ``substep_s`` (0.01), ``episode_s`` (60; a
+      flight's: to apogee);
+    * sensors: ``sensors`` (True), ``angle_sensor`` "encoder" | "gyro",
+      ``encoder_counts`` (256), ``gyro_noise_pct`` (2), ``gyro_range_dps``
+      (250);
+    * flight (below): ``flight`` (None: the tunnel), ``flight_turbulence``
+      "tunnel" | "dryden", ``gust_severity``;
     * setpoints: ``setpoint`` "steps" | "zero", ``setpoint_period_s``,
       ``setpoint_range``, ``initial_angle_deg``;
     * reward: ``error_scale``, ``rate_scale_dps``, ``rate_weight``,
@@ -222,9 +226,53 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
     >>> type(reward), terminated, truncated
     (<class 'float'>, False, False)
 
+    ## Flight: ``RocketRollFlight-v0`` and ``RocketRollFlightRate-v0``
+
+    The same rocket, off the tunnel's shaft and flying: ``flight="default"``
+    (or a rocket YAML, or a recorded ``V(t)`` CSV; :mod:`rollenv.flight`), with
+    ``angle_sensor="gyro"`` and ``setpoint="zero"``: hold the roll angle (or
+    stop the roll) from launch to apogee.
+
+    * **Episode**: from the moment the airspeed reaches the tunnel's 50 km/h
+      (the rocket has left its rail, not rolling: rate 0) to apogee, in whole
+      control steps -- 212 steps (21.2 s) of the default ascent, whose
+      airspeed peaks at 603 km/h (Mach 0.50) at burnout and whose apogee is
+      2010 m (:func:`identification.flight.simulate_ascent`).  Truncation at
+      apogee; no termination.
+    * **Transition**: the dynamics above with the rocket's coefficients
+      scaled every control step by the airspeed ``V`` and density ``ρ`` at
+      the step's midpoint, from eq. 4-8 (``c ∝ ρV``, ``b ∝ ρV²``)::
+
+          α(t) = α·V/V_ref,    a(θ, t) = a(θ)·ρV/(ρ_ref·V_ref),    θ̄ unchanged
+
+      with ``V_ref`` = 50 km/h and ``ρ_ref`` the ISA's sea level (the tunnel
+      where the model was identified); ᾱ and β̄ scale together, like ``a``.
+      Assumed: constant ``C_P``, ``C_δ`` and inertia (subsonic; the paper's
+      §4 warns of change past Mach 0.8), and an asymmetry θ̄ that does not
+      depend on airspeed.  The factors are held at 0.001 or above as ``V → 0``
+      at apogee.  At 600 km/h the gain and the damping are 12× the tunnel's:
+      a fin that rolls the rocket at 26 °/s in the tunnel rolls it at over
+      300 °/s in flight.
+    * **Sensors**: no encoder; the rate gyro (eq. 52's noise, ±250 °/s) and
+      the flight computer's angle, its readings summed over each control
+      step from the true angle at launch (``φ̂ += Δt·v̂``), so it drifts.
+    * **Turbulence** (``flight_turbulence``): ``"tunnel"`` (default) flies the
+      database's traces: time compressed by ``V/V_ref`` (Taylor's frozen
+      turbulence) and the flow angle scaled by ``V_ref/V`` (the tunnel's gust
+      velocities; :mod:`disturbances.flight`), so the replay keeps the
+      database's identified data and its train/test split.  ``"dryden"``:
+      the Dryden roll gust of MIL-F-8785C (``gust_severity`` light, moderate
+      or severe; :mod:`disturbances.dryden`), ``u_d = p_g/α(t)``.  Tunnel
+      turbulence is the default because it is this project's measured data
+      (and stronger than the free atmosphere's: a cautious default); Dryden is
+      the standard model to check a controller against.
+    * **Info** adds ``airspeed_mps``, ``altitude_m``, ``dynamic_pressure_pa``
+      and ``mach`` at the observation's time.
+
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version (the flight variants added without changing the
+      tunnel's: their episodes, observations and rewards are the same).
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 (Gymnasium's convention; copied per instance)
@@ -247,7 +295,8 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
                 f"not {render_mode!r}"
             )
         self.render_mode = render_mode
-        self.bank = load_bank(self.config, db) if bank is None else bank
+        # in flight a given tunnel bank becomes its flights (load_bank's are already)
+        self.bank = load_bank(self.config, db) if bank is None else self.config.flights(bank)
         self._batch = RollBatch(self.config, self.bank, 1)
         self._index = self._batch.all
         self._action = np.zeros(1)
@@ -256,6 +305,8 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
         self._started = False
         self._max_steps = self.config.max_episode_steps
         self._episode: dict[str, Any] = {}
+        schedule = self.config.flight_schedule
+        self._flight_columns = tuple(schedule.at_steps.items()) if schedule is not None else ()
         self._initial: dict[str, float] = {}
         self._history = HistoryRecorder(self.config.max_episode_steps + 1)
         self._renderer: Any = None
@@ -385,6 +436,7 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
             "tracking_error": float(b.error[0]),
             "time_s": round(step * self.config.dt_s, 9),
             **self._episode,
+            **{name: float(column[step]) for name, column in self._flight_columns},
         }
 
     def _episode_info(self) -> dict[str, Any]:

@@ -50,6 +50,7 @@ class State(IntEnum):
     ANGLE = 1  #: roll angle φ, ° (unwrapped)
     FIN = 2  #: the servo's actual fin angle θ, °
     COMMAND = 3  #: the last fin command, °
+    GYRO_ANGLE = 4  #: the flight computer's angle: the gyro's readings integrated, °
 
 
 class Obs(IntEnum):
@@ -108,8 +109,10 @@ class Scale(IntEnum):
 
     At control step ``k`` the kernel uses ``α·gain[k]`` and the damping
     ``a(θ)·damping[k]`` (``β̄`` and ``ᾱ`` both scaled); θ̄ stays.  With
-    airspeed ``V``, eq. 4-8 give ``b ∝ V²`` and ``c ∝ V``, so ``α = b/c`` and
-    ``a = c/I`` both grow like ``V``.  All ones is the rocket of the database.
+    airspeed ``V`` and density ``ρ``, eq. 4-8 give ``b ∝ ρV²`` and ``c ∝ ρV``,
+    so ``α = b/c`` grows like ``V`` and ``a = c/I`` like ``ρV``
+    (:func:`identification.flight.roll_scales`).  All ones is the rocket of the
+    database.
     """
 
     GAIN = 0  #: multiplies α
@@ -145,3 +148,4 @@ class Cfg(IntEnum):
     SETPOINT_PERIOD = 14  #: control steps between setpoint changes
     ERROR_MAX = 15  #: bound of the observed error
     U_PER = 16  #: substeps per u_d sample (set by the bank)
+    ANGLE_GYRO = 17  #: 1: the angle is the integrated gyro (flight), 0: the encoder

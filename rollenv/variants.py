@@ -3,7 +3,8 @@
 :func:`register_variant` registers a variant with Gymnasium and in
 :data:`VARIANTS`; the command line (``--env-id``), training, tuning and the
 evaluation read it from there (:func:`rollenv.bank.variant_config`).
-Importing this module registers ``RocketRoll-v0`` and ``RocketRollRate-v0``.
+Importing this module registers ``RocketRoll-v0`` and ``RocketRollRate-v0`` (the
+tunnel) and ``RocketRollFlight-v0`` and ``RocketRollFlightRate-v0`` (the flight).
 """
 
 from __future__ import annotations
@@ -80,3 +81,19 @@ def task_of(env_id: str) -> str:
 
 register_variant("RocketRoll-v0", task="angle", summary="hold the roll angle at a setpoint")
 register_variant("RocketRollRate-v0", task="rate", summary="track a roll-rate setpoint")
+register_variant(
+    "RocketRollFlight-v0",
+    task="angle",
+    flight="default",
+    angle_sensor="gyro",
+    setpoint="zero",
+    summary="hold the roll angle in flight, from 50 km/h to apogee (600 km/h, 2 km)",
+)
+register_variant(
+    "RocketRollFlightRate-v0",
+    task="rate",
+    flight="default",
+    angle_sensor="gyro",
+    setpoint="zero",
+    summary="stop the roll in flight (zero roll rate), from 50 km/h to apogee",
+)

@@ -96,7 +96,8 @@ class RocketRollVectorEnv(
         self.config = make_config(type(self).__name__, settings)
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
-        self.bank = load_bank(self.config, db) if bank is None else bank
+        # in flight a given tunnel bank becomes its flights (load_bank's are already)
+        self.bank = load_bank(self.config, db) if bank is None else self.config.flights(bank)
         self._batch = RollBatch(self.config, self.bank, self.num_envs, parallel=parallel)
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.dt_s}
         self.single_action_space, self.single_observation_space = make_spaces(self.config)
@@ -210,6 +211,10 @@ class RocketRollVectorEnv(
             "setpoint": b.setpoint_now(),
             "tracking_error": b.error.copy(),
         }
+        schedule = self.config.flight_schedule
+        if schedule is not None:
+            for name, column in schedule.at_steps.items():
+                values[name] = column[b.step_count]
         info: dict[str, Any] = {}
         for key, value in values.items():
             info[key] = value

@@ -30,6 +30,7 @@ import rollenv
 from disturbances.bank import TraceBank
 from disturbances.default import open_default
 from identification.model import Servo, servo_path, simulate
+from rollenv.bank import variant_config
 from rollenv.env import RESET_OPTIONS, RocketRollEnv
 from tests.rollenv.conftest import array_bank, wrap
 
@@ -142,10 +143,11 @@ def test_same_seed_same_rollout_other_seed_another(env_id, default_db):
     # Two separate instances (no shared state), the database's traces, sensors on,
     # setpoint steps: every source of randomness is the seed.
     kwargs: dict[str, Any] = {"setpoint_period_s": 2.0, "initial_angle_deg": 30.0}
-    a = rollout(gym.make(env_id, **kwargs), seed=11, steps=300)
-    b = rollout(gym.make(env_id, **kwargs), seed=11, steps=300)
+    steps = min(300, variant_config(env_id).max_episode_steps)  # a flight is 212 steps
+    a = rollout(gym.make(env_id, **kwargs), seed=11, steps=steps)
+    b = rollout(gym.make(env_id, **kwargs), seed=11, steps=steps)
     assert_same_rollout(a, b)
-    c = rollout(gym.make(env_id, **kwargs), seed=12, steps=300)
+    c = rollout(gym.make(env_id, **kwargs), seed=12, steps=steps)
     assert not np.array_equal(a[0], c[0])
     assert a[1] != c[1]
 
@@ -614,7 +616,9 @@ def test_importing_rollenv_only_registers():
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "['RocketRoll-v0', 'RocketRollRate-v0']"
+    assert done.stdout.strip() == (
+        "['RocketRoll-v0', 'RocketRollFlight-v0', 'RocketRollFlightRate-v0', 'RocketRollRate-v0']"
+    )
     assert rollenv.RocketRollEnv is RocketRollEnv
     with pytest.raises(AttributeError, match="no attribute 'Nope'"):
         rollenv.Nope  # noqa: B018

@@ -1,0 +1,322 @@
+"""The rocket in flight: the identified roll model carried along an ascent (issue 17, §4).
+
+A flight environment (``flight=`` of :class:`rollenv.core.RollConfig`) is the
+tunnel's environment with three things changed, all decided here once per
+configuration:
+
+* **the episode** runs from the moment the airspeed first reaches the
+  tunnel's ``V_ref`` (50 km/h: the rocket has left its launch rail and the
+  fins have the authority the tunnel identified) to apogee, in whole control
+  steps;
+* **the rocket** changes every control step: gain ``α·V/V_ref`` and damping
+  ``a(θ)·ρV/(ρ_ref·V_ref)`` (eq. 4-8; :func:`identification.flight.roll_scales`),
+  taken at the step's midpoint.  Both vanish as ``V → 0`` at apogee; they are
+  held at :data:`MIN_SCALE` or above, where the rocket simply keeps rolling;
+* **the turbulence** is flown: a tunnel trace time-compressed and scaled by
+  :mod:`disturbances.flight`, sampled on the env's substep grid.
+
+Documented assumptions: constant ``C_P``, ``C_δ`` and inertia (subsonic: the
+default flight peaks at Mach 0.5, the paper's §4 warns of change past 0.8);
+θ̄ (a geometric asymmetry) does not change with airspeed; ᾱ and β̄ of a(θ)
+scale together, like ``a``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from disturbances.bank import TraceBank
+from disturbances.flight import flight_bank
+from identification.flight import (
+    DEFAULT_ASCENT,
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    TUNNEL_AIRSPEED_MPS,
+    FlightProfile,
+    load_ascent_yaml,
+    load_profile_csv,
+    roll_scales,
+    simulate_ascent,
+)
+from rocketroll_common.arrays import FloatArray, readonly_array
+
+__all__ = [
+    "INFO_COLUMNS",
+    "MIN_SCALE",
+    "FlightSchedule",
+    "flight_profile",
+    "flight_schedule",
+    "for_flight",
+    "turbulence_of",
+]
+
+#: What a flight env's ``info`` adds (:class:`identification.flight.FlightState` fields).
+INFO_COLUMNS = ("airspeed_mps", "altitude_m", "dynamic_pressure_pa", "mach")
+
+#: The smallest gain and damping multiplier (near apogee the airflow, and with it the roll
+#: model's coefficients, vanish; the kernel needs them positive).
+MIN_SCALE = 1e-3
+
+
+def flight_profile(name: str) -> FlightProfile:
+    """The ascent called ``name``: ``"default"`` (:data:`identification.flight.DEFAULT_ASCENT`
+    simulated), a rocket-and-motor YAML (``.yml``/``.yaml``,
+    :func:`identification.flight.load_ascent_yaml`, simulated) or a recorded ``V(t)`` CSV
+    (:func:`identification.flight.load_profile_csv`).  Cached per file state."""
+    if name == "default":
+        return _profile(name, 0, 0)
+    path = Path(name)
+    if path.suffix.lower() not in (".yml", ".yaml", ".csv"):
+        raise ValueError(
+            f"flight: {name!r} is neither 'default' nor a .yml/.yaml rocket or a .csv profile"
+        )
+    try:
+        stat = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"flight: {name}: {exc.strerror or 'cannot be read'}") from None
+    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _profile(name: str, mtime_ns: int, size: int) -> FlightProfile:
+    del mtime_ns, size  # the cache key: a changed file is read again
+    if name == "default":
+        return simulate_ascent(DEFAULT_ASCENT)
+    if name.lower().endswith(".csv"):
+        return load_profile_csv(name)
+    return simulate_ascent(load_ascent_yaml(name))
+
+
+@dataclass(frozen=True, eq=False)
+class FlightSchedule:
+    """One flight on the environment's time grid.
+
+    Attributes
+    ----------
+    profile : FlightProfile
+        The ascent.
+    start_s : float
+        Profile time of the episode's start (the airspeed first reaches ``v_ref_mps``), s.
+    steps : int
+        Control steps to apogee.
+    dt_s : float
+        Control step, s.
+    scales : ndarray, shape (steps, 2)
+        Gain and damping multipliers per control step (:class:`rollenv.layout.Scale`).
+    edges_s : ndarray, shape (steps·substeps + 1,)
+        Episode time of the substep edges (the flown ``u_d`` samples), s.
+    airspeed_edges_mps, altitude_edges_m : ndarray, shape (steps·substeps + 1,)
+        Airspeed, m/s, and altitude above sea level, m, at those edges.
+    at_steps : dict of str to ndarray, shape (steps + 1,)
+        What the flight is at the start of each control step (and at its end):
+        ``airspeed_mps``, ``altitude_m``, ``dynamic_pressure_pa``, ``mach``
+        (the env's ``info``; precomputed, so a step reads them, not interpolates).
+    v_ref_mps, rho_ref_kgm3 : float
+        The tunnel's airspeed and density (where the model was identified).
+    """
+
+    profile: FlightProfile
+    start_s: float
+    steps: int
+    dt_s: float
+    scales: FloatArray
+    edges_s: FloatArray
+    airspeed_edges_mps: FloatArray
+    altitude_edges_m: FloatArray
+    at_steps: dict[str, FloatArray]
+    v_ref_mps: float
+    rho_ref_kgm3: float
+
+    @property
+    def duration_s(self) -> float:
+        """Episode length, s."""
+        return self.steps * self.dt_s
+
+    def step_times_s(self) -> FloatArray:
+        """Profile time at the start of each control step, s."""
+        return np.asarray(self.start_s + self.dt_s * np.arange(self.steps))
+
+    def __repr__(self) -> str:
+        gain = self.scales[:, 0]
+        return (
+            f"FlightSchedule({self.steps} steps of {self.dt_s:g} s from t={self.start_s:.2f} s, "
+            f"gain {gain.min():.3g}..{gain.max():.3g}, {self.profile.source})"
+        )
+
+
+def flight_schedule(
+    name: str,
+    dt_s: float,
+    substep_s: float,
+    v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
+    rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+) -> FlightSchedule:
+    """The flight ``name`` (:func:`flight_profile`) on a grid of ``dt_s`` control steps of
+    ``substep_s`` substeps; ``ValueError`` if it never reaches ``v_ref_mps`` or is shorter
+    than one control step after that.  Cached per profile and grid."""
+    return _schedule(flight_profile(name), dt_s, substep_s, v_ref_mps, rho_ref_kgm3)
+
+
+@functools.lru_cache(maxsize=16)
+def _schedule(
+    profile: FlightProfile, dt_s: float, substep_s: float, v_ref_mps: float, rho_ref_kgm3: float
+) -> FlightSchedule:
+    fast = np.flatnonzero(profile.airspeed_mps >= v_ref_mps)
+    if fast.size == 0:
+        raise ValueError(
+            f"flight: {profile.source} never reaches the tunnel's airspeed "
+            f"{v_ref_mps:.1f} m/s (its fastest: {profile.max_speed_mps:.1f} m/s)"
+        )
+    k = int(fast[0])
+    if k == 0:
+        start = float(profile.t_s[0])
+    else:  # where the airspeed crosses v_ref, between samples k - 1 and k
+        t0, t1 = profile.t_s[k - 1], profile.t_s[k]
+        v0, v1 = profile.airspeed_mps[k - 1], profile.airspeed_mps[k]
+        start = float(t0 + (t1 - t0) * (v_ref_mps - v0) / (v1 - v0))
+    end = float(profile.apogee_s if math.isfinite(profile.apogee_s) else profile.t_s[-1])
+    steps = math.floor((end - start) / dt_s + 1e-9)
+    if steps < 1:
+        raise ValueError(f"flight: {profile.source} lasts less than one control step")
+    middle = profile.at(start + dt_s * (np.arange(steps) + 0.5))
+    gain, damping = roll_scales(middle.airspeed_mps, middle.density_kgm3, v_ref_mps, rho_ref_kgm3)
+    scales = np.maximum(np.column_stack([gain, damping]), MIN_SCALE)
+    substeps = round(dt_s / substep_s)
+    edges = substep_s * np.arange(steps * substeps + 1)
+    along = profile.at(start + edges)
+    at = profile.at(start + dt_s * np.arange(steps + 1))
+    at_steps = {name: readonly_array(np.asarray(getattr(at, name))) for name in INFO_COLUMNS}
+    return FlightSchedule(
+        profile=profile,
+        start_s=start,
+        steps=steps,
+        dt_s=dt_s,
+        scales=readonly_array(scales),
+        edges_s=readonly_array(edges),
+        airspeed_edges_mps=readonly_array(np.asarray(along.airspeed_mps)),
+        altitude_edges_m=readonly_array(np.asarray(along.altitude_m)),
+        at_steps=at_steps,
+        v_ref_mps=v_ref_mps,
+        rho_ref_kgm3=rho_ref_kgm3,
+    )
+
+
+#: Dryden flights per split: each one episode of the roll gust, seeded by split and index.
+DRYDEN_FLIGHTS = 256
+#: The Dryden flights' seeds: the train and the test split never share a flight.
+_DRYDEN_SEED = 20261124
+_SPLIT_INDEX = {"train": 0, "test": 1}
+
+
+def turbulence_of(bank: TraceBank) -> str | None:
+    """``"tunnel"`` or ``"dryden"`` for a bank of flights (:func:`for_flight`), None for
+    tunnel traces."""
+    kinds = {t.settings.get("turbulence") for t in bank.traces}
+    if kinds == {None}:
+        return None
+    if len(kinds) != 1:
+        raise ValueError(f"{bank.description}: mixes flights and tunnel traces")
+    return str(kinds.pop())
+
+
+#: Banks of flights by (tunnel bank, schedule, steps, turbulence, severity, split).
+_FLIGHTS: dict[tuple[object, ...], tuple[TraceBank, TraceBank]] = {}
+
+
+def for_flight(
+    bank: TraceBank,
+    schedule: FlightSchedule,
+    *,
+    steps: int,
+    substeps: int,
+    turbulence: str = "tunnel",
+    severity: str = "light",
+    split: str = "train",
+) -> TraceBank:
+    """The flights an env replays: one trace per flight, ``steps`` control steps of
+    ``substeps`` substeps, on ``bank``'s rockets.  Cached.
+
+    ``turbulence="tunnel"``: ``bank``'s traces flown (:func:`disturbances.flight.flight_bank`).
+    ``"dryden"``: :data:`DRYDEN_FLIGHTS` draws of the Dryden roll gust ``p_g``
+    (:func:`disturbances.dryden.roll_gust`, ``severity``, seeded by ``split``) along the
+    flight, the rockets taken in turn from ``bank``, as the equivalent fin angle
+    ``u_d = p_g / (α₀·gain)``: the gust rolls the air the damping works against, ``a·(v -
+    p_g)``, which is eq. 36 with ``α·u_d = p_g``.  A bank of flights of that turbulence is
+    returned as it is.
+    """
+    made = turbulence_of(bank)
+    if made == turbulence:
+        return bank
+    if made is not None:
+        raise ValueError(f"{bank.description}: flights of {made} turbulence, not {turbulence}")
+    key = (id(bank), id(schedule), steps, turbulence, severity, split)
+    hit = _FLIGHTS.get(key)
+    if hit is not None and hit[0] is bank:
+        return hit[1]
+    m = steps * substeps + 1
+    if turbulence == "tunnel":
+        result = flight_bank(
+            bank,
+            schedule.edges_s[:m],
+            schedule.airspeed_edges_mps[:m],
+            v_ref_mps=schedule.v_ref_mps,
+            marks={"turbulence": "tunnel"},
+        )
+    elif turbulence == "dryden":
+        result = _dryden(bank, schedule, m, substeps, severity, split)
+    else:
+        raise ValueError(f"turbulence must be 'tunnel' or 'dryden', not {turbulence!r}")
+    if len(_FLIGHTS) >= 8:
+        _FLIGHTS.clear()
+    _FLIGHTS[key] = (bank, result)
+    return result
+
+
+def _dryden(
+    bank: TraceBank, schedule: FlightSchedule, m: int, substeps: int, severity: str, split: str
+) -> TraceBank:
+    from disturbances.dryden import roll_gust
+    from disturbances.rows import checksum, plain_statistics
+
+    height = schedule.altitude_edges_m[:m] - schedule.profile.altitude_m[0]
+    rng = np.random.default_rng([_DRYDEN_SEED, _SPLIT_INDEX[split]])
+    gust = roll_gust(
+        schedule.edges_s[:m],
+        schedule.airspeed_edges_mps[:m],
+        np.maximum(height, 0.0),
+        severity=severity,  # type: ignore[arg-type]
+        rng=rng,
+        size=DRYDEN_FLIGHTS,
+    )
+    gain = np.repeat(schedule.scales[: (m - 1) // substeps, 0], substeps)
+    rows = []
+    for k in range(DRYDEN_FLIGHTS):
+        source = bank.traces[k % len(bank)]
+        u = gust[k] / (source.rocket().alpha * gain)
+        settings = {
+            "turbulence": "dryden",
+            "severity": severity,
+            "flown_from": source.uid,
+            "flight": k,
+            "split_seed": [_DRYDEN_SEED, _SPLIT_INDEX[split]],
+        }
+        rows.append(
+            dataclasses.replace(
+                source,
+                uid=f"{source.uid}@dryden-{severity}-{k}",
+                dt_s=float(schedule.edges_s[1] - schedule.edges_s[0]),
+                t0_s=0.0,
+                u_d_deg=u,
+                checksum=checksum(u),
+                settings={**dict(source.settings), **settings},
+                statistics=plain_statistics(u),
+                id=None,
+            )
+        )
+    return TraceBank(rows, f"{bank.description}, Dryden {severity} flights")
