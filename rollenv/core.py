@@ -376,8 +376,10 @@ class RollConfig:
 
     @property
     def encoder_resolution_deg(self) -> float:
-        """One encoder count, ° (0 without quantisation)."""
-        return 360.0 / self.encoder_counts if self.sensors and self.encoder_counts else 0.0
+        """One encoder count, ° (0 without quantisation: no sensors, no counts, or the angle
+        from the gyro)."""
+        encoder = self.sensors and self.encoder_counts and self.angle_sensor == "encoder"
+        return 360.0 / self.encoder_counts if encoder else 0.0
 
     @property
     def servo(self) -> Servo:

@@ -364,7 +364,8 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
         from rollenv.render import Renderer
 
         if self._renderer is None:
-            self._renderer = Renderer(self.render_mode, self.metadata["render_fps"])
+            title = self.spec.id if self.spec is not None else type(self).__name__
+            self._renderer = Renderer(self.render_mode, self.metadata["render_fps"], title=title)
         recent = self.history().tail(round(RENDER_HISTORY_S / self.config.dt_s) + 1)
         if self.render_mode == "rgb_array":
             frame: NDArray[np.uint8] = self._renderer.frame(recent)
@@ -409,11 +410,15 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
                 "no history: call reset() first, with a render_mode (only rendering records it)"
             )
         info = self.bank.traces[int(self._batch.trace[0])]
-        return self._history.history(
-            self.config.task,
-            self.config.fin_range_deg,
-            f"{info.uid} ({info.split}, {self.config.disturbance})",
-        )
+        label = f"{info.uid} ({info.split}, {self.config.disturbance})"
+        if self._flight_columns:  # where the rocket is on its flight now
+            now = dict(self._flight_columns)
+            k = int(self._batch.step_count[0])
+            label = (
+                f"V {now['airspeed_mps'][k] * 3.6:.0f} km/h, h {now['altitude_m'][k]:.0f} m, "
+                f"q {now['dynamic_pressure_pa'][k] / 1e3:.1f} kPa · {label}"
+            )
+        return self._history.history(self.config.task, self.config.fin_range_deg, label)
 
     @property
     def core(self) -> RollBatch:

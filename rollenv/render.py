@@ -198,9 +198,12 @@ class _Scene:
     background stale, and the next frame redraws it in full.
     """
 
-    def __init__(self, task: str, size: tuple[int, int], window_s: float) -> None:
+    def __init__(
+        self, task: str, size: tuple[int, int], window_s: float, title: str = "RocketRoll-v0"
+    ) -> None:
         width, height = size
         self.task = task
+        self.title = title
         self.window_s = window_s
         self.figure = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
         self.figure.set_facecolor("white")
@@ -239,7 +242,7 @@ class _Scene:
         self.figure.text(
             x_text,
             1.0 - 6.0 / height,
-            "RocketRoll-v0 · seen from the tail",
+            f"{self.title} · seen from the tail",
             fontsize=font * 1.15,
             weight="bold",
             va="top",
@@ -650,6 +653,8 @@ class Renderer:
     window_s : float, optional
         Shortest time span of the strip charts, s (10 s by default); a longer
         history widens them.
+    title : str, optional
+        What the frame is of (the environment's id), before "seen from the tail".
 
     Raises
     ------
@@ -687,6 +692,7 @@ class Renderer:
         size: tuple[int, int] = (720, 480),
         *,
         window_s: float = 10.0,
+        title: str = "RocketRoll-v0",
     ) -> None:
         if render_mode not in RENDER_MODES:
             raise ValueError(
@@ -710,6 +716,7 @@ class Renderer:
         self.fps = float(fps)
         self.size = (int(size[0]), int(size[1]))
         self.window_s = float(window_s)
+        self.title = str(title)
         self._scene: _Scene | None = None
         self._window: Any = None  # (figure, image) of the pyplot window in human mode
         self._window_state = "unopened"  # "unopened", "open" or "offscreen"
@@ -736,7 +743,7 @@ class Renderer:
             new array on every call; the same shape on every call.
         """
         if self._scene is None or self._scene.task != snap.task:
-            self._scene = _Scene(snap.task, self.size, self.window_s)
+            self._scene = _Scene(snap.task, self.size, self.window_s, self.title)
         self._scene.update(snap)
         pixels = self._scene.rgb()
         width, height = self.size
