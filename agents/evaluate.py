@@ -204,7 +204,9 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
 
     Over the steps after reset: the headline, the RMS error over the samples
     at least ``REGULATION_AFTER_S`` (at most 3/4 of a period) after the last
-    setpoint change or the start; the mean time to settle after a setpoint
+    setpoint change or the start (in flight: after a change only -- the rocket
+    leaves its rail on its setpoint, and the boost is what it must hold); the
+    mean time to settle after a setpoint
     change (NaN if the setpoint never changes); the settled RMS over the last
     quarter of each setpoint period, 7.5-10 s after a change by default (the
     episode's last quarter if no period ends within it); RMS and largest
@@ -222,7 +224,12 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     if not settled.any():  # a period as long as the episode: its last quarter
         settled = steps > len(error) - max(len(error) // 4, 1)
     after = min(round(REGULATION_AFTER_S[config.task] / config.dt_s), (3 * period) // 4)
-    regulating = _since_change(rollout.setpoint)[1:] >= after
+    since = _since_change(rollout.setpoint)
+    if config.flight is not None:  # launched on its setpoint: nothing to settle at the start
+        since = np.where(
+            np.cumsum(np.diff(rollout.setpoint, prepend=rollout.setpoint[0]) != 0) > 0, since, after
+        )
+    regulating = since[1:] >= after
     if not regulating.any():
         regulating = settled
     settle = settle_times(rollout, config)

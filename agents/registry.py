@@ -100,6 +100,12 @@ register_controller(
     default=True,
 )
 register_controller(
+    "pid-tunnel",
+    "agents.pid:make_tunnel_pid",
+    usage="pid-tunnel[:OMEGA]",
+    summary="the PID with the tunnel's fixed gains, unscheduled in flight (the cautionary row)",
+)
+register_controller(
     "observer",
     "agents.observer:make_observer",
     summary="u_d estimated on the fly (Kalman filter) and cancelled, LQR on the estimate",

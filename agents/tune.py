@@ -45,7 +45,7 @@ def tune_bandwidth(
     specs = protocol_episodes(config, episodes=episodes, seed=seed, db=db)
     out = []
     for omega in omegas:
-        pid = PIDController.for_env(config, model, omega, zeta, tf_s)
+        pid = PIDController.scheduled(config, model, omega, zeta, tf_s)  # fixed in the tunnel
         result = evaluate(config, pid, specs, db=db)
         out.append((float(omega), {k: v["mean"] for k, v in result.aggregate.items()}))
     return out
@@ -95,9 +95,10 @@ def tune(args: TuneArgs) -> int:
     sign = -1.0 if args.metric == "return" else 1.0
     best = min(results, key=lambda r: sign * r[1][args.metric])[0]
     gains = PIDGains.place(model, task, best)
+    where = " (at the tunnel's airspeed; in flight scheduled on q)" if config.flight else ""
     print(
         f"best ω by {args.metric} = {best:g} rad/s: kp = {gains.kp:.4g}, ki = {gains.ki:.4g}, "
-        f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°"
+        f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°{where}"
     )
     print(f"use it with: rocketroll eval --env-id {args.env_id} --policy pid:{best:g}")
     return 0
