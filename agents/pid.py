@@ -231,7 +231,9 @@ class PIDController:
 
         The controller counts its control steps from ``reset``: a flight computer with a
         launch detector reading the nominal flight's schedule by time since launch.
-        ``omega`` defaults to :data:`FLIGHT_BANDWIDTH`.  In the tunnel (no
+        Below the tunnel's airspeed (the last seconds before apogee) the schedule holds the
+        gains of ``V_ref`` at that altitude's density.  ``omega`` defaults to
+        :data:`FLIGHT_BANDWIDTH`.  In the tunnel (no
         ``config.flight``) these are :meth:`for_env`'s fixed gains.
         """
         flight = config.flight_schedule
@@ -241,17 +243,23 @@ class PIDController:
             omega = FLIGHT_BANDWIDTH[config.task]
         fixed = PIDGains.place(model, config.task, omega, zeta, tf_s)
         steps = flight.scales[: config.max_episode_steps]
+        # Below the tunnel's airspeed (near apogee) the schedule freezes at V_ref: placed on
+        # a vanishing a·α the gains would grow without bound where the fins have no
+        # authority left; the density ratio rho/rho_ref = damping/gain is kept.
+        held = np.maximum(steps[:, 0], 1.0)
         schedule = [
             PIDGains.place(
                 dataclasses.replace(
-                    model, a_per_s=model.a_per_s * damping, alpha=model.alpha * gain
+                    model,
+                    a_per_s=model.a_per_s * damping * speed / gain,
+                    alpha=model.alpha * speed,
                 ),
                 config.task,
                 omega,
                 zeta,
                 tf_s,
             )
-            for gain, damping in steps
+            for (gain, damping), speed in zip(steps, held, strict=True)
         ]
         return cls(fixed, config, schedule)
 
