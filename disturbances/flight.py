@@ -46,7 +46,7 @@ from disturbances.bank import TraceBank
 from disturbances.rows import TraceRow, checksum, plain_statistics
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["flight_bank", "fly_trace", "tunnel_time"]
+__all__ = ["flight_bank", "flown_row", "fly_trace", "tunnel_time"]
 
 
 def tunnel_time(edges_s: FloatArray, airspeed_mps: FloatArray, v_ref_mps: float) -> FloatArray:
@@ -170,30 +170,27 @@ def flight_bank(
     for k, start in pairs:
         source = bank.traces[k]
         u = fly_trace(source.samples(), source.dt_s, start, tau, amplitude)
-        rows.append(_flown(source, u, h, start, need, v_ref_mps, dict(marks or {})))
+        settings = {
+            "flown_from": source.uid,
+            "tunnel_start_s": start,
+            "tunnel_duration_s": need,
+            "v_ref_mps": v_ref_mps,
+            **(marks or {}),
+        }
+        rows.append(flown_row(source, u, h, f"{start:g}s", settings))
     return TraceBank(rows, f"{bank.description}, flown")
 
 
-def _flown(
-    source: TraceRow,
-    u: FloatArray,
-    h: float,
-    start: float,
-    need: float,
-    v_ref: float,
-    marks: dict[str, Any],
+def flown_row(
+    source: TraceRow, u: FloatArray, dt_s: float, suffix: str, settings: Mapping[str, Any]
 ) -> TraceRow:
-    settings = {
-        "flown_from": source.uid,
-        "tunnel_start_s": start,
-        "tunnel_duration_s": need,
-        "v_ref_mps": v_ref,
-        **marks,
-    }
+    """A flight's trace made from ``source``: its rocket and provenance, the samples ``u``
+    held ``dt_s`` each, uid ``<source uid>@<suffix>``, ``settings`` added to the source's
+    (in memory only: such traces are made per configuration, not stored)."""
     return dataclasses.replace(
         source,
-        uid=f"{source.uid}@{start:g}s",
-        dt_s=h,
+        uid=f"{source.uid}@{suffix}",
+        dt_s=float(dt_s),
         t0_s=0.0,
         u_d_deg=u,
         checksum=checksum(u),

@@ -23,7 +23,6 @@ scale together, like ``a``.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import os
@@ -33,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from disturbances.bank import TraceBank
-from disturbances.flight import flight_bank
+from disturbances.flight import flight_bank, flown_row
 from identification.flight import (
     DEFAULT_ASCENT,
     ISA_SEA_LEVEL_DENSITY_KGM3,
@@ -282,7 +281,6 @@ def _dryden(
     bank: TraceBank, schedule: FlightSchedule, m: int, substeps: int, severity: str, split: str
 ) -> TraceBank:
     from disturbances.dryden import roll_gust
-    from disturbances.rows import checksum, plain_statistics
 
     height = schedule.altitude_edges_m[:m] - schedule.profile.altitude_m[0]
     rng = np.random.default_rng([_DRYDEN_SEED, _SPLIT_INDEX[split]])
@@ -295,6 +293,7 @@ def _dryden(
         size=DRYDEN_FLIGHTS,
     )
     gain = np.repeat(schedule.scales[: (m - 1) // substeps, 0], substeps)
+    h = float(schedule.edges_s[1] - schedule.edges_s[0])
     rows = []
     for k in range(DRYDEN_FLIGHTS):
         source = bank.traces[k % len(bank)]
@@ -306,17 +305,5 @@ def _dryden(
             "flight": k,
             "split_seed": [_DRYDEN_SEED, _SPLIT_INDEX[split]],
         }
-        rows.append(
-            dataclasses.replace(
-                source,
-                uid=f"{source.uid}@dryden-{severity}-{k}",
-                dt_s=float(schedule.edges_s[1] - schedule.edges_s[0]),
-                t0_s=0.0,
-                u_d_deg=u,
-                checksum=checksum(u),
-                settings={**dict(source.settings), **settings},
-                statistics=plain_statistics(u),
-                id=None,
-            )
-        )
+        rows.append(flown_row(source, u, h, f"dryden-{severity}-{k}", settings))
     return TraceBank(rows, f"{bank.description}, Dryden {severity} flights")
