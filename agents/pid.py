@@ -199,9 +199,13 @@ class PIDController:
         half_count = 0.5 * config.encoder_resolution_deg if config.sensors else 0.0
         self._offset = half_count if self._angle else 0.0
         self._beta = self._dt / (gains.tf_s + self._dt)
-        every = self.schedule or (gains,)
-        self._aw_of = [self._dt / g.tt_s / g.ki if g.ki > 0 else 0.0 for g in every]
+        self._aw = self._back_calculation(gains)
+        self._aw_of = [self._back_calculation(g) for g in self.schedule or ()]
         self.reset()
+
+    def _back_calculation(self, gains: PIDGains) -> float:
+        """The anti-windup factor ``Δt/(T_t·k_i)`` of ``gains``."""
+        return self._dt / gains.tt_s / gains.ki if gains.ki > 0 else 0.0
 
     @classmethod
     def for_env(
@@ -273,9 +277,10 @@ class PIDController:
 
     def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
         """The fin command for observation ``(error, rate, fin, last command)``."""
-        k = min(self._step, len(self._aw_of) - 1)  # 0 unless scheduled
-        g = self.schedule[k] if self.schedule is not None else self.gains
-        self._aw = self._aw_of[k]
+        g, aw = self.gains, self._aw
+        if self.schedule is not None:  # this control step's gains
+            k = min(self._step, len(self.schedule) - 1)
+            g, aw = self.schedule[k], self._aw_of[k]
         self._step += 1
         error = float(obs[Obs.ERROR]) - self._offset
         rate = float(obs[Obs.RATE])
@@ -284,7 +289,7 @@ class PIDController:
             self._rate = rate
         else:
             self._rate += self._beta * (rate - self._rate)
-            self._integral += self._aw * (fin - self._command)  # back-calculation
+            self._integral += aw * (fin - self._command)  # back-calculation
         if self._angle:
             raw = g.trim_deg + g.kp * error + g.ki * self._integral - g.kd * self._rate
         else:
