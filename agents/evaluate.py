@@ -21,7 +21,7 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
-from agents.registry import default_policies, make_controller, policy_help
+from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
 from disturbances.bank import TraceBank
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -476,6 +476,7 @@ class Args:
 
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
+    args = replace(args, policy=unnamed_defaults(args.policy, default_policies(), args.env_id))
     try:
         config = variant_config(args.env_id, {**args.settings, "split": args.split})
         controllers = [make_controller(p, config, args.env_id, db=args.db) for p in args.policy]

@@ -14,15 +14,12 @@ from numpy.typing import NDArray
 from agents.base import Design, FlightView
 from agents.memory import History
 from agents.observer import ObserverFeatures
+from agents.registry import COMMITTED
 from disturbances.bank import TraceBank
 from rollenv.core import RollConfig
 from rollenv.layout import Obs
 
 __all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_learned", "make_ppo"]
-
-
-#: Where the committed policies are: one folder per environment id.
-COMMITTED = Path(__file__).resolve().parent / "policies"
 
 
 class ObservationNormalizer:

@@ -20,22 +20,44 @@ test split the protocol evaluates on.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 from agents.base import Controller, Design
 from rocketroll_common.registry import Registry
 from rollenv.core import RollConfig
 
 __all__ = [
+    "COMMITTED",
     "CONTROLLERS",
+    "available",
     "default_policies",
+    "flies",
+    "has_committed",
     "make_controller",
     "policy_help",
     "register_controller",
+    "unnamed_defaults",
 ]
 
 
 #: ``factory(design) -> controller``.
 Factory = Callable[[Design], Controller]
+
+#: Where the committed policies are: one folder per environment id.
+COMMITTED = Path(__file__).resolve().parent / "policies"
+
+
+def has_committed(env_id: str) -> bool:
+    """Whether a PPO policy is committed for ``env_id`` (``agents/policies/ENV_ID``)."""
+    return (COMMITTED / env_id / "model.zip").is_file()
+
+
+def flies(env_id: str) -> bool:
+    """Whether ``env_id`` is a flight variant (its options set ``flight``)."""
+    from rollenv.variants import variant_options
+
+    return variant_options(env_id).get("flight") is not None
+
 
 #: Every controller, by the name ``--policy`` takes.
 CONTROLLERS: Registry[Factory] = Registry("controller")
@@ -49,21 +71,45 @@ def register_controller(
     summary: str = "",
     default: bool = False,
     replace: bool = False,
+    available: Callable[[str], bool] | None = None,
 ) -> None:
     """Register a controller for ``--policy NAME`` (``factory`` or ``"module:function"``).
 
     ``usage`` shows its argument in ``--help`` (``pid[:OMEGA]``); ``default``
     puts it among the controllers ``rocketroll eval`` runs without
-    ``--policy``.
+    ``--policy``; ``available(env_id)`` says whether it can run on an
+    environment without an argument (the committed PPO policy exists for some
+    ids only), else the default set leaves it out there.
     """
     CONTROLLERS.register(
-        name, factory, summary=summary, replace=replace, usage=usage or name, default=default
+        name,
+        factory,
+        summary=summary,
+        replace=replace,
+        usage=usage or name,
+        default=default,
+        available=available,
     )
 
 
 def default_policies() -> list[str]:
-    """The controllers ``rocketroll eval`` runs when none is named, in table order."""
+    """The controllers ``rocketroll eval`` runs when none is named, in table order (on a
+    given environment: those of them :func:`available` there, :func:`unnamed_defaults`)."""
     return [e.name for e in CONTROLLERS.entries() if e.info.get("default")]
+
+
+def available(name: str, env_id: str) -> bool:
+    """Whether controller ``name`` runs on ``env_id`` without an argument."""
+    check = CONTROLLERS.entry(name).info.get("available")
+    return check is None or bool(check(env_id))
+
+
+def unnamed_defaults(chosen: list[str], defaults: list[str], env_id: str) -> list[str]:
+    """``chosen``, unless it is a command's ``defaults`` (no ``--policy`` named): then those
+    of them available on ``env_id`` (the commands print what they run)."""
+    if chosen != defaults:
+        return chosen
+    return [p for p in defaults if available(p, env_id)]
 
 
 def policy_help() -> str:
@@ -104,6 +150,8 @@ register_controller(
     "agents.pid:make_tunnel_pid",
     usage="pid-tunnel[:OMEGA]",
     summary="the PID with the tunnel's fixed gains, unscheduled in flight (the cautionary row)",
+    default=True,
+    available=flies,
 )
 register_controller(
     "observer",
@@ -126,6 +174,7 @@ register_controller(
     summary="a trained PPO policy (DIR: a `rocketroll train ppo` output; default: the "
     "committed policy agents/policies/ENV_ID)",
     default=True,
+    available=has_committed,
 )
 register_controller(
     "sac",

@@ -31,7 +31,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -46,7 +46,7 @@ from agents.evaluate import (
     headline_scores,
     protocol_episodes,
 )
-from agents.registry import default_policies, make_controller, policy_help
+from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
@@ -65,13 +65,18 @@ CONDITIONS: dict[str, dict[str, Any]] = {
 }
 
 
+def _default_policy() -> list[str]:
+    """Every default controller but trim (which has nothing to be robust about)."""
+    return [p for p in default_policies() if p != "trim"]
+
+
 @dataclass(frozen=True)
 class Args:
     """``rocketroll robustness`` / ``python -m agents.robustness``."""
 
     env_id: str = env_id_setting()
     policy: list[str] = setting(
-        default_factory=lambda: [p for p in default_policies() if p != "trim"],
+        default_factory=_default_policy,
         help=lambda: f"controller, in table order (repeatable): {policy_help()}",
         metavar="POLICY",
         always=True,
@@ -167,6 +172,7 @@ def plot(
 
 def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     """Design every controller once, evaluate it under every condition, report."""
+    args = replace(args, policy=unnamed_defaults(args.policy, _default_policy(), args.env_id))
     try:
         design = variant_config(args.env_id, {"split": args.split})
         controllers: list[Controller] = [
