@@ -14,7 +14,7 @@ from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 from rollenv import task_of
 
-__all__ = ["COMMANDS", "RolloutArgs", "rollout"]
+__all__ = ["COMMANDS", "FlightArgs", "RolloutArgs", "rollout", "run_flight"]
 
 POLICIES = ("zero", "random")
 
@@ -180,6 +180,56 @@ def run_rollout(args: RolloutArgs) -> int:
     return 0
 
 
+@dataclass(frozen=True)
+class FlightArgs:
+    """``rocketroll env flight``."""
+
+    flight: str = setting(
+        "default",
+        "the ascent: 'default', a rocket YAML (identification/data/ascent-default.yml's keys) "
+        "or a recorded V(t) CSV (time_s, airspeed_mps[, altitude_m])",
+        metavar="FLIGHT",
+    )
+    plot: Path | None = setting(
+        None, "save V, h, q and Mach against time to this PNG", output="file"
+    )
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def run_flight(args: FlightArgs) -> int:
+    """Print the flight's summary and what it does to the roll model; plot it."""
+    from rollenv.flight import flight_schedule
+
+    try:
+        schedule = flight_schedule(args.flight, 0.1, 0.01)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+    profile = schedule.profile
+    gain, damping = schedule.scales[:, 0], schedule.scales[:, 1]
+    print(profile.source)
+    print(
+        f"  max {profile.max_speed_mps * 3.6:.0f} km/h ({profile.max_speed_mps:.1f} m/s, Mach "
+        f"{profile.max_mach:.2f}), max q {profile.max_dynamic_pressure_pa / 1e3:.1f} kPa, "
+        f"burnout {profile.burnout_s:.2f} s, apogee {profile.apogee_m:.0f} m at "
+        f"{profile.apogee_s:.2f} s"
+    )
+    print(
+        f"  episode: {schedule.steps} control steps from {schedule.start_s:.2f} s "
+        f"({schedule.v_ref_mps * 3.6:.0f} km/h) to apogee; the roll model's gain x "
+        f"{gain.max():.2f} and damping x {damping.max():.2f} at most (eq. 4-8)"
+    )
+    if args.plot is not None:
+        from identification.flight import plot_profile
+        from rocketroll_common.files import write_atomic
+        from rocketroll_common.plotting import png_bytes
+
+        write_atomic(args.plot, png_bytes(plot_profile(profile), dpi=110))
+        print(f"plot: {args.plot}")
+    return 0
+
+
 #: The commands of this layer, by name.
 COMMANDS: dict[str, Command] = {
     "env": Command(
@@ -192,6 +242,12 @@ COMMANDS: dict[str, Command] = {
                 "run episodes with a zero or random policy; print a summary; save frames",
                 RolloutArgs,
                 run_rollout,
+            ),
+            Command(
+                "flight",
+                "the ascent a flight variant flies (RocketRollFlight-v0): summary and plot",
+                FlightArgs,
+                run_flight,
             ),
         ),
     )

@@ -187,3 +187,20 @@ def test_dryden_flights_roll_the_air_the_damping_works_against() -> None:
     )
     with pytest.raises(ValueError, match="not dryden"):
         train.flights(RollConfig(flight="default").flights(array_bank()))
+
+
+def test_rocketroll_env_flight_summarises_and_plots(tmp_path, capsys) -> None:
+    from rocketroll.cli import main
+
+    png = tmp_path / "profile.png"
+    assert main(["env", "flight", "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "max 603 km/h" in out and "apogee 2010 m" in out and "212 control steps" in out
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    bad = tmp_path / "rocket.yml"
+    bad.write_text("dry_mass_kg: -1\n")
+    assert main(["env", "flight", "--flight", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "missing key 'propellant_mass_kg'" in err
+    assert main(["env", "flight", "--flight", str(tmp_path / "none.yml")]) == 2
+    assert "No such file" in capsys.readouterr().err
