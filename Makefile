@@ -51,6 +51,9 @@ demo: $(VENV)/.installed
 		--out $(DEMO)/seeds-rate
 	$(BIN)/rocketroll robustness --env-id RocketRoll-v0 --out $(DEMO)/robustness-angle
 	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
+	$(BIN)/rocketroll env flight --plot $(DEMO)/flight-profile.png
+	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
+		--policy trim --policy pid --policy pid-tunnel --policy oracle --out $(DEMO)/eval-flight
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
 	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
 	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
@@ -59,7 +62,9 @@ demo: $(VENV)/.installed
 	@echo "      at a zero setpoint, PPO as a residual on the observer and SAC over five training"
 	@echo "      seeds each in $(DEMO)/seeds-angle/"
 	@echo "      and seeds-rate/, and every controller under"
-	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/ (tables above)"
+	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/, and in flight"
+	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png and the scheduled PID"
+	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above)"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

@@ -54,14 +54,23 @@ def test_the_identification_table_of_the_bundled_reconstruction() -> None:
     assert f"| {noise.mae_deg[i10]:.2f} / {noise.p90_deg[i10]:.2f} ° |" in rows[6]
 
 
+#: The flight table's controllers (README, In flight).
+FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "oracle")
+
+
 @pytest.mark.parametrize(
-    ("env_id", "table"), [("RocketRoll-v0", 0), ("RocketRollRate-v0", 1)], ids=["angle", "rate"]
+    ("env_id", "table"),
+    [("RocketRoll-v0", 0), ("RocketRollRate-v0", 1), ("RocketRollFlight-v0", 2)],
+    ids=["angle", "rate", "flight"],
 )
 def test_the_evaluation_tables(
     env_id: str, table: int, default_db: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """`make demo`'s tables, 20 held-out episodes, seed 0, every default controller."""
-    assert rocketroll(["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0"]) == 0
+    """`make demo`'s tables, 20 held-out episodes, seed 0, every default controller (in
+    flight: trim, the scheduled PID, the tunnel's PID and the oracle)."""
+    policies = [f"--policy={p}" for p in FLIGHT_POLICIES] if "Flight" in env_id else []
+    words = ["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0", *policies]
+    assert rocketroll(words) == 0
     printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
     starts = [k for k, line in enumerate(README.splitlines()) if line.startswith("| trim |")]
     shown = README.splitlines()[starts[table] : starts[table] + len(printed) - 1]
