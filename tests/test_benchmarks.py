@@ -10,8 +10,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run_script(name: str, *args: str, db: Path) -> str:
-    done = subprocess.run(
+def run_benchmark(name: str, *args: str, db: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
         [sys.executable, str(REPO / "benchmarks" / name), *args],
         cwd=REPO,
         capture_output=True,
@@ -20,6 +20,10 @@ def run_script(name: str, *args: str, db: Path) -> str:
         timeout=600,
         check=False,
     )
+
+
+def run_script(name: str, *args: str, db: Path) -> str:
+    done = run_benchmark(name, *args, db=db)
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout
 
@@ -85,15 +89,7 @@ def test_train_speed_times_two_recipes_side_by_side(default_db: Path, tmp_path: 
 
 
 def test_train_speed_names_a_bad_recipe(default_db: Path) -> None:
-    done = subprocess.run(
-        [sys.executable, str(REPO / "benchmarks" / "train_speed.py"), "--recipe", "x=nowhere.yml"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONPATH": str(REPO), "ROCKETROLL_DB": str(default_db)},
-        timeout=600,
-        check=False,
-    )
+    done = run_benchmark("train_speed.py", "--recipe", "x=nowhere.yml", db=default_db)
     assert done.returncode != 0
     assert "--recipe x=nowhere.yml: nowhere.yml: no such file" in done.stderr
 
