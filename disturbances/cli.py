@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from disturbances.flightlog import FlightLogSpec
 from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
 from identification.methods import METHODS, default_methods, has_posterior
 from identification.model import MODEL_NAMES
@@ -110,6 +111,29 @@ def _new_database(db: str | None) -> Iterator[None]:
             raise
 
 
+# --------------------------------------------------------------------------- flight
+@dataclass(frozen=True)
+class FlightArgs:
+    """``rocketroll flight``."""
+
+    out: Path = setting(help="recording file to write (CSV, format 1.1)", output="file")
+    spec: FlightLogSpec = setting(default_factory=FlightLogSpec, flatten=True)
+
+
+def flight(args: FlightArgs) -> int:
+    """Fly the virtual flight and write its log."""
+    from disturbances.flightlog import run_flight
+    from identification.recording import save_recording
+
+    try:
+        recording = run_flight(args.spec)
+    except ValueError as exc:
+        raise UsageError(f"--ascent {args.spec.ascent}: {exc}") from None
+    save_recording(recording, args.out)
+    print(f"wrote {args.out}: {recording!r}")
+    return 0
+
+
 # --------------------------------------------------------------------------- identify
 @dataclass(frozen=True)
 class IdentifyArgs:
@@ -123,14 +147,14 @@ class IdentifyArgs:
         None, "also write PNG figures and report.md into this folder", output="folder"
     )
     method: list[str] = setting(
-        default_factory=_default_methods,
-        help=_methods_help("identification method to run"),
+        default_factory=list,
+        help=_methods_help("identification method to run (a flight: flight)"),
         metavar="METHOD",
     )
     db: str | None = setting(
         None,
         "also store the results (every method, both models) in this disturbance database; "
-        "created if missing",
+        "created if missing (not for a flight)",
         metavar="DB",
     )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
@@ -138,7 +162,7 @@ class IdentifyArgs:
     def __post_init__(self) -> None:
         check(self)
         _check_methods(self.method)
-        if self.report is not None and "paper" not in self.method:
+        if self.report is not None and self.method and "paper" not in self.method:
             raise UsageError("--report is the paper's report: add --method paper")
 
 
@@ -157,9 +181,19 @@ def identify(args: IdentifyArgs) -> int:
         check_output(args.db, "--db")  # before the work, as every output
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
+    methods = args.method or list(default_methods(recording))
+    if recording.is_flight and args.db is not None:
+        raise UsageError(
+            f"--db: {args.recording} is a flight (it has airspeed_mps); the database holds "
+            "the tunnel's turbulence, and a flight's identification is not stored"
+        )
+    if recording.is_flight and args.report is not None:
+        raise UsageError(
+            f"--report is the paper's report of a tunnel run; {args.recording} is a flight"
+        )
     context = Context(recording, options)
-    fits = {method: fit(context, method, _models_of(method)) for method in args.method}
-    result = context.paper if "paper" in args.method else None
+    fits = {method: fit(context, method, _models_of(method)) for method in methods}
+    result = context.paper if "paper" in methods else None
     outputs: dict[str | os.PathLike[str], str | bytes] = {}
     if args.json is not None:
         data = {} if result is None else result.to_dict()
@@ -182,11 +216,11 @@ def identify(args: IdentifyArgs) -> int:
 
         with _new_database(args.db), _open(args.db, create=True) as db:
             if result is not None:
-                added = add_identification(db, result, methods=args.method)
+                added = add_identification(db, result, methods=methods)
             else:
                 from disturbances.ingest import add_recording
 
-                added = add_recording(db, recording, options, methods=args.method)
+                added = add_recording(db, recording, options, methods=methods)
         stored = (
             f"{args.db}: this recording is already stored (same samples); nothing added"
             if added.recordings == 0 and added.traces == 0
@@ -196,7 +230,9 @@ def identify(args: IdentifyArgs) -> int:
     write_all_atomic(outputs)  # all or nothing
     if result is not None:
         print(parameter_table(result))
-    if any(method != "paper" for method in fits):
+    if recording.is_flight:
+        print(_flight_table(fits))
+    elif any(method != "paper" for method in fits):
         print("\nidentification methods (parameters; re-simulation of each one's u_d, §3.5)")
         print(methods_table(fits))
     if stored:
@@ -212,6 +248,33 @@ def identify(args: IdentifyArgs) -> int:
 def _models_of(method: str) -> tuple[str, ...]:
     models: tuple[str, ...] = METHODS.entry(method).info["models"]
     return models
+
+
+def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
+    """A flight's identification: the coefficients at the reference airspeed, per model."""
+    from identification.tables import methods_table
+
+    lines = []
+    for by_model in fits.values():
+        for model, f in by_model.items():
+            m = f.metrics
+            errors = m.get("std_errors", {})
+            lines.append(
+                f"{f.method} {model}: at V_ref {m['v_ref_mps']:.2f} m/s, ρ_ref "
+                f"{m['rho_ref_kgm3']:.4f} kg/m³ ({m['density']}): "
+                f"α₀ {f.params.alpha:.4f} ± {errors.get('alpha', float('nan')):.4f}, "
+                f"β̄₀ {f.params.beta_bar_per_s:.4f} ± "
+                f"{errors.get('beta_bar_per_s', float('nan')):.4f} 1/s; "
+                f"C_P-like β̄₀/(ρV) {m['damping_per_rho_v']:.5g} m²/kg, "
+                f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
+                f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
+            )
+    return (
+        "flight identification (eq. 4-8: a ∝ ρV, α ∝ V)\n"
+        + "\n".join(lines)
+        + "\n\n"
+        + (methods_table(fits))
+    )
 
 
 def _json_safe(value: Any) -> Any:
@@ -705,6 +768,16 @@ _DB_COMMANDS = (
 
 #: The commands of this layer, by name.
 COMMANDS: dict[str, Command] = {
+    "flight": Command(
+        "flight",
+        "fly the virtual flight and write a synthetic flight log",
+        FlightArgs,
+        flight,
+        "The virtual tunnel's flight counterpart: the rocket (truth given at --v-ref) along "
+        "an ascent from the rail to apogee, its gain and damping scaled by eq. 4-8, a fin "
+        "staircase, flown turbulence, a rate gyro; a format-1.1 recording with the truth "
+        "in its metadata.  Identify it with: rocketroll identify LOG.csv",
+    ),
     "identify": Command(
         "identify",
         "identify roll parameters and the disturbance u_d(t) from a recording",

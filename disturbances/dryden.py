@@ -167,6 +167,7 @@ from numpy.typing import ArrayLike
 
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import UsageError
+from rocketroll_common.ou import interval_coefficients
 
 __all__ = [
     "DEFAULT_SPAN_M",
@@ -233,10 +234,6 @@ _HIGH_LENGTH_FT = 1750.0
 DEFAULT_SPAN_M = 0.3
 #: Airspeed below which there is no airflow and no gust rate, m/s.
 STILL_AIR_MPS = 0.01
-
-#: Below this ``h/T`` the conditional variance of the integral is summed as a series.
-_SERIES_BELOW = 0.1
-_SERIES_TERMS = 16
 
 
 # --------------------------------------------------------------------------- validation
@@ -509,37 +506,6 @@ def roll_gust_time_constant(
     return _scalar_or_array(time)
 
 
-def _integral_variance(u: FloatArray) -> FloatArray:
-    """``2u − 3 + 4e^(−u) − e^(−2u)``: Var(integral | start) / (σ²T²), ``u = h/T > 0``."""
-    direct = 2.0 * u - 3.0 + 4.0 * np.exp(-u) - np.exp(-2.0 * u)
-    small = np.minimum(u, _SERIES_BELOW)
-    series = np.zeros_like(u)
-    for n in range(_SERIES_TERMS, 2, -1):  # Σ (−1)ⁿ(4 − 2ⁿ)/n! uⁿ, n ≥ 3, by Horner
-        series = (series + (-1) ** n * (4.0 - 2.0**n) / math.factorial(n)) * small
-    series *= small**2
-    return np.where(u < _SERIES_BELOW, series, direct)
-
-
-def _interval_coefficients(
-    u: FloatArray,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The exact one-interval update, in units of σ, for ``u = h/T > 0``.
-
-    With ``z1``, ``z2`` independent standard normals::
-
-        x1  = phi·x0 + σ·a1·z1
-        I/h = mean·x0 + σ·(l21·z1 + l22·z2)
-    """
-    phi = np.exp(-u)
-    gap = -np.expm1(-u)  # 1 − φ, accurate for small u
-    a1 = np.sqrt(-np.expm1(-2.0 * u))  # sqrt(1 − φ²)
-    mean = gap / u
-    l21 = gap**2 / (u * a1)  # Cov(e1, e2)/h / (σ²·a1)
-    schur = _integral_variance(u) - gap**3 / (1.0 + phi)  # Var(e2 | e1) / (σ²T²)
-    l22 = np.sqrt(np.maximum(schur, 0.0)) / u
-    return phi, a1, mean, l21, l22
-
-
 def _edge_values(name: str, value: ArrayLike, n_edges: int, unit: str) -> FloatArray:
     arr = _non_negative(name, value, unit)
     if arr.ndim == 0:
@@ -654,7 +620,7 @@ def roll_gust(
     sigma = _roll_sigma(sigma_ftps * FT_M, length_ft * FT_M, span)
     moving = speed_mid >= STILL_AIR_MPS
     u = np.where(moving, steps * math.pi * np.maximum(speed_mid, STILL_AIR_MPS) / (4.0 * span), 1.0)
-    phi, a1, mean, l21, l22 = _interval_coefficients(u)
+    phi, a1, mean, l21, l22 = interval_coefficients(u)
     # Without airflow: output 0, state unchanged.
     phi = np.where(moving, phi, 1.0)
     noise_state = np.where(moving, sigma * a1, 0.0)

@@ -257,7 +257,8 @@ def add_recording(
     db : Store
         Where to store (:class:`~disturbances.db.DisturbanceDB` or another back end).
     recording : Recording
-        Any recording the pipeline accepts.
+        Any recording the pipeline accepts; not a flight (its ``u_d`` is not the
+        tunnel's, which the environments replay and fly).
     options : IdentifyOptions, optional
         Identification settings (the paper's by default).
     methods : sequence of str, optional
@@ -277,6 +278,14 @@ def add_recording(
     posterior_seed : int
         Seed of the first draw (the next ones count up).
     """
+    if recording.is_flight:
+        from identification.steps import IdentificationError
+
+        raise IdentificationError(
+            f"recording {recording.name!r} is a flight (it has airspeed_mps): the database "
+            "holds the tunnel's turbulence, which the environments replay and fly; identify "
+            "a flight with `rocketroll identify` (it is not stored)"
+        )
     chosen = _methods(methods)
     _check_posterior(chosen, posterior)
     source_method = _surrogate_method(chosen, surrogate_method)

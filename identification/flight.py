@@ -48,6 +48,7 @@ same assumption for a motor given as a RASP ``.eng`` thrust curve).
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 import math
 import os
@@ -78,6 +79,7 @@ __all__ = [
     "Atmosphere",
     "FlightProfile",
     "FlightState",
+    "flight_profile",
     "isa",
     "load_ascent_yaml",
     "load_profile_csv",
@@ -565,6 +567,31 @@ class FlightProfile:
         if t.ndim == 0:
             return FlightState(**{k: float(v) for k, v in values.items()})
         return FlightState(**values)
+
+    def window(self, v_ref_mps: float) -> tuple[float, float]:
+        """From the moment the airspeed first reaches ``v_ref_mps`` (the rocket has left its
+        rail, the fins have the authority identified at that airspeed) to apogee, s.
+
+        Raises
+        ------
+        ValueError
+            If the profile never reaches ``v_ref_mps``.
+        """
+        fast = np.flatnonzero(self.airspeed_mps >= v_ref_mps)
+        if fast.size == 0:
+            raise ValueError(
+                f"flight: {self.source} never reaches the tunnel's airspeed "
+                f"{v_ref_mps:.1f} m/s (its fastest: {self.max_speed_mps:.1f} m/s)"
+            )
+        k = int(fast[0])
+        if k == 0:
+            start = float(self.t_s[0])
+        else:  # where the airspeed crosses v_ref, between samples k - 1 and k
+            t0, t1 = self.t_s[k - 1], self.t_s[k]
+            v0, v1 = self.airspeed_mps[k - 1], self.airspeed_mps[k]
+            start = float(t0 + (t1 - t0) * (v_ref_mps - v0) / (v1 - v0))
+        end = float(self.apogee_s if math.isfinite(self.apogee_s) else self.t_s[-1])
+        return start, end
 
     def scales(
         self,
@@ -1085,3 +1112,39 @@ def plot_profile(profile: FlightProfile) -> Figure:
         fontsize="medium",
     )
     return fig
+
+
+# --------------------------------------------------------------------------- by name
+def flight_profile(name: str) -> FlightProfile:
+    """The ascent called ``name``: ``"default"`` (:data:`DEFAULT_ASCENT` simulated), a
+    rocket-and-motor YAML (``.yml``/``.yaml``, :func:`load_ascent_yaml`, simulated) or a
+    recorded ``V(t)`` CSV (:func:`load_profile_csv`).  Cached per file state.
+
+    Raises
+    ------
+    ValueError
+        ``flight: NAME: problem`` for a name that is none of these or a file that
+        cannot be read (the loaders' own errors for a bad file).
+    """
+    if name == "default":
+        return _profile(name, 0, 0)
+    path = Path(name)
+    if path.suffix.lower() not in (".yml", ".yaml", ".csv"):
+        raise ValueError(
+            f"flight: {name!r} is neither 'default' nor a .yml/.yaml rocket or a .csv profile"
+        )
+    try:
+        stat = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"flight: {name}: {exc.strerror or 'cannot be read'}") from None
+    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _profile(name: str, mtime_ns: int, size: int) -> FlightProfile:
+    del mtime_ns, size  # the cache key: a changed file is read again
+    if name == "default":
+        return simulate_ascent(DEFAULT_ASCENT)
+    if name.lower().endswith(".csv"):
+        return load_profile_csv(name)
+    return simulate_ascent(load_ascent_yaml(name))

@@ -41,10 +41,16 @@ ROLES: dict[str, str | None] = {
     "fin": "fin_deg",
     "roll": "roll_deg",
     "roll_rate": "roll_rate_dps",
+    "airspeed": "airspeed_mps",
+    "altitude": "altitude_m",
     "skip": None,
 }
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / np.pi}
+#: Airspeed units (``--speed-unit``) in m/s.
+SPEED_UNITS = {"mps": 1.0, "kmh": 1.0 / 3.6, "fps": 0.3048, "kn": 1852.0 / 3600.0}
+#: Altitude units (``--altitude-unit``) in m.
+ALTITUDE_UNITS = {"m": 1.0, "ft": 0.3048}
 
 
 def _delimiter(text: str) -> str:
@@ -65,7 +71,7 @@ class ImportSettings:
     columns: tuple[str, ...] = setting(
         (),
         "comma-separated role of each input column: time, fin_cmd, fin, roll, roll_rate, "
-        "skip (required)",
+        "airspeed, altitude (a flight: format 1.1), skip (required)",
         metavar="ROLES",
     )
     header: bool = setting(True, "the first non-comment line is a header row (--no-header: none)")
@@ -77,6 +83,12 @@ class ImportSettings:
         None, "the time column by header name (or 1-based number without header)"
     )
     time_unit: Literal["s", "ms", "us"] = setting("s", "unit of the time column")
+    speed_unit: Literal["mps", "kmh", "fps", "kn"] = setting(
+        "mps", "unit of an airspeed column: m/s, km/h, ft/s or knots"
+    )
+    altitude_unit: Literal["m", "ft"] = setting(
+        "m", "unit of an altitude column (above sea level: it gives the ISA density)"
+    )
     delimiter: str | None = setting(
         None,
         "cell separator (default: each line's comma, semicolon or tab, else whitespace)",
@@ -124,6 +136,8 @@ def import_csv(
     name: str | None = None,
     source: str = "wind-tunnel",
     notes: str | None = None,
+    speed_unit: str = "mps",
+    altitude_unit: str = "m",
 ) -> Recording:
     """Read a foreign delimited text file into a validated :class:`Recording`.
 
@@ -155,6 +169,10 @@ def import_csv(
         Unwrap a roll angle that wraps around (e.g. at ±180° or 0/360°).
     name, source, notes : str, optional
         Metadata of the new recording; ``name`` defaults to the file stem.
+    speed_unit : {"mps", "kmh", "fps", "kn"}
+        Unit of an ``airspeed`` column (a flight; the recording is then format 1.1).
+    altitude_unit : {"m", "ft"}
+        Unit of an ``altitude`` column (above sea level).
 
     Returns
     -------
@@ -178,6 +196,8 @@ def import_csv(
             name=name,
             source=source,  # type: ignore[arg-type]
             notes=notes,
+            speed_unit=speed_unit,  # type: ignore[arg-type]
+            altitude_unit=altitude_unit,  # type: ignore[arg-type]
         )
     except SettingError as exc:
         raise RecordingError(os.fspath(path), None, f"{exc.setting}: {exc.problem}") from None
@@ -265,11 +285,14 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
             else _time_index(where, time_column, names, roles, header_line)
         )
         out["time_s"] = data[:, index] * TIME_UNITS[time_unit]
-    scale = ANGLE_UNITS[units]
+    scales = {
+        "airspeed_mps": SPEED_UNITS[settings.speed_unit],
+        "altitude_m": ALTITUDE_UNITS[settings.altitude_unit],
+    }
     for j, role in enumerate(roles):
         target = ROLES[role]
         if target is not None and target != "time_s":
-            out[target] = data[:, j] * scale
+            out[target] = data[:, j] * scales.get(target, ANGLE_UNITS[units])
     if settings.unwrap and "roll_deg" in out:
         out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
 
@@ -278,6 +301,10 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
     )
     meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
     meta["import.units"] = units
+    if "airspeed_mps" in out:
+        meta["import.speed_unit"] = settings.speed_unit
+    if "altitude_m" in out:
+        meta["import.altitude_unit"] = settings.altitude_unit
     if settings.notes:
         meta["notes"] = settings.notes
     return Recording(

@@ -48,6 +48,7 @@ __all__ = [
     "default_methods",
     "fit",
     "has_posterior",
+    "is_flight_method",
     "paper_method",
     "register_method",
     "resimulation_metrics",
@@ -106,6 +107,7 @@ def register_method(
     models: Sequence[str] = MODEL_NAMES,
     posterior: bool = False,
     database: bool | None = None,
+    flight: bool = False,
     replace: bool = False,
 ) -> None:
     """Register an identification method.
@@ -130,6 +132,10 @@ def register_method(
         draws can be stored with its traces).
     database : bool, optional
         Part of the default database's recipe; default: ``default``.
+    flight : bool
+        It identifies flights (recordings with ``airspeed_mps``, format 1.1), and
+        only those; the others identify the tunnel's constant airspeed.  With
+        ``default``, it runs without ``--method`` on a flight.
     replace : bool
         Replace a method registered under ``name``.
     """
@@ -143,13 +149,25 @@ def register_method(
         default=default,
         models=tuple(models),
         posterior=posterior,
-        database=default if database is None else database,
+        database=(default and not flight) if database is None else database,
+        flight=flight,
     )
 
 
-def default_methods() -> tuple[str, ...]:
-    """The methods run when none is named, in registration order."""
-    return tuple(e.name for e in METHODS.entries() if e.info.get("default"))
+def default_methods(recording: Recording | None = None) -> tuple[str, ...]:
+    """The methods run when none is named, in registration order: for a flight
+    recording (one with an airspeed) the flight methods, else the tunnel's."""
+    flight = recording is not None and recording.is_flight
+    return tuple(
+        e.name
+        for e in METHODS.entries()
+        if e.info.get("default") and bool(e.info.get("flight")) == flight
+    )
+
+
+def is_flight_method(method: str) -> bool:
+    """Whether the method registered as ``method`` identifies flights."""
+    return bool(METHODS.entry(method).info.get("flight"))
 
 
 def has_posterior(method: str) -> bool:
@@ -250,6 +268,20 @@ def fit(
     """
     context = recording if isinstance(recording, Context) else Context(recording, options)
     entry = METHODS.entry(method)
+    rec = context.recording
+    if bool(entry.info.get("flight")) != rec.is_flight:
+        from identification.steps import IdentificationError
+
+        if rec.is_flight:
+            raise IdentificationError(
+                f"recording {rec.name!r} is a flight (it has airspeed_mps): method {method!r} "
+                "assumes the tunnel's one airspeed; use "
+                + " or ".join(f"--method {m}" for m in default_methods(rec))
+            )
+        raise IdentificationError(
+            f"recording {rec.name!r} has no airspeed_mps column: method {method!r} identifies "
+            "flights (format 1.1); use " + " or ".join(f"--method {m}" for m in default_methods())
+        )
     supported = entry.info.get("models", MODEL_NAMES)
     for model in models:
         check_model(model)
@@ -334,4 +366,13 @@ register_method(
     "environment replays by default",
     posterior=True,
     database=True,
+)
+register_method(
+    "flight",
+    "identification.flightfit:flight_method",
+    summary="a flight (a recording with airspeed_mps): maximum likelihood of a, α at a "
+    "reference airspeed (--v-ref) scaled along the flight by eq. 4-8, the turbulence a "
+    "field flown through; u_d from the Kalman smoother",
+    default=True,
+    flight=True,
 )

@@ -427,12 +427,26 @@ def piece_coefficients(
 
 
 def _piece(
-    params: RollParams, theta0: FloatArray, theta1: FloatArray, u_d: FloatArray, h: FloatArray
+    params: RollParams,
+    theta0: FloatArray,
+    theta1: FloatArray,
+    u_d: FloatArray,
+    h: FloatArray,
+    gain: FloatArray | float = 1.0,
+    damping: FloatArray | float = 1.0,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """:func:`piece_coefficients` for a :class:`RollParams`."""
+    """:func:`piece_coefficients` for a :class:`RollParams`, its ``α`` times ``gain`` and
+    its ``ᾱ``, ``β̄`` times ``damping`` (the flight's scales, eq. 4-8)."""
     p = params
     return piece_coefficients(
-        p.alpha, p.theta_bar_deg, p.beta_bar_per_s, p.alpha_bar_per_deg_s, theta0, theta1, u_d, h
+        p.alpha * gain,
+        p.theta_bar_deg,
+        p.beta_bar_per_s * damping,
+        p.alpha_bar_per_deg_s * damping,
+        theta0,
+        theta1,
+        u_d,
+        h,
     )
 
 
@@ -443,6 +457,9 @@ def roll_coefficients(
     u_d_deg: ArrayLike,
     h_s: float,
     rate_limit_dps: float | None = None,
+    *,
+    gain: ArrayLike = 1.0,
+    damping: ArrayLike = 1.0,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Coefficients of the exact substep update, linear in the rate.
 
@@ -457,7 +474,10 @@ def roll_coefficients(
     holds -- the exact path of a rate-limited servo whose ramp may end inside
     the substep -- and the two pieces are composed.  Without it the fin moves
     linearly over the whole substep (e.g. a sampled, measured fin angle).
-    All inputs broadcast; ``h_s`` is a scalar.
+    All inputs broadcast; ``h_s`` is a scalar.  ``gain`` and ``damping``
+    multiply ``α`` and the damping ``a(θ)`` (both ᾱ and β̄) piece by piece:
+    the rocket at another airspeed and density (eq. 4-8,
+    :func:`identification.flight.roll_scales`).
 
     Returns
     -------
@@ -468,11 +488,13 @@ def roll_coefficients(
     theta0 = np.asarray(theta0_deg, dtype=float)
     theta1 = np.asarray(theta1_deg, dtype=float)
     u_d = np.asarray(u_d_deg, dtype=float)
+    g = np.asarray(gain, dtype=float)
+    d = np.asarray(damping, dtype=float)
     if rate_limit_dps is None:
-        return _piece(params, theta0, theta1, u_d, np.asarray(h_s, dtype=float))
+        return _piece(params, theta0, theta1, u_d, np.asarray(h_s, dtype=float), g, d)
     h_ramp = np.minimum(np.abs(theta1 - theta0) / rate_limit_dps, h_s)
-    e1, c1, a1, b1 = _piece(params, theta0, theta1, u_d, h_ramp)
-    e2, c2, a2, b2 = _piece(params, theta1, theta1, u_d, h_s - h_ramp)
+    e1, c1, a1, b1 = _piece(params, theta0, theta1, u_d, h_ramp, g, d)
+    e2, c2, a2, b2 = _piece(params, theta1, theta1, u_d, h_s - h_ramp, g, d)
     # Compose v -> e1·v + c1 -> e2·(e1·v + c1) + c2, and the angle increments alike.
     return e2 * e1, e2 * c1 + c2, a1 + a2 * e1, b1 + a2 * c1 + b2
 
@@ -567,6 +589,8 @@ def simulate(
     theta0_deg: float | None = None,
     substeps: int = 10,
     t0_s: float = 0.0,
+    gain: ArrayLike = 1.0,
+    damping: ArrayLike = 1.0,
 ) -> SimResult:
     """Simulate eq. 36/49 over a uniform input grid.
 
@@ -598,6 +622,11 @@ def simulate(
         for Δt = 0.1 s).  The servo is resolved on the substep grid.
     t0_s : float
         Time of the first grid point, s.
+    gain, damping : float or array_like, shape (n,) or (n * substeps,)
+        Factors on ``α`` and on the damping ``a(θ)`` per interval or per
+        substep, ≥ 0: the rocket in flight (eq. 4-8,
+        :func:`identification.flight.roll_scales`).  Default 1: the rocket
+        as identified.
 
     Returns
     -------
@@ -628,10 +657,25 @@ def simulate(
         frac = np.arange(n * substeps + 1) / substeps
         theta = np.interp(frac, np.arange(n + 1), fin)
     u_fine = np.repeat(u_d, substeps)
+    scales = [
+        _per_substep(name, x, n, substeps) for name, x in (("gain", gain), ("damping", damping))
+    ]
 
     rate_limit = None if servo is None else servo.rate_limit_dps
-    e, c, big_a, big_b = roll_coefficients(params, theta[:-1], theta[1:], u_fine, h, rate_limit)
-    v0 = float(params.steady_rate(theta[0], u_d[0])) if rate0_dps is None else float(rate0_dps)
+    e, c, big_a, big_b = roll_coefficients(
+        params,
+        theta[:-1],
+        theta[1:],
+        u_fine,
+        h,
+        rate_limit,
+        gain=scales[0],
+        damping=scales[1],
+    )
+    if rate0_dps is None:
+        v0 = float(params.steady_rate(theta[0], u_d[0]) * np.ravel(scales[0])[0])
+    else:
+        v0 = float(rate0_dps)
     rate = _linear_recurrence(e, c, v0)
     angle = np.empty_like(rate)
     angle[0] = angle0_deg
@@ -641,6 +685,23 @@ def simulate(
     grid = slice(None, None, substeps)
     time = t0_s + dt_s * np.arange(n + 1, dtype=float)
     return SimResult(time_s=time, fin_deg=theta[grid], rate_dps=rate[grid], angle_deg=angle[grid])
+
+
+def _per_substep(name: str, value: ArrayLike, n: int, substeps: int) -> FloatArray:
+    """A scale factor of :func:`simulate`: a number, or one per interval or per substep."""
+    x = np.asarray(value, dtype=float)
+    if x.ndim == 0:
+        pass
+    elif x.shape == (n,):
+        x = np.repeat(x, substeps)
+    elif x.shape != (n * substeps,):
+        raise ValueError(
+            f"{name} must be a number or have shape ({n},) (per interval) or "
+            f"({n * substeps},) (per substep), not {x.shape}"
+        )
+    if not (np.all(np.isfinite(x)) and np.all(x >= 0)):
+        raise ValueError(f"{name} must be finite and >= 0")
+    return x
 
 
 #: Largest |log| of the decay accumulated inside one block of

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from identification.flight import TUNNEL_AIRSPEED_MPS
 from identification.model import RollParams, check_model, damping
 from identification.noise import NoiseStudy, noise_study
 from identification.recording import Recording
@@ -152,6 +153,15 @@ class IdentifyOptions:
     )
     noise_seed: int = setting(0, "seed of the noise study", flag="--mc-seed", ge=0, le=2**63 - 1)
     progress: bool = setting(False, "show a progress bar for the noise study", cli=False)
+    v_ref_mps: float = setting(
+        TUNNEL_AIRSPEED_MPS,
+        "a flight's identification gives a, α at this airspeed and ISA sea-level density "
+        "(default: the tunnel's 50 km/h)",
+        flag="--v-ref",
+        gt=0.0,
+        le=2_000.0,
+        unit="m/s",
+    )
 
     def __post_init__(self) -> None:
         check(self)

@@ -1,4 +1,4 @@
-"""Roll recording format v1: load, validate, save.
+"""Roll recording format v1 (and its minor version 1.1, for flights): load, validate, save.
 
 A recording is a UTF-8 CSV file::
 
@@ -21,6 +21,12 @@ A recording is a UTF-8 CSV file::
 * Columns (see :data:`COLUMNS`): ``time_s`` and at least one fin column and
   one roll column.  ``ud_true_deg`` (the tunnel's ground-truth disturbance)
   is only allowed in synthetic recordings.
+* Format 1.1 adds a flight's ``airspeed_mps`` (required for a flight
+  identification: the roll model's gain and damping scale with it, eq. 4-8)
+  and ``altitude_m`` (optional, for the density; needs ``airspeed_mps``).
+  A file with either says ``# format: rocketroll-recording/1.1``; a file
+  without them is written as ``rocketroll-recording/1``, byte for byte as
+  before, and both are read.
 * Time strictly increasing and uniformly sampled within
   :data:`SAMPLING_RTOL` of the median interval; at least :data:`MIN_SAMPLES`
   samples; a fin angle that changes by at least :data:`MIN_FIN_CHANGE_DEG`.
@@ -49,7 +55,10 @@ from rocketroll_common.files import write_atomic
 
 __all__ = [
     "COLUMNS",
+    "FLIGHT_COLUMNS",
     "FORMAT",
+    "FORMATS",
+    "FORMAT_V1",
     "MAX_ABS",
     "MAX_RATE_DPS",
     "MIN_FIN_CHANGE_DEG",
@@ -63,7 +72,12 @@ __all__ = [
     "validate_samples",
 ]
 
-FORMAT = "rocketroll-recording/1"
+#: Format 1: the tunnel's recordings (written for every recording without flight columns).
+FORMAT_V1 = "rocketroll-recording/1"
+#: Format 1.1: format 1 plus the flight columns :data:`FLIGHT_COLUMNS`.
+FORMAT = "rocketroll-recording/1.1"
+#: Every format this package reads.
+FORMATS = (FORMAT_V1, FORMAT)
 SOURCES = ("synthetic", "wind-tunnel", "flight")
 
 #: Column name -> meaning.  Order here is the order in which files are written.
@@ -74,11 +88,21 @@ COLUMNS: Mapping[str, str] = MappingProxyType(
         "fin_deg": "measured actual fin angle, °",
         "roll_deg": "roll angle from the encoder, °",
         "roll_rate_dps": "roll rate from a rate gyro, °/s",
+        "airspeed_mps": "airspeed of a flight, m/s (format 1.1)",
+        "altitude_m": "altitude above sea level of a flight, m, for the ISA density "
+        "(format 1.1; needs airspeed_mps)",
         "ud_true_deg": "ground-truth disturbance u_d, ° (synthetic recordings only)",
     }
 )
 FIN_COLUMNS = ("fin_cmd_deg", "fin_deg")
 ROLL_COLUMNS = ("roll_deg", "roll_rate_dps")
+#: The columns format 1.1 adds.
+FLIGHT_COLUMNS = ("airspeed_mps", "altitude_m")
+#: Allowed range of each flight column (the altitudes the ISA of
+#: :mod:`identification.flight` covers).
+FLIGHT_RANGES: Mapping[str, tuple[float, float]] = MappingProxyType(
+    {"airspeed_mps": (0.0, 2_000.0), "altitude_m": (-500.0, 20_000.0)}
+)
 
 #: Largest allowed relative deviation of a sampling interval from the median.
 SAMPLING_RTOL = 0.01
@@ -99,6 +123,8 @@ MAX_ABS: Mapping[str, float] = MappingProxyType(
         "fin_deg": 90.0,
         "roll_deg": 1e9,
         "roll_rate_dps": MAX_RATE_DPS,
+        "airspeed_mps": FLIGHT_RANGES["airspeed_mps"][1],
+        "altitude_m": FLIGHT_RANGES["altitude_m"][1],
         "ud_true_deg": 1e5,
     }
 )
@@ -146,6 +172,7 @@ def validate_samples(
     lines: NDArray[np.int64] | None = None,
     header_line: int | None = None,
     source: str | None = None,
+    version: str | None = None,
 ) -> None:
     """Check the sample columns of a recording; raise :class:`RecordingError`.
 
@@ -162,6 +189,8 @@ def validate_samples(
         Line of the header, for column-level problems.
     source : str, optional
         The recording's source; ``ud_true_deg`` needs ``"synthetic"``.
+    version : str, optional
+        The file's declared format; the flight columns need :data:`FORMAT`.
     """
     unknown = [c for c in columns if c not in COLUMNS]
     if unknown:
@@ -180,6 +209,21 @@ def validate_samples(
     if missing:
         raise RecordingError(
             path, header_line, f"missing column {'; missing column '.join(missing)}"
+        )
+    flight = [c for c in FLIGHT_COLUMNS if c in columns]
+    if flight and version is not None and version != FORMAT:
+        raise RecordingError(
+            path,
+            header_line,
+            f"column {flight[0]!r} is format 1.1: the file must say '# format: {FORMAT}', "
+            f"not {version!r}",
+        )
+    if "altitude_m" in columns and "airspeed_mps" not in columns:
+        raise RecordingError(
+            path,
+            header_line,
+            "column 'altitude_m' needs the column 'airspeed_mps' (a flight's altitude "
+            "gives the density; without the airspeed there is nothing to scale)",
         )
     if "ud_true_deg" in columns and source is not None and source != "synthetic":
         raise RecordingError(
@@ -210,6 +254,16 @@ def validate_samples(
                 f"{_sample(lines, i)}{name} is {values[i]:g}: implausible (beyond ±{limit:g}); "
                 "refused rather than fitted",
             )
+        if name in FLIGHT_RANGES:
+            low, high = FLIGHT_RANGES[name]
+            bad = np.flatnonzero((values < low) | (values > high))
+            if bad.size:
+                i = int(bad[0])
+                raise RecordingError(
+                    path,
+                    _where(lines, i),
+                    f"{_sample(lines, i)}{name} is {values[i]:g}: outside [{low:g}, {high:g}]",
+                )
     if n < MIN_SAMPLES:
         raise RecordingError(
             path, None, f"too few samples: {n} (at least {MIN_SAMPLES} are needed)"
@@ -334,6 +388,8 @@ class Recording:
         Commanded / measured fin angle, °.
     roll_deg, roll_rate_dps : ndarray or None
         Encoder roll angle, ° / gyro roll rate, °/s.
+    airspeed_mps, altitude_m : ndarray or None
+        A flight's airspeed, m/s, and altitude above sea level, m (format 1.1).
     ud_true_deg : ndarray or None
         Ground-truth disturbance of a synthetic recording, ° (held over each
         sample interval).  Never an input to identification.
@@ -350,6 +406,8 @@ class Recording:
     fin_deg: FloatArray | None = None
     roll_deg: FloatArray | None = None
     roll_rate_dps: FloatArray | None = None
+    airspeed_mps: FloatArray | None = None
+    altitude_m: FloatArray | None = None
     ud_true_deg: FloatArray | None = None
     metadata: Mapping[str, str] = field(default_factory=dict)
 
@@ -388,6 +446,17 @@ class Recording:
             if values is not None:
                 out[column] = values
         return out
+
+    @property
+    def format(self) -> str:
+        """The format the file is written in: :data:`FORMAT_V1` unless it has flight columns."""
+        return FORMAT if self.is_flight else FORMAT_V1
+
+    @property
+    def is_flight(self) -> bool:
+        """Whether the recording has a flight's airspeed (format 1.1): the roll model's
+        gain and damping change along it."""
+        return self.airspeed_mps is not None
 
     @property
     def n_samples(self) -> int:
@@ -522,10 +591,12 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
 
     if header is None:
         raise RecordingError(name, None, "no header row (and no samples)")
-    fmt = meta.pop("format", FORMAT)
-    if fmt != FORMAT:
+    fmt = meta.pop("format", None)
+    if fmt is not None and fmt not in FORMATS:
         raise RecordingError(
-            name, meta_lines["format"], f"unsupported format {fmt!r}; this package reads {FORMAT}"
+            name,
+            meta_lines["format"],
+            f"unsupported format {fmt!r}; this package reads {' and '.join(FORMATS)}",
         )
     source = meta.pop("source", None)
     if source is None:
@@ -548,6 +619,7 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         lines=np.array(row_lines, dtype=np.int64),
         header_line=header_line,
         source=source,
+        version=fmt,
     )
     try:
         return Recording(name=rec_name, source=source, metadata=meta, **columns)
@@ -563,7 +635,11 @@ def format_number(x: float, decimals: int = 6) -> str:
 
 def recording_text(recording: Recording) -> str:
     """The file contents :func:`save_recording` writes."""
-    lines = [f"# format: {FORMAT}", f"# name: {recording.name}", f"# source: {recording.source}"]
+    lines = [
+        f"# format: {recording.format}",
+        f"# name: {recording.name}",
+        f"# source: {recording.source}",
+    ]
     lines += [f"# {key}: {value}" for key, value in recording.metadata.items()]
     columns = recording.columns()
     lines.append(",".join(columns))
@@ -577,7 +653,7 @@ def recording_text(recording: Recording) -> str:
 
 
 def save_recording(recording: Recording, path: str | os.PathLike[str]) -> None:
-    """Write a recording in format v1, atomically.
+    """Write a recording in format v1 (1.1 with flight columns), atomically.
 
     Numbers are written in fixed point with at most 6 decimals (time with
     :data:`TIME_DECIMALS`), so the same recording always gives the same bytes.

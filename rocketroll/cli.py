@@ -24,6 +24,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tunnel": ("identification.cli", "run the virtual wind tunnel and write a synthetic recording"),
     "import-csv": ("identification.cli", "convert a foreign CSV/text log into a recording"),
     "info": ("identification.cli", "validate a recording and print its summary"),
+    "flight": (
+        "disturbances.cli",
+        "fly the virtual flight and write a synthetic flight log",
+    ),
     "identify": (
         "disturbances.cli",
         "identify roll parameters and the disturbance u_d(t) from a recording",

@@ -25,23 +25,18 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from disturbances.bank import TraceBank
 from disturbances.flight import flight_bank, flown_row
 from identification.flight import (
-    DEFAULT_ASCENT,
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
     FlightProfile,
-    load_ascent_yaml,
-    load_profile_csv,
+    flight_profile,
     roll_scales,
-    simulate_ascent,
 )
 from rocketroll_common.arrays import FloatArray, readonly_array
 
@@ -61,35 +56,6 @@ INFO_COLUMNS = ("airspeed_mps", "altitude_m", "dynamic_pressure_pa", "mach")
 #: The smallest gain and damping multiplier (near apogee the airflow, and with it the roll
 #: model's coefficients, vanish; the kernel needs them positive).
 MIN_SCALE = 1e-3
-
-
-def flight_profile(name: str) -> FlightProfile:
-    """The ascent called ``name``: ``"default"`` (:data:`identification.flight.DEFAULT_ASCENT`
-    simulated), a rocket-and-motor YAML (``.yml``/``.yaml``,
-    :func:`identification.flight.load_ascent_yaml`, simulated) or a recorded ``V(t)`` CSV
-    (:func:`identification.flight.load_profile_csv`).  Cached per file state."""
-    if name == "default":
-        return _profile(name, 0, 0)
-    path = Path(name)
-    if path.suffix.lower() not in (".yml", ".yaml", ".csv"):
-        raise ValueError(
-            f"flight: {name!r} is neither 'default' nor a .yml/.yaml rocket or a .csv profile"
-        )
-    try:
-        stat = os.stat(path)
-    except OSError as exc:
-        raise ValueError(f"flight: {name}: {exc.strerror or 'cannot be read'}") from None
-    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
-
-
-@functools.lru_cache(maxsize=8)
-def _profile(name: str, mtime_ns: int, size: int) -> FlightProfile:
-    del mtime_ns, size  # the cache key: a changed file is read again
-    if name == "default":
-        return simulate_ascent(DEFAULT_ASCENT)
-    if name.lower().endswith(".csv"):
-        return load_profile_csv(name)
-    return simulate_ascent(load_ascent_yaml(name))
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,20 +132,7 @@ def flight_schedule(
 def _schedule(
     profile: FlightProfile, dt_s: float, substep_s: float, v_ref_mps: float, rho_ref_kgm3: float
 ) -> FlightSchedule:
-    fast = np.flatnonzero(profile.airspeed_mps >= v_ref_mps)
-    if fast.size == 0:
-        raise ValueError(
-            f"flight: {profile.source} never reaches the tunnel's airspeed "
-            f"{v_ref_mps:.1f} m/s (its fastest: {profile.max_speed_mps:.1f} m/s)"
-        )
-    k = int(fast[0])
-    if k == 0:
-        start = float(profile.t_s[0])
-    else:  # where the airspeed crosses v_ref, between samples k - 1 and k
-        t0, t1 = profile.t_s[k - 1], profile.t_s[k]
-        v0, v1 = profile.airspeed_mps[k - 1], profile.airspeed_mps[k]
-        start = float(t0 + (t1 - t0) * (v_ref_mps - v0) / (v1 - v0))
-    end = float(profile.apogee_s if math.isfinite(profile.apogee_s) else profile.t_s[-1])
+    start, end = profile.window(v_ref_mps)
     steps = math.floor((end - start) / dt_s + 1e-9)
     if steps < 1:
         raise ValueError(f"flight: {profile.source} lasts less than one control step")

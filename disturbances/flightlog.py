@@ -1,0 +1,365 @@
+"""The virtual tunnel's flight counterpart: a flight log with known truth (``rocketroll flight``).
+
+The tunnel (:mod:`identification.tunnel`) re-creates the paper's experiment so
+that every identification can be checked against the truth.  This module does
+the same for the flight the paper's §4 looks ahead to: the rocket of a
+:class:`~identification.flight.FlightProfile` (default: the 5-kg rocket to
+603 km/h and 2 km) from the moment it reaches the tunnel's airspeed (it has
+left the rail) to apogee, with
+
+* the roll model of eq. 36/49 at the reference airspeed ``V_ref`` (the
+  truth), its gain and damping scaled along the flight by eq. 4-8
+  (:func:`identification.flight.roll_scales`), integrated exactly
+  (:func:`identification.model.simulate`, scales per substep);
+* an excitation: a random staircase of fin commands, short dwells (the rocket
+  settles in tens of milliseconds at speed), through the servo of eq. 23;
+* turbulence flown, from one of the two sources of the flight environment:
+  ``tunnel`` -- a stationary ``u_d`` process like the tunnel's
+  (:class:`identification.tunnel.Turbulence`) flown by the law of
+  :mod:`disturbances.flight` (Taylor's frozen field, amplitude
+  ``V_ref/max(V, V_ref)``) -- or ``dryden`` -- the MIL-F-8785C roll gust
+  ``p_g`` (:mod:`disturbances.dryden`) as ``α·u_d = p_g``;
+* flight sensors: a rate gyro with the multiplicative noise of eq. 52 and an
+  additive floor, optionally an encoder-like quantised angle; the airspeed
+  and altitude of the profile (format 1.1).
+
+The recording's metadata holds the truth (``truth.*`` at ``truth.v_ref_mps``,
+``truth.rho_ref_kgm3``) and the exact command; ``ud_true_deg`` is the
+disturbance the rocket flew, per sample interval.
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from disturbances.dryden import roll_gust
+from disturbances.flight import fly_trace, tunnel_time
+from identification import paper
+from identification.flight import (
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    TUNNEL_AIRSPEED_MPS,
+    FlightProfile,
+    flight_profile,
+    roll_scales,
+)
+from identification.model import MODEL_NAMES, PAPER_CONSTANT, PAPER_THETA, RollParams, Servo
+from identification.model import simulate as simulate_roll
+from identification.recording import Recording, metadata_items
+from identification.tunnel import FinSchedule, Turbulence
+from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import SettingError
+from rocketroll_common.settings import check, setting, to_argv
+
+__all__ = ["FlightLogSpec", "run_flight"]
+
+#: The tunnel trace's hold interval that the ``tunnel`` turbulence is drawn at, s (the tunnel's Δt).
+TUNNEL_DT_S = 0.1
+#: The fin command is held at 0° this long after the rail before the staircase starts, s.
+LEAD_S = 0.5
+
+
+@dataclass(frozen=True)
+class FlightLogSpec:
+    """Everything that defines one virtual flight; each field is a ``rocketroll flight`` flag.
+
+    The rocket's truth is given at the reference airspeed ``v_ref`` (default:
+    the tunnel's 50 km/h) and ISA sea-level density, as the tunnel's
+    identification gives it; the defaults are the paper's θ-dependent rocket.
+    """
+
+    seed: int = setting(
+        0, "random seed; the same seed gives a byte-identical file", ge=0, le=2**63 - 1, always=True
+    )
+    ascent: str = setting(
+        "default",
+        "the ascent: default (the 5-kg rocket to about 600 km/h and 2 km), a rocket YAML or "
+        "a recorded V(t) CSV",
+        metavar="FLIGHT",
+    )
+    model: str = setting(
+        "theta", "damping model: theta (eq. 49) or constant (eq. 29)", choices=MODEL_NAMES
+    )
+    alpha: float = setting(
+        PAPER_THETA.alpha,
+        "steady-state gain α at --v-ref (eq. 17: the tunnel's)",
+        ge=-10.0,
+        le=10.0,
+        unit="(°/s)/°",
+    )
+    beta: float = setting(
+        PAPER_THETA.beta_dps,
+        "steady-state offset β at --v-ref (eq. 17); θ̄ = β/α",
+        ge=-100.0,
+        le=100.0,
+        unit="°/s",
+    )
+    alpha_bar: float | None = setting(
+        None,
+        f"ᾱ at --v-ref (eq. 48: {paper.PARAMETERS['alpha_bar_per_deg_s']}; 0 for --model constant)",
+        ge=-1.0,
+        le=1.0,
+        unit="1/(s·°)",
+    )
+    beta_bar: float | None = setting(
+        None,
+        f"β̄ at --v-ref (eq. 48: {paper.PARAMETERS['beta_bar_per_s']}), or the constant a "
+        f"(eq. 46: {paper.PARAMETERS['a_per_s']})",
+        gt=0.0,
+        le=100.0,
+        unit="1/s",
+    )
+    v_ref: float = setting(
+        TUNNEL_AIRSPEED_MPS,
+        "airspeed at which the truth holds (ISA sea-level density); the log starts when the "
+        "rocket reaches it",
+        gt=0.0,
+        le=1000.0,
+        unit="m/s",
+    )
+    servo_rate: float = setting(
+        Servo().rate_limit_dps, "servo rate limit (eq. 23)", gt=0.0, le=10_000.0, unit="°/s"
+    )
+    fin_range: float = setting(
+        20.0, "staircase levels are uniform in ±this", gt=0.5, le=40.0, unit="°"
+    )
+    dwell_min: float = setting(0.1, "shortest staircase dwell", gt=0.0, le=60.0, unit="s")
+    dwell_max: float = setting(0.5, "longest staircase dwell", gt=0.0, le=60.0, unit="s")
+    turbulence: Literal["tunnel", "dryden"] = setting(
+        "tunnel",
+        "turbulence: the tunnel's u_d process flown (Taylor, amplitude V_ref/V), or the "
+        "Dryden roll gust of MIL-F-8785C",
+    )
+    distribution: Literal["gaussian", "laplace", "student-t"] = setting(
+        "gaussian", "marginal of the tunnel process (--turbulence tunnel)"
+    )
+    turbulence_sd: float = setting(
+        Turbulence().sd_deg, "SD of the tunnel process", ge=0.0, le=45.0, unit="°"
+    )
+    correlation_time: float = setting(
+        Turbulence().correlation_time_s,
+        "correlation time of the tunnel process, in tunnel time",
+        ge=0.0,
+        le=600.0,
+        unit="s",
+    )
+    dof: float = setting(Turbulence().dof, "degrees of freedom of the student-t", gt=2.0, le=1000.0)
+    severity: Literal["light", "moderate", "severe"] = setting(
+        "light", "Dryden gust severity (--turbulence dryden)"
+    )
+    log_dt: float = setting(0.01, "logging interval", ge=0.001, le=0.1, unit="s")
+    substeps: int = setting(4, "exact-update substeps per logging interval", ge=1, le=1000)
+    gyro_noise: float = setting(
+        1.0, "rate gyro's multiplicative noise (eq. 52)", ge=0.0, le=100.0, unit="%"
+    )
+    gyro_floor: float = setting(0.1, "rate gyro's additive noise SD", ge=0.0, le=1000.0, unit="°/s")
+    no_gyro: bool = setting(False, "omit the gyro (needs --encoder-counts)")
+    encoder_counts: int = setting(
+        0,
+        "add a roll angle quantised to this many counts per revolution (0: none)",
+        ge=0,
+        le=2**24,
+    )
+    no_altitude: bool = setting(False, "omit the altitude column")
+    measured_fin: bool = setting(False, "add the actual (measured) fin angle column fin_deg")
+    name: str | None = setting(None, "recording name (default flight-<turbulence>-seed<N>)")
+    split: Literal["train", "test"] | None = setting(None, "evaluation split in the metadata")
+
+    def __post_init__(self) -> None:
+        check(self)
+        if self.model == "constant" and self.alpha_bar not in (None, 0.0):
+            raise SettingError("alpha_bar", "must be 0 for the constant-damping model")
+        if abs(self.alpha) < 1e-3:
+            raise SettingError("alpha", f"must be at least 0.001 in size, got {self.alpha!r}")
+        if abs(self.beta / self.alpha) > 45.0:
+            raise SettingError(
+                "beta", f"gives an asymmetry θ̄ = β/α = {self.beta / self.alpha:.4g}° beyond ±45°"
+            )
+        if self.no_gyro and self.encoder_counts == 0:
+            raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
+        if not self.log_dt <= self.dwell_min <= self.dwell_max:
+            raise SettingError(
+                "dwell_min",
+                f"must be at least --log-dt ({self.log_dt:g} s) and at most --dwell-max "
+                f"({self.dwell_max:g} s), got {self.dwell_min:g} s",
+            )
+        params = self.params()
+        lowest = params.beta_bar_per_s + min(params.alpha_bar_per_deg_s, 0.0) * (
+            Servo().range_deg + abs(params.theta_bar_deg)
+        )
+        if lowest <= 0.0:
+            raise SettingError(
+                "alpha_bar",
+                f"makes the damping a(θ) = ᾱ·|θ + θ̄| + β̄ reach {lowest:.3g} 1/s within the "
+                f"±{Servo().range_deg:g}° fin range; it must stay positive",
+            )
+
+    def params(self) -> RollParams:
+        """The truth at ``v_ref`` and ISA sea-level density."""
+        base = PAPER_THETA if self.model == "theta" else PAPER_CONSTANT
+        return RollParams.from_steady_state(
+            alpha=self.alpha,
+            beta=self.beta,
+            beta_bar=base.beta_bar_per_s if self.beta_bar is None else self.beta_bar,
+            alpha_bar=base.alpha_bar_per_deg_s if self.alpha_bar is None else self.alpha_bar,
+        )
+
+    def default_name(self) -> str:
+        """``flight-<turbulence>-seed<N>`` unless a name was given."""
+        return self.name or f"flight-{self.turbulence}-seed{self.seed}"
+
+    def command(self) -> str:
+        """The full shell command, e.g. ``rocketroll flight --seed 0``."""
+        return shlex.join(["rocketroll", "flight", *to_argv(self)])
+
+
+def _turbulence(
+    spec: FlightLogSpec,
+    profile: FlightProfile,
+    edges: FloatArray,
+    gain_mid: FloatArray,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """``u_d`` per logging interval along the flight, °."""
+    along = profile.at(edges)
+    speed = np.asarray(along.airspeed_mps)
+    if spec.turbulence == "tunnel":
+        tau = tunnel_time(edges - edges[0], speed, spec.v_ref)
+        process = Turbulence(
+            distribution=spec.distribution,
+            sd_deg=spec.turbulence_sd,
+            correlation_time_s=spec.correlation_time,
+            dof=spec.dof,
+        )
+        u = process.sample(math.ceil(tau[-1] / TUNNEL_DT_S) + 2, TUNNEL_DT_S, rng)
+        middle = 0.5 * (speed[1:] + speed[:-1])
+        return fly_trace(u, TUNNEL_DT_S, 0.0, tau, spec.v_ref / np.maximum(middle, spec.v_ref))
+    height = np.maximum(np.asarray(along.altitude_m) - profile.altitude_m[0], 0.0)
+    gust = roll_gust(edges, speed, height, severity=spec.severity, rng=rng)
+    return np.asarray(gust / (spec.params().alpha * np.maximum(gain_mid, 1e-3)))
+
+
+def run_flight(spec: FlightLogSpec) -> Recording:
+    """Fly the virtual flight and log it.
+
+    Returns
+    -------
+    Recording
+        ``source = synthetic``, format 1.1: ``fin_cmd_deg``, ``roll_rate_dps``
+        (unless ``no_gyro``), the optional ``fin_deg`` and ``roll_deg``,
+        ``airspeed_mps``, ``altitude_m`` (unless ``no_altitude``) and the
+        ground-truth ``ud_true_deg``; the metadata carries the truth and the
+        exact command.
+
+    Raises
+    ------
+    ValueError
+        ``flight: ...`` for an ascent that cannot be read or never reaches ``v_ref``.
+    """
+    children = np.random.SeedSequence(spec.seed).spawn(3)
+    rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
+    profile = flight_profile(spec.ascent)
+    start, end = profile.window(spec.v_ref)
+    n = math.floor((end - start) / spec.log_dt + 1e-9)
+    if n < 50:
+        raise ValueError(
+            f"flight: {profile.source} spends {end - start:.2f} s above --v-ref "
+            f"{spec.v_ref:g} m/s: fewer than 50 samples of {spec.log_dt:g} s"
+        )
+    time = start + spec.log_dt * np.arange(n + 1)
+    steps = math.ceil((end - start) / spec.dwell_min) + 1
+    schedule = FinSchedule.staircase(
+        rng_schedule,
+        steps,
+        range_deg=spec.fin_range,
+        dwell_s=(spec.dwell_min, spec.dwell_max),
+        lead_s=LEAD_S,
+        min_step_deg=min(5.0, spec.fin_range),
+        grid_s=spec.log_dt,
+    )
+    command = schedule.command(time - start)
+    h = spec.log_dt / spec.substeps
+    fine_middle = start + h * (np.arange(n * spec.substeps) + 0.5)
+    state = profile.at(fine_middle)
+    gain, damping = roll_scales(
+        state.airspeed_mps, state.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3
+    )
+    gain_mid, _ = roll_scales(
+        profile.at(time[:-1] + 0.5 * spec.log_dt).airspeed_mps, 1.0, spec.v_ref, 1.0
+    )
+    u_d = _turbulence(spec, profile, time, np.asarray(gain_mid), rng_turbulence)
+    params = spec.params()
+    servo = Servo(rate_limit_dps=spec.servo_rate)
+    sim = simulate_roll(
+        params,
+        spec.log_dt,
+        command[:-1],
+        u_d,
+        servo=servo,
+        substeps=spec.substeps,
+        t0_s=float(time[0]),
+        gain=gain,
+        damping=damping,
+    )
+    columns: dict[str, FloatArray] = {"fin_cmd_deg": command}
+    if spec.measured_fin:
+        columns["fin_deg"] = sim.fin_deg
+    if spec.encoder_counts:
+        resolution = 360.0 / spec.encoder_counts
+        columns["roll_deg"] = np.floor(sim.angle_deg / resolution + 1e-9) * resolution
+    if not spec.no_gyro:
+        eps = rng_sensor.standard_normal((2, sim.rate_dps.size))
+        columns["roll_rate_dps"] = (
+            1.0 + spec.gyro_noise / 100.0 * eps[0]
+        ) * sim.rate_dps + spec.gyro_floor * eps[1]
+    at = profile.at(time)
+    columns["airspeed_mps"] = np.asarray(at.airspeed_mps)
+    if not spec.no_altitude:
+        columns["altitude_m"] = np.asarray(at.altitude_m)
+    columns["ud_true_deg"] = np.append(u_d, u_d[-1])
+
+    meta: list[tuple[str, object]] = [
+        ("notes", "virtual flight (synthetic data with known ground truth)"),
+        ("command", spec.command()),
+        ("seed", spec.seed),
+        ("flight.ascent", profile.source),
+        ("flight.start_s", round(start, 9)),
+        ("truth.model", spec.model),
+        ("truth.alpha", params.alpha),
+        ("truth.beta_dps", params.beta_dps),
+        ("truth.theta_bar_deg", params.theta_bar_deg),
+        ("truth.alpha_bar_per_deg_s", params.alpha_bar_per_deg_s),
+        ("truth.beta_bar_per_s", params.beta_bar_per_s),
+        ("truth.v_ref_mps", spec.v_ref),
+        ("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3),
+        ("truth.servo_rate_dps", servo.rate_limit_dps),
+        ("truth.turbulence", "tunnel-flown" if spec.turbulence == "tunnel" else "dryden"),
+    ]
+    if spec.turbulence == "tunnel":
+        meta += [
+            ("flight.turbulence_distribution", spec.distribution),
+            ("truth.turbulence_sd_deg", spec.turbulence_sd),
+            ("truth.turbulence_tau_s", spec.correlation_time),
+        ]
+    else:
+        meta.append(("flight.gust_severity", spec.severity))
+    if not spec.no_gyro:
+        meta += [
+            ("sensor.gyro_noise_pct", spec.gyro_noise),
+            ("sensor.gyro_floor_dps", spec.gyro_floor),
+        ]
+    if spec.encoder_counts:
+        meta.append(("sensor.encoder_counts", spec.encoder_counts))
+    if spec.split is not None:
+        meta.append(("split", spec.split))
+    return Recording(
+        name=spec.default_name(),
+        source="synthetic",
+        time_s=time,
+        metadata=metadata_items(meta),
+        **columns,
+    )

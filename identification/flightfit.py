@@ -1,0 +1,736 @@
+"""Identification of a flight: the roll model at a reference airspeed, from a changing one.
+
+The paper identifies ``a`` and ``α`` at the tunnel's one airspeed (§4) and
+names the way to flight: identify the coefficients of eq. 7-8 (``C_P``,
+``C_δ``) instead of the lumped ``a``, ``α``, so that the dynamic pressure of
+eq. 5 carries them to any airspeed.  This module does that for a recording
+with an ``airspeed_mps`` column (format 1.1): it estimates the model **at a
+reference airspeed** ``V_ref`` and density ``ρ_ref`` (default: the tunnel's
+50 km/h at ISA sea level) with the flight's scaling (eq. 4-8,
+:func:`identification.flight.roll_scales`)::
+
+    α(t) = α₀·V/V_ref,     a(θ, t) = (ᾱ₀·|θ + θ̄| + β̄₀)·ρV/(ρ_ref·V_ref)
+
+so ``β̄₀/(ρ_ref·V_ref)`` is ``S·d²·|C_P|/(4·I)`` and ``β̄₀·α₀/q_ref`` is
+``S·d·C_δ/I``: the ``C_P``- and ``C_δ``-like coefficients, reported as such.
+
+Method: maximum likelihood with a Kalman filter (the flight's version of
+:mod:`identification.ml`).  The state is the roll rate ``v``, the roll angle
+``φ`` and the turbulence ``w``; the rocket moves by the exact update of
+:mod:`identification.model` with the scales of each substep; the turbulence
+is the physics of :mod:`disturbances.flight` and :mod:`disturbances.dryden`
+made a prior: a field frozen in the air (Taylor) that the rocket flies
+through, an Ornstein-Uhlenbeck process in *tunnel time* ``τ = ∫V/V_ref dt``
+(so its correlation time in flight shrinks like ``V_ref/V``) of SD ``σ_w``
+and time constant ``T``, whose flow angle shrinks like ``V_ref/V``::
+
+    u_d = (V_ref / max(V, V_ref)) · w̄,        w̄ = the average of w over the sample interval
+
+(the average exactly, :mod:`rocketroll_common.ou`).  For the Dryden gust
+(``α·u_d = p_g``, an OU process of time constant ``4b/(πV)``) this is the
+same law.  Measured: a rate gyro with the multiplicative noise of eq. 52 plus
+an additive floor (both estimated), or, without a gyro, the encoder angle
+with its quantisation.  The likelihood of the innovations is maximised over
+``α₀, θ̄, β̄₀`` (and ``ᾱ₀``), ``σ_w, T`` and the sensor noise by L-BFGS-B; the
+Rauch-Tung-Striebel smoother gives ``u_d(t)``, and the model driven by it is
+re-simulated against the measured rate (§3.5).
+
+Assumptions, documented: constant ``C_P``, ``C_δ`` and inertia (subsonic,
+§4); θ̄ does not change with airspeed; ᾱ and β̄ scale together; the density
+is the ISA's at ``altitude_m`` (without that column: ``ρ_ref`` throughout);
+the turbulence has mean zero (a mean is indistinguishable from θ̄, as in
+the tunnel).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize
+
+from identification.flight import (
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    TUNNEL_AIRSPEED_MPS,
+    isa,
+    roll_scales,
+)
+from identification.methods import ModelFit
+from identification.model import RollParams, Servo, roll_coefficients, servo_path, simulate
+from identification.recording import Recording
+from identification.steps import Disturbance, IdentificationError
+from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_common.ou import interval_coefficients
+
+if TYPE_CHECKING:
+    from identification.methods import Context
+
+__all__ = [
+    "FlightFit",
+    "FlightInputs",
+    "c_coefficients",
+    "flight_inputs",
+    "flight_method",
+    "identify_flight",
+    "rescale",
+]
+
+#: Exact-update substeps per sample interval (the servo ramp is resolved exactly within each).
+SUBSTEPS = 4
+#: Smallest damping a(θ) the fit may give anywhere on the flown fin angles, 1/s.
+MIN_DAMPING = 1e-3
+#: Below this tunnel time per interval (s) the air does not move the field past the rocket.
+_STILL = 1e-9
+#: The turbulence's SD is estimated separately on this many equal stretches of the flight
+#: (the atmosphere's intensity changes with altitude: MIL-F-8785C, §3.7.2).  One: four
+#: were tried on the Dryden flights of ``benchmarks/flight_ground_truth.py`` (whose
+#: intensity falls with height) and recovered the coefficients no better, in 1.7x the time.
+SEGMENTS = 1
+#: Bound on the optimiser's log-parameters (exp(±50) is beyond any physical value).
+_LOG_BOUND = 50.0
+
+
+@dataclass(frozen=True, eq=False)
+class FlightInputs:
+    """A flight recording made ready for the filter (:func:`flight_inputs`).
+
+    Attributes
+    ----------
+    recording : Recording
+        The data.
+    dt_s : float
+        Sample interval, s.
+    theta : ndarray, shape (n·SUBSTEPS + 1,)
+        Fin angle at the substep edges, ° (the servo of eq. 23 on the commands,
+        or the measured fin angle, linear between samples).
+    rate_limit_dps : float or None
+        The servo's rate (None with a measured fin angle).
+    gain, damping : ndarray, shape (n·SUBSTEPS,)
+        ``V/V_ref`` and ``ρV/(ρ_ref·V_ref)`` at each substep's midpoint.
+    u_per_w : ndarray, shape (n,)
+        ``V_ref/max(V, V_ref)`` at each interval's midpoint: ``u_d`` per unit ``w̄``.
+    tunnel_dt_s : ndarray, shape (n,)
+        Tunnel time that passes in each interval, ∫V/V_ref dt, s.
+    rate : ndarray or None
+        Gyro roll rate at the samples, °/s.
+    angle : ndarray or None
+        Roll angle at the samples, ° (used only without a gyro).
+    quantum_deg : float
+        The angle's quantisation step, ° (0 if none is seen).
+    density : str
+        Where the density came from.
+    v_ref_mps, rho_ref_kgm3 : float
+        The reference the coefficients are given at.
+    """
+
+    recording: Recording
+    dt_s: float
+    theta: FloatArray
+    rate_limit_dps: float | None
+    gain: FloatArray
+    damping: FloatArray
+    u_per_w: FloatArray
+    tunnel_dt_s: FloatArray
+    rate: FloatArray | None
+    angle: FloatArray | None
+    quantum_deg: float
+    density: str
+    v_ref_mps: float
+    rho_ref_kgm3: float
+
+    @property
+    def segment(self) -> NDArray[np.intp]:
+        """The stretch of :data:`SEGMENTS` equal ones each interval is in."""
+        return np.minimum(np.arange(self.n) * SEGMENTS // self.n, SEGMENTS - 1)
+
+    @property
+    def n(self) -> int:
+        """Number of sample intervals."""
+        return int(self.u_per_w.size)
+
+
+def flight_inputs(
+    recording: Recording,
+    *,
+    v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
+    rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+    servo_rate_dps: float = Servo().rate_limit_dps,
+) -> FlightInputs:
+    """The fin path, the scales and the measurements of a flight recording.
+
+    Raises
+    ------
+    IdentificationError
+        If the recording has no airspeed (not a flight) or no roll measurement.
+    """
+    from identification.ml import _quantum
+
+    if recording.airspeed_mps is None:
+        raise IdentificationError(
+            f"recording {recording.name!r} has no airspeed_mps column: not a flight "
+            "(identify it with the tunnel's methods: paper, output-error, ml)"
+        )
+    if not (math.isfinite(v_ref_mps) and v_ref_mps > 0):
+        raise IdentificationError(f"v_ref_mps must be > 0, not {v_ref_mps!r}")
+    time = np.asarray(recording.time_s)
+    n = time.size - 1
+    dt = recording.dt_s
+    h = dt / SUBSTEPS
+    fine = time[0] + h * np.arange(n * SUBSTEPS + 1)
+    middle = fine[:-1] + 0.5 * h
+    speed = np.asarray(recording.airspeed_mps)
+    if recording.altitude_m is not None:
+        density = np.asarray(
+            isa(np.interp(middle, time, recording.altitude_m)).density_kgm3, dtype=float
+        )
+        source = "ISA at altitude_m"
+    else:
+        density = np.full(middle.size, rho_ref_kgm3)
+        source = f"no altitude_m: ρ_ref = {rho_ref_kgm3:.4f} kg/m³ throughout"
+    gain, damping = roll_scales(np.interp(middle, time, speed), density, v_ref_mps, rho_ref_kgm3)
+    speed_mid = 0.5 * (speed[1:] + speed[:-1])
+    if recording.fin_deg is not None:
+        theta = np.interp(fine, time, recording.fin_deg)
+        rate_limit = None
+    else:
+        assert recording.fin_cmd_deg is not None
+        command = np.asarray(recording.fin_cmd_deg)
+        servo = Servo(rate_limit_dps=servo_rate_dps)
+        theta = servo_path(np.repeat(command[:-1], SUBSTEPS), float(command[0]), h, servo)
+        rate_limit = servo_rate_dps
+    rate = None if recording.roll_rate_dps is None else np.asarray(recording.roll_rate_dps)
+    angle = None if recording.roll_deg is None else np.asarray(recording.roll_deg)
+    return FlightInputs(
+        recording=recording,
+        dt_s=dt,
+        theta=theta,
+        rate_limit_dps=rate_limit,
+        gain=gain,
+        damping=damping,
+        u_per_w=v_ref_mps / np.maximum(speed_mid, v_ref_mps),
+        tunnel_dt_s=speed_mid / v_ref_mps * np.diff(time),
+        rate=rate,
+        angle=angle,
+        quantum_deg=0.0 if angle is None else _quantum(angle),
+        density=source,
+        v_ref_mps=v_ref_mps,
+        rho_ref_kgm3=rho_ref_kgm3,
+    )
+
+
+def interval_maps(
+    inputs: FlightInputs, params: RollParams
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The exact update over each sample interval with ``u_d = u_per_w·w̄`` held::
+
+        v1 = E·v0 + C0 + C1·w̄,     φ1 = φ0 + A·v0 + B0 + B1·w̄
+
+    composed from the :data:`SUBSTEPS` substeps of :func:`~identification.model.roll_coefficients`.
+    """
+    n = inputs.n
+    th0, th1 = inputs.theta[:-1], inputs.theta[1:]
+    h = inputs.dt_s / SUBSTEPS
+    unit = np.repeat(inputs.u_per_w, SUBSTEPS)
+    kw = {"gain": inputs.gain, "damping": inputs.damping}
+    e, c0, a, b0 = roll_coefficients(params, th0, th1, 0.0, h, inputs.rate_limit_dps, **kw)
+    _, c1, _, b1 = roll_coefficients(params, th0, th1, unit, h, inputs.rate_limit_dps, **kw)
+    parts = [x.reshape(n, SUBSTEPS) for x in (e, c0, c1 - c0, a, b0, b1 - b0)]
+    e_s, c0_s, c1_s, a_s, b0_s, b1_s = parts
+    big_e, big_c0, big_c1 = np.ones(n), np.zeros(n), np.zeros(n)
+    big_a, big_b0, big_b1 = np.zeros(n), np.zeros(n), np.zeros(n)
+    for j in range(SUBSTEPS):  # v_j = E·v0 + C0 + C1·w̄ at the start of substep j
+        big_a += a_s[:, j] * big_e
+        big_b0 += a_s[:, j] * big_c0 + b0_s[:, j]
+        big_b1 += a_s[:, j] * big_c1 + b1_s[:, j]
+        big_e, big_c0, big_c1 = (
+            e_s[:, j] * big_e,
+            e_s[:, j] * big_c0 + c0_s[:, j],
+            e_s[:, j] * big_c1 + c1_s[:, j],
+        )
+    return big_e, big_c0, big_c1, big_a, big_b0, big_b1
+
+
+@numba.njit(cache=True, nogil=True)
+def _kalman(  # pragma: no cover - compiled
+    trans: FloatArray,
+    offset: FloatArray,
+    noise: FloatArray,
+    y: FloatArray,
+    r: FloatArray,
+    x0: FloatArray,
+    p0: FloatArray,
+    smooth: bool,
+) -> tuple[float, FloatArray]:
+    """Log-likelihood of ``y`` (row k: the rate and the angle at sample k, with variances
+    ``r``; a variance ≤ 0 means not measured), and the smoothed means if ``smooth``.
+
+    ``x[k+1] = trans[k]·x[k] + offset[k] + noise[k]·z``, ``z`` standard normal (2-vector).
+    """
+    n = trans.shape[0]
+    x = x0.copy()
+    p = p0.copy()
+    loglike = 0.0
+    xs_pred = np.zeros((n + 1, 3))
+    ps_pred = np.zeros((n + 1, 3, 3))
+    xs_filt = np.zeros((n + 1, 3))
+    ps_filt = np.zeros((n + 1, 3, 3))
+    xs_pred[0] = x
+    ps_pred[0] = p
+    for k in range(n + 1):
+        for m in range(2):  # sequential scalar updates: rate (state 0), angle (state 1)
+            if r[k, m] <= 0.0:
+                continue
+            s = p[m, m] + r[k, m]
+            innovation = y[k, m] - x[m]
+            loglike -= 0.5 * (math.log(2.0 * math.pi * s) + innovation * innovation / s)
+            gain = p[:, m] / s
+            x = x + gain * innovation
+            p = p - np.outer(gain, gain) * s
+        p = 0.5 * (p + p.T)
+        xs_filt[k] = x
+        ps_filt[k] = p
+        if k == n:
+            break
+        f = trans[k]
+        g = noise[k]
+        x = f @ x + offset[k]
+        p = f @ p @ f.T + g @ g.T
+        xs_pred[k + 1] = x
+        ps_pred[k + 1] = p
+    if not smooth:
+        return loglike, xs_filt[:0]
+    xs = xs_filt.copy()
+    for k in range(n - 1, -1, -1):
+        pp = ps_pred[k + 1] + 1e-12 * np.eye(3)
+        j = np.linalg.solve(pp.T, (ps_filt[k] @ trans[k].T).T).T
+        xs[k] = xs_filt[k] + j @ (xs[k + 1] - xs_pred[k + 1])
+    return loglike, xs
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Which parameters are free, in the optimiser's coordinates."""
+
+    theta_model: bool
+    gyro: bool
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        core = ("log_beta_bar", "alpha", "theta_bar") + (("alpha_bar",) if self.theta_model else ())
+        noise = ("log_gyro_rel", "log_gyro_abs") if self.gyro else ("log_angle_sd",)
+        sigmas = tuple(f"log_sigma_w{j}" for j in range(SEGMENTS))
+        return (*core, *sigmas, "log_tau", *noise)
+
+    def natural(self, x: FloatArray) -> dict[str, float]:
+        values = dict(zip(self.names, (float(v) for v in x), strict=True))
+        for name in values:
+            if name.startswith("log_"):
+                values[name] = min(max(values[name], -_LOG_BOUND), _LOG_BOUND)
+        return {
+            "beta_bar": math.exp(values["log_beta_bar"]),
+            "alpha": values["alpha"],
+            "theta_bar": values["theta_bar"],
+            "alpha_bar": values.get("alpha_bar", 0.0),
+            **{f"sigma_w{j}": math.exp(values[f"log_sigma_w{j}"]) for j in range(SEGMENTS)},
+            "tau": math.exp(values["log_tau"]),
+            "gyro_rel": math.exp(values.get("log_gyro_rel", -99.0)),
+            "gyro_abs": math.exp(values.get("log_gyro_abs", -99.0)),
+            "angle_sd": math.exp(values.get("log_angle_sd", -99.0)),
+        }
+
+    def vector(self, nat: dict[str, float]) -> FloatArray:
+        values = {
+            "log_beta_bar": math.log(nat["beta_bar"]),
+            "alpha": nat["alpha"],
+            "theta_bar": nat["theta_bar"],
+            "alpha_bar": nat.get("alpha_bar", 0.0),
+            **{
+                f"log_sigma_w{j}": math.log(nat.get(f"sigma_w{j}", nat.get("sigma_w", 1.0)))
+                for j in range(SEGMENTS)
+            },
+            "log_tau": math.log(nat["tau"]),
+            "log_gyro_rel": math.log(nat.get("gyro_rel", 0.01)),
+            "log_gyro_abs": math.log(nat.get("gyro_abs", 0.1)),
+            "log_angle_sd": math.log(nat.get("angle_sd", 0.01)),
+        }
+        return np.array([values[name] for name in self.names])
+
+
+def _params(nat: dict[str, float]) -> RollParams | None:
+    if nat["alpha"] == 0.0:
+        return None
+    return RollParams(nat["alpha"], nat["theta_bar"], nat["beta_bar"], nat["alpha_bar"])
+
+
+def _system(
+    inputs: FlightInputs, nat: dict[str, float]
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] | None:
+    """Transition, offset, noise, measurements, their variances and the first state."""
+    params = _params(nat)
+    if params is None:
+        return None
+    if nat["alpha_bar"] != 0.0:
+        low = nat["beta_bar"] + nat["alpha_bar"] * float(
+            np.max(np.abs(inputs.theta + nat["theta_bar"])) if nat["alpha_bar"] < 0 else 0.0
+        )
+        if low < MIN_DAMPING:
+            return None
+    e, c0, c1, a, b0, b1 = interval_maps(inputs, params)
+    tau = nat["tau"]
+    sigma = _sigmas(nat)[inputs.segment]
+    moving = inputs.tunnel_dt_s > _STILL
+    u = np.where(moving, inputs.tunnel_dt_s / tau, 1.0)
+    phi, a1, mean, l21, l22 = interval_coefficients(u)
+    phi = np.where(moving, phi, 1.0)
+    mean = np.where(moving, mean, 1.0)
+    a1, l21, l22 = (np.where(moving, x, 0.0) for x in (a1, l21, l22))
+    n = inputs.n
+    trans = np.zeros((n, 3, 3))
+    trans[:, 0, 0] = e
+    trans[:, 0, 2] = c1 * mean
+    trans[:, 1, 0] = a
+    trans[:, 1, 1] = 1.0
+    trans[:, 1, 2] = b1 * mean
+    trans[:, 2, 2] = phi
+    offset = np.zeros((n, 3))
+    offset[:, 0] = c0
+    offset[:, 1] = b0
+    noise = np.zeros((n, 3, 2))
+    noise[:, 0, 0] = c1 * sigma * l21
+    noise[:, 0, 1] = c1 * sigma * l22
+    noise[:, 1, 0] = b1 * sigma * l21
+    noise[:, 1, 1] = b1 * sigma * l22
+    noise[:, 2, 0] = sigma * a1
+    y = np.zeros((n + 1, 2))
+    r = np.zeros((n + 1, 2))
+    x0 = np.zeros(3)
+    p0 = np.diag([1e4, 1e4, sigma[0] ** 2])
+    if inputs.rate is not None:
+        y[:, 0] = inputs.rate
+        r[:, 0] = nat["gyro_abs"] ** 2 + (nat["gyro_rel"] * inputs.rate) ** 2
+        x0[0] = inputs.rate[0]
+        p0[1, 1] = 1.0  # the angle is not measured: its start does not matter
+    else:
+        assert inputs.angle is not None
+        y[:, 1] = inputs.angle - inputs.angle[0]
+        r[:, 1] = inputs.quantum_deg**2 / 12.0 + nat["angle_sd"] ** 2
+        p0[1, 1] = r[0, 1]
+    return trans, offset, noise, y, r, np.stack([x0, np.diag(p0)])
+
+
+def _sigmas(nat: dict[str, float]) -> FloatArray:
+    return np.array([nat[f"sigma_w{j}"] for j in range(SEGMENTS)])
+
+
+def _negloglike(x: FloatArray, inputs: FlightInputs, layout: _Layout) -> float:
+    nat = layout.natural(x)
+    if not all(math.isfinite(v) for v in nat.values()):
+        return 1e12
+    system = _system(inputs, nat)
+    if system is None:
+        return 1e12
+    trans, offset, noise, y, r, start = system
+    loglike, _ = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), False)
+    return -loglike if math.isfinite(loglike) else 1e12
+
+
+def _rough_rate(inputs: FlightInputs) -> FloatArray:
+    """The rate at the samples for a start: the gyro, or the angle differenced and smoothed."""
+    if inputs.rate is not None:
+        return inputs.rate
+    assert inputs.angle is not None
+    kernel = np.ones(5) / 5.0
+    smooth = np.convolve(np.pad(inputs.angle, 2, mode="edge"), kernel, mode="valid")
+    return np.gradient(smooth, inputs.dt_s)
+
+
+def _equation_error_start(inputs: FlightInputs) -> dict[str, float]:
+    """Least squares of ``dv/dt = −β̄₀·d·v + β̄₀α₀·d·g·θ + β̄₀α₀θ̄·d·g``: the optimiser's start."""
+    rate = _rough_rate(inputs)
+    kernel = np.ones(3) / 3.0
+    smooth = np.convolve(np.pad(rate, 1, mode="edge"), kernel, mode="valid")
+    slope = np.gradient(smooth, inputs.dt_s)
+    at = slice(0, None, SUBSTEPS)
+    theta = inputs.theta[at]
+    gain = np.append(inputs.gain[at], inputs.gain[-1])
+    damping = np.append(inputs.damping[at], inputs.damping[-1])
+    design = np.column_stack([-damping * smooth, damping * gain * theta, damping * gain])
+    coef, *_ = np.linalg.lstsq(design, slope, rcond=None)
+    beta_bar = float(coef[0]) if coef[0] > MIN_DAMPING else 1.0
+    alpha = float(coef[1] / beta_bar) if coef[1] != 0 else 1.0
+    theta_bar = float(coef[2] / (beta_bar * alpha))
+    resid = slope - design @ coef
+    scale = np.maximum(damping * gain * beta_bar * abs(alpha), 1e-6)
+    sigma = float(np.clip(np.std(resid / scale) * math.sqrt(inputs.dt_s), 0.05, 30.0))
+    return {"beta_bar": beta_bar, "alpha": alpha, "theta_bar": theta_bar, "sigma_w": sigma}
+
+
+@dataclass(frozen=True, eq=False)
+class FlightFit:
+    """The maximum-likelihood fit of one damping model to a flight (:func:`identify_flight`).
+
+    Attributes
+    ----------
+    model : str
+        ``constant`` or ``theta``.
+    params : RollParams
+        The rocket at ``v_ref_mps`` and ``rho_ref_kgm3``.
+    turbulence_sd_deg : tuple of float
+        ``σ_w`` (°) of the turbulence on each of :data:`SEGMENTS` equal stretches of the flight.
+    turbulence_tau_s : float
+        Its time constant ``T``, tunnel seconds.
+    gyro_noise_pct, gyro_floor_dps : float or None
+        The gyro's estimated relative noise (%, eq. 52) and additive floor.
+    loglike : float
+        The maximised log-likelihood.
+    std_errors : dict
+        Asymptotic standard errors of α, θ̄, β̄ (and ᾱ) from the inverse Hessian.
+    u_d_deg : ndarray, shape (n,)
+        Posterior mean of ``u_d`` over each sample interval (the flight's
+        equivalent fin angle, °).
+    rate_dps : ndarray, shape (n + 1,)
+        Posterior mean of the roll rate at the samples, °/s.
+    converged : bool
+        Whether the optimiser said so.
+    inputs : FlightInputs
+        What was fitted.
+    """
+
+    model: str
+    params: RollParams
+    turbulence_sd_deg: tuple[float, ...]
+    turbulence_tau_s: float
+    gyro_noise_pct: float | None
+    gyro_floor_dps: float | None
+    loglike: float
+    std_errors: dict[str, float]
+    u_d_deg: FloatArray
+    rate_dps: FloatArray
+    converged: bool
+    inputs: FlightInputs
+
+    def disturbance(self) -> Disturbance:
+        """``u_d`` as the tunnel methods give theirs (held over each sample interval)."""
+        time = self.inputs.recording.time_s
+        return Disturbance(
+            model=self.model,
+            params=self.params,
+            interval_s=self.inputs.dt_s,
+            start_s=readonly_array(time[:-1]),
+            u_d_deg=readonly_array(self.u_d_deg),
+        )
+
+    def resimulate(self) -> dict[str, float]:
+        """§3.5 in flight: the model driven by its ``u_d`` from the first sample, open loop.
+
+        Returns the rate's mean and SD absolute error against the measured
+        rate (and the angle's against the measured angle), and the rate's MAE
+        as a percentage of the mean measured ``|rate|``.
+        """
+        inp = self.inputs
+        rec = inp.recording
+        servo = None if inp.rate_limit_dps is None else Servo(rate_limit_dps=inp.rate_limit_dps)
+        fin = rec.fin_deg if servo is None else np.asarray(rec.fin_cmd_deg)[:-1]
+        sim = simulate(
+            self.params,
+            inp.dt_s,
+            np.asarray(fin),
+            self.u_d_deg,
+            rate0_dps=float(self.rate_dps[0]),
+            angle0_deg=0.0 if inp.angle is None else float(inp.angle[0]),
+            servo=servo,
+            theta0_deg=float(inp.theta[0]),
+            substeps=SUBSTEPS,
+            gain=inp.gain,
+            damping=inp.damping,
+        )
+        measured = inp.rate if inp.rate is not None else _rough_rate(inp)
+        error = np.abs(sim.rate_dps - measured)
+        out = {
+            "resim_rate_mae_dps": float(error.mean()),
+            "resim_rate_sd_dps": float(error.std(ddof=1)),
+            "resim_rate_mae_pct": float(100.0 * error.mean() / np.mean(np.abs(measured))),
+        }
+        if inp.angle is not None:
+            angle_error = np.abs(sim.angle_deg - inp.angle)
+            out["resim_angle_mae_deg"] = float(angle_error.mean())
+            out["resim_angle_sd_deg"] = float(angle_error.std(ddof=1))
+        return out
+
+
+def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
+    """Maximum likelihood of one damping model on a flight (module docstring).
+
+    The constant-damping model starts from an equation-error least-squares fit
+    at two turbulence time constants; the θ-dependent model starts from the
+    constant model's fit with ᾱ₀ = 0.
+    """
+    from identification.ml import _hessian
+
+    gyro = inputs.rate is not None
+    if not gyro and inputs.angle is None:
+        raise IdentificationError(
+            f"recording {inputs.recording.name!r} has neither roll_rate_dps nor roll_deg"
+        )
+    if model == "theta":
+        base = identify_flight(inputs, "constant")
+        p = base.params
+        starts = [
+            {
+                "beta_bar": p.beta_bar_per_s,
+                "alpha": p.alpha,
+                "theta_bar": p.theta_bar_deg,
+                "alpha_bar": 0.0,
+                **{f"sigma_w{j}": sd for j, sd in enumerate(base.turbulence_sd_deg)},
+                "tau": base.turbulence_tau_s,
+                "gyro_rel": (base.gyro_noise_pct or 1.0) / 100.0,
+                "gyro_abs": base.gyro_floor_dps or 0.1,
+            }
+        ]
+    elif model == "constant":
+        rough = _equation_error_start(inputs)
+        starts = [{**rough, "alpha_bar": 0.0, "tau": tau} for tau in (0.05, 0.5)]
+    else:
+        raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
+    layout = _Layout(theta_model=model == "theta", gyro=gyro)
+    best: optimize.OptimizeResult | None = None
+    for start in starts:
+        x0 = layout.vector(start)
+        result = optimize.minimize(
+            _negloglike, x0, args=(inputs, layout), method="L-BFGS-B", options={"maxiter": 500}
+        )
+        if best is None or result.fun < best.fun:
+            best = result
+    assert best is not None
+    nat = layout.natural(best.x)
+    params = _params(nat)
+    if params is None or best.fun >= 1e12:
+        raise IdentificationError(
+            f"recording {inputs.recording.name!r}: the flight fit of the {model} model failed "
+            f"({best.message})"
+        )
+    system = _system(inputs, nat)
+    assert system is not None
+    trans, offset, noise, y, r, start = system
+    loglike, smoothed = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), True)
+    e, c0, c1, _, _, _ = interval_maps(inputs, params)
+    rate = smoothed[:, 0]
+    # v1 = E·v0 + C0 + C1·w̄ holds exactly in the model, so it holds for the smoothed means.
+    mean_w = np.where(
+        np.abs(c1) > 1e-9 * np.maximum(np.abs(rate[1:]), 1.0),
+        (rate[1:] - e * rate[:-1] - c0) / np.where(c1 == 0.0, 1.0, c1),
+        smoothed[:-1, 2],
+    )
+    u_d = inputs.u_per_w * mean_w
+    names = (
+        ["alpha", "theta_bar"] + ["log_beta_bar"] + (["alpha_bar"] if layout.theta_model else [])
+    )
+    errors: dict[str, float] = {}
+    try:
+        hess = _hessian(lambda x: _negloglike(x, inputs, layout), best.x)
+        cov = np.linalg.inv(hess)
+        diag = np.diag(cov)
+        index = {name: layout.names.index(name) for name in names}
+        if np.all(diag[list(index.values())] > 0):
+            errors = {
+                "alpha": math.sqrt(diag[index["alpha"]]),
+                "theta_bar_deg": math.sqrt(diag[index["theta_bar"]]),
+                "beta_bar_per_s": params.beta_bar_per_s * math.sqrt(diag[index["log_beta_bar"]]),
+            }
+            if layout.theta_model:
+                errors["alpha_bar_per_deg_s"] = math.sqrt(diag[index["alpha_bar"]])
+    except np.linalg.LinAlgError:
+        errors = {}
+    return FlightFit(
+        model=model,
+        params=params,
+        turbulence_sd_deg=tuple(float(x) for x in _sigmas(nat)),
+        turbulence_tau_s=nat["tau"],
+        gyro_noise_pct=100.0 * nat["gyro_rel"] if gyro else None,
+        gyro_floor_dps=nat["gyro_abs"] if gyro else None,
+        loglike=float(loglike),
+        std_errors=errors,
+        u_d_deg=readonly_array(u_d),
+        rate_dps=readonly_array(rate),
+        converged=bool(best.success),
+        inputs=inputs,
+    )
+
+
+def c_coefficients(
+    params: RollParams,
+    v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
+    rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+) -> dict[str, float]:
+    """The coefficients behind ``a`` and ``α`` that do not depend on the airspeed (eq. 7-8).
+
+    ``damping_per_rho_v = β̄/(ρ·V) = S·d²·|C_P|/(4·I)`` (m²/kg: the ``C_P``-like
+    coefficient) and ``torque_per_q = β̄·α/q = S·d·C_δ/I`` ((°/s²)/° per Pa: the
+    ``C_δ``-like one), with ``q = ½·ρ·V²`` at the reference.
+    """
+    q = 0.5 * rho_ref_kgm3 * v_ref_mps**2
+    return {
+        "damping_per_rho_v": params.beta_bar_per_s / (rho_ref_kgm3 * v_ref_mps),
+        "torque_per_q": params.beta_bar_per_s * params.alpha / q,
+    }
+
+
+def rescale(
+    params: RollParams,
+    from_ref: tuple[float, float],
+    to_ref: tuple[float, float],
+) -> RollParams:
+    """The same rocket's parameters at another reference ``(V m/s, ρ kg/m³)`` (eq. 4-8)."""
+    (v1, rho1), (v2, rho2) = from_ref, to_ref
+    gain = v2 / v1
+    damping = (rho2 * v2) / (rho1 * v1)
+    return RollParams(
+        params.alpha * gain,
+        params.theta_bar_deg,
+        params.beta_bar_per_s * damping,
+        params.alpha_bar_per_deg_s * damping,
+    )
+
+
+def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
+    """The ``flight`` identification method: :func:`identify_flight` per model, at the
+    options' reference airspeed (``--v-ref``)."""
+    options = context.options
+    inputs = flight_inputs(
+        context.recording,
+        v_ref_mps=options.v_ref_mps,
+        servo_rate_dps=options.servo_rate_dps,
+    )
+    fits = []
+    for model in models:
+        result = identify_flight(inputs, model)
+        metrics: dict[str, Any] = {
+            **result.resimulate(),
+            "v_ref_mps": inputs.v_ref_mps,
+            "rho_ref_kgm3": inputs.rho_ref_kgm3,
+            "density": inputs.density,
+            **c_coefficients(result.params, inputs.v_ref_mps, inputs.rho_ref_kgm3),
+            "loglike": result.loglike,
+            "converged": result.converged,
+            "turbulence_sd_deg": list(result.turbulence_sd_deg),
+            "turbulence_tau_s": result.turbulence_tau_s,
+            "std_errors": result.std_errors,
+        }
+        if result.gyro_noise_pct is not None:
+            metrics["gyro_noise_pct"] = result.gyro_noise_pct
+            metrics["gyro_floor_dps"] = result.gyro_floor_dps
+        settings = {
+            "interval_s": inputs.dt_s,
+            "equations": "flight Kalman smoother (eq. 4-8 scaling)",
+            "frame": "flight",
+            "v_ref_mps": inputs.v_ref_mps,
+        }
+        fits.append(
+            ModelFit("flight", model, result.params, result.disturbance(), metrics, settings)
+        )
+    return fits
