@@ -46,7 +46,11 @@ TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
         {"alpha": 0.4, "beta": 1.0, "alpha_bar": 0.02, "beta_bar": 1.5},
         "α 0.4, θ̄ +2.5°, ᾱ +0.02 (damping rising with fin angle)",
     ),
-    "dryden": ({"turbulence": "dryden", "severity": "moderate"}, "Dryden roll gust, moderate"),
+    "dryden": ({"turbulence": "dryden"}, "Dryden roll gust, light (the flight env's default)"),
+    "dryden-moderate": (
+        {"turbulence": "dryden", "severity": "moderate"},
+        "Dryden roll gust, moderate: β̄₀'s own SE is ~4.5 % on one flight",
+    ),
     "laplace": (
         {"distribution": "laplace", "turbulence_sd": 12.0, "correlation_time": 0.3},
         "heavy-tailed (Laplace) tunnel turbulence, SD 12°, τ 0.3 s",

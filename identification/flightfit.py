@@ -51,7 +51,6 @@ from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
-from numpy.typing import NDArray
 from scipy import optimize
 
 from identification.flight import (
@@ -86,11 +85,6 @@ SUBSTEPS = 4
 MIN_DAMPING = 1e-3
 #: Below this tunnel time per interval (s) the air does not move the field past the rocket.
 _STILL = 1e-9
-#: The turbulence's SD is estimated separately on this many equal stretches of the flight
-#: (the atmosphere's intensity changes with altitude: MIL-F-8785C, §3.7.2).  One: four
-#: were tried on the Dryden flights of ``benchmarks/flight_ground_truth.py`` (whose
-#: intensity falls with height) and recovered the coefficients no better, in 1.7x the time.
-SEGMENTS = 1
 #: Bound on the optimiser's log-parameters (exp(±50) is beyond any physical value).
 _LOG_BOUND = 50.0
 
@@ -142,11 +136,6 @@ class FlightInputs:
     density: str
     v_ref_mps: float
     rho_ref_kgm3: float
-
-    @property
-    def segment(self) -> NDArray[np.intp]:
-        """The stretch of :data:`SEGMENTS` equal ones each interval is in."""
-        return np.minimum(np.arange(self.n) * SEGMENTS // self.n, SEGMENTS - 1)
 
     @property
     def n(self) -> int:
@@ -323,8 +312,7 @@ class _Layout:
     def names(self) -> tuple[str, ...]:
         core = ("log_beta_bar", "alpha", "theta_bar") + (("alpha_bar",) if self.theta_model else ())
         noise = ("log_gyro_rel", "log_gyro_abs") if self.gyro else ("log_angle_sd",)
-        sigmas = tuple(f"log_sigma_w{j}" for j in range(SEGMENTS))
-        return (*core, *sigmas, "log_tau", *noise)
+        return (*core, "log_sigma_w", "log_tau", *noise)
 
     def natural(self, x: FloatArray) -> dict[str, float]:
         values = dict(zip(self.names, (float(v) for v in x), strict=True))
@@ -336,7 +324,7 @@ class _Layout:
             "alpha": values["alpha"],
             "theta_bar": values["theta_bar"],
             "alpha_bar": values.get("alpha_bar", 0.0),
-            **{f"sigma_w{j}": math.exp(values[f"log_sigma_w{j}"]) for j in range(SEGMENTS)},
+            "sigma_w": math.exp(values["log_sigma_w"]),
             "tau": math.exp(values["log_tau"]),
             "gyro_rel": math.exp(values.get("log_gyro_rel", -99.0)),
             "gyro_abs": math.exp(values.get("log_gyro_abs", -99.0)),
@@ -349,10 +337,7 @@ class _Layout:
             "alpha": nat["alpha"],
             "theta_bar": nat["theta_bar"],
             "alpha_bar": nat.get("alpha_bar", 0.0),
-            **{
-                f"log_sigma_w{j}": math.log(nat.get(f"sigma_w{j}", nat.get("sigma_w", 1.0)))
-                for j in range(SEGMENTS)
-            },
+            "log_sigma_w": math.log(nat["sigma_w"]),
             "log_tau": math.log(nat["tau"]),
             "log_gyro_rel": math.log(nat.get("gyro_rel", 0.01)),
             "log_gyro_abs": math.log(nat.get("gyro_abs", 0.1)),
@@ -382,7 +367,7 @@ def _system(
             return None
     e, c0, c1, a, b0, b1 = interval_maps(inputs, params)
     tau = nat["tau"]
-    sigma = _sigmas(nat)[inputs.segment]
+    sigma = nat["sigma_w"]
     moving = inputs.tunnel_dt_s > _STILL
     u = np.where(moving, inputs.tunnel_dt_s / tau, 1.0)
     phi, a1, mean, l21, l22 = interval_coefficients(u)
@@ -409,7 +394,7 @@ def _system(
     y = np.zeros((n + 1, 2))
     r = np.zeros((n + 1, 2))
     x0 = np.zeros(3)
-    p0 = np.diag([1e4, 1e4, sigma[0] ** 2])
+    p0 = np.diag([1e4, 1e4, sigma**2])
     if inputs.rate is not None:
         y[:, 0] = inputs.rate
         r[:, 0] = nat["gyro_abs"] ** 2 + (nat["gyro_rel"] * inputs.rate) ** 2
@@ -421,10 +406,6 @@ def _system(
         r[:, 1] = inputs.quantum_deg**2 / 12.0 + nat["angle_sd"] ** 2
         p0[1, 1] = r[0, 1]
     return trans, offset, noise, y, r, np.stack([x0, np.diag(p0)])
-
-
-def _sigmas(nat: dict[str, float]) -> FloatArray:
-    return np.array([nat[f"sigma_w{j}"] for j in range(SEGMENTS)])
 
 
 def _negloglike(x: FloatArray, inputs: FlightInputs, layout: _Layout) -> float:
@@ -480,8 +461,8 @@ class FlightFit:
         ``constant`` or ``theta``.
     params : RollParams
         The rocket at ``v_ref_mps`` and ``rho_ref_kgm3``.
-    turbulence_sd_deg : tuple of float
-        ``σ_w`` (°) of the turbulence on each of :data:`SEGMENTS` equal stretches of the flight.
+    turbulence_sd_deg : float
+        ``σ_w`` (°): the turbulence's intensity, stationary along the flight.
     turbulence_tau_s : float
         Its time constant ``T``, tunnel seconds.
     gyro_noise_pct, gyro_floor_dps : float or None
@@ -503,7 +484,7 @@ class FlightFit:
 
     model: str
     params: RollParams
-    turbulence_sd_deg: tuple[float, ...]
+    turbulence_sd_deg: float
     turbulence_tau_s: float
     gyro_noise_pct: float | None
     gyro_floor_dps: float | None
@@ -563,59 +544,34 @@ class FlightFit:
         return out
 
 
-def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
-    """Maximum likelihood of one damping model on a flight (module docstring).
-
-    The constant-damping model starts from an equation-error least-squares fit
-    at two turbulence time constants; the θ-dependent model starts from the
-    constant model's fit with ᾱ₀ = 0.
-    """
-    from identification.ml import _hessian
-
-    gyro = inputs.rate is not None
-    if not gyro and inputs.angle is None:
-        raise IdentificationError(
-            f"recording {inputs.recording.name!r} has neither roll_rate_dps nor roll_deg"
-        )
-    if model == "theta":
-        base = identify_flight(inputs, "constant")
-        p = base.params
-        starts = [
-            {
-                "beta_bar": p.beta_bar_per_s,
-                "alpha": p.alpha,
-                "theta_bar": p.theta_bar_deg,
-                "alpha_bar": 0.0,
-                **{f"sigma_w{j}": sd for j, sd in enumerate(base.turbulence_sd_deg)},
-                "tau": base.turbulence_tau_s,
-                "gyro_rel": (base.gyro_noise_pct or 1.0) / 100.0,
-                "gyro_abs": base.gyro_floor_dps or 0.1,
-            }
-        ]
-    elif model == "constant":
-        rough = _equation_error_start(inputs)
-        starts = [{**rough, "alpha_bar": 0.0, "tau": tau} for tau in (0.05, 0.5)]
-    else:
-        raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
-    layout = _Layout(theta_model=model == "theta", gyro=gyro)
+def _maximise(
+    inputs: FlightInputs, layout: _Layout, starts: Sequence[dict[str, float]]
+) -> optimize.OptimizeResult:
+    """L-BFGS-B from each start; the best."""
     best: optimize.OptimizeResult | None = None
     for start in starts:
-        x0 = layout.vector(start)
         result = optimize.minimize(
-            _negloglike, x0, args=(inputs, layout), method="L-BFGS-B", options={"maxiter": 500}
+            _negloglike,
+            layout.vector(start),
+            args=(inputs, layout),
+            method="L-BFGS-B",
+            options={"maxiter": 500},
         )
         if best is None or result.fun < best.fun:
             best = result
     assert best is not None
-    nat = layout.natural(best.x)
-    params = _params(nat)
-    if params is None or best.fun >= 1e12:
+    if _params(layout.natural(best.x)) is None or best.fun >= 1e12:
         raise IdentificationError(
-            f"recording {inputs.recording.name!r}: the flight fit of the {model} model failed "
-            f"({best.message})"
+            f"recording {inputs.recording.name!r}: the flight fit failed ({best.message})"
         )
+    return best
+
+
+def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, FloatArray, FloatArray]:
+    """Log-likelihood, smoothed rate at the samples and smoothed ``w̄`` per interval."""
+    params = _params(nat)
     system = _system(inputs, nat)
-    assert system is not None
+    assert params is not None and system is not None
     trans, offset, noise, y, r, start = system
     loglike, smoothed = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), True)
     e, c0, c1, _, _, _ = interval_maps(inputs, params)
@@ -626,15 +582,64 @@ def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
         (rate[1:] - e * rate[:-1] - c0) / np.where(c1 == 0.0, 1.0, c1),
         smoothed[:-1, 2],
     )
+    return float(loglike), rate, mean_w
+
+
+def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
+    """Maximum likelihood of one damping model on a flight (module docstring).
+
+    The constant-damping model starts from an equation-error least-squares fit
+    at two turbulence time constants; the θ-dependent model starts from the
+    constant model's fit with ᾱ₀ = 0.
+
+    The turbulence's intensity is taken as stationary along the flight.  A second
+    pass weighting each second of the flight by the intensity the first pass's
+    smoother showed there (the atmosphere's roll gust falls with height near the
+    ground, MIL-F-8785C §3.7.2) was tried on the Dryden flights of
+    ``benchmarks/flight_ground_truth.py``, and so were four separately estimated
+    intensities: neither recovered the coefficients better.
+    """
+    from identification.ml import _hessian
+
+    gyro = inputs.rate is not None
+    if not gyro and inputs.angle is None:
+        raise IdentificationError(
+            f"recording {inputs.recording.name!r} has neither roll_rate_dps nor roll_deg"
+        )
+    layout = _Layout(theta_model=model == "theta", gyro=gyro)
+    if model == "theta":
+        base = identify_flight(inputs, "constant")
+        p = base.params
+        starts = [
+            {
+                "beta_bar": p.beta_bar_per_s,
+                "alpha": p.alpha,
+                "theta_bar": p.theta_bar_deg,
+                "alpha_bar": 0.0,
+                "sigma_w": base.turbulence_sd_deg,
+                "tau": base.turbulence_tau_s,
+                "gyro_rel": (base.gyro_noise_pct or 1.0) / 100.0,
+                "gyro_abs": base.gyro_floor_dps or 0.1,
+            }
+        ]
+        best = _maximise(inputs, layout, starts)
+    elif model == "constant":
+        rough = _equation_error_start(inputs)
+        best = _maximise(
+            inputs, layout, [{**rough, "alpha_bar": 0.0, "tau": t} for t in (0.05, 0.5)]
+        )
+    else:
+        raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
+    nat = layout.natural(best.x)
+    params = _params(nat)
+    assert params is not None
+    loglike, rate, mean_w = _smoothed(inputs, nat)
     u_d = inputs.u_per_w * mean_w
-    names = (
-        ["alpha", "theta_bar"] + ["log_beta_bar"] + (["alpha_bar"] if layout.theta_model else [])
-    )
+    names = ["alpha", "theta_bar", "log_beta_bar"] + (["alpha_bar"] if layout.theta_model else [])
     errors: dict[str, float] = {}
     try:
         hess = _hessian(lambda x: _negloglike(x, inputs, layout), best.x)
-        cov = np.linalg.inv(hess)
-        diag = np.diag(cov)
+        diag = np.diag(np.linalg.inv(hess))
         index = {name: layout.names.index(name) for name in names}
         if np.all(diag[list(index.values())] > 0):
             errors = {
@@ -649,11 +654,11 @@ def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
     return FlightFit(
         model=model,
         params=params,
-        turbulence_sd_deg=tuple(float(x) for x in _sigmas(nat)),
+        turbulence_sd_deg=nat["sigma_w"],
         turbulence_tau_s=nat["tau"],
         gyro_noise_pct=100.0 * nat["gyro_rel"] if gyro else None,
         gyro_floor_dps=nat["gyro_abs"] if gyro else None,
-        loglike=float(loglike),
+        loglike=loglike,
         std_errors=errors,
         u_d_deg=readonly_array(u_d),
         rate_dps=readonly_array(rate),
@@ -717,7 +722,7 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             **c_coefficients(result.params, inputs.v_ref_mps, inputs.rho_ref_kgm3),
             "loglike": result.loglike,
             "converged": result.converged,
-            "turbulence_sd_deg": list(result.turbulence_sd_deg),
+            "turbulence_sd_deg": result.turbulence_sd_deg,
             "turbulence_tau_s": result.turbulence_tau_s,
             "std_errors": result.std_errors,
         }

@@ -590,7 +590,10 @@ BAD_IMPORTS = [
         headerless_input,
         ["--columns", "fin,rol", "--no-header", "--rate", "10"],
         None,
-        ["unknown column role 'rol' in --columns", "time, fin_cmd, fin, roll, roll_rate, airspeed, altitude, skip"],
+        [
+            "unknown column role 'rol' in --columns",
+            "time, fin_cmd, fin, roll, roll_rate, airspeed, altitude, skip",
+        ],
         id="unknown-role",
     ),
     pytest.param(

@@ -1,0 +1,336 @@
+"""Flight logs in (issue 17, item 5): format 1.1, the scaled model, the recorder, the ``flight``
+method and its ground truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from disturbances.flightlog import FlightLogSpec, run_flight
+from identification.flight import ISA_SEA_LEVEL_DENSITY_KGM3, TUNNEL_AIRSPEED_MPS
+from identification.flightfit import (
+    FlightFit,
+    _Layout,
+    _negloglike,
+    c_coefficients,
+    flight_inputs,
+    identify_flight,
+    rescale,
+)
+from identification.importer import import_csv
+from identification.methods import default_methods, fit
+from identification.model import PAPER_THETA, RollParams, Servo, simulate
+from identification.recording import (
+    FORMAT,
+    FORMAT_V1,
+    Recording,
+    RecordingError,
+    load_recording,
+    recording_text,
+    save_recording,
+)
+from identification.steps import IdentificationError
+from identification.tunnel import TunnelSpec, run_tunnel
+from rocketroll.cli import main
+from rocketroll_common.errors import SettingError
+
+
+@pytest.fixture(scope="module")
+def paper_flight() -> Recording:
+    """The default virtual flight: the paper's θ-dependent rocket, tunnel turbulence flown."""
+    return run_flight(FlightLogSpec(seed=0))
+
+
+@pytest.fixture(scope="module")
+def paper_fit(paper_flight: Recording) -> FlightFit:
+    return identify_flight(flight_inputs(paper_flight), "theta")
+
+
+def pct(x: float, truth: float) -> float:
+    return 100.0 * abs(x / truth - 1.0)
+
+
+# ------------------------------------------------------------------ format 1.1
+def test_a_flight_is_written_as_format_1_1_and_read_back(tmp_path: Path, paper_flight: Recording):
+    path = tmp_path / "f.csv"
+    save_recording(paper_flight, path)
+    assert path.read_text(encoding="utf-8").startswith(f"# format: {FORMAT}\n")
+    assert FORMAT == "rocketroll-recording/1.1"
+    back = load_recording(path)
+    assert back.is_flight and back.format == FORMAT
+    np.testing.assert_allclose(back.airspeed_mps, paper_flight.airspeed_mps, atol=1e-6)
+    np.testing.assert_allclose(back.altitude_m, paper_flight.altitude_m, atol=1e-6)
+    assert recording_text(back) == path.read_text(encoding="utf-8")
+
+
+def test_a_recording_without_flight_columns_stays_format_1():
+    tunnel = run_tunnel(TunnelSpec(seed=0))
+    assert not tunnel.is_flight
+    assert recording_text(tunnel).startswith(f"# format: {FORMAT_V1}\n")
+
+
+def _write(path: Path, header: str, rows: list[str], fmt: str | None = None) -> Path:
+    lines = ([f"# format: {fmt}"] if fmt else []) + ["# source: flight", header]
+    t = np.arange(60) * 0.01
+    body = [
+        f"{ti:.2f},{5.0 if i > 30 else 0.0},{i * 0.1}" + rows[i % len(rows)]
+        for i, ti in enumerate(t)
+    ]
+    path.write_text("\n".join(lines + body) + "\n", encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("fmt", "header", "rows", "line", "words"),
+    [
+        (
+            "rocketroll-recording/1",
+            "time_s,fin_cmd_deg,roll_deg,airspeed_mps",
+            [",50"],
+            3,
+            ["'airspeed_mps' is format 1.1", "rocketroll-recording/1.1"],
+        ),
+        (
+            None,
+            "time_s,fin_cmd_deg,roll_deg,altitude_m",
+            [",100"],
+            2,
+            ["'altitude_m' needs the column 'airspeed_mps'"],
+        ),
+        (
+            FORMAT,
+            "time_s,fin_cmd_deg,roll_deg,airspeed_mps",
+            [",50", ",-1"],
+            5,
+            ["airspeed_mps is -1", "outside [0, 2000]"],
+        ),
+        (
+            FORMAT,
+            "time_s,fin_cmd_deg,roll_deg,airspeed_mps,altitude_m",
+            [",50,100", ",50,25000"],
+            5,
+            ["altitude_m is 25000", "20000"],
+        ),
+    ],
+)
+def test_bad_flight_columns_are_named_at_their_line(tmp_path, fmt, header, rows, line, words):
+    path = _write(tmp_path / "bad.csv", header, rows, fmt)
+    with pytest.raises(RecordingError) as caught:
+        load_recording(path)
+    assert caught.value.line == line
+    for word in words:
+        assert word in str(caught.value)
+
+
+def test_import_csv_reads_airspeed_and_altitude_in_their_units(tmp_path: Path):
+    t = np.arange(100) * 0.01
+    rows = [
+        f"{ti:.2f},{10.0 if i > 50 else 0.0},{i * 0.5},{180.0 + i},{1000.0 + i}"
+        for i, ti in enumerate(t)
+    ]
+    src = tmp_path / "log.txt"
+    src.write_text("t,fin,rate,v,h\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    rec = import_csv(
+        src,
+        ["time", "fin_cmd", "roll_rate", "airspeed", "altitude"],
+        speed_unit="kmh",
+        altitude_unit="ft",
+        source="flight",
+    )
+    assert rec.is_flight and rec.format == FORMAT
+    assert rec.airspeed_mps[0] == pytest.approx(50.0)  # 180 km/h
+    assert rec.altitude_m[0] == pytest.approx(304.8)  # 1000 ft
+    assert rec.roll_rate_dps[2] == pytest.approx(1.0)  # angles stay in their --units
+    assert rec.metadata["import.speed_unit"] == "kmh"
+
+
+# ------------------------------------------------------------------ the scaled model
+def test_simulate_with_constant_scales_is_the_scaled_rocket():
+    command = np.repeat([0.0, 10.0, -5.0, 20.0], 30)
+    u = np.random.default_rng(0).normal(0.0, 3.0, command.size)
+    scaled = simulate(PAPER_THETA, 0.01, command, u, gain=3.0, damping=2.0, substeps=4)
+    p = PAPER_THETA
+    same = RollParams(
+        3.0 * p.alpha, p.theta_bar_deg, 2.0 * p.beta_bar_per_s, 2.0 * p.alpha_bar_per_deg_s
+    )
+    direct = simulate(same, 0.01, command, u, substeps=4)
+    np.testing.assert_allclose(scaled.rate_dps, direct.rate_dps, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(scaled.angle_deg, direct.angle_deg, rtol=1e-12, atol=1e-10)
+    unit = simulate(PAPER_THETA, 0.01, command, u, gain=np.ones(command.size), substeps=4)
+    np.testing.assert_array_equal(
+        unit.rate_dps, simulate(PAPER_THETA, 0.01, command, u, substeps=4).rate_dps
+    )
+    with pytest.raises(ValueError, match="damping must be a number or have shape"):
+        simulate(PAPER_THETA, 0.01, command, u, damping=np.ones(7))
+    with pytest.raises(ValueError, match="gain must be finite and >= 0"):
+        simulate(PAPER_THETA, 0.01, command, u, gain=-1.0)
+
+
+def test_rescale_and_the_coefficients_behind_a_and_alpha():
+    there = (600 / 3.6, 1.0066)  # 600 km/h at 2 km
+    here = (TUNNEL_AIRSPEED_MPS, ISA_SEA_LEVEL_DENSITY_KGM3)
+    fast = rescale(PAPER_THETA, here, there)
+    assert fast.alpha == pytest.approx(12.0 * PAPER_THETA.alpha)
+    assert fast.beta_bar_per_s == pytest.approx(
+        12.0 * 1.0066 / ISA_SEA_LEVEL_DENSITY_KGM3 * PAPER_THETA.beta_bar_per_s
+    )
+    back = rescale(fast, there, here)
+    assert back.alpha == pytest.approx(PAPER_THETA.alpha) and back.beta_bar_per_s == pytest.approx(
+        PAPER_THETA.beta_bar_per_s
+    )
+    # The C_P- and C_δ-like coefficients do not depend on the reference they are read at.
+    assert c_coefficients(fast, *there) == pytest.approx(c_coefficients(PAPER_THETA, *here))
+
+
+# ------------------------------------------------------------------ the recorder
+def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
+    spec = FlightLogSpec(
+        seed=4, gyro_noise=0.0, gyro_floor=0.0, measured_fin=True, model="constant"
+    )
+    rec = run_flight(spec)
+    assert rec.airspeed_mps[0] == pytest.approx(spec.v_ref)  # from the rail exit ...
+    assert rec.airspeed_mps[-1] < 1.0  # ... to apogee
+    assert rec.truth() == spec.params()
+    assert float(rec.metadata["truth.v_ref_mps"]) == spec.v_ref
+    assert (
+        rec.metadata["command"]
+        == "rocketroll flight --seed 4 --model constant --gyro-noise 0.0 --gyro-floor 0.0 "
+        "--measured-fin"
+    )
+    # Re-simulating the truth with the logged u_d and the scales gives the logged rate.
+    inputs = flight_inputs(rec)
+    sim = simulate(
+        spec.params(),
+        rec.dt_s,
+        rec.fin_deg,
+        rec.ud_true_deg[:-1],
+        rate0_dps=float(rec.roll_rate_dps[0]),
+        servo=None,
+        substeps=4,
+        gain=inputs.gain,
+        damping=inputs.damping,
+    )
+    assert np.max(np.abs(sim.rate_dps - rec.roll_rate_dps)) < 0.02 * np.mean(
+        np.abs(rec.roll_rate_dps)
+    )
+    # The same seed gives the same bytes; a file written is a file read.
+    assert recording_text(run_flight(spec)) == recording_text(rec)
+    path = tmp_path / "f.csv"
+    assert main(["flight", "--out", str(path), *spec.command().split()[2:]]) == 0
+    assert path.read_text(encoding="utf-8") == recording_text(rec)
+
+
+def test_bad_recorder_settings_are_named(tmp_path: Path, capsys):
+    with pytest.raises(SettingError, match="needs an angle"):
+        FlightLogSpec(no_gyro=True)
+    with pytest.raises(SettingError, match="alpha_bar"):
+        FlightLogSpec(model="constant", alpha_bar=0.01)
+    out = tmp_path / "x.csv"
+    assert main(["flight", "--out", str(out), "--ascent", str(tmp_path / "none.yml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "none.yml" in err
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ the flight method
+def test_the_flight_method_recovers_the_paper_rocket(paper_flight: Recording, paper_fit: FlightFit):
+    truth = paper_flight.truth()
+    p = paper_fit.params
+    assert paper_fit.converged
+    assert pct(p.alpha, truth.alpha) < 5.0
+    assert pct(p.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
+    assert abs(p.theta_bar_deg - truth.theta_bar_deg) < 0.5
+    # The damping over the flown fins, and the noise it was given: σ_w 9.8°, τ 0.5 s, 1 %, 0.1 °/s.
+    theta = paper_fit.inputs.theta
+    assert np.sqrt(np.mean((p.damping(theta) / truth.damping(theta) - 1) ** 2)) < 0.05
+    assert paper_fit.turbulence_sd_deg == pytest.approx(9.8, rel=0.15)
+    assert paper_fit.turbulence_tau_s == pytest.approx(0.5, rel=0.3)
+    assert paper_fit.gyro_noise_pct == pytest.approx(1.0, rel=0.1)
+    # Its u_d follows the true one, and re-simulated it gives the measured rate.
+    assert np.corrcoef(paper_fit.u_d_deg, paper_flight.ud_true_deg[:-1])[0, 1] > 0.95
+    assert paper_fit.resimulate()["resim_rate_mae_pct"] < 2.0
+
+
+def test_the_likelihood_prefers_the_truth_to_a_wrong_gain(
+    paper_flight: Recording, paper_fit: FlightFit
+):
+    inputs = flight_inputs(paper_flight)
+    layout = _Layout(theta_model=True, gyro=True)
+    best = {
+        "beta_bar": paper_fit.params.beta_bar_per_s,
+        "alpha": paper_fit.params.alpha,
+        "theta_bar": paper_fit.params.theta_bar_deg,
+        "alpha_bar": paper_fit.params.alpha_bar_per_deg_s,
+        "sigma_w": paper_fit.turbulence_sd_deg,
+        "tau": paper_fit.turbulence_tau_s,
+        "gyro_rel": paper_fit.gyro_noise_pct / 100,
+        "gyro_abs": paper_fit.gyro_floor_dps,
+    }
+    at_best = _negloglike(layout.vector(best), inputs, layout)
+    assert at_best == pytest.approx(-paper_fit.loglike)
+    for factor in (0.9, 1.1):
+        wrong = _negloglike(
+            layout.vector({**best, "alpha": factor * best["alpha"]}), inputs, layout
+        )
+        assert wrong > at_best + 10.0
+
+
+@pytest.mark.parametrize(
+    ("settings", "model"),
+    [
+        ({"model": "constant", "alpha": 1.2, "beta": -3.0, "beta_bar": 0.8, "seed": 1}, "constant"),
+        ({"model": "constant", "no_gyro": True, "encoder_counts": 4096, "seed": 2}, "constant"),
+    ],
+    ids=["negative-asymmetry", "angle-only"],
+)
+def test_other_truths_come_back(settings, model):
+    spec = FlightLogSpec(**settings)
+    rec = run_flight(spec)
+    result = identify_flight(flight_inputs(rec), model)
+    truth = spec.params()
+    assert pct(result.params.alpha, truth.alpha) < 5.0
+    assert pct(result.params.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
+    assert abs(result.params.theta_bar_deg - truth.theta_bar_deg) < 0.5
+    assert result.resimulate()["resim_rate_mae_pct"] < 2.0
+
+
+def test_tunnel_methods_refuse_a_flight_and_the_flight_method_a_tunnel_run(paper_flight: Recording):
+    assert default_methods(paper_flight) == ("flight",)
+    assert "flight" not in default_methods()
+    with pytest.raises(IdentificationError, match=r"is a flight .* use --method flight"):
+        fit(paper_flight, "paper", ["constant"])
+    with pytest.raises(IdentificationError, match="no airspeed_mps column: method 'flight'"):
+        fit(run_tunnel(TunnelSpec(seed=0)), "flight", ["constant"])
+
+
+def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
+    path = tmp_path / "flight.csv"
+    assert main(["flight", "--out", str(path), "--seed", "5", "--model", "constant"]) == 0
+    capsys.readouterr()
+    out_json = tmp_path / "fit.json"
+    assert main(["identify", str(path), "--json", str(out_json)]) == 0
+    out, err = capsys.readouterr()
+    assert err == ""
+    assert "flight identification" in out and "C_P-like" in out
+    data = json.loads(out_json.read_text(encoding="utf-8"))
+    constant = data["methods"]["flight"]["constant"]
+    assert constant["params"]["alpha"] == pytest.approx(PAPER_THETA.alpha, rel=0.05)
+    assert constant["params"]["beta_bar_per_s"] == pytest.approx(1.314, rel=0.05)
+    assert constant["metrics"]["resim_rate_mae_pct"] < 2.0
+    # The database holds the tunnel's turbulence: a flight is refused, nothing written.
+    db = tmp_path / "db.sqlite"
+    assert main(["identify", str(path), "--db", str(db)]) == 2
+    assert "is a flight" in capsys.readouterr().err
+    assert main(["db", "add", str(path), "--db", str(db)]) == 2
+    assert "is a flight" in capsys.readouterr().err
+    assert not db.exists()
+
+
+def test_a_measured_fin_angle_is_used_without_the_servo():
+    rec = run_flight(FlightLogSpec(seed=6, measured_fin=True, model="constant"))
+    inputs = flight_inputs(rec, servo_rate_dps=Servo().rate_limit_dps)
+    assert inputs.rate_limit_dps is None
+    np.testing.assert_allclose(inputs.theta[::4], rec.fin_deg, atol=1e-9)
