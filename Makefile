@@ -54,6 +54,8 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll env flight --plot $(DEMO)/flight-profile.png
 	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
 		--policy trim --policy pid --policy pid-tunnel --policy oracle --out $(DEMO)/eval-flight
+	$(BIN)/rocketroll flight --seed 0 --out $(DEMO)/flight-seed0.csv
+	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
 	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
 	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
@@ -64,7 +66,8 @@ demo: $(VENV)/.installed
 	@echo "      and seeds-rate/, and every controller under"
 	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/, and in flight"
 	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png and the scheduled PID"
-	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above)"
+	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above), and a virtual flight's"
+	@echo "      log $(DEMO)/flight-seed0.csv identified back in $(DEMO)/flight-seed0.json"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

@@ -57,7 +57,7 @@ from agents.base import Controller, EpisodeSpec
 from agents.evaluate import HEADLINE, env_on, metrics, run_episode
 from agents.registry import make_controller
 from disturbances.bank import TraceBank
-from identification.methods import METHODS, Context, fit
+from identification.methods import METHODS, Context, fit, tunnel_methods
 from identification.model import RollParams
 from identification.pipeline import IdentifyOptions
 from identification.tunnel import run_tunnel
@@ -247,7 +247,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     truths = list(dict.fromkeys(ns.truth or DEFAULT_TRUTHS))
     if "all" in truths:
         truths = list(TRUTHS)
-    methods = METHODS.names() if ns.methods is None else tuple(ns.methods.split(","))
+    methods = tunnel_methods() if ns.methods is None else tuple(ns.methods.split(","))
     for method in methods:
         if method not in METHODS.names():
             parser.error(f"--methods: unknown method {method!r}")

@@ -54,7 +54,7 @@ import numpy as np
 from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
-from identification.methods import METHODS, Context, ModelFit, fit
+from identification.methods import METHODS, Context, ModelFit, fit, tunnel_methods
 from identification.ml import posterior_given
 from identification.model import RollParams, damping
 from identification.pipeline import IdentifyOptions
@@ -440,8 +440,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--methods",
         default=None,
-        help="comma-separated registered methods (default: all: "
-        + ", ".join(METHODS.names())
+        help="comma-separated registered methods (default: the tunnel's: "
+        + ", ".join(tunnel_methods())
         + ")",
     )
     parser.add_argument(
@@ -465,7 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         truths = ["paper"]
     if "all" in truths:
         truths = list(TRUTHS)
-    methods = METHODS.names() if ns.methods is None else tuple(ns.methods.split(","))
+    methods = tunnel_methods() if ns.methods is None else tuple(ns.methods.split(","))
     for method in methods:
         if method not in METHODS.names():
             parser.error(

@@ -222,7 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
     from identification.ml import maximum_likelihood, posterior_traces
 
-    others = [m for m in METHODS.names() if m != "paper"]
+    others = [  # the tunnel's methods (a flight method identifies flights only)
+        m for m in METHODS.names() if m != "paper" and not METHODS.entry(m).info.get("flight")
+    ]
     ml_theta = maximum_likelihood(rec, "theta", options=options)
     remote, commit = start_against(__file__, words, ns.against)
     timings, before = time_interleaved(

@@ -53,6 +53,7 @@ __all__ = [
     "register_method",
     "resimulation_metrics",
     "trace_settings",
+    "tunnel_methods",
 ]
 
 
@@ -163,6 +164,11 @@ def default_methods(recording: Recording | None = None) -> tuple[str, ...]:
         for e in METHODS.entries()
         if e.info.get("default") and bool(e.info.get("flight")) == flight
     )
+
+
+def tunnel_methods() -> tuple[str, ...]:
+    """Every registered method that identifies the tunnel's recordings (not flights)."""
+    return tuple(e.name for e in METHODS.entries() if not e.info.get("flight"))
 
 
 def is_flight_method(method: str) -> bool:

@@ -37,6 +37,14 @@ def test_ground_truth_reports_every_method_and_the_targets(default_db: Path) -> 
     assert out.count("PASS") + out.count("FAIL") == 7
 
 
+def test_flight_ground_truth_reports_each_truth_and_the_targets(default_db: Path) -> None:
+    args = ["--seeds", "1", "--truth", "fast-negative", "--truth", "angle-only", "--jobs", "1"]
+    out = run_script("flight_ground_truth.py", *args, db=default_db)
+    assert "fast-negative" in out and "angle-only" in out and "paper-theta  " not in out
+    assert "re-sim %" in out and "2 flights in" in out
+    assert out.count("PASS") + out.count("FAIL") == 2
+
+
 def test_closed_loop_scores_each_replay_against_the_truth(default_db: Path, tmp_path: Path) -> None:
     settings = ["--seeds", "2", "--truth", "rising", "--policies", "trim,pid"]
     settings += ["--tasks", "angle-zero", "--windows", "1", "--draws", "1"]
