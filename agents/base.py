@@ -113,6 +113,14 @@ class Design:
 
         return load_bank(replace(self.config, split="train"), self.db)
 
+    @cached_property
+    def tunnel_train_bank(self) -> TraceBank:
+        """The *train* split's tunnel traces, also in flight (where :attr:`train_bank` is
+        its flights): what a flight design models the turbulence on before flying it."""
+        from rollenv.bank import load_bank
+
+        return load_bank(replace(self.config, split="train", flight=None), self.db)
+
     def no_argument(self, name: str) -> None:
         """Refuse an argument for a controller that takes none."""
         if self.arg:

@@ -56,6 +56,7 @@ from rollenv.layout import Obs
 
 __all__ = [
     "DEFAULT_WEIGHTS",
+    "FLIGHT_WEIGHTS",
     "ObserverController",
     "ObserverFeatures",
     "RollObserver",
@@ -116,6 +117,29 @@ class Turbulence:
     @property
     def order(self) -> int:
         return int(self.ar.size)
+
+    def flown(self, gains: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """This (tunnel) turbulence flown along a flight, as an AR(1) per control step.
+
+        ``gains`` are the flight's ``V/V_ref`` per control step (:mod:`rollenv.flight`).
+        The flight env flies the tunnel's traces time-compressed by ``V/V_ref`` and
+        scaled by ``V_ref/max(V, V_ref)`` (:mod:`disturbances.flight`), so from one
+        control step to the next the turbulence is as correlated as this model is at a
+        lag of ``dt·V/V_ref`` (its autocorrelation, interpolated), and its SD is this
+        model's times the scale.  Returns the per-step coefficient of ``w[k+1]`` on
+        ``w[k]`` (the scale's change included) and the innovation's SD, each of shape
+        (steps,).
+        """
+        gains = np.asarray(gains, dtype=float)
+        sd = math.sqrt(float(stationary_cov(self.ar, self.innovation_sd)[0, 0]))
+        lags = int(np.ceil(np.max(gains))) + 2
+        acf = ArmaProcess(ar=np.r_[1.0, -self.ar]).acf(lags + 1)
+        phi = np.interp(gains, np.arange(lags + 1), acf, right=0.0)
+        scale = 1.0 / np.maximum(gains, 1.0)
+        after = np.append(scale[1:], scale[-1])
+        coefficient = phi * after / scale
+        innovation = after * sd * np.sqrt(np.maximum(1.0 - phi**2, 0.0))
+        return coefficient, innovation
 
     @classmethod
     def from_bank(
@@ -195,9 +219,21 @@ class RollObserver:
         The turbulence model on the control grid.
     config : RollConfig
         The environment's settings: control step, servo, sensors, task.
+    scales : ndarray, shape (steps, 2), optional
+        In flight: the rocket's gain and damping multipliers at each control step
+        (:attr:`rollenv.flight.FlightSchedule.scales`, eq. 4-8); the filter's model at
+        step ``k`` is ``rocket`` carried there (:meth:`rocket_at`), and its turbulence
+        ``turbulence`` flown there (:meth:`Turbulence.flown`: an AR(1) per step).  The
+        step is counted from :meth:`reset`, as the scheduled PID counts it.
     """
 
-    def __init__(self, rocket: RollParams, turbulence: Turbulence, config: RollConfig) -> None:
+    def __init__(
+        self,
+        rocket: RollParams,
+        turbulence: Turbulence,
+        config: RollConfig,
+        scales: FloatArray | None = None,
+    ) -> None:
         if abs(turbulence.dt_s - config.dt_s) > 1e-9:
             raise ValueError(
                 f"the turbulence model's grid ({turbulence.dt_s:g} s) is not the control "
@@ -205,6 +241,7 @@ class RollObserver:
             )
         self.rocket = rocket
         self.turbulence = turbulence
+        self._scaled = None if scales is None else [rocket.scaled(g, d) for g, d in scales]
         self.per = round(config.dt_s / config.substep_s)
         self.h = config.substep_s
         self.max_move = config.rate_limit_dps * config.substep_s
@@ -214,16 +251,21 @@ class RollObserver:
         self.gyro_var = (config.gyro_noise_pct / 100.0) ** 2 if config.sensors else 0.0
         # At least two lags, so the last step's u_d is a state (an AR(1) gets a zero a_2).
         self.ar = np.pad(turbulence.ar, (0, max(0, 2 - turbulence.order)))
+        self._flown: tuple[FloatArray, FloatArray] | None = None
+        if scales is not None:  # in flight: an AR(1) per step, two lags kept
+            self._flown = turbulence.flown(np.asarray(scales)[:, 0])
+            self.ar = np.array([self._flown[0][0], 0.0])
         p = self.ar.size
         self.m = 3 + p
         self.bias = self.m - 1
         self.state_cov = np.zeros((self.m, self.m))
         self.state_cov[2, 2] = turbulence.innovation_sd**2
+        innovation = turbulence.innovation_sd if self._flown is None else self._flown[1][0]
         self.state_cov[self.bias, self.bias] = turbulence.drift_sd**2
         self._prior_cov = np.zeros((self.m, self.m))
         self._prior_cov[0, 0] = 1e4
         self._prior_cov[1, 1] = _DIFFUSE
-        self._prior_cov[2 : 2 + p, 2 : 2 + p] = stationary_cov(self.ar, turbulence.innovation_sd)
+        self._prior_cov[2 : 2 + p, 2 : 2 + p] = stationary_cov(self.ar, innovation)
         self._prior_cov[self.bias, self.bias] = turbulence.offset_sd**2
         self._gyro = np.array([0], dtype=np.intp)
         self._y = np.zeros(1)
@@ -249,10 +291,31 @@ class RollObserver:
         self._fin += fin_deg
         return self._fin
 
-    def step_model(self, fin_deg: float, command_deg: float) -> tuple[FloatArray, FloatArray]:
-        """``T``, ``c`` of one control step that starts with the fin at ``fin_deg``."""
-        maps = interval_maps(self.rocket, self.fin_path(fin_deg, command_deg), self.per, self.h)
-        t_roll, c_roll = roll_transition(maps, self.ar)
+    def rocket_at(self, step: int) -> RollParams:
+        """The filter's rocket at control step ``step`` (the nominal one in the tunnel)."""
+        if self._scaled is None:
+            return self.rocket
+        return self._scaled[min(max(step, 0), len(self._scaled) - 1)]
+
+    def ar_at(self, step: int) -> tuple[FloatArray, float]:
+        """The turbulence's AR coefficients and innovation SD over control step ``step``."""
+        if self._flown is None:
+            return self.ar, self.turbulence.innovation_sd
+        k = min(max(step, 0), self._flown[0].size - 1)
+        return np.array([self._flown[0][k], 0.0]), float(self._flown[1][k])
+
+    def step_model(
+        self,
+        fin_deg: float,
+        command_deg: float,
+        rocket: RollParams | None = None,
+        ar: FloatArray | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """``T``, ``c`` of one control step that starts with the fin at ``fin_deg``
+        (under ``rocket`` and turbulence ``ar``; default: the nominal ones)."""
+        model = self.rocket if rocket is None else rocket
+        maps = interval_maps(model, self.fin_path(fin_deg, command_deg), self.per, self.h)
+        t_roll, c_roll = roll_transition(maps, self.ar if ar is None else ar)
         t = np.zeros((self.m, self.m))
         c = np.zeros(self.m)
         t[:-1, :-1] = t_roll[0]
@@ -264,7 +327,10 @@ class RollObserver:
 
     def predict(self, fin_deg: float, command_deg: float) -> None:
         """Time update over the control step just taken (fin at its start, the command)."""
-        t, c = self.step_model(fin_deg, command_deg)
+        step = self.steps - 1
+        ar, innovation = self.ar_at(step)
+        t, c = self.step_model(fin_deg, command_deg, self.rocket_at(step), ar)
+        self.state_cov[2, 2] = innovation**2
         predict(self.mean, self.cov, t, c, self.state_cov, self._work)
 
     def update(self, obs: NDArray[np.float32]) -> None:
@@ -358,6 +424,15 @@ DEFAULT_WEIGHTS: dict[str, dict[str, float]] = {
     "angle": {"rate": 0.01, "move": 0.005},
     "rate": {"rate": 1.0, "move": 0.003},
 }
+#: The weights in flight (scheduled), chosen on 20 train flights of each task: angle move
+#: 0.005 / 0.2 / 1 / 3 / 10 / 30 / 100 gave 2.72° / 2.21 / 1.56 / 1.43 / 1.61 / 1.83 / 2.14
+#: at 142 / 89 / 29 / 13 / 5.5 / 3.5 / 2.1 °/s of fin travel (at 0.005 the fins chatter at
+#: the servo's rate limit: the rocket answers a fin 12x more strongly at top speed); rate
+#: move 0.003 / 0.1 / 1 / 3 gave 3.70 / 3.72 / 3.82 / 3.93 °/s: the tunnel's weight stays.
+FLIGHT_WEIGHTS: dict[str, dict[str, float]] = {
+    "angle": {"rate": 0.01, "move": 3.0},
+    "rate": {"rate": 1.0, "move": 0.003},
+}
 
 
 class ObserverController:
@@ -371,20 +446,38 @@ class ObserverController:
         rocket: NominalModel,
         turbulence: Turbulence,
         weights: dict[str, float] | None = None,
+        *,
+        scheduled: bool = False,
     ) -> None:
         self.config = config
         self.rocket = rocket
         self.turbulence = turbulence
-        self.observer = RollObserver(rocket.params, turbulence, config)
+        flight = config.flight_schedule if scheduled else None
+        scales = None if flight is None else flight.scales[: config.max_episode_steps]
+        self.observer = RollObserver(rocket.params, turbulence, config, scales)
         self.weights = {**DEFAULT_WEIGHTS[config.task], **(weights or {})}
         self._range = config.fin_range_deg
         self._angle = config.task == "angle"
         self.gain = self._design()
+        #: In flight, scheduled: the LQR gain of each control step, designed on the
+        #: nominal rocket carried to that step's airspeed and density -- held at the
+        #: tunnel's airspeed below it (near apogee), as the scheduled PID's gains are.
+        self.schedule: list[FloatArray] | None = None
+        if scales is not None:
+            held = np.maximum(scales[:, 0], 1.0)
+            self.schedule = [
+                self._design(rocket.params.scaled(speed, damping * speed / gain), k)
+                for k, ((gain, damping), speed) in enumerate(zip(scales, held, strict=True))
+            ]
+            self._design()  # the nominal design's Riccati matrix stays the attribute
         self.reset()
 
-    def design_model(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    def design_model(
+        self, rocket: RollParams | None = None, step: int | None = None
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """The design's linear model and cost: ``A, B, Q, R, S`` of ``x⁺ = A x + B u`` and
-        the stage cost ``x'Qx + u'Ru + 2x'Su``.
+        the stage cost ``x'Qx + u'Ru + 2x'Su`` (on ``rocket``, default the nominal one,
+        and the turbulence of control ``step``, default the tunnel's).
 
         ``x = [v, ψ, u_d lags, b, θ + θ̄]`` (``ψ`` left out on the rate task)
         and ``u`` the command plus ``θ̄``.  The model is the observer's at trim
@@ -398,9 +491,13 @@ class ObserverController:
         """
         obs = self.observer
         trim = -self.rocket.theta_bar_deg
-        t_rest, c_rest = obs.step_model(trim, trim)
-        move = max(self.turbulence.innovation_sd, 0.1)
-        _, c_moved = obs.step_model(trim, trim + move)
+        if step is None:
+            ar, innovation = obs.ar, self.turbulence.innovation_sd
+        else:
+            ar, innovation = obs.ar_at(step)
+        t_rest, c_rest = obs.step_model(trim, trim, rocket, ar)
+        move = max(innovation, 0.1)
+        _, c_moved = obs.step_model(trim, trim + move, rocket, ar)
         m = obs.m
         n = m + 1
         a = np.zeros((n, n))
@@ -435,10 +532,10 @@ class ObserverController:
         n = self.observer.m + 1
         return [i for i in range(n) if self._angle or i != 1]
 
-    def _design(self) -> FloatArray:
+    def _design(self, rocket: RollParams | None = None, step: int | None = None) -> FloatArray:
         """LQR gain on ``[v, ψ, u_d lags, b, θ + θ̄]`` with the command as the input
-        (:meth:`design_model`; zero on ``ψ`` in the rate task)."""
-        a, b, q, r, s = self.design_model()
+        (:meth:`design_model` on ``rocket`` at ``step``; zero on ``ψ`` in the rate task)."""
+        a, b, q, r, s = self.design_model(rocket, step)
         x = linalg.solve_discrete_are(a, b, q, r, s=s)
         self.riccati = x
         k = np.linalg.solve(r + b.T @ x @ b, b.T @ x @ a + s.T)
@@ -468,7 +565,7 @@ class ObserverController:
         else:
             setpoint = float(obs[Obs.ERROR]) + float(obs[Obs.RATE])
             x[0] -= setpoint
-            offset = setpoint / self.rocket.alpha
+            offset = setpoint / ob.rocket_at(ob.steps - 1).alpha
         shift = theta_bar - offset
         return np.append(x, fin + shift), shift
 
@@ -485,6 +582,8 @@ class ObserverController:
     def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
         """The fin command for observation ``obs``."""
         state, shift = self.design_state(obs)
+        if self.schedule is not None:  # this control step's gain
+            self.gain = self.schedule[min(self.observer.steps - 1, len(self.schedule) - 1)]
         fin = float(obs[Obs.FIN])
         command = self.command(state, shift, fin)
         self._last = (fin, command)
@@ -579,9 +678,21 @@ class ObserverFeatures:
 
 
 def make_observer(design: Design) -> ObserverController:
-    """``--policy observer``: designed on the train split's nominal rocket and turbulence."""
+    """``--policy observer``: designed on the train split's nominal rocket and turbulence.
+
+    In flight it is scheduled: its filter's rocket and its LQR gain follow the flight's
+    airspeed and density step by step, and its turbulence model is fitted to the train
+    split's flights (the turbulence as the flight env replays it)."""
     design.no_argument("observer")
-    bank = design.train_bank
-    nominal = NominalModel.from_bank(bank)
-    turbulence = Turbulence.from_bank(bank, design.config.dt_s, nominal)
-    return ObserverController(design.config, nominal, turbulence)
+    config = design.config
+    if config.flight_schedule is None:
+        bank = design.train_bank
+        nominal = NominalModel.from_bank(bank)
+        turbulence = Turbulence.from_bank(bank, config.dt_s, nominal)
+        return ObserverController(config, nominal, turbulence)
+    tunnel = design.tunnel_train_bank
+    nominal = NominalModel.from_bank(tunnel)
+    turbulence = Turbulence.from_bank(tunnel, config.dt_s, nominal)
+    return ObserverController(
+        config, nominal, turbulence, FLIGHT_WEIGHTS[config.task], scheduled=True
+    )

@@ -692,14 +692,7 @@ def rescale(
 ) -> RollParams:
     """The same rocket's parameters at another reference ``(V m/s, ρ kg/m³)`` (eq. 4-8)."""
     (v1, rho1), (v2, rho2) = from_ref, to_ref
-    gain = v2 / v1
-    damping = (rho2 * v2) / (rho1 * v1)
-    return RollParams(
-        params.alpha * gain,
-        params.theta_bar_deg,
-        params.beta_bar_per_s * damping,
-        params.alpha_bar_per_deg_s * damping,
-    )
+    return params.scaled(v2 / v1, (rho2 * v2) / (rho1 * v1))
 
 
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:

@@ -152,6 +152,16 @@ class RollParams:
         theta = np.asarray(theta_deg, dtype=float)
         return self.alpha * (theta + self.theta_bar_deg + np.asarray(u_d_deg, dtype=float))
 
+    def scaled(self, gain: float, damping: float) -> RollParams:
+        """The rocket at another airspeed and density: ``α`` times ``gain``, ``ᾱ`` and ``β̄``
+        times ``damping``, θ̄ unchanged (eq. 4-8; :func:`identification.flight.roll_scales`)."""
+        return RollParams(
+            self.alpha * gain,
+            self.theta_bar_deg,
+            self.beta_bar_per_s * damping,
+            self.alpha_bar_per_deg_s * damping,
+        )
+
     def with_constant_damping(self, a_per_s: float) -> RollParams:
         """The same α and θ̄ with constant damping ``a`` (eq. 29)."""
         return RollParams(self.alpha, self.theta_bar_deg, a_per_s, 0.0)

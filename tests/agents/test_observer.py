@@ -13,6 +13,7 @@ from agents.nominal import NominalModel
 from agents.observer import ObserverController, RollObserver, Turbulence
 from agents.registry import CONTROLLERS, make_controller
 from disturbances.bank import TraceBank
+from identification.ml import stationary_cov
 from identification.model import RollParams
 from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollConfig
@@ -279,3 +280,55 @@ def test_the_observer_controller_pickles_and_restarts(default_db):
     controller.reset(None)
     clone.reset(None)
     np.testing.assert_array_equal(controller.act(obs, None), clone.act(obs, None))
+
+
+# ------------------------------------------------------------------ flight (issue 17)
+def test_in_flight_the_observer_is_scheduled_on_the_flying_rocket_and_turbulence(default_db):
+    from agents.observer import FLIGHT_WEIGHTS
+
+    cfg = config("RocketRollFlight-v0")
+    controller = make_controller("observer", cfg, "RocketRollFlight-v0")
+    assert isinstance(controller, ObserverController)
+    assert controller.weights == FLIGHT_WEIGHTS["angle"]
+    schedule = cfg.flight_schedule
+    assert schedule is not None and controller.schedule is not None
+    assert len(controller.schedule) == cfg.max_episode_steps
+    ob = controller.observer
+    nominal = controller.rocket.params
+    for k in (0, 60, 211):
+        gain, damping = schedule.scales[k]
+        assert ob.rocket_at(k) == nominal.scaled(gain, damping)
+    # The turbulence is the tunnel's flown: per step as correlated as the tunnel's at a lag of
+    # V/V_ref steps, its SD scaled by V_ref/V (at top speed: nearly white and 12x smaller).
+    tunnel = controller.turbulence
+    coefficient, innovation = tunnel.flown(schedule.scales[:, 0])
+    fast = int(np.argmax(schedule.scales[:, 0]))
+    assert schedule.scales[fast, 0] > 11
+    assert abs(coefficient[fast]) < 0.2 < coefficient[0]
+    sd = np.sqrt(stationary_cov(tunnel.ar, tunnel.innovation_sd)[0, 0])
+    assert innovation[fast] < sd / 10
+    assert ob.ar_at(fast)[0][0] == coefficient[fast]
+    # Each step's LQR gain is designed on the rocket of that step (held at V_ref's near
+    # apogee, where a vanishing gain would ask for unbounded fins), with that step's
+    # turbulence; at top speed the fins bite 12x harder and the feedback on the rate and
+    # the angle is smaller.
+    for k in (0, fast, 211):
+        gain, damping = schedule.scales[k]
+        speed = max(gain, 1.0)
+        designed = controller._design(nominal.scaled(speed, damping * speed / gain), k)
+        np.testing.assert_allclose(controller.schedule[k], designed)
+    assert schedule.scales[211, 0] < 1.0
+    assert np.all(np.abs(controller.schedule[fast][:2]) < np.abs(controller.schedule[0][:2]))
+    # In the tunnel nothing is scheduled.
+    assert make_controller("observer", config(), "RocketRoll-v0").schedule is None
+
+
+def test_in_flight_the_scheduled_observer_holds_within_two_degrees(default_db):
+    from agents.evaluate import evaluate, protocol_episodes
+
+    cfg = config("RocketRollFlight-v0", split="test")
+    specs = protocol_episodes(cfg, episodes=6, seed=0)
+    controller = make_controller("observer", cfg, "RocketRollFlight-v0")
+    result = evaluate(cfg, controller, specs).aggregate
+    assert result["regulation_rms_error"]["mean"] < 2.0
+    assert result["fin_travel_dps"]["mean"] < 40.0  # no chatter at the servo's rate limit
