@@ -53,7 +53,8 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
 	$(BIN)/rocketroll env flight --plot $(DEMO)/flight-profile.png
 	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
-		--policy trim --policy pid --policy pid-tunnel --policy oracle --out $(DEMO)/eval-flight
+		--policy trim --policy pid --policy pid-tunnel --policy observer --policy oracle \
+		--out $(DEMO)/eval-flight
 	$(BIN)/rocketroll flight --seed 0 --out $(DEMO)/flight-seed0.csv
 	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
