@@ -270,7 +270,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
             f"flight: {profile.source} spends {end - start:.2f} s above --v-ref "
             f"{spec.v_ref:g} m/s: fewer than 50 samples of {spec.log_dt:g} s"
         )
-    time = start + spec.log_dt * np.arange(n + 1)
+    time: FloatArray = np.asarray(start + spec.log_dt * np.arange(n + 1), dtype=np.float64)
     steps = math.ceil((end - start) / spec.dwell_min) + 1
     schedule = FinSchedule.staircase(
         rng_schedule,

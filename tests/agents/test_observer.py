@@ -320,7 +320,8 @@ def test_in_flight_the_observer_is_scheduled_on_the_flying_rocket_and_turbulence
     assert schedule.scales[211, 0] < 1.0
     assert np.all(np.abs(controller.schedule[fast][:2]) < np.abs(controller.schedule[0][:2]))
     # In the tunnel nothing is scheduled.
-    assert make_controller("observer", config(), "RocketRoll-v0").schedule is None
+    in_tunnel = make_controller("observer", config(), "RocketRoll-v0")
+    assert isinstance(in_tunnel, ObserverController) and in_tunnel.schedule is None
 
 
 def test_in_flight_the_scheduled_observer_holds_within_two_degrees(default_db):
