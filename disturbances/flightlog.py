@@ -47,10 +47,16 @@ from identification.flight import (
     flight_profile,
     roll_scales,
 )
-from identification.model import MODEL_NAMES, PAPER_CONSTANT, PAPER_THETA, RollParams, Servo
+from identification.model import MODEL_NAMES, PAPER_THETA, RollParams, Servo
 from identification.model import simulate as simulate_roll
 from identification.recording import Recording, metadata_items
-from identification.tunnel import FinSchedule, Turbulence
+from identification.tunnel import (
+    FinSchedule,
+    Turbulence,
+    check_dwells,
+    check_rocket,
+    rocket_params,
+)
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, setting, to_argv
@@ -171,42 +177,14 @@ class FlightLogSpec:
 
     def __post_init__(self) -> None:
         check(self)
-        if self.model == "constant" and self.alpha_bar not in (None, 0.0):
-            raise SettingError("alpha_bar", "must be 0 for the constant-damping model")
-        if abs(self.alpha) < 1e-3:
-            raise SettingError("alpha", f"must be at least 0.001 in size, got {self.alpha!r}")
-        if abs(self.beta / self.alpha) > 45.0:
-            raise SettingError(
-                "beta", f"gives an asymmetry θ̄ = β/α = {self.beta / self.alpha:.4g}° beyond ±45°"
-            )
+        check_rocket(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
         if self.no_gyro and self.encoder_counts == 0:
             raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
-        if not self.log_dt <= self.dwell_min <= self.dwell_max:
-            raise SettingError(
-                "dwell_min",
-                f"must be at least --log-dt ({self.log_dt:g} s) and at most --dwell-max "
-                f"({self.dwell_max:g} s), got {self.dwell_min:g} s",
-            )
-        params = self.params()
-        lowest = params.beta_bar_per_s + min(params.alpha_bar_per_deg_s, 0.0) * (
-            Servo().range_deg + abs(params.theta_bar_deg)
-        )
-        if lowest <= 0.0:
-            raise SettingError(
-                "alpha_bar",
-                f"makes the damping a(θ) = ᾱ·|θ + θ̄| + β̄ reach {lowest:.3g} 1/s within the "
-                f"±{Servo().range_deg:g}° fin range; it must stay positive",
-            )
+        check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
 
     def params(self) -> RollParams:
         """The truth at ``v_ref`` and ISA sea-level density."""
-        base = PAPER_THETA if self.model == "theta" else PAPER_CONSTANT
-        return RollParams.from_steady_state(
-            alpha=self.alpha,
-            beta=self.beta,
-            beta_bar=base.beta_bar_per_s if self.beta_bar is None else self.beta_bar,
-            alpha_bar=base.alpha_bar_per_deg_s if self.alpha_bar is None else self.alpha_bar,
-        )
+        return rocket_params(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
 
     def default_name(self) -> str:
         """``flight-<turbulence>-seed<N>`` unless a name was given."""

@@ -249,9 +249,52 @@ class FinSchedule:
         return levels[index]
 
 
-def _paper_damping(model: str) -> tuple[float, float]:
+def rocket_params(
+    model: str, alpha: float, beta: float, alpha_bar: float | None, beta_bar: float | None
+) -> RollParams:
+    """A virtual rocket's truth from its settings: ``ᾱ``/``β̄`` default (None) to the
+    paper's for ``model`` -- ᾱ = -0.0289, β̄ = 2.4075 (eq. 48) or ᾱ = 0, a = 1.314 (eq. 46)."""
     base = PAPER_THETA if model == "theta" else PAPER_CONSTANT
-    return base.alpha_bar_per_deg_s, base.beta_bar_per_s
+    return RollParams.from_steady_state(
+        alpha=alpha,
+        beta=beta,
+        beta_bar=base.beta_bar_per_s if beta_bar is None else beta_bar,
+        alpha_bar=base.alpha_bar_per_deg_s if alpha_bar is None else alpha_bar,
+    )
+
+
+def check_rocket(
+    model: str, alpha: float, beta: float, alpha_bar: float | None, beta_bar: float | None
+) -> None:
+    """Refuse a virtual rocket's settings that make no rocket (``SettingError`` naming the
+    setting): ᾱ with the constant model, a vanishing gain, an asymmetry beyond ±45°, a
+    damping that reaches zero within the fin range."""
+    if model == "constant" and alpha_bar not in (None, 0.0):
+        raise SettingError("alpha_bar", "must be 0 for the constant-damping model")
+    if abs(alpha) < 1e-3:
+        raise SettingError("alpha", f"must be at least 0.001 in size, got {alpha!r}")
+    if abs(beta / alpha) > 45.0:
+        raise SettingError("beta", f"gives an asymmetry θ̄ = β/α = {beta / alpha:.4g}° beyond ±45°")
+    params = rocket_params(model, alpha, beta, alpha_bar, beta_bar)
+    lowest = params.beta_bar_per_s + min(params.alpha_bar_per_deg_s, 0.0) * (
+        Servo().range_deg + abs(params.theta_bar_deg)
+    )
+    if lowest <= 0.0:
+        raise SettingError(
+            "alpha_bar",
+            f"makes the damping a(θ) = ᾱ·|θ + θ̄| + β̄ reach {lowest:.3g} 1/s within the "
+            f"±{Servo().range_deg:g}° fin range; it must stay positive",
+        )
+
+
+def check_dwells(log_dt: float, dwell_min: float, dwell_max: float) -> None:
+    """Refuse staircase dwells shorter than a logging interval or out of order."""
+    if not log_dt <= dwell_min <= dwell_max:
+        raise SettingError(
+            "dwell_min",
+            f"must be at least --log-dt ({log_dt:g} s) and at most --dwell-max "
+            f"({dwell_max:g} s), got {dwell_min:g} s",
+        )
 
 
 @dataclass(frozen=True)
@@ -361,43 +404,14 @@ class TunnelSpec:
 
     def __post_init__(self) -> None:
         check(self)
-        if self.model == "constant" and self.alpha_bar not in (None, 0.0):
-            raise SettingError("alpha_bar", "must be 0 for the constant-damping model")
-        if abs(self.alpha) < 1e-3:
-            raise SettingError("alpha", f"must be at least 0.001 in size, got {self.alpha!r}")
-        if abs(self.beta / self.alpha) > 45.0:
-            raise SettingError(
-                "beta",
-                f"gives an asymmetry θ̄ = β/α = {self.beta / self.alpha:.4g}° beyond ±45°",
-            )
+        check_rocket(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
         if self.no_encoder and self.gyro_noise is None:
             raise SettingError("no_encoder", "needs a rate gyro (give --gyro-noise, e.g. 0)")
-        if not self.log_dt <= self.dwell_min <= self.dwell_max:
-            raise SettingError(
-                "dwell_min",
-                f"must be at least --log-dt ({self.log_dt:g} s) and at most --dwell-max "
-                f"({self.dwell_max:g} s), got {self.dwell_min:g} s",
-            )
-        params = self.params()
-        lowest = params.beta_bar_per_s + min(params.alpha_bar_per_deg_s, 0.0) * (
-            Servo().range_deg + abs(params.theta_bar_deg)
-        )
-        if lowest <= 0.0:
-            raise SettingError(
-                "alpha_bar",
-                f"makes the damping a(θ) = ᾱ·|θ + θ̄| + β̄ reach {lowest:.3g} 1/s within the "
-                f"±{Servo().range_deg:g}° fin range; it must stay positive",
-            )
+        check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
 
     def params(self) -> RollParams:
         """Ground-truth roll parameters of this run."""
-        alpha_bar, beta_bar = _paper_damping(self.model)
-        return RollParams.from_steady_state(
-            alpha=self.alpha,
-            beta=self.beta,
-            beta_bar=beta_bar if self.beta_bar is None else self.beta_bar,
-            alpha_bar=alpha_bar if self.alpha_bar is None else self.alpha_bar,
-        )
+        return rocket_params(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
 
     def servo(self) -> Servo:
         """Servo model of this run."""
