@@ -20,7 +20,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-__all__ = ["History", "history_space"]
+__all__ = ["FlightClock", "History", "history_space"]
 
 Float32Array = NDArray[np.float32]
 
@@ -68,3 +68,42 @@ class History:
         past_obs = self._obs[rows].reshape(obs.shape[0], -1)
         past_act = self._act[rows].reshape(obs.shape[0], -1)
         return np.concatenate([obs, past_obs, past_act], axis=1)
+
+
+class FlightClock:
+    """The flight's phase for a policy: the rocket's gain and damping multipliers at each
+    environment's control step, read from the nominal flight by the steps since launch.
+
+    A flight computer knows the time since launch; the scheduled PID and observer read the
+    nominal flight's schedule by it (:mod:`rollenv.flight`), and a policy given this clock
+    reads the same two numbers (``V/V_ref`` and ``ρV/(ρ_ref·V_ref)``, eq. 4-8).
+
+    >>> clock = FlightClock(np.array([[1.0, 1.0], [2.0, 1.9], [3.0, 2.7]]), n=2)
+    >>> clock.values().tolist()
+    [[1.0, 1.0], [1.0, 1.0]]
+    >>> clock.advance(); clock.clear(1); clock.values().tolist()
+    [[2.0, 1.899999976158142], [1.0, 1.0]]
+    """
+
+    SIZE = 2
+    NAMES = ("flight_gain", "flight_damping")
+
+    def __init__(self, scales: NDArray[Any], n: int = 1) -> None:
+        table = np.asarray(scales, dtype=np.float32)
+        if table.ndim != 2 or table.shape[1] != self.SIZE or table.shape[0] < 1:
+            raise ValueError(f"scales must have shape (steps, 2), not {table.shape}")
+        self._table = table
+        self._step = np.zeros(n, dtype=np.intp)
+
+    def clear(self, rows: Any = slice(None)) -> None:
+        """Back to launch for ``rows`` (all by default): a new episode."""
+        self._step[rows] = 0
+
+    def advance(self) -> None:
+        """One control step later, for every environment."""
+        self._step += 1
+
+    def values(self, rows: Any = slice(None)) -> Float32Array:
+        """The multipliers of ``rows``' coming control step (held after the last), (n, 2)."""
+        index = np.minimum(self._step[rows], self._table.shape[0] - 1)
+        return np.asarray(self._table[index], dtype=np.float32).reshape(-1, self.SIZE)

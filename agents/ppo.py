@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import Design, FlightView
-from agents.memory import History
+from agents.memory import FlightClock, History
 from agents.observer import ObserverFeatures
 from agents.registry import COMMITTED
 from disturbances.bank import TraceBank
@@ -117,7 +117,12 @@ class PPOController:
         #: The policy's action is a residual on the observer controller's command, × this.
         self.residual = residual
         self.features: ObserverFeatures | None = None
+        #: The policy reads the flight's phase (:class:`agents.memory.FlightClock`), made
+        #: from the environment's flight at :meth:`reset`.
+        self.needs_clock = _flight_clock(settings)
+        self.clock: FlightClock | None = None
         width = len(Obs) + (ObserverFeatures.SIZE if observer else 0)
+        width += FlightClock.SIZE if self.needs_clock else 0
         self.history: History | None = None
         if k:
             self.history = History(1, width, 1, k)
@@ -161,7 +166,7 @@ class PPOController:
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
         history, observer, _ = _layout(settings)
-        size = len(observation_names(history, observer))  # with history and observer
+        size = len(observation_names(history, observer, _flight_clock(settings)))
         record = json.loads(norm_file.read_text(encoding="utf-8"))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
@@ -186,6 +191,14 @@ class PPOController:
     def reset(self, env: FlightView) -> None:
         """Forget the history and the observer's state (if it has them); checks the task."""
         self.require_task(env.config.task)
+        if self.needs_clock:
+            schedule = env.config.flight_schedule
+            if schedule is None:
+                raise ValueError(
+                    f"this {self.name} policy reads the flight's phase: it flies a flight "
+                    "variant (RocketRollFlight-v0, ...), not the tunnel"
+                )
+            self.clock = FlightClock(schedule.scales[: env.config.max_episode_steps])
         if self.history is not None:
             self.history.clear()
         if self.features is not None:
@@ -202,6 +215,11 @@ class PPOController:
                     "train_bank) first (--policy does)"
                 )
             seen = np.concatenate([raw, self.features.one(0, raw[0])[None]], axis=1)
+        if self.needs_clock:
+            if self.clock is None:
+                raise RuntimeError("reset(env) first: the flight's phase comes from its flight")
+            seen = np.concatenate([seen, self.clock.values()], axis=1)
+            self.clock.advance()
         if self.history is not None:
             seen_now = seen
             seen = self.history.augment(seen_now)
@@ -238,6 +256,11 @@ class PPOController:
     def _predict(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
         action, _ = self.model.predict(self.normalizer(seen), deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(1)
+
+
+def _flight_clock(settings: dict[str, Any]) -> bool:
+    """Whether the run's policy reads the flight's phase (``flight_clock``)."""
+    return bool((settings.get("hyperparameters") or {}).get("flight_clock", False))
 
 
 def _layout(settings: dict[str, Any]) -> tuple[int, bool, float]:

@@ -86,7 +86,9 @@ ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 #: (true: the observer's estimate ``[v̂, ψ̂, û_d]`` in the observation,
 #: :class:`agents.observer.ObserverFeatures`, designed on the train split), ``residual``
 #: (a scale in (0, 1]: the action is a residual added to the observer controller's command,
-#: × the scale; implies ``observer``), and for the off-policy algorithms the exploration
+#: × the scale; implies ``observer``), ``flight_clock`` (true, on a flight variant: the
+#: flight's gain and damping multipliers at the coming control step in the observation,
+#: :class:`agents.memory.FlightClock`), and for the off-policy algorithms the exploration
 #: noise (``noise_type: normal``, ``noise_std``) as
 #: rl-baselines3-zoo writes it.
 SCRIPT_KEYS = (
@@ -98,6 +100,7 @@ SCRIPT_KEYS = (
     "history",
     "observer",
     "residual",
+    "flight_clock",
     "noise_type",
     "noise_std",
 )
@@ -276,6 +279,8 @@ class Hyperparameters:
     residual : float
         0, or the scale of the action as a residual on the observer controller's
         command (:class:`agents.observer.ObserverFeatures`).
+    flight_clock : bool
+        The flight's phase in the observation (:class:`agents.memory.FlightClock`).
     """
 
     env_id: str
@@ -291,6 +296,7 @@ class Hyperparameters:
     noise: tuple[str, float] | None = None
     observer: bool = False
     residual: float = 0.0
+    flight_clock: bool = False
 
 
 # ----------------------------------------------------------------------------- arguments
@@ -418,6 +424,16 @@ def load_hyperparameters(
     env_kwargs = entry.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
         raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    flight_clock = entry.get("flight_clock", False)
+    if not isinstance(flight_clock, bool):
+        raise UsageError(f"{where}: flight_clock must be true or false, got {flight_clock!r}")
+    if flight_clock:
+        from rollenv.variants import variant_options
+
+        if variant_options(env_id).get("flight") is None and "flight" not in env_kwargs:
+            raise UsageError(
+                f"{where}: flight_clock is the phase of a flight; {env_id} is not a flight variant"
+            )
     ppo = {key: entry[key] for key in keywords if key in entry}
     _ppo_arguments(ppo, where)  # fail now on a bad schedule or activation
     return Hyperparameters(
@@ -434,6 +450,7 @@ def load_hyperparameters(
         noise=noise,
         observer=observer,
         residual=float(residual),
+        flight_clock=flight_clock,
     )
 
 
@@ -553,6 +570,13 @@ def make_env(
             train_bank = load_bank(train_config, db)
         features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs, hp.residual)
         env = VecObserver(env, features)
+    if hp.flight_clock:
+        from agents.vecenv import VecFlightClock
+
+        schedule = adapter.config.flight_schedule
+        if schedule is None:
+            raise UsageError(f"{hp.source}, {hp.env_id}: flight_clock needs a flight")
+        env = VecFlightClock(env, schedule.scales[: adapter.config.max_episode_steps])
     if hp.history:
         from agents.vecenv import VecHistory
 
@@ -677,25 +701,31 @@ def evaluate_held_out(model: Any, eval_env: Any, adapter: Any, seed: int) -> dic
 
 
 # ----------------------------------------------------------------------------- outputs
-def observation_names(history: int = 0, observer: bool = False) -> list[str]:
-    """The names of the policy's observation: the env's, the observer's estimate, then the
-    history (``name@t-k``, and ``action@t-k``).
+def observation_names(
+    history: int = 0, observer: bool = False, flight_clock: bool = False
+) -> list[str]:
+    """The names of the policy's observation: the env's, the observer's estimate, the
+    flight's phase, then the history (``name@t-k``, and ``action@t-k``).
 
     >>> observation_names(1)[4:]
     ['tracking_error@t-1', 'roll_rate_dps@t-1', 'fin_deg@t-1', 'fin_cmd_deg@t-1', 'action@t-1']
     >>> len(observation_names(2, observer=True))  # (4 + 3) x 3 + 2
     23
     """
+    from agents.memory import FlightClock
     from rollenv.layout import OBSERVATION_NAMES
 
     now = [*OBSERVATION_NAMES, *(("v_hat_dps", "psi_hat_deg", "u_d_hat_deg") if observer else ())]
+    now += list(FlightClock.NAMES) if flight_clock else []
     past = [f"{name}@t-{k}" for k in range(1, history + 1) for name in now]
     return now + past + [f"action@t-{k}" for k in range(1, history + 1)]
 
 
-def normalization_record(venv: Any, history: int = 0, observer: bool = False) -> dict[str, Any]:
+def normalization_record(
+    venv: Any, history: int = 0, observer: bool = False, flight_clock: bool = False
+) -> dict[str, Any]:
     """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
-    names = observation_names(history, observer)
+    names = observation_names(history, observer, flight_clock)
     if venv is None or not venv.norm_obs:
         return {"norm_obs": False, "observation_names": names}
     rms = venv.obs_rms
@@ -898,7 +928,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     # The result: the final model and its observation statistics (as JSON, and as SB3's
     # VecNormalize pickle for `VecNormalize.load`).
     model.save(out / "model.zip")
-    norm_record = normalization_record(normalize, hp.history, hp.observer)
+    norm_record = normalization_record(normalize, hp.history, hp.observer, hp.flight_clock)
     (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
     if normalize is not None:
         from stable_baselines3.common.vec_env import sync_envs_normalization
@@ -922,6 +952,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 **({"history": hp.history} if hp.history else {}),
                 **({"observer": True} if hp.observer else {}),
                 **({"residual": hp.residual} if hp.residual else {}),
+                **({"flight_clock": True} if hp.flight_clock else {}),
                 **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.ppo,
             }

@@ -25,13 +25,20 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvWrapper,
 )
 
-from agents.memory import History, history_space
+from agents.memory import FlightClock, History, history_space
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
 
-__all__ = ["ENV_ATTRIBUTES", "RollVecEnv", "StepReturn", "VecHistory", "VecObserver"]
+__all__ = [
+    "ENV_ATTRIBUTES",
+    "RollVecEnv",
+    "StepReturn",
+    "VecFlightClock",
+    "VecHistory",
+    "VecObserver",
+]
 
 #: What ``step`` and ``step_wait`` return: observations, rewards, dones, infos.
 StepReturn = tuple[
@@ -390,3 +397,42 @@ class VecObserver(VecEnvWrapper):
             out[i] = self._with(i, obs[i])
         self._last = obs
         return out, rewards, dones, infos
+
+
+class VecFlightClock(VecEnvWrapper):
+    """An SB3 ``VecEnv`` of a flight variant whose observations carry the flight's phase
+    (:class:`agents.memory.FlightClock`: the gain and damping multipliers of the coming
+    control step) after the values below; each env's clock restarts with its episode."""
+
+    def __init__(self, venv: VecEnv, scales: NDArray[Any]) -> None:
+        assert isinstance(venv.observation_space, spaces.Box)
+        space = venv.observation_space
+        big = np.full(FlightClock.SIZE, np.float32(1e3))
+        observation_space = spaces.Box(
+            np.concatenate([space.low, np.zeros(FlightClock.SIZE, np.float32)]).astype(np.float32),
+            np.concatenate([space.high, big]).astype(np.float32),
+            dtype=np.float32,
+        )
+        super().__init__(venv, observation_space=observation_space)
+        self.clock = FlightClock(scales, venv.num_envs)
+
+    def reset(self) -> NDArray[np.float32]:
+        obs = np.asarray(self.venv.reset(), dtype=np.float32)
+        self.clock.clear()
+        return np.concatenate([obs, self.clock.values()], axis=1)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self.clock.advance()
+        for i in np.flatnonzero(dones).tolist():
+            terminal = infos[i].get("terminal_observation")
+            if terminal is not None:
+                infos[i]["terminal_observation"] = np.concatenate(
+                    [np.asarray(terminal, dtype=np.float32), self.clock.values(i)[0]]
+                )
+            self.clock.clear(i)
+        obs = np.asarray(obs, dtype=np.float32)
+        return np.concatenate([obs, self.clock.values()], axis=1), rewards, dones, infos

@@ -604,3 +604,52 @@ def test_bad_residual_settings_are_named(extra, message, tmp_path):
     path.write_text(TINY + extra, encoding="utf-8")
     with pytest.raises(UsageError, match=re.escape(message)):
         load_hyperparameters(path, "RocketRoll-v0")
+
+
+def test_a_flight_policy_reads_the_flights_phase_as_in_training(tmp_path, default_db):
+    """``flight_clock: true``: the flight's gain and damping multipliers of the coming control
+    step beside the observation; the controller rebuilds them from the env's flight, step by
+    step, and acts as model.predict does on the training stack."""
+    import gymnasium as gym
+
+    from agents.train import load_hyperparameters, make_env
+
+    text = TINY.replace("RocketRoll-v0:", "RocketRollFlight-v0:") + "  flight_clock: true\n"
+    hyperparams = tmp_path / "flight.yml"
+    hyperparams.write_text(text, encoding="utf-8")
+    out = tmp_path / "run"
+    argv = ["--env-id", "RocketRollFlight-v0", "--hyperparams", str(hyperparams)]
+    argv += ["--db", str(default_db), "--out", str(out), "--eval-freq", "0"]
+    argv += ["--eval-episodes", "1", "--checkpoint-freq", "0", "--no-progress-bar"]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert run_command(COMMAND, argv, "rocketroll train ppo") == 0
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["hyperparameters"]["flight_clock"] is True
+    names = json.loads((out / "normalize.json").read_text())["observation_names"]
+    assert names[-2:] == ["flight_gain", "flight_damping"]
+    controller = PPOController.load(out)
+    assert controller.needs_clock
+    hp = load_hyperparameters(hyperparams, "RocketRollFlight-v0", "ppo")
+    adapter, stack, normalize = make_env(hp, 1, 5, split="test", db=default_db, training=False)
+    stored = json.loads((out / "normalize.json").read_text())
+    normalize.obs_rms.mean = np.array(stored["mean"])
+    normalize.obs_rms.var = np.array(stored["var"])
+    schedule = adapter.config.flight_schedule
+    seen = stack.reset()
+    env = gym.make("RocketRollFlight-v0").unwrapped
+    view = FlightView(env)
+    controller.reset(view)
+    for k in range(40):
+        raw_all = stack.unnormalize_obs(seen)[0]
+        np.testing.assert_allclose(raw_all[4:], schedule.scales[k], rtol=1e-6)  # the clock
+        expected, _ = controller.model.predict(seen, deterministic=True)
+        action = controller.act(raw_all[:4], view)
+        np.testing.assert_allclose(action, expected.reshape(1), rtol=0, atol=1e-6)
+        seen, _, _, _ = stack.step(action.reshape(1, 1))
+    # In the tunnel there is no flight to read the phase of; the YAML is refused there too.
+    with pytest.raises(ValueError, match="reads the flight's phase"):
+        controller.reset(FlightView(RocketRollEnv(bank=array_bank())))
+    tunnel = tmp_path / "tunnel.yml"
+    tunnel.write_text(TINY + "  flight_clock: true\n", encoding="utf-8")
+    with pytest.raises(UsageError, match="flight_clock is the phase of a flight"):
+        load_hyperparameters(tunnel, "RocketRoll-v0", "ppo")
