@@ -852,6 +852,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("history", f"{hp.history} steps" if hp.history else "off"),
         ("observer estimate", "in the observation" if hp.observer else "off"),
         *((("residual", f"x {hp.residual:g} on the observer's command"),) if hp.residual else ()),
+        *(
+            (("flight clock", "the flight's gain and damping in the observation"),)
+            if hp.flight_clock
+            else ()
+        ),
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.ppo[k]) for k in hp.ppo),
         ("env_kwargs", hp.env_kwargs or "-"),
