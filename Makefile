@@ -66,7 +66,7 @@ demo: $(VENV)/.installed
 	@echo "      seeds each in $(DEMO)/seeds-angle/"
 	@echo "      and seeds-rate/, and every controller under"
 	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/, and in flight"
-	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png and the scheduled PID"
+	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png, the scheduled PID and observer"
 	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above), and a virtual flight's"
 	@echo "      log $(DEMO)/flight-seed0.csv identified back in $(DEMO)/flight-seed0.json"
 
