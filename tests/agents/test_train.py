@@ -637,6 +637,7 @@ def test_a_flight_policy_reads_the_flights_phase_as_in_training(tmp_path, defaul
     schedule = adapter.config.flight_schedule
     seen = stack.reset()
     env = gym.make("RocketRollFlight-v0").unwrapped
+    assert isinstance(env, RocketRollEnv)
     view = FlightView(env)
     controller.reset(view)
     for k in range(40):
