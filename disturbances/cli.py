@@ -122,12 +122,12 @@ class FlightArgs:
 
 def flight(args: FlightArgs) -> int:
     """Fly the virtual flight and write its log."""
-    from disturbances.flightlog import run_flight
+    from disturbances.flightlog import AscentError, run_flight
     from identification.recording import save_recording
 
     try:
         recording = run_flight(args.spec)
-    except ValueError as exc:
+    except AscentError as exc:
         raise UsageError(f"--ascent {args.spec.ascent}: {exc}") from None
     save_recording(recording, args.out)
     print(f"wrote {args.out}: {recording!r}")
@@ -170,7 +170,7 @@ def identify(args: IdentifyArgs) -> int:
     """Identify a recording by every method asked for; print, write and store the results."""
     import dataclasses
 
-    from identification.methods import Context, fit
+    from identification.methods import Context, fit, is_flight_method
     from identification.recording import load_recording
     from identification.tables import methods_table, parameter_table
     from rocketroll_common.files import write_all_atomic
@@ -184,7 +184,7 @@ def identify(args: IdentifyArgs) -> int:
     methods = args.method or list(default_methods(recording))
     if recording.is_flight and args.db is not None:
         raise UsageError(
-            f"--db: {args.recording} is a flight (it has airspeed_mps); the database holds "
+            f"--db: {args.recording} is a flight (its airspeed_mps changes); the database holds "
             "the tunnel's turbulence, and a flight's identification is not stored"
         )
     if recording.is_flight and args.report is not None:
@@ -230,11 +230,13 @@ def identify(args: IdentifyArgs) -> int:
     write_all_atomic(outputs)  # all or nothing
     if result is not None:
         print(parameter_table(result))
-    if recording.is_flight:
-        print(_flight_table(fits))
-    elif any(method != "paper" for method in fits):
+    flown = {method: f for method, f in fits.items() if is_flight_method(method)}
+    tunnel = {method: f for method, f in fits.items() if method not in flown}
+    if flown:
+        print(_flight_table(flown))
+    if any(method != "paper" for method in tunnel):
         print("\nidentification methods (parameters; re-simulation of each one's u_d, §3.5)")
-        print(methods_table(fits))
+        print(methods_table(tunnel))
     if stored:
         print(stored)
     if args.json is not None:
@@ -269,6 +271,13 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                 f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
                 f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
             )
+            if not errors:
+                lines.append(
+                    "  warning: no standard errors (the likelihood's Hessian is not positive "
+                    "definite at the fit): the recording may not determine these parameters"
+                )
+            if not m.get("converged", True):
+                lines.append("  warning: the optimiser did not report convergence")
     return (
         "flight identification (eq. 4-8: a ∝ ρV, α ∝ V)\n"
         + "\n".join(lines)

@@ -26,9 +26,13 @@ and time constant ``T``, whose flow angle shrinks like ``V_ref/V``::
 
     u_d = (V_ref / max(V, V_ref)) · w̄,        w̄ = the average of w over the sample interval
 
-(the average exactly, :mod:`rocketroll_common.ou`).  For the Dryden gust
-(``α·u_d = p_g``, an OU process of time constant ``4b/(πV)``) this is the
-same law.  Measured: a rate gyro with the multiplicative noise of eq. 52 plus
+(the average exactly, :mod:`rocketroll_common.ou`).  Above ``V_ref`` the
+Dryden gust (``α·u_d = p_g``, an OU process of time constant ``4b/(πV)``:
+constant in tunnel time) has this form, its intensity changing with height
+and airspeed where the prior's is stationary (``benchmarks/flight_ground_truth.py``
+measures what that costs); below ``V_ref`` the prior holds the flow angle's
+scale at the tunnel's, which the gust does not (``rocketroll flight`` logs
+only above ``V_ref``).  Measured: a rate gyro with the multiplicative noise of eq. 52 plus
 an additive floor (both estimated), or, without a gyro, the encoder angle
 with its quantisation.  The likelihood of the innovations is maximised over
 ``α₀, θ̄, β̄₀`` (and ``ᾱ₀``), ``σ_w, T`` and the sensor noise by L-BFGS-B; the
@@ -87,6 +91,10 @@ MIN_DAMPING = 1e-3
 _STILL = 1e-9
 #: Bound on the optimiser's log-parameters (exp(±50) is beyond any physical value).
 _LOG_BOUND = 50.0
+#: Airspeed, as a fraction of V_ref, below which the fins have next to no authority.
+MIN_AIRSPEED_FRACTION = 0.1
+#: Intervals at or above that airspeed a flight needs before it is identified.
+MIN_MOVING_INTERVALS = 100
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,10 +160,16 @@ def flight_inputs(
 ) -> FlightInputs:
     """The fin path, the scales and the measurements of a flight recording.
 
+    The substep grid follows the recorded timestamps (each sample interval cut
+    into :data:`SUBSTEPS` equal parts), so a logger's jitter does not slide the
+    fin angle and the airspeed against the roll measurements.
+
     Raises
     ------
     IdentificationError
-        If the recording has no airspeed (not a flight) or no roll measurement.
+        If the recording has no airspeed (not a flight), or flies slower than
+        :data:`MIN_AIRSPEED_FRACTION` of ``v_ref_mps`` on all but fewer than
+        :data:`MIN_MOVING_INTERVALS` intervals (the fins move nothing there).
     """
     from identification.ml import _quantum
 
@@ -170,9 +184,19 @@ def flight_inputs(
     n = time.size - 1
     dt = recording.dt_s
     h = dt / SUBSTEPS
-    fine = time[0] + h * np.arange(n * SUBSTEPS + 1)
-    middle = fine[:-1] + 0.5 * h
+    fine = np.interp(np.arange(n * SUBSTEPS + 1) / SUBSTEPS, np.arange(n + 1), time)
+    middle = 0.5 * (fine[1:] + fine[:-1])
     speed = np.asarray(recording.airspeed_mps)
+    speed_mid = 0.5 * (speed[1:] + speed[:-1])
+    moving = int(np.count_nonzero(speed_mid >= MIN_AIRSPEED_FRACTION * v_ref_mps))
+    if moving < MIN_MOVING_INTERVALS:
+        raise IdentificationError(
+            f"recording {recording.name!r}: the airspeed reaches "
+            f"{MIN_AIRSPEED_FRACTION:.0%} of v_ref ({MIN_AIRSPEED_FRACTION * v_ref_mps:.3g} m/s) "
+            f"on only {moving} of {n} intervals (at least {MIN_MOVING_INTERVALS} needed): "
+            "the fins move the rocket too little there to identify it "
+            f"(max airspeed {float(speed.max()):.3g} m/s)"
+        )
     if recording.altitude_m is not None:
         density = np.asarray(
             isa(np.interp(middle, time, recording.altitude_m)).density_kgm3, dtype=float
@@ -182,7 +206,6 @@ def flight_inputs(
         density = np.full(middle.size, rho_ref_kgm3)
         source = f"no altitude_m: ρ_ref = {rho_ref_kgm3:.4f} kg/m³ throughout"
     gain, damping = roll_scales(np.interp(middle, time, speed), density, v_ref_mps, rho_ref_kgm3)
-    speed_mid = 0.5 * (speed[1:] + speed[:-1])
     if recording.fin_deg is not None:
         theta = np.interp(fine, time, recording.fin_deg)
         rate_limit = None
@@ -451,6 +474,37 @@ def _equation_error_start(inputs: FlightInputs) -> dict[str, float]:
     return {"beta_bar": beta_bar, "alpha": alpha, "theta_bar": theta_bar, "sigma_w": sigma}
 
 
+#: The turbulence time constants (tunnel s) and SDs (°) the likelihood is surveyed on for a start.
+_START_TAUS = np.geomspace(0.005, 5.0, 13)
+_START_SIGMAS = np.geomspace(0.3, 300.0, 10)
+
+
+def _turbulence_starts(
+    inputs: FlightInputs, layout: _Layout, rough: dict[str, float]
+) -> list[dict[str, float]]:
+    """Two starts for the optimiser: the rocket of the equation-error fit with the
+    turbulence ``(T, σ_w)`` of the best likelihood on a grid over four decades of ``T``,
+    and the best at least a decade of ``T`` away from it.
+
+    The likelihood has a second optimum where a slow turbulence (``T`` of seconds)
+    passes for the rocket's own response with a damping many times the true one; a
+    fixed start falls into it on some flights (half of ten Dryden flights did), a
+    survey of a hundred Kalman passes (a fraction of a second) does not.
+    """
+    rows = []
+    for tau in _START_TAUS:
+        values = [
+            _negloglike(layout.vector({**rough, "tau": tau, "sigma_w": sd}), inputs, layout)
+            for sd in _START_SIGMAS
+        ]
+        j = int(np.argmin(values))
+        rows.append((values[j], float(tau), float(_START_SIGMAS[j])))
+    first = min(rows)
+    apart = [row for row in rows if abs(math.log10(row[1] / first[1])) >= 1.0]
+    chosen = [first] + ([min(apart)] if apart else [])
+    return [{**rough, "tau": tau, "sigma_w": sd} for _, tau, sd in chosen]
+
+
 @dataclass(frozen=True, eq=False)
 class FlightFit:
     """The maximum-likelihood fit of one damping model to a flight (:func:`identify_flight`).
@@ -478,6 +532,9 @@ class FlightFit:
         Posterior mean of the roll rate at the samples, °/s.
     converged : bool
         Whether the optimiser said so.
+    estimates : dict
+        Every maximised parameter in natural units (the model's, ``sigma_w``,
+        ``tau`` and the sensor noise), as a start for a richer model.
     inputs : FlightInputs
         What was fitted.
     """
@@ -493,6 +550,7 @@ class FlightFit:
     u_d_deg: FloatArray
     rate_dps: FloatArray
     converged: bool
+    estimates: dict[str, float]
     inputs: FlightInputs
 
     def disturbance(self) -> Disturbance:
@@ -585,12 +643,15 @@ def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, Float
     return float(loglike), rate, mean_w
 
 
-def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
+def identify_flight(
+    inputs: FlightInputs, model: str = "constant", *, constant: FlightFit | None = None
+) -> FlightFit:
     """Maximum likelihood of one damping model on a flight (module docstring).
 
     The constant-damping model starts from an equation-error least-squares fit
-    at two turbulence time constants; the θ-dependent model starts from the
-    constant model's fit with ᾱ₀ = 0.
+    with the turbulence of :func:`_turbulence_starts`; the θ-dependent model starts from the
+    constant model's fit with ᾱ₀ = 0 (pass it as ``constant`` if it is at
+    hand; otherwise it is fitted first).
 
     The turbulence's intensity is taken as stationary along the flight.  A second
     pass weighting each second of the flight by the intensity the first pass's
@@ -608,26 +669,14 @@ def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
         )
     layout = _Layout(theta_model=model == "theta", gyro=gyro)
     if model == "theta":
-        base = identify_flight(inputs, "constant")
-        p = base.params
-        starts = [
-            {
-                "beta_bar": p.beta_bar_per_s,
-                "alpha": p.alpha,
-                "theta_bar": p.theta_bar_deg,
-                "alpha_bar": 0.0,
-                "sigma_w": base.turbulence_sd_deg,
-                "tau": base.turbulence_tau_s,
-                "gyro_rel": (base.gyro_noise_pct or 1.0) / 100.0,
-                "gyro_abs": base.gyro_floor_dps or 0.1,
-            }
-        ]
-        best = _maximise(inputs, layout, starts)
+        if constant is None:
+            constant = identify_flight(inputs, "constant")
+        elif constant.model != "constant" or constant.inputs is not inputs:
+            raise ValueError("constant must be the constant model's fit to the same inputs")
+        best = _maximise(inputs, layout, [{**constant.estimates, "alpha_bar": 0.0}])
     elif model == "constant":
-        rough = _equation_error_start(inputs)
-        best = _maximise(
-            inputs, layout, [{**rough, "alpha_bar": 0.0, "tau": t} for t in (0.05, 0.5)]
-        )
+        rough = {**_equation_error_start(inputs), "alpha_bar": 0.0}
+        best = _maximise(inputs, layout, _turbulence_starts(inputs, layout, rough))
     else:
         raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
     nat = layout.natural(best.x)
@@ -663,6 +712,7 @@ def identify_flight(inputs: FlightInputs, model: str = "constant") -> FlightFit:
         u_d_deg=readonly_array(u_d),
         rate_dps=readonly_array(rate),
         converged=bool(best.success),
+        estimates=nat,
         inputs=inputs,
     )
 
@@ -704,9 +754,13 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
         v_ref_mps=options.v_ref_mps,
         servo_rate_dps=options.servo_rate_dps,
     )
-    fits = []
-    for model in models:
-        result = identify_flight(inputs, model)
+    fits: dict[str, ModelFit] = {}
+    constant: FlightFit | None = None
+    # The constant model first: the θ-dependent one starts from its fit.
+    for model in sorted(models, key=lambda m: m != "constant"):
+        result = identify_flight(inputs, model, constant=constant)
+        if model == "constant":
+            constant = result
         metrics: dict[str, Any] = {
             **result.resimulate(),
             "v_ref_mps": inputs.v_ref_mps,
@@ -728,7 +782,7 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "frame": "flight",
             "v_ref_mps": inputs.v_ref_mps,
         }
-        fits.append(
-            ModelFit("flight", model, result.params, result.disturbance(), metrics, settings)
+        fits[model] = ModelFit(
+            "flight", model, result.params, result.disturbance(), metrics, settings
         )
-    return fits
+    return [fits[model] for model in models]
