@@ -282,7 +282,7 @@ def add_recording(
         from identification.steps import IdentificationError
 
         raise IdentificationError(
-            f"recording {recording.name!r} is a flight (it has airspeed_mps): the database "
+            f"recording {recording.name!r} is a flight (its airspeed_mps changes): the database "
             "holds the tunnel's turbulence, which the environments replay and fly; identify "
             "a flight with `rocketroll identify` (it is not stored)"
         )

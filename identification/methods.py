@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from identification.model import MODEL_NAMES, RollParams, check_model
 from identification.recording import Recording
 from rocketroll_common.arrays import FloatArray
@@ -157,7 +159,8 @@ def register_method(
 
 def default_methods(recording: Recording | None = None) -> tuple[str, ...]:
     """The methods run when none is named, in registration order: for a flight
-    recording (one with an airspeed) the flight methods, else the tunnel's."""
+    recording (one whose airspeed changes, :attr:`Recording.is_flight`) the flight
+    methods, else the tunnel's."""
     flight = recording is not None and recording.is_flight
     return tuple(
         e.name
@@ -275,15 +278,20 @@ def fit(
     context = recording if isinstance(recording, Context) else Context(recording, options)
     entry = METHODS.entry(method)
     rec = context.recording
-    if bool(entry.info.get("flight")) != rec.is_flight:
+    flight_method = bool(entry.info.get("flight"))
+    if rec.is_flight and not flight_method:
         from identification.steps import IdentificationError
 
-        if rec.is_flight:
-            raise IdentificationError(
-                f"recording {rec.name!r} is a flight (it has airspeed_mps): method {method!r} "
-                "assumes the tunnel's one airspeed; use "
-                + " or ".join(f"--method {m}" for m in default_methods(rec))
-            )
+        assert rec.airspeed_mps is not None
+        raise IdentificationError(
+            f"recording {rec.name!r} is a flight (its airspeed_mps goes from "
+            f"{float(np.min(rec.airspeed_mps)):.3g} to {float(np.max(rec.airspeed_mps)):.3g} "
+            f"m/s): method {method!r} assumes the tunnel's one airspeed; use "
+            + " or ".join(f"--method {m}" for m in default_methods(rec))
+        )
+    if flight_method and rec.airspeed_mps is None:
+        from identification.steps import IdentificationError
+
         raise IdentificationError(
             f"recording {rec.name!r} has no airspeed_mps column: method {method!r} identifies "
             "flights (format 1.1); use " + " or ".join(f"--method {m}" for m in default_methods())

@@ -65,6 +65,7 @@ __all__ = [
     "MIN_SAMPLES",
     "SAMPLING_RTOL",
     "SOURCES",
+    "STEADY_AIRSPEED_RTOL",
     "Recording",
     "RecordingError",
     "load_recording",
@@ -106,6 +107,9 @@ FLIGHT_RANGES: Mapping[str, tuple[float, float]] = MappingProxyType(
 
 #: Largest allowed relative deviation of a sampling interval from the median.
 SAMPLING_RTOL = 0.01
+#: An airspeed whose 1st-99th percentile spread stays within this fraction of its median
+#: is a tunnel's steady one (a fan's wobble and a sensor's noise), not a flight.
+STEADY_AIRSPEED_RTOL = 0.1
 #: Fewest samples a recording may have.
 MIN_SAMPLES = 50
 #: Smallest fin-angle range (max - min) that gives something to identify, °.
@@ -450,13 +454,19 @@ class Recording:
     @property
     def format(self) -> str:
         """The format the file is written in: :data:`FORMAT_V1` unless it has flight columns."""
-        return FORMAT if self.is_flight else FORMAT_V1
+        return FORMAT_V1 if self.airspeed_mps is None else FORMAT
 
     @property
     def is_flight(self) -> bool:
-        """Whether the recording has a flight's airspeed (format 1.1): the roll model's
-        gain and damping change along it."""
-        return self.airspeed_mps is not None
+        """Whether the recording is a flight: its airspeed changes (1st to 99th percentile,
+        so that a sensor's noise does not count) by more than :data:`STEADY_AIRSPEED_RTOL`
+        of its median, so the roll model's gain and damping
+        change along it.  A tunnel run that logs its steady airspeed is not one (the
+        tunnel's methods identify it at that airspeed; the ``flight`` method may too)."""
+        if self.airspeed_mps is None:
+            return False
+        low, middle, high = np.percentile(self.airspeed_mps, [1.0, 50.0, 99.0])
+        return float(high - low) > STEADY_AIRSPEED_RTOL * float(middle)
 
     @property
     def n_samples(self) -> int:
