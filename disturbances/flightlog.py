@@ -4,8 +4,11 @@ The tunnel (:mod:`identification.tunnel`) re-creates the paper's experiment so
 that every identification can be checked against the truth.  This module does
 the same for the flight the paper's §4 looks ahead to: the rocket of a
 :class:`~identification.flight.FlightProfile` (default: the 5-kg rocket to
-603 km/h and 2 km) from the moment it reaches the tunnel's airspeed (it has
-left the rail) to apogee, with
+603 km/h and 2 km) from the moment it reaches the reference airspeed (the
+tunnel's, unless ``--v-ref``; it has left the rail) to apogee -- with Dryden
+gusts, to the moment it slows back below ``v_ref`` just before apogee (there
+the fins lose their authority while the rolling gust does not, so its
+equivalent fin angle grows without bound) -- with
 
 * the roll model of eq. 36/49 at the reference airspeed ``V_ref`` (the
   truth), its gain and damping scaled along the flight by eq. 4-8
@@ -61,7 +64,7 @@ from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, setting, to_argv
 
-__all__ = ["FlightLogSpec", "run_flight"]
+__all__ = ["AscentError", "FlightLogSpec", "run_flight"]
 
 #: The tunnel trace's hold interval that the ``tunnel`` turbulence is drawn at, s (the tunnel's Δt).
 TUNNEL_DT_S = 0.1
@@ -195,6 +198,10 @@ class FlightLogSpec:
         return shlex.join(["rocketroll", "flight", *to_argv(self)])
 
 
+class AscentError(ValueError):
+    """The ascent of a virtual flight cannot be read or is too short to log."""
+
+
 def _turbulence(
     spec: FlightLogSpec,
     profile: FlightProfile,
@@ -235,16 +242,25 @@ def run_flight(spec: FlightLogSpec) -> Recording:
 
     Raises
     ------
-    ValueError
-        ``flight: ...`` for an ascent that cannot be read or never reaches ``v_ref``.
+    AscentError
+        For an ascent that cannot be read, or spends fewer than 50 logging
+        intervals above ``v_ref``.
     """
     children = np.random.SeedSequence(spec.seed).spawn(3)
     rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
-    profile = flight_profile(spec.ascent)
-    start, end = profile.window(spec.v_ref)
+    try:
+        profile = flight_profile(spec.ascent)
+        # Dryden's rolling gust does not fade with the airspeed while the fins' authority
+        # does: near apogee its equivalent fin angle grows without bound, so a Dryden log
+        # ends where the airspeed falls back below v_ref (the tunnel's law holds the flow
+        # angle at the tunnel's scale there, defined to apogee).
+        until = "slow" if spec.turbulence == "dryden" else "apogee"
+        start, end = profile.window(spec.v_ref, until=until)
+    except ValueError as exc:
+        raise AscentError(str(exc)) from None
     n = math.floor((end - start) / spec.log_dt + 1e-9)
     if n < 50:
-        raise ValueError(
+        raise AscentError(
             f"flight: {profile.source} spends {end - start:.2f} s above --v-ref "
             f"{spec.v_ref:g} m/s: fewer than 50 samples of {spec.log_dt:g} s"
         )

@@ -568,30 +568,56 @@ class FlightProfile:
             return FlightState(**{k: float(v) for k, v in values.items()})
         return FlightState(**values)
 
-    def window(self, v_ref_mps: float) -> tuple[float, float]:
+    def window(self, v_ref_mps: float, *, until: str = "apogee") -> tuple[float, float]:
         """From the moment the airspeed first reaches ``v_ref_mps`` (the rocket has left its
         rail, the fins have the authority identified at that airspeed) to apogee, s.
+
+        Parameters
+        ----------
+        v_ref_mps : float
+            The reference airspeed, m/s.
+        until : {"apogee", "slow"}
+            ``apogee`` (the environments' episode) or ``slow``: the moment the
+            airspeed falls back below ``v_ref_mps`` on the way up (the flight
+            recorder's log: below ``v_ref`` the rolling gust of Dryden's model,
+            taken as a flow angle, outgrows the fins' authority without bound).
 
         Raises
         ------
         ValueError
-            If the profile never reaches ``v_ref_mps``.
+            If the profile never reaches ``v_ref_mps``, or reaches it only at apogee.
         """
+        if until not in ("apogee", "slow"):
+            raise ValueError(f"until must be 'apogee' or 'slow', not {until!r}")
         fast = np.flatnonzero(self.airspeed_mps >= v_ref_mps)
         if fast.size == 0:
             raise ValueError(
-                f"flight: {self.source} never reaches the tunnel's airspeed "
+                f"flight: {self.source} never reaches the reference airspeed "
                 f"{v_ref_mps:.1f} m/s (its fastest: {self.max_speed_mps:.1f} m/s)"
             )
-        k = int(fast[0])
-        if k == 0:
-            start = float(self.t_s[0])
-        else:  # where the airspeed crosses v_ref, between samples k - 1 and k
-            t0, t1 = self.t_s[k - 1], self.t_s[k]
-            v0, v1 = self.airspeed_mps[k - 1], self.airspeed_mps[k]
-            start = float(t0 + (t1 - t0) * (v_ref_mps - v0) / (v1 - v0))
-        end = float(self.apogee_s if math.isfinite(self.apogee_s) else self.t_s[-1])
+        apogee = float(self.apogee_s if math.isfinite(self.apogee_s) else self.t_s[-1])
+        start = self._crossing(int(fast[0]), v_ref_mps)
+        if until == "slow":
+            after = np.flatnonzero(self.airspeed_mps[fast[0] :] < v_ref_mps)
+            end = apogee if after.size == 0 else self._crossing(int(fast[0] + after[0]), v_ref_mps)
+        else:
+            end = apogee
+        end = min(end, apogee)
+        if not end > start:
+            where = "is at apogee" if end == apogee else "falls back below it"
+            raise ValueError(
+                f"flight: {self.source} reaches the reference airspeed {v_ref_mps:.1f} m/s "
+                f"at {start:.2f} s and {where} at {end:.2f} s: no time to fly"
+            )
         return start, end
+
+    def _crossing(self, k: int, speed: float) -> float:
+        """Where the airspeed crosses ``speed`` between samples ``k - 1`` and ``k``, s."""
+        if k == 0:
+            return float(self.t_s[0])
+        t0, t1 = self.t_s[k - 1], self.t_s[k]
+        v0, v1 = self.airspeed_mps[k - 1], self.airspeed_mps[k]
+        return float(t0 + (t1 - t0) * (speed - v0) / (v1 - v0))
 
     def scales(
         self,
