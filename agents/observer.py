@@ -681,8 +681,9 @@ def make_observer(design: Design) -> ObserverController:
     """``--policy observer``: designed on the train split's nominal rocket and turbulence.
 
     In flight it is scheduled: its filter's rocket and its LQR gain follow the flight's
-    airspeed and density step by step, and its turbulence model is fitted to the train
-    split's flights (the turbulence as the flight env replays it)."""
+    airspeed and density step by step, and its turbulence model (fitted, as in the tunnel,
+    to the train split's tunnel traces) is flown by the env's law: each step's AR(1)
+    coefficient and amplitude follow the airspeed (:meth:`Turbulence.flown`)."""
     design.no_argument("observer")
     config = design.config
     if config.flight_schedule is None:
