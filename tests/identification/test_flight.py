@@ -316,6 +316,17 @@ def test_csv_with_altitude(tmp_path):
     assert np.all(np.isnan(p.mass_kg)) and math.isnan(p.burnout_s)
     assert (p.apogee_s, p.apogee_m, p.max_speed_mps) == (1.5, 70.0, 60.0)
     assert "flight.csv" in p.source
+    # The environments fly from the reference airspeed to apogee; the recorder stops
+    # where the airspeed falls back below it.
+    assert p.window(35.0) == pytest.approx((0.4375, 1.5))
+    assert p.window(35.0, until="slow") == pytest.approx((0.4375, 1.0 + 0.5 * 25 / 30))
+    assert p.window(60.0) == (1.0, 1.5)
+    with pytest.raises(ValueError, match=r"60.0 m/s at 1.00 s and falls back below it at 1.00"):
+        p.window(60.0, until="slow")
+    with pytest.raises(ValueError, match=r"never reaches the reference airspeed 70.0 m/s"):
+        p.window(70.0)
+    with pytest.raises(ValueError, match="until must be"):
+        p.window(35.0, until="landing")
 
 
 def test_csv_without_altitude_integrates_the_airspeed(default_profile, tmp_path):

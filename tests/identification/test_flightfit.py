@@ -3,6 +3,7 @@ method and its ground truth."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -238,6 +239,19 @@ def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
     assert path.read_text(encoding="utf-8") == recording_text(rec)
 
 
+def test_dryden_flights_stay_inside_the_fins_authority():
+    # Near apogee the airspeed, and with it the fins' authority, falls to nothing while
+    # Dryden's rolling gust does not: the log stops where the airspeed falls below V_ref.
+    # (Logged on to apogee, these flights' last second reached |u_d| of 6,000-10,000°;
+    # the largest |u_d| left, 200-400°, is the low-level gust just off the rail.)
+    for seed in range(3):
+        spec = FlightLogSpec(seed=seed, turbulence="dryden", severity="moderate")
+        rec = run_flight(spec)
+        assert np.max(np.abs(col(rec, "ud_true_deg"))) < 1000.0
+        assert col(rec, "airspeed_mps")[-1] == pytest.approx(spec.v_ref, rel=0.02)
+        assert np.all(col(rec, "airspeed_mps") >= 0.99 * spec.v_ref)
+
+
 def test_bad_recorder_settings_are_named(tmp_path: Path, capsys):
     with pytest.raises(SettingError, match="needs an angle"):
         FlightLogSpec(no_gyro=True)
@@ -350,3 +364,60 @@ def test_a_measured_fin_angle_is_used_without_the_servo():
     inputs = flight_inputs(rec, servo_rate_dps=Servo().rate_limit_dps)
     assert inputs.rate_limit_dps is None
     np.testing.assert_allclose(inputs.theta[::4], col(rec, "fin_deg"), atol=1e-9)
+
+
+def test_a_jittered_logger_clock_keeps_the_fins_and_airspeed_on_their_samples():
+    # A logger whose intervals wander by up to 0.8 % (inside the format's 1 %): the times
+    # drift by many samples over the flight.  The fin angle, the airspeed and the density
+    # belong to their samples, not to a uniform clock started at the first one.
+    rec = run_flight(FlightLogSpec(seed=7, model="constant"))
+    rng = np.random.default_rng(0)
+    steps = np.diff(rec.time_s) * (1.0 + rng.uniform(-0.004, 0.004, rec.time_s.size - 1))
+    steps *= 1.0 + 0.004 * np.sign(np.arange(steps.size) - steps.size / 2)  # a drift, too
+    jittered = dataclasses.replace(rec, time_s=np.concatenate([[0.0], np.cumsum(steps)]))
+    drift = np.max(np.abs(jittered.time_s - rec.time_s)) / rec.dt_s
+    assert drift > 2.0  # samples, so a uniform grid would misalign the columns
+    even, uneven = flight_inputs(rec), flight_inputs(jittered)
+    # (the servo ramps over the median interval, which the jitter moves by a hair)
+    np.testing.assert_allclose(uneven.theta, even.theta, atol=5e-3)
+    np.testing.assert_allclose(uneven.gain, even.gain, rtol=1e-9)
+    np.testing.assert_allclose(uneven.damping, even.damping, rtol=1e-9)
+    truth = truth_of(rec)
+    result = identify_flight(uneven, "constant")
+    assert pct(result.params.alpha, truth.alpha) < 5.0
+    assert pct(result.params.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
+
+
+def test_a_recording_that_barely_moves_through_the_air_is_refused(paper_flight: Recording):
+    still = dataclasses.replace(paper_flight, airspeed_mps=np.full(paper_flight.time_s.size, 0.5))
+    with pytest.raises(IdentificationError, match=r"only 0 of \d+ intervals .* too little"):
+        flight_inputs(still)
+    with pytest.raises(IdentificationError, match=r"max airspeed 0\.5 m/s"):
+        fit(still, "flight", ["constant"])
+
+
+def test_the_theta_model_starts_from_the_constant_fit_it_is_given(paper_flight: Recording):
+    inputs = flight_inputs(paper_flight)
+    constant = identify_flight(inputs, "constant")
+    theta = identify_flight(inputs, "theta", constant=constant)
+    assert theta.loglike >= constant.loglike - 1e-6  # it nests the constant model
+    with pytest.raises(ValueError, match="constant model's fit to the same inputs"):
+        identify_flight(inputs, "theta", constant=theta)
+
+
+def test_a_tunnel_run_that_logs_its_steady_airspeed_is_not_a_flight(tmp_path: Path):
+    rec = run_tunnel(TunnelSpec(seed=0))
+    rng = np.random.default_rng(0)
+    noisy = TUNNEL_AIRSPEED_MPS * (1.0 + 0.01 * rng.standard_normal(rec.time_s.size))
+    steady = dataclasses.replace(rec, airspeed_mps=noisy)
+    assert not steady.is_flight and steady.format == FORMAT  # the column is kept: format 1.1
+    assert default_methods(steady) == default_methods()
+    assert fit(steady, "paper", ["constant"])["constant"].params.alpha > 0
+    path = tmp_path / "steady.csv"
+    save_recording(steady, path)
+    assert not load_recording(path).is_flight
+    # An airspeed that changes by a fifth is a flight.
+    ramp = dataclasses.replace(rec, airspeed_mps=np.linspace(12.5, 15.3, rec.time_s.size))
+    assert ramp.is_flight
+    with pytest.raises(IdentificationError, match=r"goes from 12\.5 to 15\.3 m/s"):
+        fit(ramp, "paper", ["constant"])
