@@ -42,7 +42,6 @@ import numpy as np
 
 from disturbances.dryden import roll_gust
 from disturbances.flight import fly_trace, tunnel_time
-from identification import paper
 from identification.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
@@ -50,7 +49,7 @@ from identification.flight import (
     flight_profile,
     roll_scales,
 )
-from identification.model import MODEL_NAMES, PAPER_THETA, RollParams, Servo
+from identification.model import MODEL_NAMES, RollParams, Servo
 from identification.model import simulate as simulate_roll
 from identification.recording import Recording, metadata_items
 from identification.tunnel import (
@@ -59,6 +58,7 @@ from identification.tunnel import (
     check_dwells,
     check_rocket,
     rocket_params,
+    rocket_setting,
 )
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
@@ -93,35 +93,10 @@ class FlightLogSpec:
     model: str = setting(
         "theta", "damping model: theta (eq. 49) or constant (eq. 29)", choices=MODEL_NAMES
     )
-    alpha: float = setting(
-        PAPER_THETA.alpha,
-        "steady-state gain α at --v-ref (eq. 17: the tunnel's)",
-        ge=-10.0,
-        le=10.0,
-        unit="(°/s)/°",
-    )
-    beta: float = setting(
-        PAPER_THETA.beta_dps,
-        "steady-state offset β at --v-ref (eq. 17); θ̄ = β/α",
-        ge=-100.0,
-        le=100.0,
-        unit="°/s",
-    )
-    alpha_bar: float | None = setting(
-        None,
-        f"ᾱ at --v-ref (eq. 48: {paper.PARAMETERS['alpha_bar_per_deg_s']}; 0 for --model constant)",
-        ge=-1.0,
-        le=1.0,
-        unit="1/(s·°)",
-    )
-    beta_bar: float | None = setting(
-        None,
-        f"β̄ at --v-ref (eq. 48: {paper.PARAMETERS['beta_bar_per_s']}), or the constant a "
-        f"(eq. 46: {paper.PARAMETERS['a_per_s']})",
-        gt=0.0,
-        le=100.0,
-        unit="1/s",
-    )
+    alpha: float = rocket_setting("alpha", " at --v-ref")
+    beta: float = rocket_setting("beta", " at --v-ref")
+    alpha_bar: float | None = rocket_setting("alpha_bar", " at --v-ref")
+    beta_bar: float | None = rocket_setting("beta_bar", " at --v-ref")
     v_ref: float = setting(
         TUNNEL_AIRSPEED_MPS,
         "airspeed at which the truth holds (ISA sea-level density); the log starts when the "

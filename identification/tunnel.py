@@ -55,7 +55,7 @@ from __future__ import annotations
 import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -249,6 +249,46 @@ class FinSchedule:
         return levels[index]
 
 
+def rocket_setting(name: str, at: str = "") -> Any:
+    """The setting (help, default, bounds) of a virtual rocket's truth ``name``
+    (``alpha``, ``beta``, ``alpha_bar``, ``beta_bar``), given ``at`` an operating point
+    (``" at --v-ref"`` for a flight); the tunnel's and the flight recorder's are these."""
+    p = paper.PARAMETERS
+    if name == "alpha":
+        return setting(
+            PAPER_THETA.alpha,
+            f"steady-state gain α{at} (eq. 17: {p['alpha']})",
+            ge=-10.0,
+            le=10.0,
+            unit="(°/s)/°",
+        )
+    if name == "beta":
+        return setting(
+            PAPER_THETA.beta_dps,
+            f"steady-state offset β{at} (eq. 17: {p['beta_dps']}); θ̄ = β/α",
+            ge=-100.0,
+            le=100.0,
+            unit="°/s",
+        )
+    if name == "alpha_bar":
+        return setting(
+            None,
+            f"ᾱ{at} (eq. 48: {p['alpha_bar_per_deg_s']}; 0 for --model constant)",
+            ge=-1.0,
+            le=1.0,
+            unit="1/(s·°)",
+        )
+    if name == "beta_bar":
+        return setting(
+            None,
+            f"β̄{at} (eq. 48: {p['beta_bar_per_s']}), or the constant a (eq. 46: {p['a_per_s']})",
+            gt=0.0,
+            le=100.0,
+            unit="1/s",
+        )
+    raise ValueError(f"no rocket setting {name!r}")
+
+
 def rocket_params(
     model: str, alpha: float, beta: float, alpha_bar: float | None, beta_bar: float | None
 ) -> RollParams:
@@ -324,35 +364,10 @@ class TunnelSpec:
     model: str = setting(
         "theta", "damping model: theta (eq. 49) or constant (eq. 29)", choices=MODEL_NAMES
     )
-    alpha: float = setting(
-        PAPER_THETA.alpha,
-        f"steady-state gain α (eq. 17: {paper.PARAMETERS['alpha']})",
-        ge=-10.0,
-        le=10.0,
-        unit="(°/s)/°",
-    )
-    beta: float = setting(
-        PAPER_THETA.beta_dps,
-        f"steady-state offset β (eq. 17: {paper.PARAMETERS['beta_dps']}); θ̄ = β/α",
-        ge=-100.0,
-        le=100.0,
-        unit="°/s",
-    )
-    alpha_bar: float | None = setting(
-        None,
-        f"ᾱ (eq. 48: {paper.PARAMETERS['alpha_bar_per_deg_s']}; 0 for --model constant)",
-        ge=-1.0,
-        le=1.0,
-        unit="1/(s·°)",
-    )
-    beta_bar: float | None = setting(
-        None,
-        f"β̄ (eq. 48: {paper.PARAMETERS['beta_bar_per_s']}), or the constant a "
-        f"(eq. 46: {paper.PARAMETERS['a_per_s']})",
-        gt=0.0,
-        le=100.0,
-        unit="1/s",
-    )
+    alpha: float = rocket_setting("alpha")
+    beta: float = rocket_setting("beta")
+    alpha_bar: float | None = rocket_setting("alpha_bar")
+    beta_bar: float | None = rocket_setting("beta_bar")
     servo_rate: float = setting(
         Servo().rate_limit_dps,
         "servo rate limit (eq. 23: 60°/0.4 s = 150)",
