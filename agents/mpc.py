@@ -21,6 +21,12 @@ by a constrained finite-horizon plan, solved every control step by OSQP:
   them) is set up once; each step updates its linear term and bounds and
   warm-starts from the last plan.  ``benchmarks/mpc_speed.py`` measures the
   time per step against the 10-ms budget and the LQR in the same run.
+* *In flight* (``scheduled``, as the observer controller): the plan predicts
+  with each coming step's model -- the nominal rocket carried to that step's
+  airspeed and density, the turbulence flown -- and ends on that step's
+  Riccati matrix; the condensed QP of each control step is built once per
+  controller (the nominal flight is the same every episode) and swapped in
+  (OSQP's ``Px`` update) as the flight goes on.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from scipy import sparse
 
 from agents.base import Design
 from agents.nominal import NominalModel
-from agents.observer import ObserverController, Turbulence
+from agents.observer import FLIGHT_WEIGHTS, ObserverController, Turbulence
 from rollenv.core import RollConfig
 
 __all__ = ["DEFAULT_HORIZON", "MPCController", "make_mpc"]
@@ -54,6 +60,12 @@ class MPCController(ObserverController):
     """Constrained receding-horizon control on the observer's estimate (module docstring)."""
 
     name = "MPC"
+    #: The Hessian's upper-triangle entries, row and column, in the solver's order.
+    _p_rows: NDArray[np.intp]
+    _p_cols: NDArray[np.intp]
+    #: The control step whose QP the solver holds.
+    _step: int
+    _qp: Any
 
     def __init__(
         self,
@@ -62,35 +74,52 @@ class MPCController(ObserverController):
         turbulence: Turbulence,
         weights: dict[str, float] | None = None,
         horizon: int = DEFAULT_HORIZON,
+        *,
+        scheduled: bool = False,
     ) -> None:
         if horizon < 1:
             raise ValueError(f"the MPC's horizon must be >= 1 step, got {horizon}")
         self.horizon = horizon
-        super().__init__(config, rocket, turbulence, weights)
+        super().__init__(config, rocket, turbulence, weights, scheduled=scheduled)
         self.name = "MPC" if horizon == DEFAULT_HORIZON else f"MPC N={horizon}"
         self._step_max = config.rate_limit_dps * config.dt_s
+        #: In flight: each control step's condensed QP (Hessian, linear map), built once.
+        self._by_step: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._condense()
         self.solves = 0
         self.fallbacks = 0
 
-    def _condense(self) -> None:
-        """The QP ``min ½U'PU + q'U`` over the moves ``U``, with ``q = F x₀``."""
-        import osqp
-
+    def _horizon_models(
+        self, step: int | None
+    ) -> tuple[list[tuple[FloatArray, FloatArray]], FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The ``(A, B)`` of each planned step from control ``step`` (the nominal design's
+        when None or unscheduled), the stage cost ``Q, R, S`` and the terminal matrix."""
         a, b, q, r, s = self.design_model()
-        p_end = self.riccati
-        n, horizon = a.shape[0], self.horizon
-        # X = [x_1 .. x_N] = Φ x0 + Γ U
+        if step is None or self.schedule is None:
+            return [(a, b)] * self.horizon, q, r, s, self.riccati
+        last = len(self.rockets) - 1
+        models = []
+        for j in range(step, step + self.horizon):
+            k = min(j, last)
+            a_k, b_k, *_ = self.design_model(self.rockets[k], k)
+            models.append((a_k, b_k))
+        return models, q, r, s, self.riccati_schedule[min(step + self.horizon, last)]
+
+    def _condensed(self, step: int | None) -> tuple[FloatArray, FloatArray]:
+        """The QP ``min ½U'PU + q'U`` over the moves ``U`` planned from control ``step``:
+        its Hessian ``P`` and the map ``F`` of ``q = F x₀``."""
+        models, q, r, s, p_end = self._horizon_models(step)
+        n, horizon = q.shape[0], self.horizon
+        # X = [x_1 .. x_N] = Φ x0 + Γ U, with x_{k+1} = A_k x_k + B_k u_k
         phi = np.zeros((horizon * n, n))
         gamma = np.zeros((horizon * n, horizon))
         power = np.eye(n)
-        for k in range(horizon):
+        for k, (a, b) in enumerate(models):
             power = a @ power
             phi[k * n : (k + 1) * n] = power
-        for k in range(horizon):  # x_{k+1} gets A^(k-j) B u_j
-            for j in range(k + 1):
-                block = np.linalg.matrix_power(a, k - j) @ b
-                gamma[k * n : (k + 1) * n, j] = block[:, 0]
+            if k:
+                gamma[k * n : (k + 1) * n, :k] = a @ gamma[(k - 1) * n : k * n, :k]
+            gamma[k * n : (k + 1) * n, k] = b[:, 0]
         q_bar = sparse.block_diag([q] * (horizon - 1) + [p_end]).toarray()
         # cross terms 2 x_k' S u_k for k = 1 .. N-1 (x_k is X's block k-1); k = 0 goes to F
         s_bar = np.zeros((horizon * n, horizon))
@@ -101,7 +130,33 @@ class MPCController(ObserverController):
         hessian = 0.5 * (hessian + hessian.T)
         linear = gamma.T @ q_bar @ phi + s_bar.T @ phi
         linear[0] += s[:, 0]
-        self._linear = 2.0 * linear  # q = this @ x0
+        return hessian, 2.0 * linear
+
+    def _use_step(self, step: int) -> None:
+        """In flight: the QP of control ``step`` into the solver."""
+        if step == self._step:
+            return
+        if step not in self._by_step:
+            self._by_step[step] = self._condensed(step)
+        hessian, self._linear = self._by_step[step]
+        self._qp.update(Px=2.0 * hessian[self._p_rows, self._p_cols])
+        self._step = step
+
+    def _condense(self) -> None:
+        """Set up the solver on the nominal design's QP (control step 0's in flight)."""
+        import osqp
+
+        horizon = self.horizon
+        hessian, self._linear = self._condensed(None if self.schedule is None else 0)
+        self._step = 0
+        # The upper triangle, every entry kept (a flight swaps in Hessians of this pattern).
+        pattern = sparse.triu(np.ones((horizon, horizon)), format="csc")
+        self._p_rows = pattern.indices.copy()
+        self._p_cols = np.repeat(np.arange(horizon), np.diff(pattern.indptr))
+        upper = sparse.csc_matrix(
+            (2.0 * hessian[self._p_rows, self._p_cols], pattern.indices, pattern.indptr),
+            shape=(horizon, horizon),
+        )
         # constraints: the commands' range, then each step's move (the first from the fin)
         difference = sparse.eye(horizon) - sparse.eye(horizon, k=-1)
         constraints = sparse.vstack([sparse.eye(horizon), difference], format="csc")
@@ -111,7 +166,7 @@ class MPCController(ObserverController):
         self._upper[horizon:] = self._step_max
         self._qp = osqp.OSQP()
         self._qp.setup(
-            sparse.csc_matrix(2.0 * np.triu(hessian)),
+            upper,
             np.zeros(horizon),
             constraints,
             self._lower,
@@ -127,6 +182,8 @@ class MPCController(ObserverController):
     def plan(self, state: FloatArray, shift: float, fin: float) -> FloatArray:
         """The planned commands (design input ``u``, ``command = u - shift``) from ``state``."""
         horizon = self.horizon
+        if self.schedule is not None:
+            self._use_step(min(self.observer.steps - 1, len(self.schedule) - 1))
         x0 = state[self.design_states]
         lo, hi = -self._range + shift, self._range + shift
         self._lower[:horizon], self._upper[:horizon] = lo, hi
@@ -163,10 +220,13 @@ class MPCController(ObserverController):
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._condense()
+        if self.schedule is not None:
+            self._use_step(min(max(self.observer.steps - 1, 0), len(self.schedule) - 1))
 
 
 def make_mpc(design: Design) -> MPCController:
-    """``--policy mpc[:HORIZON]``: the observer's design, planned over HORIZON steps."""
+    """``--policy mpc[:HORIZON]``: the observer's design, planned over HORIZON steps
+    (in flight scheduled as the observer controller is, :func:`agents.observer.make_observer`)."""
     horizon = DEFAULT_HORIZON
     if design.arg:
         try:
@@ -177,7 +237,12 @@ def make_mpc(design: Design) -> MPCController:
             ) from None
         if horizon < 1:
             raise ValueError(f"mpc:HORIZON must be >= 1 step, got {horizon}")
-    bank = design.train_bank
+    config = design.config
+    flight = config.flight_schedule is not None
+    bank = design.tunnel_train_bank if flight else design.train_bank
     nominal = NominalModel.from_bank(bank)
-    turbulence = Turbulence.from_bank(bank, design.config.dt_s, nominal)
-    return MPCController(design.config, nominal, turbulence, horizon=horizon)
+    turbulence = Turbulence.from_bank(bank, config.dt_s, nominal)
+    if not flight:
+        return MPCController(config, nominal, turbulence, horizon=horizon)
+    weights = FLIGHT_WEIGHTS[config.task]
+    return MPCController(config, nominal, turbulence, weights, horizon, scheduled=True)

@@ -463,12 +463,19 @@ class ObserverController:
         #: nominal rocket carried to that step's airspeed and density -- held at the
         #: tunnel's airspeed below it (near apogee), as the scheduled PID's gains are.
         self.schedule: list[FloatArray] | None = None
+        #: ... and each step's rocket and Riccati matrix (the MPC plans on them).
+        self.rockets: list[RollParams] = []
+        self.riccati_schedule: list[FloatArray] = []
         if scales is not None:
             held = np.maximum(scales[:, 0], 1.0)
-            self.schedule = [
-                self._design(rocket.params.scaled(speed, damping * speed / gain), k)
-                for k, ((gain, damping), speed) in enumerate(zip(scales, held, strict=True))
+            self.rockets = [
+                rocket.params.scaled(speed, damping * speed / gain)
+                for (gain, damping), speed in zip(scales, held, strict=True)
             ]
+            self.schedule = []
+            for k, scaled in enumerate(self.rockets):
+                self.schedule.append(self._design(scaled, k))
+                self.riccati_schedule.append(self.riccati)
             self._design()  # the nominal design's Riccati matrix stays the attribute
         self.reset()
 

@@ -82,3 +82,60 @@ def test_the_mpc_pickles_and_takes_a_horizon(default_db):
     for bad, message in [("mpc:0", "must be >= 1"), ("mpc:x", "whole number")]:
         with pytest.raises(ValueError, match=message):
             make_controller(bad, cfg, "RocketRoll-v0")
+
+
+@pytest.fixture(scope="module")
+def flight(default_db):
+    cfg = variant_config("RocketRollFlight-v0", {"split": "test"})
+    mpc = make_controller("mpc", cfg, "RocketRollFlight-v0")
+    observer = make_controller("observer", cfg, "RocketRollFlight-v0")
+    assert isinstance(mpc, MPCController)
+    return cfg, mpc, observer
+
+
+def test_in_flight_the_plan_is_the_time_varying_lqr_where_no_limit_binds(flight):
+    """Scheduled, the plan predicts with each coming step's rocket (not the step's own
+    frozen): where no limit binds its first move is the finite-horizon LQR of those
+    models, by the backward Riccati recursion from the terminal step's Riccati matrix."""
+    cfg, mpc, _ = flight
+    assert mpc.schedule is not None
+    rng = np.random.default_rng(4)
+    shift = mpc.rocket.theta_bar_deg
+    for step in (0, 40, 120):  # the rail, top speed, the coast
+        models, q, r, s, p = mpc._horizon_models(step)
+        assert not np.allclose(models[0][0], models[-1][0])  # the rocket changes
+        for a, b in reversed(models):
+            k = np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a + s.T)
+            p = q + a.T @ p @ a - (a.T @ p @ b + s) @ k
+        mpc.observer.steps = step + 1  # the controller reads the step from its filter
+        for _ in range(5):
+            state = rng.normal(0.0, 0.05, mpc.gain.size)
+            fin = float(state[-1]) - shift
+            expected = float(-k[0] @ state[mpc.design_states]) - shift
+            assert abs(expected - fin) < cfg.rate_limit_dps * cfg.dt_s
+            assert mpc.command(state, shift, fin) == pytest.approx(expected, abs=1e-3)
+    mpc.reset()
+
+
+def test_in_flight_the_mpc_flies_as_the_observer_within_the_servo_limits(flight):
+    cfg, mpc, observer = flight
+    bank = load_bank(cfg, None)
+    env = env_on(cfg, bank)
+    step = cfg.rate_limit_dps * cfg.dt_s
+    for spec in protocol_episodes(cfg, 2, seed=0, bank=bank):
+        planned = run_episode(env, mpc, spec)
+        moves = planned.command_deg[1:] - planned.fin_deg[:-1]
+        assert np.abs(moves).max() <= step + 1e-3
+        lqr = run_episode(env, observer, spec)
+        mine, theirs = (float(np.sqrt(np.mean(x.angle_deg**2))) for x in (planned, lqr))
+        assert mine < 3.0  # unscheduled, the tunnel's MPC held 83°
+        assert mine == pytest.approx(theirs, rel=0.2)
+    assert mpc.fallbacks == 0
+    # Pickled mid-flight, it acts on as it was.
+    obs = np.array([2.0, 1.0, -4.0, -4.0], dtype=np.float32)
+    mpc.reset()
+    for _ in range(30):
+        mpc.act(obs, None)
+    clone = pickle.loads(pickle.dumps(mpc))
+    for _ in range(5):
+        np.testing.assert_array_equal(mpc.act(obs, None), clone.act(obs, None))
