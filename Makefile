@@ -53,8 +53,8 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
 	$(BIN)/rocketroll env flight --plot $(DEMO)/flight-profile.png
 	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
-		--policy trim --policy pid --policy pid-tunnel --policy observer --policy oracle \
-		--out $(DEMO)/eval-flight
+		--policy trim --policy pid --policy pid-tunnel --policy observer --policy mpc \
+		--policy oracle --out $(DEMO)/eval-flight
 	$(BIN)/rocketroll flight --seed 0 --out $(DEMO)/flight-seed0.csv
 	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
@@ -66,7 +66,7 @@ demo: $(VENV)/.installed
 	@echo "      seeds each in $(DEMO)/seeds-angle/"
 	@echo "      and seeds-rate/, and every controller under"
 	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/, and in flight"
-	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png, the scheduled PID and observer"
+	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png, the scheduled PID, observer and MPC"
 	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above), and a virtual flight's"
 	@echo "      log $(DEMO)/flight-seed0.csv identified back in $(DEMO)/flight-seed0.json"
 

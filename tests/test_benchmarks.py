@@ -68,11 +68,11 @@ def test_ml_bias_fits_each_seed_three_ways(default_db: Path) -> None:
     assert "nan" not in out.lower()
 
 
-def test_mpc_speed_times_both_controllers_on_both_tasks(default_db: Path) -> None:
+def test_mpc_speed_times_both_controllers_on_every_task(default_db: Path) -> None:
     out = run_script("mpc_speed.py", "--episodes", "1", "--horizon", "5", db=default_db)
-    for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
+    for env_id in ("RocketRoll-v0", "RocketRollRate-v0", "RocketRollFlight-v0"):
         assert f"{env_id:<20} observer" in out and f"{env_id:<20} mpc:5" in out
-    assert out.count("vs target 10 ms:") == 2
+    assert out.count("vs target 10 ms:") == 3
 
 
 def test_train_speed_times_two_recipes_side_by_side(default_db: Path, tmp_path: Path) -> None:

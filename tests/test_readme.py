@@ -55,7 +55,7 @@ def test_the_identification_table_of_the_bundled_reconstruction() -> None:
 
 
 #: The flight table's controllers (README, In flight).
-FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "oracle")
+FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "mpc", "oracle")
 
 
 @pytest.mark.parametrize(
@@ -67,8 +67,8 @@ def test_the_evaluation_tables(
     env_id: str, table: int, default_db: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """`make demo`'s tables, 20 held-out episodes, seed 0, every default controller (in
-    flight: trim, the scheduled PID, the tunnel's PID, the scheduled observer and the
-    oracle)."""
+    flight: trim, the scheduled PID, the tunnel's PID, the scheduled observer and MPC, and
+    the oracle)."""
     policies = [f"--policy={p}" for p in FLIGHT_POLICIES] if "Flight" in env_id else []
     words = ["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0", *policies]
     assert rocketroll(words) == 0
