@@ -12,11 +12,17 @@ the error of θ̄ (°) and ᾱ₀, the RMS error of the damping ``a(θ)`` over t
 flown fin angles (%), the re-simulation's rate MAE as a percentage of the
 mean measured ``|rate|``, and the fit's time.  Below the table: issue 17's
 targets (coefficients within 5 %, re-simulation under 2 %), PASS or FAIL
-over every flight run.
+over every fit.
+
+``--joint K`` fits K flights of the rocket together
+(:func:`identification.flightfit.identify_flights`: one rocket, one
+turbulence's statistics, one gyro; each flight its own filter), ``--seeds``
+such fits per truth, and reports the first flight's re-simulation.
 
 Run from the repository root::
 
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 10
+    .venv/bin/python benchmarks/flight_ground_truth.py --seeds 10 --joint 3 --truth dryden
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 3 --truth paper-theta --jobs 1
 """
 
@@ -32,7 +38,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from disturbances.flightlog import FlightLogSpec, run_flight
-from identification.flightfit import flight_inputs, identify_flight
+from identification.flightfit import flight_inputs, identify_flights
 
 #: Name -> (FlightLogSpec settings, what it tests).
 TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
@@ -62,14 +68,16 @@ TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
 }
 
 
-def one(truth: str, seed: int) -> dict[str, Any]:
-    """Fly, identify, compare."""
+def one(truth: str, seed: int, joint: int = 1) -> dict[str, Any]:
+    """Fly, identify, compare: flights ``seed·joint`` to ``seed·joint + joint - 1``, fitted
+    together (:func:`identification.flightfit.identify_flights`), the first one's fit."""
     settings, _ = TRUTHS[truth]
-    spec = FlightLogSpec(seed=seed, **settings)
-    recording = run_flight(spec)
+    specs = [FlightLogSpec(seed=seed * joint + k, **settings) for k in range(joint)]
+    flights = [flight_inputs(run_flight(spec)) for spec in specs]
+    spec = specs[0]
     params = spec.params()
     start = time.perf_counter()
-    fit = identify_flight(flight_inputs(recording), spec.model)
+    fit = identify_flights(flights, spec.model)[0]
     seconds = time.perf_counter() - start
     p = fit.params
     theta = fit.inputs.theta
@@ -89,7 +97,7 @@ def one(truth: str, seed: int) -> dict[str, Any]:
     }
 
 
-def _run(job: tuple[str, int]) -> dict[str, Any]:
+def _run(job: tuple[str, int, int]) -> dict[str, Any]:
     return one(*job)
 
 
@@ -132,37 +140,44 @@ def verdicts(rows: list[dict[str, Any]]) -> list[str]:
     worst_beta = max(abs(r["beta_bar_pct"]) for r in rows)
     worst_resim = max(r["resim_pct"] for r in rows)
     return [
-        f"coefficients α₀ and β̄₀ within 5 %: {len(coefficient)}/{n} flights "
+        f"coefficients α₀ and β̄₀ within 5 %: {len(coefficient)}/{n} fits "
         f"(worst α₀ {worst_alpha:.2f} %, worst β̄₀ {worst_beta:.2f} %) -- "
         f"{'PASS' if len(coefficient) == n else 'FAIL'}",
-        f"re-simulated rate MAE under 2 % of mean |rate|: {len(resim)}/{n} flights "
+        f"re-simulated rate MAE under 2 % of mean |rate|: {len(resim)}/{n} fits "
         f"(worst {worst_resim:.2f} %) -- {'PASS' if len(resim) == n else 'FAIL'}",
     ]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, default=10, help="flights per truth (seeds 0..N-1)")
+    parser.add_argument("--seeds", type=int, default=10, help="fits per truth (seeds 0..N-1)")
     parser.add_argument(
         "--truth", action="append", choices=sorted(TRUTHS), help="repeatable; default: all"
     )
     parser.add_argument("--jobs", type=int, default=2, help="processes")
+    parser.add_argument(
+        "--joint",
+        type=int,
+        default=1,
+        help="flights of one rocket fitted together per fit (--seeds fits of this many)",
+    )
     args = parser.parse_args(argv)
-    if args.seeds < 1 or args.jobs < 1:
-        parser.error("--seeds and --jobs must be at least 1")
+    if args.seeds < 1 or args.jobs < 1 or args.joint < 1:
+        parser.error("--seeds, --jobs and --joint must be at least 1")
     truths = args.truth or list(TRUTHS)
-    jobs = [(truth, seed) for truth in truths for seed in range(args.seeds)]
+    jobs = [(truth, seed, args.joint) for truth in truths for seed in range(args.seeds)]
     print("truths:")
     for truth in truths:
         print(f"  {truth:<16}{TRUTHS[truth][1]}")
     start = time.perf_counter()
     if args.jobs == 1:
-        rows = [_run(job) for job in tqdm(jobs, desc="flights")]
+        rows = [_run(job) for job in tqdm(jobs, desc="fits")]
     else:
         with ProcessPoolExecutor(args.jobs) as pool:
-            rows = list(tqdm(pool.map(_run, jobs), total=len(jobs), desc="flights"))
+            rows = list(tqdm(pool.map(_run, jobs), total=len(jobs), desc="fits"))
     print(table(rows))
-    print(f"{len(rows)} flights in {time.perf_counter() - start:.0f} s ({args.jobs} processes)")
+    each = "" if args.joint == 1 else f" of {args.joint} flights each"
+    print(f"{len(rows)} fits{each} in {time.perf_counter() - start:.0f} s ({args.jobs} processes)")
     for line in verdicts(rows):
         print(line)
     return 0 if all(math.isfinite(r["alpha_pct"]) for r in rows) else 1

@@ -80,6 +80,7 @@ __all__ = [
     "flight_inputs",
     "flight_method",
     "identify_flight",
+    "identify_flights",
     "rescale",
 ]
 
@@ -431,16 +432,22 @@ def _system(
     return trans, offset, noise, y, r, np.stack([x0, np.diag(p0)])
 
 
-def _negloglike(x: FloatArray, inputs: FlightInputs, layout: _Layout) -> float:
+def _negloglike(x: FloatArray, flights: Sequence[FlightInputs], layout: _Layout) -> float:
+    """Minus the log-likelihood of ``x`` over the flights (each its own Kalman filter)."""
     nat = layout.natural(x)
     if not all(math.isfinite(v) for v in nat.values()):
         return 1e12
-    system = _system(inputs, nat)
-    if system is None:
-        return 1e12
-    trans, offset, noise, y, r, start = system
-    loglike, _ = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), False)
-    return -loglike if math.isfinite(loglike) else 1e12
+    total = 0.0
+    for inputs in flights:
+        system = _system(inputs, nat)
+        if system is None:
+            return 1e12
+        trans, offset, noise, y, r, start = system
+        loglike, _ = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), False)
+        if not math.isfinite(loglike):
+            return 1e12
+        total -= loglike
+    return total
 
 
 def _rough_rate(inputs: FlightInputs) -> FloatArray:
@@ -453,24 +460,30 @@ def _rough_rate(inputs: FlightInputs) -> FloatArray:
     return np.gradient(smooth, inputs.dt_s)
 
 
-def _equation_error_start(inputs: FlightInputs) -> dict[str, float]:
-    """Least squares of ``dv/dt = −β̄₀·d·v + β̄₀α₀·d·g·θ + β̄₀α₀θ̄·d·g``: the optimiser's start."""
-    rate = _rough_rate(inputs)
-    kernel = np.ones(3) / 3.0
-    smooth = np.convolve(np.pad(rate, 1, mode="edge"), kernel, mode="valid")
-    slope = np.gradient(smooth, inputs.dt_s)
-    at = slice(0, None, SUBSTEPS)
-    theta = inputs.theta[at]
-    gain = np.append(inputs.gain[at], inputs.gain[-1])
-    damping = np.append(inputs.damping[at], inputs.damping[-1])
-    design = np.column_stack([-damping * smooth, damping * gain * theta, damping * gain])
+def _equation_error_start(flights: Sequence[FlightInputs]) -> dict[str, float]:
+    """Least squares of ``dv/dt = −β̄₀·d·v + β̄₀α₀·d·g·θ + β̄₀α₀θ̄·d·g`` over the flights'
+    samples together: the optimiser's start."""
+    designs, slopes, steps = [], [], []
+    for inputs in flights:
+        rate = _rough_rate(inputs)
+        kernel = np.ones(3) / 3.0
+        smooth = np.convolve(np.pad(rate, 1, mode="edge"), kernel, mode="valid")
+        slopes.append(np.gradient(smooth, inputs.dt_s))
+        at = slice(0, None, SUBSTEPS)
+        theta = inputs.theta[at]
+        gain = np.append(inputs.gain[at], inputs.gain[-1])
+        damping = np.append(inputs.damping[at], inputs.damping[-1])
+        designs.append(np.column_stack([-damping * smooth, damping * gain * theta, damping * gain]))
+        steps.append(np.full(smooth.size, inputs.dt_s))
+    design, slope, dt = np.concatenate(designs), np.concatenate(slopes), np.concatenate(steps)
     coef, *_ = np.linalg.lstsq(design, slope, rcond=None)
     beta_bar = float(coef[0]) if coef[0] > MIN_DAMPING else 1.0
     alpha = float(coef[1] / beta_bar) if coef[1] != 0 else 1.0
     theta_bar = float(coef[2] / (beta_bar * alpha))
     resid = slope - design @ coef
-    scale = np.maximum(damping * gain * beta_bar * abs(alpha), 1e-6)
-    sigma = float(np.clip(np.std(resid / scale) * math.sqrt(inputs.dt_s), 0.05, 30.0))
+    # the third column is d·g: the scale of the turbulence's torque per degree
+    scale = np.maximum(design[:, 2] * beta_bar * abs(alpha), 1e-6)
+    sigma = float(np.clip(np.std(resid / scale * np.sqrt(dt)), 0.05, 30.0))
     return {"beta_bar": beta_bar, "alpha": alpha, "theta_bar": theta_bar, "sigma_w": sigma}
 
 
@@ -480,7 +493,7 @@ _START_SIGMAS = np.geomspace(0.3, 300.0, 10)
 
 
 def _turbulence_starts(
-    inputs: FlightInputs, layout: _Layout, rough: dict[str, float]
+    flights: Sequence[FlightInputs], layout: _Layout, rough: dict[str, float]
 ) -> list[dict[str, float]]:
     """Two starts for the optimiser: the rocket of the equation-error fit with the
     turbulence ``(T, σ_w)`` of the best likelihood on a grid over four decades of ``T``,
@@ -494,7 +507,7 @@ def _turbulence_starts(
     rows = []
     for tau in _START_TAUS:
         values = [
-            _negloglike(layout.vector({**rough, "tau": tau, "sigma_w": sd}), inputs, layout)
+            _negloglike(layout.vector({**rough, "tau": tau, "sigma_w": sd}), flights, layout)
             for sd in _START_SIGMAS
         ]
         j = int(np.argmin(values))
@@ -537,6 +550,8 @@ class FlightFit:
         ``tau`` and the sensor noise), as a start for a richer model.
     inputs : FlightInputs
         What was fitted.
+    flights : int
+        How many flights were fitted together (:func:`identify_flights`).
     """
 
     model: str
@@ -552,6 +567,7 @@ class FlightFit:
     converged: bool
     estimates: dict[str, float]
     inputs: FlightInputs
+    flights: int = 1
 
     def disturbance(self) -> Disturbance:
         """``u_d`` as the tunnel methods give theirs (held over each sample interval)."""
@@ -602,8 +618,12 @@ class FlightFit:
         return out
 
 
+def _names(flights: Sequence[FlightInputs]) -> str:
+    return ", ".join(repr(inputs.recording.name) for inputs in flights)
+
+
 def _maximise(
-    inputs: FlightInputs, layout: _Layout, starts: Sequence[dict[str, float]]
+    flights: Sequence[FlightInputs], layout: _Layout, starts: Sequence[dict[str, float]]
 ) -> optimize.OptimizeResult:
     """L-BFGS-B from each start; the best."""
     best: optimize.OptimizeResult | None = None
@@ -611,7 +631,7 @@ def _maximise(
         result = optimize.minimize(
             _negloglike,
             layout.vector(start),
-            args=(inputs, layout),
+            args=(flights, layout),
             method="L-BFGS-B",
             options={"maxiter": 500},
         )
@@ -620,7 +640,7 @@ def _maximise(
     assert best is not None
     if _params(layout.natural(best.x)) is None or best.fun >= 1e12:
         raise IdentificationError(
-            f"recording {inputs.recording.name!r}: the flight fit failed ({best.message})"
+            f"recording {_names(flights)}: the flight fit failed ({best.message})"
         )
     return best
 
@@ -658,36 +678,80 @@ def identify_flight(
     smoother showed there (the atmosphere's roll gust falls with height near the
     ground, MIL-F-8785C §3.7.2) was tried on the Dryden flights of
     ``benchmarks/flight_ground_truth.py``, and so were four separately estimated
-    intensities: neither recovered the coefficients better.
+    intensities, and an intensity following MIL-F-8785C's law of height (which
+    raised the likelihood of moderate-gust flights by 50-130): none recovered the
+    coefficients better.  Several flights of the rocket, fitted together
+    (:func:`identify_flights`), do.
+    """
+    return identify_flights([inputs], model, constant=None if constant is None else [constant])[0]
+
+
+def identify_flights(
+    flights: Sequence[FlightInputs],
+    model: str = "constant",
+    *,
+    constant: Sequence[FlightFit] | None = None,
+) -> list[FlightFit]:
+    """One rocket from several flights: the joint maximum likelihood (the sum of each
+    flight's Kalman-filter likelihood) of its parameters at the common reference, and of
+    a turbulence and a sensor shared by the flights (one atmosphere's statistics, one
+    gyro); each flight's ``u_d`` then from its own smoother.  One fit per flight comes
+    back, all with the same parameters, standard errors (from the joint likelihood)
+    and ``estimates``; each ``loglike`` is its own flight's.
+
+    ``constant``: the constant model's fits to these flights, as the θ-dependent
+    model's start (otherwise fitted first).
+
+    Raises
+    ------
+    IdentificationError
+        For no flights, a flight without a roll measurement, flights with different
+        measurements (gyro or angle) or different references.
     """
     from identification.ml import _hessian
 
-    gyro = inputs.rate is not None
-    if not gyro and inputs.angle is None:
+    flights = list(flights)
+    if not flights:
+        raise IdentificationError("no flights to identify")
+    for inputs in flights:
+        if inputs.rate is None and inputs.angle is None:
+            raise IdentificationError(
+                f"recording {inputs.recording.name!r} has neither roll_rate_dps nor roll_deg"
+            )
+    gyro = flights[0].rate is not None
+    if any((inputs.rate is not None) != gyro for inputs in flights):
         raise IdentificationError(
-            f"recording {inputs.recording.name!r} has neither roll_rate_dps nor roll_deg"
+            f"recordings {_names(flights)}: some have a gyro and some only an angle; "
+            "fit flights with the same measurements together"
+        )
+    reference = (flights[0].v_ref_mps, flights[0].rho_ref_kgm3)
+    if any((f.v_ref_mps, f.rho_ref_kgm3) != reference for f in flights):
+        raise IdentificationError(
+            f"recordings {_names(flights)}: prepared at different reference airspeeds or "
+            "densities; a joint fit needs one reference"
         )
     layout = _Layout(theta_model=model == "theta", gyro=gyro)
     if model == "theta":
         if constant is None:
-            constant = identify_flight(inputs, "constant")
-        elif constant.model != "constant" or constant.inputs is not inputs:
-            raise ValueError("constant must be the constant model's fit to the same inputs")
-        best = _maximise(inputs, layout, [{**constant.estimates, "alpha_bar": 0.0}])
+            constant = identify_flights(flights, "constant")
+        elif len(constant) != len(flights) or any(
+            c.model != "constant" or c.inputs is not f
+            for c, f in zip(constant, flights, strict=False)
+        ):
+            raise ValueError("constant must be the constant model's fits to the same inputs")
+        best = _maximise(flights, layout, [{**constant[0].estimates, "alpha_bar": 0.0}])
     elif model == "constant":
-        rough = {**_equation_error_start(inputs), "alpha_bar": 0.0}
-        best = _maximise(inputs, layout, _turbulence_starts(inputs, layout, rough))
+        rough = {**_equation_error_start(flights), "alpha_bar": 0.0}
+        best = _maximise(flights, layout, _turbulence_starts(flights, layout, rough))
     else:
         raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
     nat = layout.natural(best.x)
     params = _params(nat)
     assert params is not None
-    loglike, rate, mean_w = _smoothed(inputs, nat)
-    u_d = inputs.u_per_w * mean_w
     names = ["alpha", "theta_bar", "log_beta_bar"] + (["alpha_bar"] if layout.theta_model else [])
     errors: dict[str, float] = {}
     try:
-        hess = _hessian(lambda x: _negloglike(x, inputs, layout), best.x)
+        hess = _hessian(lambda x: _negloglike(x, flights, layout), best.x)
         diag = np.diag(np.linalg.inv(hess))
         index = {name: layout.names.index(name) for name in names}
         if np.all(diag[list(index.values())] > 0):
@@ -700,21 +764,28 @@ def identify_flight(
                 errors["alpha_bar_per_deg_s"] = math.sqrt(diag[index["alpha_bar"]])
     except np.linalg.LinAlgError:
         errors = {}
-    return FlightFit(
-        model=model,
-        params=params,
-        turbulence_sd_deg=nat["sigma_w"],
-        turbulence_tau_s=nat["tau"],
-        gyro_noise_pct=100.0 * nat["gyro_rel"] if gyro else None,
-        gyro_floor_dps=nat["gyro_abs"] if gyro else None,
-        loglike=loglike,
-        std_errors=errors,
-        u_d_deg=readonly_array(u_d),
-        rate_dps=readonly_array(rate),
-        converged=bool(best.success),
-        estimates=nat,
-        inputs=inputs,
-    )
+    fits = []
+    for inputs in flights:
+        loglike, rate, mean_w = _smoothed(inputs, nat)
+        fits.append(
+            FlightFit(
+                model=model,
+                params=params,
+                turbulence_sd_deg=nat["sigma_w"],
+                turbulence_tau_s=nat["tau"],
+                gyro_noise_pct=100.0 * nat["gyro_rel"] if gyro else None,
+                gyro_floor_dps=nat["gyro_abs"] if gyro else None,
+                loglike=loglike,
+                std_errors=errors,
+                u_d_deg=readonly_array(inputs.u_per_w * mean_w),
+                rate_dps=readonly_array(rate),
+                converged=bool(best.success),
+                estimates=nat,
+                inputs=inputs,
+                flights=len(flights),
+            )
+        )
+    return fits
 
 
 def c_coefficients(

@@ -41,8 +41,11 @@ def test_flight_ground_truth_reports_each_truth_and_the_targets(default_db: Path
     args = ["--seeds", "1", "--truth", "fast-negative", "--truth", "angle-only", "--jobs", "1"]
     out = run_script("flight_ground_truth.py", *args, db=default_db)
     assert "fast-negative" in out and "angle-only" in out and "paper-theta  " not in out
-    assert "re-sim %" in out and "2 flights in" in out
+    assert "re-sim %" in out and "2 fits in" in out
     assert out.count("PASS") + out.count("FAIL") == 2
+    joint = ["--seeds", "1", "--truth", "fast-negative", "--joint", "2", "--jobs", "1"]
+    out = run_script("flight_ground_truth.py", *joint, db=default_db)
+    assert "1 fits of 2 flights each in" in out
 
 
 def test_closed_loop_scores_each_replay_against_the_truth(default_db: Path, tmp_path: Path) -> None:

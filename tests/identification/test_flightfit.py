@@ -19,6 +19,7 @@ from identification.flightfit import (
     c_coefficients,
     flight_inputs,
     identify_flight,
+    identify_flights,
     rescale,
 )
 from identification.importer import import_csv
@@ -299,11 +300,11 @@ def test_the_likelihood_prefers_the_truth_to_a_wrong_gain(
         "gyro_rel": paper_fit.gyro_noise_pct / 100,
         "gyro_abs": paper_fit.gyro_floor_dps,
     }
-    at_best = _negloglike(layout.vector(best), inputs, layout)
+    at_best = _negloglike(layout.vector(best), [inputs], layout)
     assert at_best == pytest.approx(-paper_fit.loglike)
     for factor in (0.9, 1.1):
         wrong = _negloglike(
-            layout.vector({**best, "alpha": factor * best["alpha"]}), inputs, layout
+            layout.vector({**best, "alpha": factor * best["alpha"]}), [inputs], layout
         )
         assert wrong > at_best + 10.0
 
@@ -401,7 +402,7 @@ def test_the_theta_model_starts_from_the_constant_fit_it_is_given(paper_flight: 
     constant = identify_flight(inputs, "constant")
     theta = identify_flight(inputs, "theta", constant=constant)
     assert theta.loglike >= constant.loglike - 1e-6  # it nests the constant model
-    with pytest.raises(ValueError, match="constant model's fit to the same inputs"):
+    with pytest.raises(ValueError, match="constant model's fits to the same inputs"):
         identify_flight(inputs, "theta", constant=theta)
 
 
@@ -421,3 +422,40 @@ def test_a_tunnel_run_that_logs_its_steady_airspeed_is_not_a_flight(tmp_path: Pa
     assert ramp.is_flight
     with pytest.raises(IdentificationError, match=r"goes from 12\.5 to 15\.3 m/s"):
         fit(ramp, "paper", ["constant"])
+
+
+# ------------------------------------------------------------------ several flights
+def test_flights_of_one_rocket_fitted_together_narrow_its_coefficients():
+    specs = [FlightLogSpec(seed=seed, model="constant", alpha=0.9, beta=-2.0) for seed in (11, 12)]
+    recordings = [run_flight(spec) for spec in specs]
+    flights = [flight_inputs(rec) for rec in recordings]
+    alone = [identify_flight(inputs, "constant") for inputs in flights]
+    together = identify_flights(flights, "constant")
+    truth = specs[0].params()
+    assert [f.flights for f in together] == [2, 2]
+    assert [f.inputs for f in together] == flights
+    p = together[0].params
+    assert together[1].params == p and together[1].std_errors == together[0].std_errors
+    assert pct(p.alpha, truth.alpha) < 5.0 and pct(p.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
+    # Twice the data: the standard errors shrink by about √2.
+    for key in ("alpha", "beta_bar_per_s"):
+        assert together[0].std_errors[key] < 0.85 * min(f.std_errors[key] for f in alone)
+    # The joint likelihood is the flights' sum; each flight keeps its own u_d.
+    layout = _Layout(theta_model=False, gyro=True)
+    joint = _negloglike(layout.vector(together[0].estimates), flights, layout)
+    assert joint == pytest.approx(-sum(f.loglike for f in together))
+    for one, rec in zip(together, recordings, strict=True):
+        assert np.corrcoef(one.u_d_deg, col(rec, "ud_true_deg")[:-1])[0, 1] > 0.95
+        assert one.resimulate()["resim_rate_mae_pct"] < 2.0
+
+
+def test_a_joint_fit_refuses_flights_it_cannot_put_together(paper_flight: Recording):
+    inputs = flight_inputs(paper_flight)
+    with pytest.raises(IdentificationError, match="no flights"):
+        identify_flights([], "constant")
+    angle_only = flight_inputs(run_flight(FlightLogSpec(seed=2, no_gyro=True, encoder_counts=4096)))
+    with pytest.raises(IdentificationError, match="some have a gyro and some only an angle"):
+        identify_flights([inputs, angle_only], "constant")
+    faster = flight_inputs(paper_flight, v_ref_mps=20.0)
+    with pytest.raises(IdentificationError, match="different reference airspeeds"):
+        identify_flights([inputs, faster], "constant")
