@@ -157,6 +157,12 @@ class IdentifyArgs:
         "created if missing (not for a flight)",
         metavar="DB",
     )
+    together: list[Path] = setting(
+        default_factory=list,
+        help="another flight of the same rocket, fitted together with RECORDING by the flight "
+        "method (one rocket, one turbulence's statistics, one gyro; repeatable)",
+        metavar="FLIGHT",
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
@@ -181,6 +187,7 @@ def identify(args: IdentifyArgs) -> int:
         check_output(args.db, "--db")  # before the work, as every output
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
+    together = [load_recording(path) for path in args.together]
     methods = args.method or list(default_methods(recording))
     if recording.is_flight and args.db is not None:
         raise UsageError(
@@ -191,7 +198,7 @@ def identify(args: IdentifyArgs) -> int:
         raise UsageError(
             f"--report is the paper's report of a tunnel run; {args.recording} is a flight"
         )
-    context = Context(recording, options)
+    context = Context(recording, options, together=together)
     fits = {method: fit(context, method, _models_of(method)) for method in methods}
     result = context.paper if "paper" in methods else None
     outputs: dict[str | os.PathLike[str], str | bytes] = {}
@@ -271,6 +278,11 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                 f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
                 f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
             )
+            if m.get("fitted_with"):
+                lines.append(
+                    f"  fitted together with {len(m['fitted_with'])} other flight(s): "
+                    + ", ".join(m["fitted_with"])
+                )
             if not errors:
                 lines.append(
                     "  warning: no standard errors (the likelihood's Hessian is not positive "
@@ -580,6 +592,12 @@ class AddArgs:
         le=1000,
     )
     posterior_seed: int = setting(0, "seed of the first posterior draw", ge=0, le=2**63 - 1)
+    together: list[Path] = setting(
+        default_factory=list,
+        help="another flight of the same rocket, fitted together with RECORDING by the flight "
+        "method (one rocket, one turbulence's statistics, one gyro; repeatable)",
+        metavar="FLIGHT",
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:

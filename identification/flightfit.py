@@ -817,21 +817,23 @@ def rescale(
 
 
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
-    """The ``flight`` identification method: :func:`identify_flight` per model, at the
-    options' reference airspeed (``--v-ref``)."""
+    """The ``flight`` identification method: :func:`identify_flights` per model on the
+    recording and the flights fitted with it (``--together``), at the options' reference
+    airspeed (``--v-ref``); the recording's fit."""
     options = context.options
-    inputs = flight_inputs(
-        context.recording,
-        v_ref_mps=options.v_ref_mps,
-        servo_rate_dps=options.servo_rate_dps,
-    )
+    flights = [
+        flight_inputs(recording, v_ref_mps=options.v_ref_mps, servo_rate_dps=options.servo_rate_dps)
+        for recording in (context.recording, *context.together)
+    ]
+    inputs = flights[0]
     fits: dict[str, ModelFit] = {}
-    constant: FlightFit | None = None
+    constant: list[FlightFit] | None = None
     # The constant model first: the θ-dependent one starts from its fit.
     for model in sorted(models, key=lambda m: m != "constant"):
-        result = identify_flight(inputs, model, constant=constant)
+        joint = identify_flights(flights, model, constant=constant)
         if model == "constant":
-            constant = result
+            constant = joint
+        result = joint[0]
         metrics: dict[str, Any] = {
             **result.resimulate(),
             "v_ref_mps": inputs.v_ref_mps,
@@ -843,6 +845,8 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "turbulence_sd_deg": result.turbulence_sd_deg,
             "turbulence_tau_s": result.turbulence_tau_s,
             "std_errors": result.std_errors,
+            "flights": len(flights),
+            "fitted_with": [f.recording.name for f in flights[1:]],
         }
         if result.gyro_noise_pct is not None:
             metrics["gyro_noise_pct"] = result.gyro_noise_pct

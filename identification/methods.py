@@ -202,6 +202,9 @@ class Context:
     paper : Identification, optional
         The paper's pipeline on this recording and these options, when the
         caller has it already.
+    together : sequence of Recording, optional
+        Other flights of the same rocket, fitted together with ``recording`` by
+        the flight methods (each method's fit is ``recording``'s).
     """
 
     def __init__(
@@ -209,10 +212,13 @@ class Context:
         recording: Recording,
         options: IdentifyOptions | None = None,
         paper: Identification | None = None,
+        *,
+        together: Sequence[Recording] = (),
     ) -> None:
         from identification.pipeline import IdentifyOptions
 
         self.recording = recording
+        self.together = tuple(together)
         self.options = IdentifyOptions() if options is None else options
         if paper is not None:
             if paper.recording is not recording or paper.options != self.options:
@@ -289,12 +295,21 @@ def fit(
             f"m/s): method {method!r} assumes the tunnel's one airspeed; use "
             + " or ".join(f"--method {m}" for m in default_methods(rec))
         )
-    if flight_method and rec.airspeed_mps is None:
+    for one in (rec, *context.together) if flight_method else ():
+        if one.airspeed_mps is None:
+            from identification.steps import IdentificationError
+
+            raise IdentificationError(
+                f"recording {one.name!r} has no airspeed_mps column: method {method!r} "
+                "identifies flights (format 1.1); use "
+                + " or ".join(f"--method {m}" for m in default_methods())
+            )
+    if context.together and not flight_method:
         from identification.steps import IdentificationError
 
         raise IdentificationError(
-            f"recording {rec.name!r} has no airspeed_mps column: method {method!r} identifies "
-            "flights (format 1.1); use " + " or ".join(f"--method {m}" for m in default_methods())
+            f"method {method!r} identifies one recording; other flights fitted together "
+            f"({', '.join(repr(r.name) for r in context.together)}) are for the flight methods"
         )
     supported = entry.info.get("models", MODEL_NAMES)
     for model in models:

@@ -459,3 +459,26 @@ def test_a_joint_fit_refuses_flights_it_cannot_put_together(paper_flight: Record
     faster = flight_inputs(paper_flight, v_ref_mps=20.0)
     with pytest.raises(IdentificationError, match="different reference airspeeds"):
         identify_flights([inputs, faster], "constant")
+
+
+def test_rocketroll_identify_fits_flights_together(tmp_path: Path, capsys):
+    paths = [tmp_path / f"flight{seed}.csv" for seed in (8, 9)]
+    for seed, path in zip((8, 9), paths, strict=True):
+        argv = ["flight", "--out", str(path), "--seed", str(seed), "--model", "constant"]
+        assert main(argv) == 0
+    capsys.readouterr()
+    out_json = tmp_path / "fit.json"
+    argv = ["identify", str(paths[0]), "--together", str(paths[1]), "--json", str(out_json)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "fitted together with 1 other flight(s): flight-tunnel-seed9" in out
+    constant = json.loads(out_json.read_text(encoding="utf-8"))["methods"]["flight"]["constant"]
+    assert constant["metrics"]["flights"] == 2
+    assert constant["params"]["alpha"] == pytest.approx(PAPER_THETA.alpha, rel=0.05)
+    # A tunnel run is one recording: the tunnel's methods refuse company; so does a missing file.
+    tunnel = tmp_path / "tunnel.csv"
+    save_recording(run_tunnel(TunnelSpec(seed=0)), tunnel)
+    assert main(["identify", str(tunnel), "--together", str(paths[1]), "--method", "paper"]) == 2
+    assert "identifies one recording" in capsys.readouterr().err
+    assert main(["identify", str(paths[0]), "--together", str(tmp_path / "none.csv")]) == 2
+    assert "none.csv" in capsys.readouterr().err
