@@ -168,8 +168,11 @@ class IdentifyArgs:
     def __post_init__(self) -> None:
         check(self)
         _check_methods(self.method)
-        if self.report is not None and self.method and "paper" not in self.method:
-            raise UsageError("--report is the paper's report: add --method paper")
+        if self.report is not None and self.method and not {"paper", "flight"} & set(self.method):
+            raise UsageError(
+                "--report is the paper's report (add --method paper) or, for a flight, the "
+                "flight method's (--method flight)"
+            )
 
 
 def identify(args: IdentifyArgs) -> int:
@@ -194,9 +197,9 @@ def identify(args: IdentifyArgs) -> int:
             f"--db: {args.recording} is a flight (its airspeed_mps changes); the database holds "
             "the tunnel's turbulence, and a flight's identification is not stored"
         )
-    if recording.is_flight and args.report is not None:
+    if args.report is not None and "paper" in methods and recording.is_flight:
         raise UsageError(
-            f"--report is the paper's report of a tunnel run; {args.recording} is a flight"
+            f"--report: the paper's report is of a tunnel run; {args.recording} is a flight"
         )
     context = Context(recording, options, together=together)
     fits = {method: fit(context, method, _models_of(method)) for method in methods}
@@ -216,6 +219,12 @@ def identify(args: IdentifyArgs) -> int:
         from identification.report import render_report
 
         for name, content in render_report(result).items():
+            outputs[args.report / name] = content
+    elif args.report is not None and "flight" in fits:
+        from identification.flightreport import render_flight_report
+
+        table = _flight_table({"flight": fits["flight"]})
+        for name, content in render_flight_report(recording, fits["flight"], table).items():
             outputs[args.report / name] = content
     stored = None
     if args.db is not None:  # before any file is written: all or nothing

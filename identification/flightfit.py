@@ -64,7 +64,14 @@ from identification.flight import (
     roll_scales,
 )
 from identification.methods import ModelFit
-from identification.model import RollParams, Servo, roll_coefficients, servo_path, simulate
+from identification.model import (
+    RollParams,
+    Servo,
+    SimResult,
+    roll_coefficients,
+    servo_path,
+    simulate,
+)
 from identification.recording import Recording
 from identification.steps import Disturbance, IdentificationError
 from rocketroll_common.arrays import FloatArray, readonly_array
@@ -588,23 +595,8 @@ class FlightFit:
         as a percentage of the mean measured ``|rate|``.
         """
         inp = self.inputs
-        rec = inp.recording
-        servo = None if inp.rate_limit_dps is None else Servo(rate_limit_dps=inp.rate_limit_dps)
-        fin = rec.fin_deg if servo is None else np.asarray(rec.fin_cmd_deg)[:-1]
-        sim = simulate(
-            self.params,
-            inp.dt_s,
-            np.asarray(fin),
-            self.u_d_deg,
-            rate0_dps=float(self.rate_dps[0]),
-            angle0_deg=0.0 if inp.angle is None else float(inp.angle[0]),
-            servo=servo,
-            theta0_deg=float(inp.theta[0]),
-            substeps=SUBSTEPS,
-            gain=inp.gain,
-            damping=inp.damping,
-        )
-        measured = inp.rate if inp.rate is not None else _rough_rate(inp)
+        sim = resimulated(inp, self.params, self.u_d_deg, float(self.rate_dps[0]))
+        measured = measured_rate(inp)
         error = np.abs(sim.rate_dps - measured)
         out = {
             "resim_rate_mae_dps": float(error.mean()),
@@ -620,6 +612,37 @@ class FlightFit:
 
 def _names(flights: Sequence[FlightInputs]) -> str:
     return ", ".join(repr(inputs.recording.name) for inputs in flights)
+
+
+def measured_rate(inputs: FlightInputs) -> FloatArray:
+    """The roll rate the recording measured (the gyro), or its angle's, differenced and
+    smoothed, °/s at the samples."""
+    return _rough_rate(inputs)
+
+
+def resimulated(
+    inputs: FlightInputs, params: RollParams, u_d_deg: FloatArray, rate0_dps: float
+) -> SimResult:
+    """§3.5 in flight: the model of ``params`` driven by ``u_d_deg`` (per sample interval)
+    open loop from the first sample, along the flight's scales; a
+    :class:`~identification.model.SimResult`."""
+    rec = inputs.recording
+    limit = inputs.rate_limit_dps
+    servo = None if limit is None else Servo(rate_limit_dps=limit)
+    fin = rec.fin_deg if servo is None else np.asarray(rec.fin_cmd_deg)[:-1]
+    return simulate(
+        params,
+        inputs.dt_s,
+        np.asarray(fin),
+        np.asarray(u_d_deg),
+        rate0_dps=rate0_dps,
+        angle0_deg=0.0 if inputs.angle is None else float(inputs.angle[0]),
+        servo=servo,
+        theta0_deg=float(inputs.theta[0]),
+        substeps=SUBSTEPS,
+        gain=inputs.gain,
+        damping=inputs.damping,
+    )
 
 
 def _maximise(
@@ -856,6 +879,8 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "equations": "flight Kalman smoother (eq. 4-8 scaling)",
             "frame": "flight",
             "v_ref_mps": inputs.v_ref_mps,
+            "servo_rate_dps": options.servo_rate_dps,
+            "rate0_dps": float(result.rate_dps[0]),  # the re-simulation's start
         }
         fits[model] = ModelFit(
             "flight", model, result.params, result.disturbance(), metrics, settings

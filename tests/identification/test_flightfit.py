@@ -342,10 +342,19 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert main(["flight", "--out", str(path), "--seed", "5", "--model", "constant"]) == 0
     capsys.readouterr()
     out_json = tmp_path / "fit.json"
-    assert main(["identify", str(path), "--json", str(out_json)]) == 0
+    report = tmp_path / "report"
+    assert main(["identify", str(path), "--json", str(out_json), "--report", str(report)]) == 0
     out, err = capsys.readouterr()
     assert err == ""
     assert "flight identification" in out and "C_P-like" in out
+    # The flight's report: one figure (airspeed, fin, rate re-simulated, u_d) and report.md.
+    assert sorted(p.name for p in report.iterdir()) == ["flight_identification.png", "report.md"]
+    assert (report / "flight_identification.png").read_bytes().startswith(b"\x89PNG")
+    markdown = (report / "report.md").read_text(encoding="utf-8")
+    assert "(flight_identification.png)" in markdown and "C_P-like" in markdown
+    assert main(["identify", str(path), "--method", "paper", "--report", str(tmp_path / "r")]) == 2
+    assert "the paper's report is of a tunnel run" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
     data = json.loads(out_json.read_text(encoding="utf-8"))
     constant = data["methods"]["flight"]["constant"]
     assert constant["params"]["alpha"] == pytest.approx(PAPER_THETA.alpha, rel=0.05)
