@@ -56,7 +56,8 @@ demo: $(VENV)/.installed
 		--policy trim --policy pid --policy pid-tunnel --policy observer --policy mpc \
 		--policy oracle --out $(DEMO)/eval-flight
 	$(BIN)/rocketroll flight --seed 0 --out $(DEMO)/flight-seed0.csv
-	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json
+	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json \
+		--report $(DEMO)/flight-seed0-report
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"
 	@echo "      identification report $(DEMO)/identify-paper-seed0/report.md,"
 	@echo "      $(DEMO)/surrogate.png, the RocketRoll-v0 frames $(DEMO)/env-zero.png,"
@@ -69,6 +70,7 @@ demo: $(VENV)/.installed
 	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png, the scheduled PID, observer and MPC"
 	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above), and a virtual flight's"
 	@echo "      log $(DEMO)/flight-seed0.csv identified back in $(DEMO)/flight-seed0.json"
+	@echo "      and $(DEMO)/flight-seed0-report/"
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .
