@@ -36,8 +36,10 @@ Deployable: it reads the observation and its own configuration only.
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -586,11 +588,15 @@ class ObserverController:
         self.observer.reset()
         self._last: tuple[float, float] | None = None
 
+    def follow_schedule(self) -> None:
+        """In flight: the gain of the control step the filter has reached."""
+        if self.schedule is not None:
+            self.gain = self.schedule[min(self.observer.steps - 1, len(self.schedule) - 1)]
+
     def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
         """The fin command for observation ``obs``."""
         state, shift = self.design_state(obs)
-        if self.schedule is not None:  # this control step's gain
-            self.gain = self.schedule[min(self.observer.steps - 1, len(self.schedule) - 1)]
+        self.follow_schedule()
         fin = float(obs[Obs.FIN])
         command = self.command(state, shift, fin)
         self._last = (fin, command)
@@ -615,6 +621,11 @@ class ObserverFeatures:
     action (both as fractions of the fin's range), clipped to the range
     (:meth:`record` returns it).  A policy whose action is 0 is the observer
     controller, so learning starts from it instead of from nothing.
+
+    In flight (a config with a flight schedule) the filters and the controllers are
+    scheduled as :func:`make_observer`'s, designed on the *tunnel's* train traces
+    (:meth:`from_bank` takes those) with :data:`FLIGHT_WEIGHTS`; the per-step design
+    is made once and shared by the environments.
     """
 
     SIZE = 3
@@ -633,11 +644,20 @@ class ObserverFeatures:
         self._angle = config.task == "angle"
         self.residual = float(residual)
         self.controllers: list[ObserverController] = []
+        flight = config.flight_schedule is not None
+        # One design (in flight: one per control step), copied: each env its own filter.
+        first = ObserverController(
+            config,
+            rocket,
+            turbulence,
+            FLIGHT_WEIGHTS[config.task] if flight else None,
+            scheduled=flight,
+        )
         if residual:
-            self.controllers = [ObserverController(config, rocket, turbulence) for _ in range(n)]
+            self.controllers = [first] + [_clone(first) for _ in range(n - 1)]
             self.filters = [c.observer for c in self.controllers]
         else:
-            self.filters = [RollObserver(rocket.params, turbulence, config) for _ in range(n)]
+            self.filters = [first.observer] + [copy.deepcopy(first.observer) for _ in range(n - 1)]
         self._last: list[tuple[float, float] | None] = [None] * n
         #: The observer controller's command per env for the coming step, fraction of the range.
         self.base = np.zeros(n)
@@ -646,7 +666,8 @@ class ObserverFeatures:
     def from_bank(
         cls, config: RollConfig, train_bank: TraceBank, n: int, residual: float = 0.0
     ) -> ObserverFeatures:
-        """Designed on ``train_bank`` (the *train* split), for ``n`` environments."""
+        """Designed on ``train_bank`` (the *train* split; in flight, its tunnel traces:
+        :func:`design_bank`), for ``n`` environments."""
         nominal = NominalModel.from_bank(train_bank)
         turbulence = Turbulence.from_bank(train_bank, config.dt_s, nominal)
         return cls(config, nominal, turbulence, n, residual)
@@ -667,6 +688,7 @@ class ObserverFeatures:
         if self.controllers:
             controller = self.controllers[i]
             state, shift = controller.state_of(obs)
+            controller.follow_schedule()
             fin = float(obs[Obs.FIN])
             self.base[i] = controller.command(state, shift, fin) / self._range
         psi = float(f.mean[1]) if self._angle else 0.0
@@ -682,6 +704,22 @@ class ObserverFeatures:
         for i in range(len(self.filters)):
             self._last[i] = (float(obs[i, Obs.FIN]), float(actions[i]) * self._range)
         return actions.astype(np.float32).reshape(-1, 1)
+
+
+def _clone(controller: ObserverController) -> ObserverController:
+    """Another controller of the same design (gains shared, read only) with its own filter."""
+    twin = copy.copy(controller)
+    twin.observer = copy.deepcopy(controller.observer)
+    twin.reset()
+    return twin
+
+
+def design_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
+    """The traces an observer is designed on: the train split's, and in flight the tunnel's
+    (the flight's own are those traces flown, :mod:`disturbances.flight`)."""
+    from rollenv.bank import load_bank
+
+    return load_bank(replace(config, split="train", flight=None), db)
 
 
 def make_observer(design: Design) -> ObserverController:

@@ -419,12 +419,6 @@ def load_hyperparameters(
 
     kwargs = entry.get("env_kwargs") or {}
     flight = variant_options(env_id).get("flight") is not None or "flight" in kwargs
-    if observer and flight:
-        raise UsageError(
-            f"{where}: observer/residual read the tunnel observer's estimate, which is not "
-            f"scheduled along a flight ({env_id}); the observer controller is "
-            "(--policy observer): give a flight policy history or flight_clock instead"
-        )
     redesign = sorted(set(entry.get("env_kwargs") or {}) & set(OBSERVER_DESIGN))
     if observer and redesign:
         raise UsageError(
@@ -567,14 +561,13 @@ def make_env(
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
     if hp.observer:
-        from agents.observer import ObserverFeatures
+        from agents.observer import ObserverFeatures, design_bank
         from agents.vecenv import VecObserver
-        from rollenv.bank import load_bank, variant_config
 
         train_bank = adapter.bank
-        if split != "train":  # the observer is designed on the train split, always
-            train_config = variant_config(hp.env_id, {**hp.env_kwargs, "split": "train"})
-            train_bank = load_bank(train_config, db)
+        if split != "train" or adapter.config.flight_schedule is not None:
+            # the observer is designed on the train split, always; in flight on its tunnel traces
+            train_bank = design_bank(adapter.config, db)
         features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs, hp.residual)
         env = VecObserver(env, features)
     if hp.flight_clock:

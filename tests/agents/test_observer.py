@@ -333,3 +333,36 @@ def test_in_flight_the_scheduled_observer_holds_within_two_degrees(default_db):
     result = evaluate(cfg, controller, specs).aggregate
     assert result["regulation_rms_error"]["mean"] < 2.0
     assert result["fin_travel_dps"]["mean"] < 40.0  # no chatter at the servo's rate limit
+
+
+def test_in_flight_the_observer_features_are_the_scheduled_controllers(default_db):
+    """A learned policy's observer in flight (``observer``/``residual`` recipes) is the
+    scheduled observer controller's, designed on the tunnel's train traces: with a zero
+    residual the commands are that controller's, step by step, over a held-out flight."""
+    from agents.evaluate import protocol_episodes
+    from agents.observer import ObserverFeatures, design_bank
+
+    config = variant_config("RocketRollFlight-v0", {"split": "test"})
+    reference = make_controller("observer", config, "RocketRollFlight-v0")
+    assert isinstance(reference, ObserverController) and reference.schedule is not None
+    features = ObserverFeatures.from_bank(config, design_bank(config, None), 2, residual=0.5)
+    assert all(c.schedule is not None for c in features.controllers)
+    assert features.controllers[0].schedule is features.controllers[1].schedule  # shared
+    bank = load_bank(config, None)
+    env = env_on(config, bank)
+    spec = next(iter(protocol_episodes(config, 1, seed=0, bank=bank)))
+    obs, _ = env.reset(seed=spec.seed, options=spec.options())
+    reference.reset(FlightView(env))
+    features.clear()
+    commands = []
+    truncated = False
+    while not truncated:
+        expected = reference.act(obs, FlightView(env))
+        seen = features.one(0, obs)
+        estimate = [*reference.observer.mean[:2], reference.observer.u_d]
+        np.testing.assert_allclose(seen, estimate, rtol=1e-5, atol=1e-5)
+        action = features.record(np.stack([obs, obs]), np.zeros(2, np.float32))[0]
+        np.testing.assert_allclose(action, expected, atol=1e-6)
+        commands.append(float(action[0]))
+        obs, _, _, truncated, _ = env.step(action)
+    assert len(commands) == config.max_episode_steps and np.ptp(commands) > 0.05

@@ -654,9 +654,10 @@ def test_a_flight_policy_reads_the_flights_phase_as_in_training(tmp_path, defaul
     tunnel.write_text(TINY + "  flight_clock: true\n", encoding="utf-8")
     with pytest.raises(UsageError, match="flight_clock is the phase of a flight"):
         load_hyperparameters(tunnel, "RocketRoll-v0", "ppo")
-    # The observer's features are the tunnel observer's: refused in flight, not flown unscheduled.
-    for key in ("observer: true", "residual: 0.5"):
-        flown = tmp_path / "flown.yml"
-        flown.write_text(TINY.replace("RocketRoll-v0", "RocketRollFlight-v0") + f"  {key}\n")
-        with pytest.raises(UsageError, match="not scheduled along a flight"):
-            load_hyperparameters(flown, "RocketRollFlight-v0", "ppo")
+    # In flight a recipe's observer is the scheduled one, designed on the tunnel's traces.
+    flown = tmp_path / "flown.yml"
+    flown.write_text(TINY.replace("RocketRoll-v0", "RocketRollFlight-v0") + "  residual: 0.5\n")
+    hp = load_hyperparameters(flown, "RocketRollFlight-v0", "ppo")
+    _, stack, _ = make_env(hp, 2, 5, split="test", db=default_db, training=False)
+    features = stack.venv.venv.features
+    assert all(c.schedule is not None for c in features.controllers)
