@@ -601,12 +601,6 @@ class AddArgs:
         le=1000,
     )
     posterior_seed: int = setting(0, "seed of the first posterior draw", ge=0, le=2**63 - 1)
-    together: list[Path] = setting(
-        default_factory=list,
-        help="another flight of the same rocket, fitted together with RECORDING by the flight "
-        "method (one rocket, one turbulence's statistics, one gyro; repeatable)",
-        metavar="FLIGHT",
-    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
