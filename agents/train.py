@@ -415,10 +415,6 @@ def load_hyperparameters(
                 "reads: observer: false contradicts it"
             )
         observer = True
-    from rollenv.variants import variant_options
-
-    kwargs = entry.get("env_kwargs") or {}
-    flight = variant_options(env_id).get("flight") is not None or "flight" in kwargs
     redesign = sorted(set(entry.get("env_kwargs") or {}) & set(OBSERVER_DESIGN))
     if observer and redesign:
         raise UsageError(
@@ -431,10 +427,13 @@ def load_hyperparameters(
     flight_clock = entry.get("flight_clock", False)
     if not isinstance(flight_clock, bool):
         raise UsageError(f"{where}: flight_clock must be true or false, got {flight_clock!r}")
-    if flight_clock and not flight:
-        raise UsageError(
-            f"{where}: flight_clock is the phase of a flight; {env_id} is not a flight variant"
-        )
+    if flight_clock:
+        from rollenv.variants import variant_options
+
+        if variant_options(env_id).get("flight") is None and "flight" not in env_kwargs:
+            raise UsageError(
+                f"{where}: flight_clock is the phase of a flight; {env_id} is not a flight variant"
+            )
     ppo = {key: entry[key] for key in keywords if key in entry}
     _ppo_arguments(ppo, where)  # fail now on a bad schedule or activation
     return Hyperparameters(
@@ -561,7 +560,8 @@ def make_env(
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
     if hp.observer:
-        from agents.observer import ObserverFeatures, design_bank
+        from agents.base import design_bank
+        from agents.observer import ObserverFeatures
         from agents.vecenv import VecObserver
 
         train_bank = adapter.bank
