@@ -12,6 +12,7 @@ other module of it.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, Protocol
@@ -26,7 +27,7 @@ from rollenv.history import EpisodeHistory
 if TYPE_CHECKING:
     from disturbances.bank import TraceBank
 
-__all__ = ["Controller", "Design", "EpisodeSpec", "Evaluation", "FlightView"]
+__all__ = ["Controller", "Design", "EpisodeSpec", "Evaluation", "FlightView", "design_bank"]
 
 
 class FlightView:
@@ -84,6 +85,14 @@ class Controller(Protocol):
         ...
 
 
+def design_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
+    """The train split's tunnel traces for ``config`` (in flight, the traces its flights fly:
+    :mod:`disturbances.flight`), from ``db``."""
+    from rollenv.bank import load_bank
+
+    return load_bank(replace(config, split="train", flight=None), db)
+
+
 @dataclass
 class Design:
     """What a controller factory gets (``--policy NAME[:ARG]``).
@@ -114,12 +123,13 @@ class Design:
         return load_bank(replace(self.config, split="train"), self.db)
 
     @cached_property
-    def tunnel_train_bank(self) -> TraceBank:
-        """The *train* split's tunnel traces, also in flight (where :attr:`train_bank` is
-        its flights): what a flight design models the turbulence on before flying it."""
-        from rollenv.bank import load_bank
-
-        return load_bank(replace(self.config, split="train", flight=None), self.db)
+    def design_bank(self) -> TraceBank:
+        """What a model-based design models the rocket and turbulence on: :attr:`train_bank`,
+        and in flight (where that holds flights) the train split's tunnel traces
+        (:func:`design_bank`), flown by the design itself."""
+        if self.config.flight_schedule is None:
+            return self.train_bank
+        return design_bank(self.config, self.db)
 
     def no_argument(self, name: str) -> None:
         """Refuse an argument for a controller that takes none."""

@@ -39,7 +39,7 @@ from scipy import sparse
 
 from agents.base import Design
 from agents.nominal import NominalModel
-from agents.observer import FLIGHT_WEIGHTS, ObserverController, Turbulence
+from agents.observer import ObserverController, Turbulence, designed_on, scheduling
 from rollenv.core import RollConfig
 
 __all__ = ["DEFAULT_HORIZON", "MPCController", "make_mpc"]
@@ -83,8 +83,10 @@ class MPCController(ObserverController):
         super().__init__(config, rocket, turbulence, weights, scheduled=scheduled)
         self.name = "MPC" if horizon == DEFAULT_HORIZON else f"MPC N={horizon}"
         self._step_max = config.rate_limit_dps * config.dt_s
-        #: In flight: each control step's condensed QP (Hessian, linear map), built once.
+        #: In flight: each control step's condensed QP (Hessian, linear map) and its
+        #: model ``(A, B)``, built once.
         self._by_step: dict[int, tuple[FloatArray, FloatArray]] = {}
+        self._step_models: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._condense()
         self.solves = 0
         self.fallbacks = 0
@@ -99,10 +101,10 @@ class MPCController(ObserverController):
             return [(a, b)] * self.horizon, q, r, s, self.riccati
         last = len(self.rockets) - 1
         models = []
-        for j in range(step, step + self.horizon):
-            k = min(j, last)
-            a_k, b_k, *_ = self.design_model(self.rockets[k], k)
-            models.append((a_k, b_k))
+        for k in (min(j, last) for j in range(step, step + self.horizon)):
+            if k not in self._step_models:  # each step's model serves HORIZON plans
+                self._step_models[k] = self.design_model(self.rockets[k], k)[:2]
+            models.append(self._step_models[k])
         return models, q, r, s, self.riccati_schedule[min(step + self.horizon, last)]
 
     def _condensed(self, step: int | None) -> tuple[FloatArray, FloatArray]:
@@ -183,7 +185,7 @@ class MPCController(ObserverController):
         """The planned commands (design input ``u``, ``command = u - shift``) from ``state``."""
         horizon = self.horizon
         if self.schedule is not None:
-            self._use_step(min(self.observer.steps - 1, len(self.schedule) - 1))
+            self._use_step(self.schedule_step)
         x0 = state[self.design_states]
         lo, hi = -self._range + shift, self._range + shift
         self._lower[:horizon], self._upper[:horizon] = lo, hi
@@ -221,7 +223,7 @@ class MPCController(ObserverController):
         self.__dict__.update(state)
         self._condense()
         if self.schedule is not None:
-            self._use_step(min(max(self.observer.steps - 1, 0), len(self.schedule) - 1))
+            self._use_step(self.schedule_step)
 
 
 def make_mpc(design: Design) -> MPCController:
@@ -237,12 +239,7 @@ def make_mpc(design: Design) -> MPCController:
             ) from None
         if horizon < 1:
             raise ValueError(f"mpc:HORIZON must be >= 1 step, got {horizon}")
-    config = design.config
-    flight = config.flight_schedule is not None
-    bank = design.tunnel_train_bank if flight else design.train_bank
-    nominal = NominalModel.from_bank(bank)
-    turbulence = Turbulence.from_bank(bank, config.dt_s, nominal)
-    if not flight:
-        return MPCController(config, nominal, turbulence, horizon=horizon)
-    weights = FLIGHT_WEIGHTS[config.task]
-    return MPCController(config, nominal, turbulence, weights, horizon, scheduled=True)
+    nominal, turbulence = designed_on(design.design_bank, design.config)
+    return MPCController(
+        design.config, nominal, turbulence, horizon=horizon, **scheduling(design.config)
+    )

@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import copy
 import math
-import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -588,10 +588,17 @@ class ObserverController:
         self.observer.reset()
         self._last: tuple[float, float] | None = None
 
+    @property
+    def schedule_step(self) -> int:
+        """In flight: the control step the filter has reached (the schedule's last after
+        its end)."""
+        assert self.schedule is not None
+        return min(max(self.observer.steps - 1, 0), len(self.schedule) - 1)
+
     def follow_schedule(self) -> None:
         """In flight: the gain of the control step the filter has reached."""
         if self.schedule is not None:
-            self.gain = self.schedule[min(self.observer.steps - 1, len(self.schedule) - 1)]
+            self.gain = self.schedule[self.schedule_step]
 
     def act(self, obs: NDArray[np.float32], env: FlightView | None = None) -> NDArray[np.float32]:
         """The fin command for observation ``obs``."""
@@ -644,15 +651,8 @@ class ObserverFeatures:
         self._angle = config.task == "angle"
         self.residual = float(residual)
         self.controllers: list[ObserverController] = []
-        flight = config.flight_schedule is not None
         # One design (in flight: one per control step), copied: each env its own filter.
-        first = ObserverController(
-            config,
-            rocket,
-            turbulence,
-            FLIGHT_WEIGHTS[config.task] if flight else None,
-            scheduled=flight,
-        )
+        first = ObserverController(config, rocket, turbulence, **scheduling(config))
         if residual:
             self.controllers = [first] + [_clone(first) for _ in range(n - 1)]
             self.filters = [c.observer for c in self.controllers]
@@ -667,10 +667,8 @@ class ObserverFeatures:
         cls, config: RollConfig, train_bank: TraceBank, n: int, residual: float = 0.0
     ) -> ObserverFeatures:
         """Designed on ``train_bank`` (the *train* split; in flight, its tunnel traces:
-        :func:`design_bank`), for ``n`` environments."""
-        nominal = NominalModel.from_bank(train_bank)
-        turbulence = Turbulence.from_bank(train_bank, config.dt_s, nominal)
-        return cls(config, nominal, turbulence, n, residual)
+        :func:`agents.base.design_bank`), for ``n`` environments."""
+        return cls(config, *designed_on(train_bank, config), n, residual)
 
     def clear(self, i: int | None = None) -> None:
         """A new episode for env ``i`` (all by default)."""
@@ -714,12 +712,18 @@ def _clone(controller: ObserverController) -> ObserverController:
     return twin
 
 
-def design_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
-    """The traces an observer is designed on: the train split's, and in flight the tunnel's
-    (the flight's own are those traces flown, :mod:`disturbances.flight`)."""
-    from rollenv.bank import load_bank
+def designed_on(bank: TraceBank, config: RollConfig) -> tuple[NominalModel, Turbulence]:
+    """The nominal rocket and the turbulence model a design fits to ``bank``'s traces."""
+    nominal = NominalModel.from_bank(bank)
+    return nominal, Turbulence.from_bank(bank, config.dt_s, nominal)
 
-    return load_bank(replace(config, split="train", flight=None), db)
+
+def scheduling(config: RollConfig) -> dict[str, Any]:
+    """An observer-based controller's ``weights`` and ``scheduled`` for ``config``: in
+    flight, scheduled with :data:`FLIGHT_WEIGHTS`; in the tunnel, the defaults."""
+    if config.flight_schedule is None:
+        return {"weights": None, "scheduled": False}
+    return {"weights": FLIGHT_WEIGHTS[config.task], "scheduled": True}
 
 
 def make_observer(design: Design) -> ObserverController:
@@ -730,15 +734,7 @@ def make_observer(design: Design) -> ObserverController:
     to the train split's tunnel traces) is flown by the env's law: each step's AR(1)
     coefficient and amplitude follow the airspeed (:meth:`Turbulence.flown`)."""
     design.no_argument("observer")
-    config = design.config
-    if config.flight_schedule is None:
-        bank = design.train_bank
-        nominal = NominalModel.from_bank(bank)
-        turbulence = Turbulence.from_bank(bank, config.dt_s, nominal)
-        return ObserverController(config, nominal, turbulence)
-    tunnel = design.tunnel_train_bank
-    nominal = NominalModel.from_bank(tunnel)
-    turbulence = Turbulence.from_bank(tunnel, config.dt_s, nominal)
+    nominal, turbulence = designed_on(design.design_bank, design.config)
     return ObserverController(
-        config, nominal, turbulence, FLIGHT_WEIGHTS[config.task], scheduled=True
+        config=design.config, rocket=nominal, turbulence=turbulence, **scheduling(design.config)
     )

@@ -304,10 +304,7 @@ def make_learned(design: Design, algorithm: str) -> PPOController:
     except ValueError as exc:
         raise ValueError(f"--policy {algorithm}:{path}: {exc} ({design.env_id})") from None
     if learned.needs_observer:
-        flight = design.config.flight_schedule is not None
-        learned.attach_observer(
-            design.config, design.tunnel_train_bank if flight else design.train_bank
-        )
+        learned.attach_observer(design.config, design.design_bank)
     if design.arg:
         learned.name = f"{learned.name} {path.name}"
     return learned

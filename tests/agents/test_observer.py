@@ -339,8 +339,9 @@ def test_in_flight_the_observer_features_are_the_scheduled_controllers(default_d
     """A learned policy's observer in flight (``observer``/``residual`` recipes) is the
     scheduled observer controller's, designed on the tunnel's train traces: with a zero
     residual the commands are that controller's, step by step, over a held-out flight."""
+    from agents.base import design_bank
     from agents.evaluate import protocol_episodes
-    from agents.observer import ObserverFeatures, design_bank
+    from agents.observer import ObserverFeatures
 
     config = variant_config("RocketRollFlight-v0", {"split": "test"})
     reference = make_controller("observer", config, "RocketRollFlight-v0")
