@@ -249,44 +249,40 @@ class FinSchedule:
         return levels[index]
 
 
+#: A virtual rocket's truth settings: default, help (``{at}`` the operating point, the
+#: paper's values by name) and bounds.
+_ROCKET_SETTINGS: dict[str, tuple[float | None, str, dict[str, Any]]] = {
+    "alpha": (
+        PAPER_THETA.alpha,
+        "steady-state gain α{at} (eq. 17: {alpha})",
+        {"ge": -10.0, "le": 10.0, "unit": "(°/s)/°"},
+    ),
+    "beta": (
+        PAPER_THETA.beta_dps,
+        "steady-state offset β{at} (eq. 17: {beta_dps}); θ̄ = β/α",
+        {"ge": -100.0, "le": 100.0, "unit": "°/s"},
+    ),
+    "alpha_bar": (
+        None,
+        "ᾱ{at} (eq. 48: {alpha_bar_per_deg_s}; 0 for --model constant)",
+        {"ge": -1.0, "le": 1.0, "unit": "1/(s·°)"},
+    ),
+    "beta_bar": (
+        None,
+        "β̄{at} (eq. 48: {beta_bar_per_s}), or the constant a (eq. 46: {a_per_s})",
+        {"gt": 0.0, "le": 100.0, "unit": "1/s"},
+    ),
+}
+
+
 def rocket_setting(name: str, at: str = "") -> Any:
     """The setting (help, default, bounds) of a virtual rocket's truth ``name``
     (``alpha``, ``beta``, ``alpha_bar``, ``beta_bar``), given ``at`` an operating point
     (``" at --v-ref"`` for a flight); the tunnel's and the flight recorder's are these."""
-    p = paper.PARAMETERS
-    if name == "alpha":
-        return setting(
-            PAPER_THETA.alpha,
-            f"steady-state gain α{at} (eq. 17: {p['alpha']})",
-            ge=-10.0,
-            le=10.0,
-            unit="(°/s)/°",
-        )
-    if name == "beta":
-        return setting(
-            PAPER_THETA.beta_dps,
-            f"steady-state offset β{at} (eq. 17: {p['beta_dps']}); θ̄ = β/α",
-            ge=-100.0,
-            le=100.0,
-            unit="°/s",
-        )
-    if name == "alpha_bar":
-        return setting(
-            None,
-            f"ᾱ{at} (eq. 48: {p['alpha_bar_per_deg_s']}; 0 for --model constant)",
-            ge=-1.0,
-            le=1.0,
-            unit="1/(s·°)",
-        )
-    if name == "beta_bar":
-        return setting(
-            None,
-            f"β̄{at} (eq. 48: {p['beta_bar_per_s']}), or the constant a (eq. 46: {p['a_per_s']})",
-            gt=0.0,
-            le=100.0,
-            unit="1/s",
-        )
-    raise ValueError(f"no rocket setting {name!r}")
+    if name not in _ROCKET_SETTINGS:
+        raise ValueError(f"no rocket setting {name!r}")
+    default, text, bounds = _ROCKET_SETTINGS[name]
+    return setting(default, text.format(at=at, **paper.PARAMETERS), **bounds)
 
 
 def rocket_params(
