@@ -457,8 +457,9 @@ def _negloglike(x: FloatArray, flights: Sequence[FlightInputs], layout: _Layout)
     return total
 
 
-def _rough_rate(inputs: FlightInputs) -> FloatArray:
-    """The rate at the samples for a start: the gyro, or the angle differenced and smoothed."""
+def measured_rate(inputs: FlightInputs) -> FloatArray:
+    """The roll rate the recording measured, °/s at the samples: the gyro, or the angle
+    differenced and smoothed (a start for the fit, and what a re-simulation is held to)."""
     if inputs.rate is not None:
         return inputs.rate
     assert inputs.angle is not None
@@ -472,7 +473,7 @@ def _equation_error_start(flights: Sequence[FlightInputs]) -> dict[str, float]:
     samples together: the optimiser's start."""
     designs, slopes, steps = [], [], []
     for inputs in flights:
-        rate = _rough_rate(inputs)
+        rate = measured_rate(inputs)
         kernel = np.ones(3) / 3.0
         smooth = np.convolve(np.pad(rate, 1, mode="edge"), kernel, mode="valid")
         slopes.append(np.gradient(smooth, inputs.dt_s))
@@ -612,12 +613,6 @@ class FlightFit:
 
 def _names(flights: Sequence[FlightInputs]) -> str:
     return ", ".join(repr(inputs.recording.name) for inputs in flights)
-
-
-def measured_rate(inputs: FlightInputs) -> FloatArray:
-    """The roll rate the recording measured (the gyro), or its angle's, differenced and
-    smoothed, °/s at the samples."""
-    return _rough_rate(inputs)
 
 
 def resimulated(
