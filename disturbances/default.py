@@ -22,6 +22,12 @@ results of two versions are never mixed in it.  Once a user adds to a
 database (``origin: user``) it is never rebuilt silently: opening one that
 holds another version's identifications warns instead.
 
+A build runs under the pinned numerics of :mod:`rocketroll_common.numerics`
+(a child interpreter with the same BLAS kernels and SIMD loops on every x86-64
+machine), so the same recipe and recordings give the same numbers everywhere:
+the identified parameters, traces and draws, and so every figure computed by
+replaying them.
+
 Builds are atomic: the new database is written beside the target and renamed
 into place when complete.  One process at a time builds into a folder (a lock
 on the folder itself, so no lock file is left behind); a build killed half-way
@@ -42,6 +48,7 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from disturbances.db import BUSY_TIMEOUT_S, DisturbanceDB, package_version
 from disturbances.ingest import add_recording
@@ -49,10 +56,11 @@ from disturbances.rows import SURROGATE_KINDS
 from disturbances.schema import APPLICATION_ID, SCHEMA_VERSION
 from disturbances.stores import Store, open_store
 from identification.bundled import bundled_paths
-from identification.methods import database_methods, has_posterior
+from identification.methods import METHODS, database_methods, has_posterior
 from identification.pipeline import IdentifyOptions
 from identification.recording import load_recording
 from rocketroll_common.files import created_folders_removed_on_error, file_mode
+from rocketroll_common.numerics import call_pinned
 
 __all__ = [
     "BUILD_RECIPE",
@@ -180,9 +188,40 @@ def build_database(
     """
     target = Path(path)
     with created_folders_removed_on_error(target), _build_lock(target.parent):
-        return _build(
-            target, recordings, options, surrogates, surrogate_kinds, posterior, progress, methods
+        return call_pinned(
+            _build_registered,
+            METHODS.snapshot(),
+            target,
+            recordings,
+            options,
+            surrogates,
+            surrogate_kinds,
+            posterior,
+            progress,
+            methods,
         )
+
+
+def _build_default(target: Path, progress: bool) -> None:
+    """Build the default database at ``target`` (its folder's build lock held)."""
+    call_pinned(
+        _build_registered,
+        METHODS.snapshot(),
+        target,
+        None,
+        None,
+        DEFAULT_SURROGATES,
+        ("iaaft",),
+        DEFAULT_POSTERIOR,
+        progress,
+    )
+
+
+def _build_registered(methods: list[tuple[str, Any, str, dict[str, Any]]], *args: Any) -> Path:
+    """:func:`_build` with the identification methods of ``methods`` (a snapshot of the
+    calling process's registry: the pinned process knows what that process registered)."""
+    METHODS.restore(methods)
+    return _build(*args)
 
 
 def _build(
@@ -195,7 +234,7 @@ def _build(
     progress: bool,
     methods: Sequence[str] | None = None,
 ) -> Path:
-    """:func:`build_database` with the folder's build lock held."""
+    """:func:`build_database` with the folder's build lock held, in this process."""
     from tqdm.auto import tqdm
 
     bundled = recordings is None
@@ -328,7 +367,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             f"{version}; rebuilding it with schema {SCHEMA_VERSION}",
             file=sys.stderr,
         )
-        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, show)
+        _build_default(path, show)
         return DisturbanceDB(path, create=False)
     if not path.exists() or path.stat().st_size == 0:
         print(
@@ -336,7 +375,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             "from the bundled recordings (once)",
             file=sys.stderr,
         )
-        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, show)
+        _build_default(path, show)
         return DisturbanceDB(path, create=False)
     db = DisturbanceDB(path, create=False)
     info = db.info()
@@ -352,7 +391,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
             f"rocketroll: the default disturbance database {path} {why}; rebuilding it",
             file=sys.stderr,
         )
-        _build(path, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, show)
+        _build_default(path, show)
         return DisturbanceDB(path, create=False)
     db.check_version()
     return db

@@ -149,6 +149,20 @@ class Registry(Generic[T]):
             raise ValueError(f"{self.kind} {name!r} is registered already")
         self._entries[name] = Entry(name, target, summary, MappingProxyType(dict(info)))
 
+    def snapshot(self) -> list[tuple[str, Any, str, dict[str, Any]]]:
+        """Every entry as plain values (picklable when each target is importable by name),
+        for :meth:`restore` in another process."""
+        return [(e.name, e.target, e.summary, dict(e.info)) for e in self.entries()]
+
+    def restore(self, snapshot: list[tuple[str, Any, str, dict[str, Any]]]) -> None:
+        """Make the entries those of :meth:`snapshot`, in its order (after the plugins have
+        registered theirs, so they cannot come back later)."""
+        load_plugins()
+        self._entries = {
+            name: Entry(name, target, summary, MappingProxyType(dict(info)))
+            for name, target, summary, info in snapshot
+        }
+
     def unregister(self, name: str) -> None:
         """Remove ``name`` (tests and plugins that replace a built-in)."""
         self._entries.pop(name, None)

@@ -25,6 +25,7 @@ from identification.bundled import bundled_path, load_bundled
 from identification.pipeline import identify
 from identification.recording import Recording
 from identification.steps import IdentificationError
+from rocketroll_common import numerics
 from tests.disturbances.conftest import FAST, SMALL
 
 REPO = Path(__file__).resolve().parents[2]
@@ -408,14 +409,15 @@ def test_default_database_is_rebuilt_when_built_by_another_version(
         db.set_info({"origin": "bundled", "fingerprint": "made-by-an-old-version"})
     monkeypatch.setenv("ROCKETROLL_DB", str(path))
     built: list[Path] = []
-    real_build = default_db._build  # what open_default runs, under the folder's build lock
 
-    def fake_build(target: Path, *args: object, **kwargs: object) -> Path:
+    def fake_build(target: Path, progress: bool) -> None:
+        # What open_default runs under the folder's build lock, here in this process.
         built.append(Path(target))
-        real_build(target, [bundled_path("tunnel-paper-seed0")], FAST, 0, ("iaaft",), 0, False)
-        return Path(target)
+        default_db._build(
+            target, [bundled_path("tunnel-paper-seed0")], FAST, 0, ("iaaft",), 0, False
+        )
 
-    monkeypatch.setattr(default_db, "_build", fake_build)
+    monkeypatch.setattr(default_db, "_build_default", fake_build)
     with default_db.open_default(progress=False) as db:
         assert db.versions() == [db.created_by]  # nothing of 0.0.1 left
     assert built == [path]
@@ -435,6 +437,7 @@ def test_default_build_is_atomic_and_marked(
 ) -> None:
     path = tmp_path / "db.sqlite"
     path.write_bytes(b"")  # an existing (empty) target is replaced only when the build is done
+    monkeypatch.setenv(numerics.MARKER, "pinned")  # built in this process, where the patch is
     monkeypatch.setattr(
         "disturbances.default.add_recording",
         lambda *a, **k: (_ for _ in ()).throw(RuntimeError("interrupted")),

@@ -1,0 +1,225 @@
+"""One numerical environment on every x86-64 machine, for work whose last bits are quoted.
+
+Two libraries choose their arithmetic from the processor when they load:
+
+- **OpenBLAS** (inside numpy and scipy) picks its kernels by CPU model, or by
+  ``OPENBLAS_CORETYPE`` where that is set, and splits long dot products between
+  its threads.  The kernels of two processors sum in different orders, so a
+  matrix product, a solve, a least-squares fit or L-BFGS-B's own dot products
+  differ in the last bits.
+- **numpy** runs the SIMD loops of ``exp``, ``log``, ``sin``, sums ... that the
+  processor has (AVX2 or AVX-512, chosen at import); they round differently.
+
+Identification turns those last bits into more: an optimiser (the ``ml`` and
+``output-error`` fits) stops where its tolerance lets it, so a last-bit change
+of the likelihood moves the identified parameters by about 1e-4, and every
+trace and posterior draw with them; and a closed loop that chatters at the
+fins' rate limit turns any change of its disturbance into other episodes (the
+flight table's tunnel-gain PID: 7.43° on one machine, 6.54° on another).  The
+evaluation that replays a database does not depend on either: numba compiles
+the same IEEE arithmetic for every processor (no fast-math), and the
+evaluation tables are bit for bit the same under every setting above
+(``benchmarks/machine_dependence.py`` measures both).
+
+Both choices are made once, when the libraries load, so a computation is
+pinned by running it in a new interpreter started under :func:`pinned_environment`
+(:func:`call_pinned`): OpenBLAS's Haswell kernels (AVX2 and FMA), numpy's loops
+up to AVX2 and FMA (numpy's ``X86_V3`` level), one OpenBLAS thread -- what every
+x86-64 processor of the last decade runs, AMD or Intel.  Where the machine
+cannot be pinned (not x86-64, no AVX2 or FMA) the computation runs in this
+process, as it would anyway.  The results are the same for the same versions
+of numpy, scipy and numba (the Makefile's ``constraints.txt`` fixes them).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import pickle
+import platform
+import signal
+import subprocess
+import sys
+import tempfile
+import traceback
+import warnings
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+__all__ = ["MARKER", "call_pinned", "is_pinned", "pinned_environment"]
+
+T = TypeVar("T")
+
+#: Set to ``pinned`` in a process started under :func:`pinned_environment`.
+MARKER = "ROCKETROLL_NUMERICS"
+#: OpenBLAS's kernels for AVX2 and FMA, on any processor.
+_OPENBLAS_CORE = "Haswell"
+#: numpy's dispatch targets a pinned process may use: up to AVX2 and FMA (numpy 2.4 names
+#: the level ``X86_V3``; earlier versions name each feature).
+_NUMPY_AVX2 = frozenset(
+    ("X86_V2", "X86_V3", "SSSE3", "SSE41", "POPCNT", "SSE42", "AVX", "F16C", "FMA3", "AVX2")
+)
+#: How long an interrupted child has to clean up before it is killed, s.
+_GRACE_S = 10.0
+
+
+#: The processor flags (Linux's names) of x86-64-v3, the level pinned: AVX2, FMA and company.
+_X86_V3_FLAGS = frozenset(("avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe"))
+
+
+def _numpy_dispatch() -> list[str] | None:
+    """The SIMD levels numpy was built to choose from at import, or None if unknown."""
+    for name in ("numpy._core._multiarray_umath", "numpy.core._multiarray_umath"):  # 2.x, 1.x
+        try:
+            umath = importlib.import_module(name)
+            break
+        except ImportError:
+            continue
+    else:
+        return None
+    dispatch = getattr(umath, "__cpu_dispatch__", None)
+    return None if dispatch is None else list(dispatch)
+
+
+def _has_x86_v3() -> bool:
+    """Whether the processor has AVX2, FMA and the rest of x86-64-v3.
+
+    Read from the processor (``/proc/cpuinfo``), not from numpy: numpy reports
+    what this process enabled, which ``NPY_DISABLE_CPU_FEATURES`` narrows.
+    """
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as info:
+            for line in info:
+                if line.startswith("flags"):
+                    return _X86_V3_FLAGS.issubset(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return False
+
+
+def pinned_environment(environ: Mapping[str, str] | None = None) -> dict[str, str] | None:
+    """``environ`` (default: this process's) with the numerics pinned, or None where this
+    machine cannot be pinned (not x86-64 Linux, or a processor below x86-64-v3)."""
+    if platform.machine().lower() not in ("x86_64", "amd64") or not _has_x86_v3():
+        return None
+    dispatch = _numpy_dispatch()
+    if dispatch is None:
+        return None
+    enabled = [f for f in dispatch if f in _NUMPY_AVX2]
+    env = dict(os.environ if environ is None else environ)
+    env.pop("NPY_DISABLE_CPU_FEATURES", None)  # numpy refuses both at once
+    if enabled:
+        env["NPY_ENABLE_CPU_FEATURES"] = " ".join(enabled)
+    else:  # nothing above the baseline to choose from
+        env.pop("NPY_ENABLE_CPU_FEATURES", None)
+    env["OPENBLAS_CORETYPE"] = _OPENBLAS_CORE
+    env["OPENBLAS_NUM_THREADS"] = "1"
+    env[MARKER] = "pinned"
+    # The child finds what this process imports, from wherever it imports it.
+    path = [p for p in sys.path if p]
+    if env.get("PYTHONPATH"):
+        path.append(env["PYTHONPATH"])
+    env["PYTHONPATH"] = os.pathsep.join(path)
+    return env
+
+
+def is_pinned() -> bool:
+    """Whether this process was started under :func:`pinned_environment`."""
+    return os.environ.get(MARKER) == "pinned"
+
+
+def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+    """``function(*args, **kwargs)`` computed under the pinned numerics.
+
+    In a new interpreter started under :func:`pinned_environment` (about two
+    seconds of imports), unless this process already runs pinned or the
+    machine cannot be pinned: then here.  ``function`` must be importable by
+    name (a module-level function) and its arguments and result picklable;
+    where they are not, it runs here with a ``RuntimeWarning``.
+    Its exception is raised here, with the child's traceback as a note; its
+    standard output and error are this process's.  Ctrl-C reaches the child
+    too (it is in the same process group), which gets :data:`_GRACE_S` seconds
+    to clean up.
+    """
+    env = None if is_pinned() else pinned_environment()
+    if env is None:
+        return function(*args, **kwargs)
+    try:
+        payload = pickle.dumps((function, args, kwargs))
+    except (pickle.PicklingError, AttributeError, TypeError) as exc:
+        warnings.warn(
+            f"{function.__qualname__} runs in this process, its numerics not pinned: "
+            f"a new process cannot be given its arguments ({exc})",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return function(*args, **kwargs)
+    with tempfile.TemporaryDirectory(prefix="rocketroll-pinned-") as folder:
+        call, answer = Path(folder, "call.pickle"), Path(folder, "answer.pickle")
+        call.write_bytes(payload)
+        command = [sys.executable, "-m", "rocketroll_common.numerics", str(call), str(answer)]
+        child = subprocess.Popen(command, env=env)
+        try:
+            returncode = child.wait()
+        except KeyboardInterrupt:
+            _stop(child)
+            raise
+        if not answer.exists():
+            raise RuntimeError(
+                f"the pinned computation of {function.__qualname__} ended with exit code "
+                f"{returncode} and no result"
+            )
+        ok, value = pickle.loads(answer.read_bytes())
+    if ok:
+        return value
+    raise value
+
+
+def _stop(child: subprocess.Popen[bytes]) -> None:
+    """Let an interrupted child clean up (Ctrl-C reached it as well), then end it."""
+    try:
+        child.wait(timeout=0.5)
+        return
+    except subprocess.TimeoutExpired:
+        child.send_signal(signal.SIGINT)  # the interrupt was this process's alone
+    try:
+        child.wait(timeout=_GRACE_S)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.wait()
+
+
+def _portable(exc: BaseException) -> BaseException:
+    """``exc`` if it survives pickling, else a plain exception of its family with its text."""
+    try:
+        pickle.loads(pickle.dumps(exc))
+    except Exception:
+        from rocketroll_common.errors import RocketrollError
+
+        family = RocketrollError if isinstance(exc, RocketrollError) else RuntimeError
+        plain = family(str(exc))
+        plain.__notes__ = list(getattr(exc, "__notes__", []))
+        return plain
+    return exc
+
+
+def _child(call: Path, answer: Path) -> int:
+    """Run a pickled call and pickle its outcome (the child's side of :func:`call_pinned`)."""
+    function, args, kwargs = pickle.loads(call.read_bytes())
+    try:
+        outcome: tuple[bool, Any] = (True, function(*args, **kwargs))
+    except KeyboardInterrupt:
+        return 130  # the parent was interrupted too and says so
+    except Exception as exc:
+        exc.add_note("in the pinned process:\n" + "".join(traceback.format_exception(exc)))
+        outcome = (False, _portable(exc))
+    partial = answer.with_suffix(".partial")
+    partial.write_bytes(pickle.dumps(outcome))
+    partial.replace(answer)  # the parent reads a whole answer or none
+    return 0
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    sys.exit(_child(Path(sys.argv[1]), Path(sys.argv[2])))

@@ -1,0 +1,143 @@
+"""The pinned numerics: the same last bits under every numerical environment of a machine.
+
+The environments varied here are what differs between machines of one kind:
+OpenBLAS's kernel (chosen by processor, or by ``OPENBLAS_CORETYPE``) and numpy's
+SIMD level (AVX-512, AVX2 or none; a machine without AVX-512 is one with it
+disabled).  The checks can fail: without the pin the same arithmetic gives
+other bits under each of them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rocketroll_common import numerics
+from rocketroll_common.errors import RocketrollError, SettingError
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: Numerical environments of other machines (None: the variable unset).
+VARIED: dict[str, dict[str, str | None]] = {
+    "this machine": {},
+    "OpenBLAS picks its kernel": {"OPENBLAS_CORETYPE": None},
+    "OpenBLAS's AVX kernel": {"OPENBLAS_CORETYPE": "Sandybridge"},
+    "numpy without AVX-512": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
+    "numpy without AVX2": {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"},
+}
+
+pinnable = pytest.mark.skipif(
+    numerics.pinned_environment() is None,
+    reason="the numerics are pinned only on x86-64 Linux with AVX2 and FMA (x86-64-v3)",
+)
+
+
+def fingerprint() -> str:
+    """A hash of the bits of a matrix product, a solve and numpy's SIMD functions."""
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((64, 64))
+    x = rng.standard_normal(4096) * 3.0
+    h = hashlib.sha256()
+    for value in (a @ a, np.linalg.solve(a, x[:64]), np.exp(x), np.log1p(np.abs(x)), np.sin(x)):
+        h.update(np.ascontiguousarray(value).tobytes())
+    return h.hexdigest()
+
+
+def how_pinned() -> dict[str, object]:
+    """What the pinned process sees of itself."""
+    features = importlib.import_module("numpy._core._multiarray_umath").__cpu_features__
+    return {
+        "pid": os.getpid(),
+        "pinned": numerics.is_pinned(),
+        "core": os.environ.get("OPENBLAS_CORETYPE"),
+        "avx512": bool(features.get("X86_V4")),
+    }
+
+
+def fails(message: str) -> None:
+    raise SettingError("--size", message)
+
+
+def _in_a_process(environ: dict[str, str | None]) -> tuple[str, str]:
+    """(pinned, unpinned) fingerprints computed by a new process under ``environ``."""
+    env = dict(os.environ)
+    env.pop(numerics.MARKER, None)
+    for name, value in environ.items():
+        if value is None:
+            env.pop(name, None)
+        else:
+            env[name] = value
+    code = (
+        "from rocketroll_common.numerics import call_pinned\n"
+        "from tests.test_numerics import fingerprint\n"
+        "print(call_pinned(fingerprint), fingerprint())\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    pinned, unpinned = done.stdout.split()
+    return pinned, unpinned
+
+
+@pinnable
+def test_the_pinned_bits_are_the_same_under_every_environment() -> None:
+    found = {name: _in_a_process(environ) for name, environ in VARIED.items()}
+    assert len({pinned for pinned, _ in found.values()}) == 1, found
+    # The environments are really different: unpinned, the same arithmetic differs.
+    assert len({unpinned for _, unpinned in found.values()}) >= 3, found
+
+
+@pinnable
+def test_a_call_runs_in_a_pinned_process() -> None:
+    seen = numerics.call_pinned(how_pinned)
+    assert seen == {"pid": seen["pid"], "pinned": True, "core": "Haswell", "avx512": False}
+    assert seen["pid"] != os.getpid()
+
+
+@pinnable
+def test_its_exception_is_raised_here_with_the_childs_traceback() -> None:
+    with pytest.raises(ValueError, match="bad"):
+        numerics.call_pinned(int, "bad")
+    # An exception that does not survive pickling comes back as its family with its text.
+    with pytest.raises(RocketrollError, match="--size: too big") as raised:
+        numerics.call_pinned(fails, "too big")
+    assert "in the pinned process" in "".join(raised.value.__notes__)
+
+
+def test_a_pinned_process_or_a_local_function_computes_here(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv(numerics.MARKER, "pinned")
+    assert numerics.call_pinned(os.getpid) == os.getpid()
+    monkeypatch.delenv(numerics.MARKER)
+    if numerics.pinned_environment() is None:
+        return
+    with pytest.warns(RuntimeWarning, match="not pinned"):
+        assert numerics.call_pinned(lambda: os.getpid()) == os.getpid()
+
+
+def test_the_pinned_environment_overrides_the_machines() -> None:
+    env = numerics.pinned_environment(
+        {"OPENBLAS_CORETYPE": "SkylakeX", "NPY_DISABLE_CPU_FEATURES": "X86_V3", "HOME": "/h"}
+    )
+    if env is None:
+        pytest.skip("the numerics are pinned only on x86-64 Linux with AVX2 and FMA")
+    assert env["OPENBLAS_CORETYPE"] == "Haswell" and env["OPENBLAS_NUM_THREADS"] == "1"
+    assert "NPY_DISABLE_CPU_FEATURES" not in env
+    enabled = env["NPY_ENABLE_CPU_FEATURES"].split()
+    assert "X86_V3" in enabled or "AVX2" in enabled  # numpy 2.4 names the level, 1.x-2.3 each
+    assert not {"X86_V4", "AVX512F", "AVX512_SKX", "AVX512_ICL"} & set(enabled)
+    assert env["HOME"] == "/h" and env[numerics.MARKER] == "pinned"
