@@ -19,8 +19,13 @@ by a constrained finite-horizon plan, solved every control step by OSQP:
   a large correction is spread over the steps the servo needs).
 * *Solver*: the condensed QP (the moves the only variables, ``HORIZON`` of
   them) is set up once; each step updates its linear term and bounds and
-  warm-starts from the last plan.  ``benchmarks/mpc_speed.py`` measures the
-  time per step against the 10-ms budget and the LQR in the same run.
+  warm-starts from the last plan -- from that plan's primal and dual
+  solution and OSQP's initial step size, set explicitly, unscaled and with
+  the step size adapted every 25 iterations, so that a plan depends on the
+  episode so far and nothing else (not on the episodes before it, the clock,
+  or whether the controller was pickled on the way).
+  ``benchmarks/mpc_speed.py`` measures the time per step against the 10-ms
+  budget and the LQR in the same run.
 * *In flight* (``scheduled``, as the observer controller): the plan predicts
   with each coming step's model -- the nominal rocket carried to that step's
   airspeed and density, the turbulence flown -- and ends on that step's
@@ -37,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
 
-from agents.base import Design
+from agents.base import Design, FlightView
 from agents.nominal import NominalModel
 from agents.observer import ObserverController, Turbulence, designed_on, scheduling
 from rollenv.core import RollConfig
@@ -54,6 +59,8 @@ DEFAULT_HORIZON = 20
 
 #: A planned command closer than this to a limit is set on it, °.
 _SNAP_DEG = 1e-3
+#: OSQP's ADMM step size at the start of every solve (its default; adaptive within one).
+_RHO = 0.1
 
 
 class MPCController(ObserverController):
@@ -88,8 +95,16 @@ class MPCController(ObserverController):
         self._by_step: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._step_models: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._condense()
+        #: The last plan's primal and dual solution, where the next solve starts (None:
+        #: from zero, as at an episode's start).
+        self._warm: tuple[FloatArray, FloatArray] | None = None
         self.solves = 0
         self.fallbacks = 0
+
+    def reset(self, env: FlightView | None = None) -> None:
+        """A new episode: the observer back to its prior, the plan from zero."""
+        super().reset(env)
+        self._warm = None
 
     def _horizon_models(
         self, step: int | None
@@ -175,6 +190,13 @@ class MPCController(ObserverController):
             self._upper,
             verbose=False,
             warm_starting=True,
+            rho=_RHO,
+            # Every 25 iterations: OSQP's default (0) times its own setup and adapts when
+            # that share of the time has passed -- a plan that depends on the clock.
+            adaptive_rho_interval=25,
+            # Unscaled: OSQP re-equilibrates the problem at each Hessian update (a flight's
+            # every step) from the data it holds then, the last step's linear term too.
+            scaling=0,
             polishing=False,
             eps_abs=1e-6,
             eps_rel=1e-6,
@@ -193,13 +215,20 @@ class MPCController(ObserverController):
         self._lower[horizon] = start - self._step_max
         self._upper[horizon] = start + self._step_max
         self._qp.update(q=self._linear @ x0, l=self._lower, u=self._upper)
+        if self._warm is None:
+            self._qp.warm_start(x=np.zeros(horizon), y=np.zeros(2 * horizon))
+        else:
+            self._qp.warm_start(x=self._warm[0], y=self._warm[1])
+        self._qp.update_settings(rho=_RHO)  # not the last solve's adapted step size
         result: Any = self._qp.solve(raise_error=False)
         self.solves += 1
         if result.x is None or not np.all(np.isfinite(result.x)) or result.info.status_val < 0:
             # not solved (never seen on the protocol): the LQR's move within the limits
             self.fallbacks += 1
+            self._warm = None
             u0 = float(self.gain @ state)
             return np.full(horizon, min(max(u0, lo), hi))
+        self._warm = (np.array(result.x, dtype=float), np.array(result.y, dtype=float))
         return np.asarray(result.x, dtype=float)
 
     def command(self, state: FloatArray, shift: float, fin: float) -> float:

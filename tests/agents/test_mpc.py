@@ -139,3 +139,20 @@ def test_in_flight_the_mpc_flies_as_the_observer_within_the_servo_limits(flight)
     clone = pickle.loads(pickle.dumps(mpc))
     for _ in range(5):
         np.testing.assert_array_equal(mpc.act(obs, None), clone.act(obs, None))
+
+
+def test_a_plan_depends_on_its_episode_alone(flight):
+    """Reset after another episode, the MPC acts as a new one does: OSQP starts each solve
+    from the last plan and its initial step size, unscaled (its own timing-based
+    adaptation, and its rescaling at each Hessian update, made plans depend on the
+    episodes before)."""
+    cfg = flight[0]
+    used, fresh = (make_controller("mpc", cfg, "RocketRollFlight-v0") for _ in range(2))
+    obs = np.array([2.0, 1.0, -4.0, -4.0], dtype=np.float32)
+    used.reset(None)
+    for _ in range(35):
+        used.act(obs, None)
+    used.reset(None)
+    fresh.reset(None)
+    for _ in range(35):
+        np.testing.assert_array_equal(used.act(obs, None), fresh.act(obs, None))
