@@ -122,7 +122,8 @@ class PPOController:
             self.history = History(1, width, 1, k)
         self._dim = int(np.prod(model.observation_space.shape))
         model.policy.set_training_mode(False)
-        #: The actor's layers, evaluated alike on every processor (None: torch acts).
+        #: The actor's layers, evaluated alike on every processor (None: torch acts); a copy
+        #: of the weights: remake it (ActorChain.from_policy) after changing them.
         self.chain = ActorChain.from_policy(model.policy)
 
     @classmethod

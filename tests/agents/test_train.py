@@ -19,6 +19,7 @@ import pytest
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecNormalize
 
+from agents.actor import ActorChain
 from agents.base import FlightView
 from agents.ppo import ObservationNormalizer, PPOController
 from agents.train import (
@@ -577,6 +578,7 @@ def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, smal
     with torch.no_grad():
         controller.model.policy.action_net.weight.zero_()
         controller.model.policy.action_net.bias.zero_()
+    controller.chain = ActorChain.from_policy(controller.model.policy)  # the weights changed
     reference, (train_config, bank) = _observer_on_train(small_db)
     controller.attach_observer(train_config, bank)
     actions = []
