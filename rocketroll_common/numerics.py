@@ -138,9 +138,9 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     name (a module-level function) and its arguments and result picklable;
     where they are not, it runs here with a ``RuntimeWarning``.
     Its exception is raised here, with the child's traceback as a note; its
-    standard output and error are this process's.  Ctrl-C reaches the child
-    too (it is in the same process group), which gets :data:`_GRACE_S` seconds
-    to clean up.
+    standard output and error are this process's.  Ctrl-C at a terminal
+    reaches the child too (it is in the same process group); it gets
+    :data:`_GRACE_S` seconds to clean up before it is killed.
     """
     env = None if is_pinned() else pinned_environment()
     if env is None:
@@ -177,12 +177,8 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
 
 
 def _stop(child: subprocess.Popen[bytes]) -> None:
-    """Let an interrupted child clean up (Ctrl-C reached it as well), then end it."""
-    try:
-        child.wait(timeout=0.5)
-        return
-    except subprocess.TimeoutExpired:
-        child.send_signal(signal.SIGINT)  # the interrupt was this process's alone
+    """Let an interrupted child clean up (Ctrl-C at a terminal reached it as well: a second
+    interrupt could break its clean-up), then end it."""
     try:
         child.wait(timeout=_GRACE_S)
     except subprocess.TimeoutExpired:
