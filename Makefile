@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip
 DEMO   ?= build/demo
 
-.PHONY: demo test lint typecheck pytest venv clean recordings
+.PHONY: demo test lint typecheck pytest pytest-varied venv clean recordings
 
 $(BIN)/python:
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required, found " + sys.version'
@@ -82,7 +82,19 @@ typecheck: $(VENV)/.installed-dev
 pytest: $(VENV)/.installed-dev
 	$(BIN)/pytest
 
-test: lint typecheck pytest
+# Another machine's numerics (README, Reproducibility): OpenBLAS's AVX kernel, numpy
+# without its SIMD loops, numba compiling for a generic x86-64, torch's unvectorised
+# kernels and MKL's compatible path, one thread each.  The README's tables must come out
+# digit for digit, from a default database built anew under these settings.
+VARIED := OPENBLAS_CORETYPE=Sandybridge \
+	NPY_DISABLE_CPU_FEATURES="X86_V3 X86_V4 AVX512_ICL AVX512_SPR" \
+	NUMBA_CPU_NAME=generic ATEN_CPU_CAPABILITY=default MKL_CBWR=COMPATIBLE \
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+
+pytest-varied: $(VENV)/.installed-dev
+	env $(VARIED) $(BIN)/pytest -p no:cacheprovider tests/test_readme.py
+
+test: lint typecheck pytest pytest-varied
 
 # Regenerate the bundled synthetic recordings from their recorded commands.
 recordings: $(VENV)/.installed
