@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -30,27 +29,9 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from rocketroll_common.numerics import MACHINE_SETTINGS, MARKER, with_settings
 
-#: Setting -> environment changes (None: unset).
-SETTINGS: dict[str, dict[str, str | None]] = {
-    "this machine": {},
-    "OpenBLAS picks its kernel": {"OPENBLAS_CORETYPE": None},
-    "OpenBLAS's AVX kernel": {"OPENBLAS_CORETYPE": "Sandybridge"},
-    "numpy without AVX-512": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
-    "numpy without AVX2": {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"},
-    "numba for a generic x86-64": {"NUMBA_CPU_NAME": "generic"},
-    "torch unvectorised, MKL compatible": {
-        "ATEN_CPU_CAPABILITY": "default",
-        "MKL_CBWR": "COMPATIBLE",
-    },
-    "one thread each": {
-        "OMP_NUM_THREADS": "1",
-        "OPENBLAS_NUM_THREADS": "1",
-        "MKL_NUM_THREADS": "1",
-        "NUMBA_NUM_THREADS": "1",
-    },
-}
+REPO = Path(__file__).resolve().parents[1]
 
 #: The README's tables: ``rocketroll eval`` arguments.
 TABLES: dict[str, list[str]] = {
@@ -77,15 +58,7 @@ print(json.dumps({"ids": {"/".join(r[:3]): r[3:] for r in ids}, "traces": dict(t
 
 
 def _env(changes: dict[str, str | None], **extra: str) -> dict[str, str]:
-    env = dict(os.environ)
-    env.pop("ROCKETROLL_NUMERICS", None)
-    for name, value in {**changes, **extra}.items():
-        if value is None:
-            env.pop(name, None)
-        else:
-            env[name] = value
-    env["PYTHONPATH"] = str(REPO)
-    return env
+    return with_settings({**changes, **extra, "PYTHONPATH": str(REPO)})
 
 
 def _digest(env: dict[str, str]) -> dict[str, dict[str, object]]:
@@ -141,11 +114,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--setting",
         action="append",
-        choices=list(SETTINGS),
+        choices=list(MACHINE_SETTINGS),
         help="a setting to run (repeatable; default: all; the first is the reference)",
     )
     ns = parser.parse_args(argv)
-    names = ns.setting or list(SETTINGS)
+    names = ns.setting or list(MACHINE_SETTINGS)
     if names[0] != "this machine":
         names.insert(0, "this machine")
     rows = []
@@ -159,10 +132,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 db = Path(folder, f"{k}-{'pinned' if pinned else 'unpinned'}.sqlite")
                 extra = {"ROCKETROLL_DB": str(db)}
                 if not pinned:
-                    extra["ROCKETROLL_NUMERICS"] = "pinned"  # build in the process as it is
-                env = _env(SETTINGS[name], **extra)
+                    extra[MARKER] = "pinned"  # build in the process as it is
+                env = _env(MACHINE_SETTINGS[name], **extra)
                 digest = _digest(env)
-                env.pop("ROCKETROLL_NUMERICS", None)
+                env.pop(MARKER, None)
                 found[pinned] = (digest, _tables(env))
             if not ref:
                 ref = dict(found)

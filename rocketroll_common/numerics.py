@@ -47,7 +47,14 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["MARKER", "call_pinned", "is_pinned", "pinned_environment"]
+__all__ = [
+    "MACHINE_SETTINGS",
+    "MARKER",
+    "call_pinned",
+    "is_pinned",
+    "pinned_environment",
+    "with_settings",
+]
 
 T = TypeVar("T")
 
@@ -60,6 +67,28 @@ _OPENBLAS_CORE = "Haswell"
 _NUMPY_AVX2 = frozenset(
     ("X86_V2", "X86_V3", "SSSE3", "SSE41", "POPCNT", "SSE42", "AVX", "F16C", "FMA3", "AVX2")
 )
+#: The numerical settings that differ between x86-64 machines of one kind, each imitated on
+#: this one: name -> environment variables (None: unset).  ``tests/test_numerics.py`` and
+#: ``benchmarks/machine_dependence.py`` run under each; the Makefile's ``pytest-varied``
+#: under most of them at once.
+MACHINE_SETTINGS: dict[str, dict[str, str | None]] = {
+    "this machine": {},
+    "OpenBLAS picks its kernel": {"OPENBLAS_CORETYPE": None},
+    "OpenBLAS's AVX kernel": {"OPENBLAS_CORETYPE": "Sandybridge"},
+    "numpy without AVX-512": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
+    "numpy without AVX2": {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"},
+    "numba for a generic x86-64": {"NUMBA_CPU_NAME": "generic"},
+    "torch unvectorised, MKL compatible": {
+        "ATEN_CPU_CAPABILITY": "default",
+        "MKL_CBWR": "COMPATIBLE",
+    },
+    "one thread each": {
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+        "NUMBA_NUM_THREADS": "1",
+    },
+}
 #: How long an interrupted child has to clean up before it is killed, s.
 _GRACE_S = 10.0
 
@@ -121,6 +150,21 @@ def pinned_environment(environ: Mapping[str, str] | None = None) -> dict[str, st
     if env.get("PYTHONPATH"):
         path.append(env["PYTHONPATH"])
     env["PYTHONPATH"] = os.pathsep.join(path)
+    return env
+
+
+def with_settings(
+    changes: Mapping[str, str | None], environ: Mapping[str, str] | None = None
+) -> dict[str, str]:
+    """``environ`` (default: this process's) with ``changes`` made (None: unset) and without
+    :data:`MARKER`: the environment of a new process under one of :data:`MACHINE_SETTINGS`."""
+    env = dict(os.environ if environ is None else environ)
+    env.pop(MARKER, None)
+    for name, value in changes.items():
+        if value is None:
+            env.pop(name, None)
+        else:
+            env[name] = value
     return env
 
 

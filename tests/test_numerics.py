@@ -24,14 +24,14 @@ from rocketroll_common.errors import RocketrollError, SettingError
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: Numerical environments of other machines (None: the variable unset).
-VARIED: dict[str, dict[str, str | None]] = {
-    "this machine": {},
-    "OpenBLAS picks its kernel": {"OPENBLAS_CORETYPE": None},
-    "OpenBLAS's AVX kernel": {"OPENBLAS_CORETYPE": "Sandybridge"},
-    "numpy without AVX-512": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
-    "numpy without AVX2": {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"},
-}
+#: The settings that change numpy's and OpenBLAS's bits (the others do not touch them).
+VARIED = (
+    "this machine",
+    "OpenBLAS picks its kernel",
+    "OpenBLAS's AVX kernel",
+    "numpy without AVX-512",
+    "numpy without AVX2",
+)
 
 pinnable = pytest.mark.skipif(
     numerics.pinned_environment() is None,
@@ -65,15 +65,9 @@ def fails(message: str) -> None:
     raise SettingError("--size", message)
 
 
-def _in_a_process(environ: dict[str, str | None]) -> tuple[str, str]:
-    """(pinned, unpinned) fingerprints computed by a new process under ``environ``."""
-    env = dict(os.environ)
-    env.pop(numerics.MARKER, None)
-    for name, value in environ.items():
-        if value is None:
-            env.pop(name, None)
-        else:
-            env[name] = value
+def _in_a_process(setting: str) -> tuple[str, str]:
+    """(pinned, unpinned) fingerprints computed by a new process under ``setting``."""
+    env = numerics.with_settings(numerics.MACHINE_SETTINGS[setting])
     code = (
         "from rocketroll_common.numerics import call_pinned\n"
         "from tests.test_numerics import fingerprint\n"
@@ -94,7 +88,7 @@ def _in_a_process(environ: dict[str, str | None]) -> tuple[str, str]:
 
 @pinnable
 def test_the_pinned_bits_are_the_same_under_every_environment() -> None:
-    found = {name: _in_a_process(environ) for name, environ in VARIED.items()}
+    found = {name: _in_a_process(name) for name in VARIED}
     assert len({pinned for pinned, _ in found.values()}) == 1, found
     # The environments are really different: unpinned, the same arithmetic differs.
     assert len({unpinned for _, unpinned in found.values()}) >= 3, found
