@@ -182,9 +182,9 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     name (a module-level function) and its arguments and result picklable;
     where they are not, it runs here with a ``RuntimeWarning``.
     Its exception is raised here, with the child's traceback as a note; its
-    standard output and error are this process's.  Ctrl-C at a terminal
-    reaches the child too (it is in the same process group); it gets
-    :data:`_GRACE_S` seconds to clean up before it is killed.
+    standard output and error are this process's.  Interrupted (Ctrl-C), this
+    process interrupts the child and gives it :data:`_GRACE_S` seconds to clean
+    up before it is killed; if this process dies, the child is ended too (Linux).
     """
     env = None if is_pinned() else pinned_environment()
     if env is None:
@@ -203,7 +203,10 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         call, answer = Path(folder, "call.pickle"), Path(folder, "answer.pickle")
         call.write_bytes(payload)
         command = [sys.executable, "-m", "rocketroll_common.numerics", str(call), str(answer)]
-        child = subprocess.Popen(command, env=env)
+        command.append(str(os.getpid()))
+        # Its own process group: Ctrl-C at a terminal interrupts this process alone, which
+        # passes one interrupt on (two could break the child's clean-up).
+        child = subprocess.Popen(command, env=env, process_group=0)
         try:
             returncode = child.wait()
         except KeyboardInterrupt:
@@ -221,8 +224,8 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
 
 
 def _stop(child: subprocess.Popen[bytes]) -> None:
-    """Let an interrupted child clean up (Ctrl-C at a terminal reached it as well: a second
-    interrupt could break its clean-up), then end it."""
+    """Interrupt the child, let it clean up, then end it."""
+    child.send_signal(signal.SIGINT)
     try:
         child.wait(timeout=_GRACE_S)
     except subprocess.TimeoutExpired:
@@ -260,6 +263,20 @@ def _child(call: Path, answer: Path) -> int:
     return 0
 
 
+def _die_with(parent: int) -> None:
+    """End this process when ``parent`` dies (Linux; elsewhere it runs to its end)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # it died before the request was made
+        sys.exit(1)
+
+
 if __name__ == "__main__":
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    _die_with(int(sys.argv[3]))
     sys.exit(_child(Path(sys.argv[1]), Path(sys.argv[2])))

@@ -12,8 +12,10 @@ from __future__ import annotations
 import hashlib
 import importlib
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -135,3 +137,70 @@ def test_the_pinned_environment_overrides_the_machines() -> None:
     assert "X86_V3" in enabled or "AVX2" in enabled  # numpy 2.4 names the level, 1.x-2.3 each
     assert not {"X86_V4", "AVX512F", "AVX512_SKX", "AVX512_ICL"} & set(enabled)
     assert env["HOME"] == "/h" and env[numerics.MARKER] == "pinned"
+
+
+def sleeps(folder: str) -> None:
+    """Write this process's id, wait to be interrupted, and say so on the way out."""
+    Path(folder, "pid").write_text(str(os.getpid()))
+    try:
+        time.sleep(60)
+    finally:
+        Path(folder, "cleaned").write_text("yes")
+
+
+_PARENT = """
+import sys
+from rocketroll_common.numerics import call_pinned
+from tests.test_numerics import sleeps
+try:
+    call_pinned(sleeps, sys.argv[1])
+except KeyboardInterrupt:
+    print("interrupted")
+"""
+
+
+def _parent(folder: Path) -> tuple[subprocess.Popen[str], int]:
+    """A process waiting on a pinned child that sleeps; the child's id."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    env.pop(numerics.MARKER, None)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _PARENT, str(folder)],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while not (folder / "pid").exists():
+        assert time.monotonic() < deadline, "the child never started"
+        time.sleep(0.05)
+    return proc, int((folder / "pid").read_text())
+
+
+def _gone(pid: int) -> bool:
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pinnable
+def test_an_interrupt_reaches_the_child_once_and_it_cleans_up(tmp_path: Path) -> None:
+    proc, child = _parent(tmp_path)
+    proc.send_signal(signal.SIGINT)  # as Ctrl-C: the child is in a process group of its own
+    out, _ = proc.communicate(timeout=30)
+    assert out.strip() == "interrupted"
+    assert (tmp_path / "cleaned").read_text() == "yes"
+    assert _gone(child)
+
+
+@pinnable
+def test_the_child_ends_with_its_parent(tmp_path: Path) -> None:
+    proc, child = _parent(tmp_path)
+    proc.kill()
+    proc.communicate(timeout=30)
+    assert _gone(child)
