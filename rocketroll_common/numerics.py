@@ -192,13 +192,7 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     try:
         payload = pickle.dumps((function, args, kwargs))
     except (pickle.PicklingError, AttributeError, TypeError) as exc:
-        warnings.warn(
-            f"{function.__qualname__} runs in this process, its numerics not pinned: "
-            f"a new process cannot be given its arguments ({exc})",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        return function(*args, **kwargs)
+        return _unpinned(function, str(exc), args, kwargs)
     with tempfile.TemporaryDirectory(prefix="rocketroll-pinned-") as folder:
         call, answer = Path(folder, "call.pickle"), Path(folder, "answer.pickle")
         call.write_bytes(payload)
@@ -217,10 +211,23 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
                 f"the pinned computation of {function.__qualname__} ended with exit code "
                 f"{returncode} and no result"
             )
-        ok, value = pickle.loads(answer.read_bytes())
-    if ok:
+        status, value = pickle.loads(answer.read_bytes())
+    if status == "returned":
         return value
+    if status == "unloadable":  # e.g. a function of the caller's __main__
+        return _unpinned(function, value, args, kwargs)
     raise value
+
+
+def _unpinned(function: Callable[..., T], why: str, args: Any, kwargs: Any) -> T:
+    """``function`` computed here, with a warning that its numerics are not pinned."""
+    warnings.warn(
+        f"{function.__qualname__} runs in this process, its numerics not pinned: a new "
+        f"process cannot be given it and its arguments ({why})",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    return function(*args, **kwargs)
 
 
 def _stop(child: subprocess.Popen[bytes]) -> None:
@@ -249,16 +256,25 @@ def _portable(exc: BaseException) -> BaseException:
 
 def _child(call: Path, answer: Path) -> int:
     """Run a pickled call and pickle its outcome (the child's side of :func:`call_pinned`)."""
-    function, args, kwargs = pickle.loads(call.read_bytes())
+    outcome: tuple[str, Any]
     try:
-        outcome: tuple[bool, Any] = (True, function(*args, **kwargs))
-    except KeyboardInterrupt:
-        return 130  # the parent was interrupted too and says so
+        function, args, kwargs = pickle.loads(call.read_bytes())
+    except Exception as exc:  # what the caller named cannot be imported here
+        outcome = ("unloadable", f"{type(exc).__name__}: {exc}")
+    else:
+        try:
+            outcome = ("returned", function(*args, **kwargs))
+        except KeyboardInterrupt:
+            return 130  # the parent was interrupted and says so
+        except Exception as exc:
+            exc.add_note("in the pinned process:\n" + "".join(traceback.format_exception(exc)))
+            outcome = ("raised", _portable(exc))
+    try:
+        data = pickle.dumps(outcome)
     except Exception as exc:
-        exc.add_note("in the pinned process:\n" + "".join(traceback.format_exception(exc)))
-        outcome = (False, _portable(exc))
+        data = pickle.dumps(("raised", RuntimeError(f"its result cannot be pickled: {exc}")))
     partial = answer.with_suffix(".partial")
-    partial.write_bytes(pickle.dumps(outcome))
+    partial.write_bytes(data)
     partial.replace(answer)  # the parent reads a whole answer or none
     return 0
 

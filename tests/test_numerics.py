@@ -204,3 +204,33 @@ def test_the_child_ends_with_its_parent(tmp_path: Path) -> None:
     proc.kill()
     proc.communicate(timeout=30)
     assert _gone(child)
+
+
+_SCRIPT = """
+import os, warnings
+from rocketroll_common.numerics import call_pinned
+
+def mine():
+    return os.getpid()
+
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    print(call_pinned(mine) == os.getpid(), [str(w.message) for w in caught])
+"""
+
+
+@pinnable
+def test_a_function_of_the_callers_script_is_computed_there_with_a_warning() -> None:
+    """A function of ``__main__`` pickles by name, but the child's ``__main__`` is another."""
+    env = numerics.with_settings({"PYTHONPATH": str(REPO)})
+    done = subprocess.run(
+        [sys.executable, "-c", _SCRIPT],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    assert done.stdout.startswith("True ["), done.stdout + done.stderr
+    assert "mine runs in this process, its numerics not pinned" in done.stdout
