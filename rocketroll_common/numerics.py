@@ -25,10 +25,13 @@ Both choices are made once, when the libraries load, so a computation is
 pinned by running it in a new interpreter started under :func:`pinned_environment`
 (:func:`call_pinned`): OpenBLAS's Haswell kernels (AVX2 and FMA), numpy's loops
 up to AVX2 and FMA (numpy's ``X86_V3`` level), one OpenBLAS thread -- what every
-x86-64 processor of the last decade runs, AMD or Intel.  Where the machine
-cannot be pinned (not x86-64, no AVX2 or FMA) the computation runs in this
+x86-64-v3 processor runs alike, AMD or Intel -- and the C library's own choice
+of its ``exp``, ``log``, ``tanh`` ... (``GLIBC_TUNABLES`` cleared: with FMA, every
+such processor takes the same ones).  Where the machine cannot be pinned (not
+x86-64 Linux, or a processor without AVX2 and FMA) the computation runs in this
 process, as it would anyway.  The results are the same for the same versions
-of numpy, scipy and numba (the Makefile's ``constraints.txt`` fixes them).
+of numpy, scipy, numba and the C library (the Makefile's ``constraints.txt``
+fixes the first three; machines of one kind share the last).
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ import importlib
 import os
 import pickle
 import platform
+import re
 import signal
 import subprocess
 import sys
@@ -130,7 +134,8 @@ def _has_x86_v3() -> bool:
 def pinned_environment(environ: Mapping[str, str] | None = None) -> dict[str, str] | None:
     """``environ`` (default: this process's) with the numerics pinned, or None where this
     machine cannot be pinned (not x86-64 Linux, or a processor below x86-64-v3)."""
-    if platform.machine().lower() not in ("x86_64", "amd64") or not _has_x86_v3():
+    linux_x86 = platform.system() == "Linux" and platform.machine().lower() == "x86_64"
+    if not linux_x86 or not _has_x86_v3():
         return None
     dispatch = _numpy_dispatch()
     if dispatch is None:
@@ -144,11 +149,11 @@ def pinned_environment(environ: Mapping[str, str] | None = None) -> dict[str, st
         env.pop("NPY_ENABLE_CPU_FEATURES", None)
     env["OPENBLAS_CORETYPE"] = _OPENBLAS_CORE
     env["OPENBLAS_NUM_THREADS"] = "1"
+    env.pop("GLIBC_TUNABLES", None)  # its hwcaps would narrow the C library's own choice
     env[MARKER] = "pinned"
-    # The child finds what this process imports, from wherever it imports it.
-    path = [p for p in sys.path if p]
-    if env.get("PYTHONPATH"):
-        path.append(env["PYTHONPATH"])
+    # The child imports what this process imports, from where this process does (run with
+    # -P, it puts nothing of its own first: not its working folder).
+    path = [os.getcwd() if p == "" else p for p in sys.path]
     env["PYTHONPATH"] = os.pathsep.join(path)
     return env
 
@@ -178,34 +183,37 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
 
     In a new interpreter started under :func:`pinned_environment` (about two
     seconds of imports), unless this process already runs pinned or the
-    machine cannot be pinned: then here.  ``function`` must be importable by
-    name (a module-level function) and its arguments and result picklable;
-    where they are not, it runs here with a ``RuntimeWarning``.
-    Its exception is raised here, with the child's traceback as a note; its
-    standard output and error are this process's.  Interrupted (Ctrl-C), this
-    process interrupts the child and gives it :data:`_GRACE_S` seconds to clean
-    up before it is killed; if this process dies, the child is ended too (Linux).
+    machine cannot be pinned: then here.  ``function`` and its arguments must
+    be picklable by name from an importable module, and so must its result;
+    what cannot be sent (a lambda, a function of the caller's ``__main__``)
+    is computed here with a ``RuntimeWarning``.  The child applies this
+    process's warning filters; its exception is raised here, with the child's
+    traceback as a note; its standard output and error are this process's.
+    Interrupted (Ctrl-C, or any exception while waiting), this process
+    interrupts the child once -- the child ignores a second interrupt, such as
+    a terminal's Ctrl-C that reached it too -- and gives it :data:`_GRACE_S`
+    seconds to clean up before it is killed; if this process dies, the child
+    is ended too.
     """
     env = None if is_pinned() else pinned_environment()
     if env is None:
         return function(*args, **kwargs)
     try:
-        payload = pickle.dumps((function, args, kwargs))
-    except (pickle.PicklingError, AttributeError, TypeError) as exc:
-        return _unpinned(function, str(exc), args, kwargs)
+        payload = pickle.dumps((function, args, kwargs, list(warnings.filters)))
+    except Exception as exc:  # pickling raises PicklingError, AttributeError, TypeError ...
+        return _unpinned(function, f"{type(exc).__name__}: {exc}", args, kwargs)
     with tempfile.TemporaryDirectory(prefix="rocketroll-pinned-") as folder:
         call, answer = Path(folder, "call.pickle"), Path(folder, "answer.pickle")
         call.write_bytes(payload)
-        command = [sys.executable, "-m", "rocketroll_common.numerics", str(call), str(answer)]
-        command.append(str(os.getpid()))
-        # Its own process group: Ctrl-C at a terminal interrupts this process alone, which
-        # passes one interrupt on (two could break the child's clean-up).
-        child = subprocess.Popen(command, env=env, process_group=0)
+        command = [sys.executable, "-P", "-m", "rocketroll_common.numerics"]
+        command += [str(call), str(answer), str(os.getpid())]
+        child: subprocess.Popen[bytes] | None = None
         try:
+            child = subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL)
             returncode = child.wait()
-        except KeyboardInterrupt:
-            _stop(child)
-            raise
+        finally:
+            if child is not None and child.poll() is None:
+                _stop(child)
         if not answer.exists():
             raise RuntimeError(
                 f"the pinned computation of {function.__qualname__} ended with exit code "
@@ -214,7 +222,7 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         status, value = pickle.loads(answer.read_bytes())
     if status == "returned":
         return value
-    if status == "unloadable":  # e.g. a function of the caller's __main__
+    if status == "unloadable":
         return _unpinned(function, value, args, kwargs)
     raise value
 
@@ -231,13 +239,16 @@ def _unpinned(function: Callable[..., T], why: str, args: Any, kwargs: Any) -> T
 
 
 def _stop(child: subprocess.Popen[bytes]) -> None:
-    """Interrupt the child, let it clean up, then end it."""
-    child.send_signal(signal.SIGINT)
+    """Interrupt the child once, let it clean up, then end it."""
     try:
+        child.send_signal(signal.SIGINT)
         child.wait(timeout=_GRACE_S)
     except subprocess.TimeoutExpired:
-        child.kill()
-        child.wait()
+        pass
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
 
 
 def _portable(exc: BaseException) -> BaseException:
@@ -254,14 +265,49 @@ def _portable(exc: BaseException) -> BaseException:
     return exc
 
 
+class _CallersMain(Exception):
+    """The call names something of the caller's ``__main__``, which this process lacks."""
+
+
+class _Unpickler(pickle.Unpickler):
+    """Refuses the caller's ``__main__``: here ``__main__`` is this module."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        if module == "__main__":
+            raise _CallersMain(f"{name} is defined in the caller's __main__")
+        return super().find_class(module, name)
+
+
+def _pattern(value: Any) -> str:
+    """A filter's message or module as ``filterwarnings`` takes it (a plain string of the
+    interpreter's own defaults matches exactly)."""
+    if value is None:
+        return ""
+    if isinstance(value, str):
+        return re.escape(value) + r"\Z"
+    return str(value.pattern)
+
+
+def _apply_filters(filters: list[tuple[Any, ...]]) -> None:
+    """Make the warning filters those of the caller (first wins, as there)."""
+    warnings.resetwarnings()
+    for action, message, category, module, lineno in reversed(filters):
+        warnings.filterwarnings(action, _pattern(message), category, _pattern(module), lineno)
+
+
 def _child(call: Path, answer: Path) -> int:
     """Run a pickled call and pickle its outcome (the child's side of :func:`call_pinned`)."""
     outcome: tuple[str, Any]
     try:
-        function, args, kwargs = pickle.loads(call.read_bytes())
-    except Exception as exc:  # what the caller named cannot be imported here
-        outcome = ("unloadable", f"{type(exc).__name__}: {exc}")
+        with open(call, "rb") as handle:
+            function, args, kwargs, filters = _Unpickler(handle).load()
+    except _CallersMain as exc:
+        outcome = ("unloadable", str(exc))
+    except Exception as exc:  # e.g. an import that fails here: an error, not a fallback
+        exc.add_note("in the pinned process, loading the call")
+        outcome = ("raised", _portable(exc))
     else:
+        _apply_filters(filters)
         try:
             outcome = ("returned", function(*args, **kwargs))
         except KeyboardInterrupt:
@@ -279,8 +325,14 @@ def _child(call: Path, answer: Path) -> int:
     return 0
 
 
+def _interrupt_once(signum: int, frame: Any) -> None:
+    """The first SIGINT interrupts; the clean-up it starts is not interrupted again."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
 def _die_with(parent: int) -> None:
-    """End this process when ``parent`` dies (Linux; elsewhere it runs to its end)."""
+    """End this process when ``parent`` dies (Linux, where it runs)."""
     try:
         import ctypes
 
@@ -293,6 +345,6 @@ def _die_with(parent: int) -> None:
 
 
 if __name__ == "__main__":
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGINT, _interrupt_once)
     _die_with(int(sys.argv[3]))
     sys.exit(_child(Path(sys.argv[1]), Path(sys.argv[2])))

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -140,11 +141,13 @@ def test_the_pinned_environment_overrides_the_machines() -> None:
 
 
 def sleeps(folder: str) -> None:
-    """Write this process's id, wait to be interrupted, and say so on the way out."""
+    """Write this process's id, wait to be interrupted, and clean up slowly on the way out
+    (a second interrupt during the clean-up would break it)."""
     Path(folder, "pid").write_text(str(os.getpid()))
     try:
         time.sleep(60)
     finally:
+        time.sleep(1.0)
         Path(folder, "cleaned").write_text("yes")
 
 
@@ -160,15 +163,16 @@ except KeyboardInterrupt:
 
 
 def _parent(folder: Path) -> tuple[subprocess.Popen[str], int]:
-    """A process waiting on a pinned child that sleeps; the child's id."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    env.pop(numerics.MARKER, None)
+    """A process, leading a process group as a shell's job does, waiting on a pinned child
+    that sleeps; the child's id."""
+    env = numerics.with_settings({"PYTHONPATH": str(REPO), "TMPDIR": str(folder)})
     proc = subprocess.Popen(
         [sys.executable, "-c", _PARENT, str(folder)],
         cwd=REPO,
         env=env,
         stdout=subprocess.PIPE,
         text=True,
+        process_group=0,
     )
     deadline = time.monotonic() + 60
     while not (folder / "pid").exists():
@@ -178,24 +182,28 @@ def _parent(folder: Path) -> tuple[subprocess.Popen[str], int]:
 
 
 def _gone(pid: int) -> bool:
+    """Whether process ``pid`` has ended within 10 s (a zombie waiting to be reaped has)."""
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
         try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
+            state = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0]
+        except (FileNotFoundError, ProcessLookupError):
+            return True
+        if state == "Z":
             return True
         time.sleep(0.05)
     return False
 
 
 @pinnable
-def test_an_interrupt_reaches_the_child_once_and_it_cleans_up(tmp_path: Path) -> None:
+def test_ctrl_c_interrupts_the_child_once_and_it_cleans_up(tmp_path: Path) -> None:
     proc, child = _parent(tmp_path)
-    proc.send_signal(signal.SIGINT)  # as Ctrl-C: the child is in a process group of its own
+    os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C at a terminal: to the whole job
     out, _ = proc.communicate(timeout=30)
     assert out.strip() == "interrupted"
-    assert (tmp_path / "cleaned").read_text() == "yes"
+    assert (tmp_path / "cleaned").read_text() == "yes"  # the parent's own interrupt ignored
     assert _gone(child)
+    assert not list(tmp_path.glob("rocketroll-pinned-*"))
 
 
 @pinnable
@@ -204,6 +212,68 @@ def test_the_child_ends_with_its_parent(tmp_path: Path) -> None:
     proc.kill()
     proc.communicate(timeout=30)
     assert _gone(child)
+
+
+@pinnable
+def test_an_import_that_fails_in_the_child_is_an_error(tmp_path: Path) -> None:
+    """Only what names the caller's __main__ falls back to the caller; a module the child
+    cannot import is an error (a silent unpinned computation would hide it)."""
+    module = tmp_path / "vanishing.py"
+    module.write_text("def answer():\n    return 42\n")
+    sys.path.insert(0, str(tmp_path))
+    try:
+        import vanishing  # type: ignore[import-not-found]
+
+        module.unlink()
+        with pytest.raises(ModuleNotFoundError, match="vanishing"):
+            numerics.call_pinned(vanishing.answer)
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("vanishing", None)
+
+
+@pinnable
+def test_the_child_imports_what_the_caller_does_not_its_working_folder(tmp_path: Path) -> None:
+    """A console script (``rocketroll``) run in a folder that holds a package of the same
+    name as one of ours: the child must not import that one."""
+    work = tmp_path / "work"
+    (work / "identification").mkdir(parents=True)
+    (work / "identification" / "__init__.py").write_text("raise ImportError('the wrong one')\n")
+    script = tmp_path / "bin" / "run.py"
+    script.parent.mkdir()
+    script.write_text(
+        "from identification.bundled import bundled_paths\n"
+        "from rocketroll_common.numerics import call_pinned\n"
+        "print(len(call_pinned(bundled_paths)))\n"
+    )
+    env = numerics.with_settings({"PYTHONPATH": str(REPO)})
+    done = subprocess.run(
+        [sys.executable, str(script)],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "9"
+
+
+def warns() -> int:
+    warnings.warn("from the pinned process", UserWarning, stacklevel=1)
+    return 1
+
+
+@pinnable
+def test_the_child_applies_the_callers_warning_filters() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match="from the pinned process"):
+            numerics.call_pinned(warns)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert numerics.call_pinned(warns) == 1
 
 
 _SCRIPT = """
