@@ -60,7 +60,7 @@ from identification.methods import METHODS, database_methods, has_posterior
 from identification.pipeline import IdentifyOptions
 from identification.recording import load_recording
 from rocketroll_common.files import created_folders_removed_on_error, file_mode
-from rocketroll_common.numerics import call_pinned
+from rocketroll_common.numerics import call_pinned, is_pinned, pinned_environment
 
 __all__ = [
     "BUILD_RECIPE",
@@ -80,8 +80,9 @@ ENV_VAR = "ROCKETROLL_DB"
 DEFAULT_SURROGATES = 2
 #: Posterior u_d draws per trace of a method with a posterior (ml) in the default database.
 DEFAULT_POSTERIOR = 8
-#: Version of the recipe below; bump it when the build changes in any other way.
-BUILD_RECIPE = 3
+#: Version of the recipe below; bump it when the build changes in any other way (4: built
+#: under pinned numerics, the same bits on every machine).
+BUILD_RECIPE = 4
 
 
 def default_path() -> Path:
@@ -100,9 +101,14 @@ def fingerprint(
     surrogate_kinds: Sequence[str],
     posterior: int = DEFAULT_POSTERIOR,
     methods: Sequence[str] | None = None,
+    *,
+    pinned: bool | None = None,
 ) -> str:
-    """What a build depends on, hashed: recipe, versions, settings and the input bytes."""
+    """What a build depends on, hashed: recipe, versions, settings, the input bytes and
+    whether its numerics were pinned (default: whether a build here would be)."""
     methods = database_methods() if methods is None else tuple(methods)
+    if pinned is None:
+        pinned = is_pinned() or pinned_environment() is not None
     h = hashlib.sha256()
     recipe = {
         "recipe": BUILD_RECIPE,
@@ -113,6 +119,7 @@ def fingerprint(
         "surrogates": surrogates,
         "surrogate_kinds": list(surrogate_kinds),
         "posterior": posterior,
+        "numerics": "pinned" if pinned else "as found",
     }
     h.update(json.dumps(recipe, sort_keys=True).encode())
     for path in recordings:
@@ -190,7 +197,7 @@ def build_database(
     with created_folders_removed_on_error(target), _build_lock(target.parent):
         return call_pinned(
             _build_registered,
-            METHODS.snapshot(),
+            _registered(methods),
             target,
             recordings,
             options,
@@ -206,7 +213,7 @@ def _build_default(target: Path, progress: bool) -> None:
     """Build the default database at ``target`` (its folder's build lock held)."""
     call_pinned(
         _build_registered,
-        METHODS.snapshot(),
+        _registered(None),
         target,
         None,
         None,
@@ -217,9 +224,17 @@ def _build_default(target: Path, progress: bool) -> None:
     )
 
 
+def _registered(methods: Sequence[str] | None) -> list[tuple[str, Any, str, dict[str, Any]]]:
+    """The registry a build needs, as :meth:`Registry.snapshot` gives it: the methods it
+    runs and those of the default recipe (its fingerprint names them), in their order."""
+    needed = set(database_methods() if methods is None else methods) | set(database_methods())
+    return METHODS.snapshot([name for name in METHODS.names() if name in needed])
+
+
 def _build_registered(methods: list[tuple[str, Any, str, dict[str, Any]]], *args: Any) -> Path:
     """:func:`_build` with the identification methods of ``methods`` (a snapshot of the
-    calling process's registry: the pinned process knows what that process registered)."""
+    calling process's registry, the methods the build runs: the pinned process knows what
+    that process registered, and nothing unpicklable it does not run)."""
     METHODS.restore(methods)
     return _build(*args)
 
@@ -267,7 +282,9 @@ def _build(
                     posterior=posterior,
                     methods=chosen,
                 )
-            made = fingerprint(files, opts, surrogates, surrogate_kinds, posterior, chosen)
+            made = fingerprint(
+                files, opts, surrogates, surrogate_kinds, posterior, chosen, pinned=is_pinned()
+            )
             # Only the default recipe on the bundled data may be rebuilt automatically.
             default = bundled and made == _expected_fingerprint()
             db.set_info(

@@ -22,7 +22,7 @@ from __future__ import annotations
 import difflib
 import importlib
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from types import MappingProxyType
@@ -149,10 +149,13 @@ class Registry(Generic[T]):
             raise ValueError(f"{self.kind} {name!r} is registered already")
         self._entries[name] = Entry(name, target, summary, MappingProxyType(dict(info)))
 
-    def snapshot(self) -> list[tuple[str, Any, str, dict[str, Any]]]:
-        """Every entry as plain values (picklable when each target is importable by name),
-        for :meth:`restore` in another process."""
-        return [(e.name, e.target, e.summary, dict(e.info)) for e in self.entries()]
+    def snapshot(
+        self, names: Sequence[str] | None = None
+    ) -> list[tuple[str, Any, str, dict[str, Any]]]:
+        """The entries of ``names`` (default: every one) as plain values, picklable when
+        each target is importable by name, for :meth:`restore` in another process."""
+        chosen = self.entries() if names is None else [self.entry(n) for n in names]
+        return [(e.name, e.target, e.summary, dict(e.info)) for e in chosen]
 
     def restore(self, snapshot: list[tuple[str, Any, str, dict[str, Any]]]) -> None:
         """Make the entries those of :meth:`snapshot`, in its order (after the plugins have

@@ -22,6 +22,7 @@ from disturbances.db import DatabaseError, DisturbanceDB
 from disturbances.ingest import add_recording
 from disturbances.rows import TEST_FRACTION, RecordingRow, checksum, content_hash, split_of
 from identification.bundled import bundled_path, load_bundled
+from identification.methods import METHODS, register_method
 from identification.pipeline import identify
 from identification.recording import Recording
 from identification.steps import IdentificationError
@@ -430,6 +431,38 @@ def test_default_database_is_rebuilt_when_built_by_another_version(
     with pytest.warns(UserWarning, match="0.0.1"):
         default_db.open_default(progress=False).close()
     assert built == [path]
+
+
+def test_a_build_is_pinned_and_its_fingerprint_says_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A database built as before (in the caller's process, its numerics as the machine has
+    them) is not the default recipe: an old default database is rebuilt, not trusted."""
+    if numerics.pinned_environment() is None:
+        pytest.skip("the numerics are pinned only on x86-64 Linux with AVX2 and FMA")
+    files = [bundled_path("tunnel-paper-seed0")]
+    pinned = default_db.fingerprint(files, FAST, 0, ("iaaft",), 0, ["paper"], pinned=True)
+    found = default_db.fingerprint(files, FAST, 0, ("iaaft",), 0, ["paper"], pinned=False)
+    assert pinned != found
+    assert default_db.fingerprint(files, FAST, 0, ("iaaft",), 0, ["paper"]) == pinned
+    # A method registered here that the build does not run, and that no new process could
+    # be given (a lambda), does not keep the build from its pinned process.
+    register_method("local", lambda context, models: [], summary="not picklable")
+    try:
+        path = default_db.build_database(
+            tmp_path / "db.sqlite", files, options=FAST, surrogates=0, methods=["paper"]
+        )
+    finally:
+        METHODS.unregister("local")
+    with DisturbanceDB(path, create=False) as db:
+        assert db.info()["fingerprint"] == pinned
+    # Built in this process instead, its fingerprint says that.
+    monkeypatch.setattr(default_db, "call_pinned", lambda f, *args: f(*args))
+    path = default_db.build_database(
+        tmp_path / "here.sqlite", files, options=FAST, surrogates=0, methods=["paper"]
+    )
+    with DisturbanceDB(path, create=False) as db:
+        assert db.info()["fingerprint"] == found
 
 
 def test_default_build_is_atomic_and_marked(
