@@ -53,6 +53,14 @@ def _forward(x: FloatArray, weights: FloatArray, table: NDArray[np.int64]) -> Fl
     return current
 
 
+def _flat_box(space: Any) -> bool:
+    """Whether SB3 passes observations of ``space`` to the network as they are: a 1-D
+    ``Box`` (not one-hot encoded as discrete spaces are, nor scaled as images are)."""
+    from gymnasium import spaces
+
+    return isinstance(space, spaces.Box) and len(space.shape) == 1
+
+
 @dataclass(frozen=True)
 class ActorChain:
     """The deterministic action of an SB3 MLP policy (PPO, A2C, SAC, TD3) as a chain of
@@ -106,8 +114,8 @@ class ActorChain:
             modules = list(policy.actor.mu)
         else:
             return None
-        if not isinstance(extractor, FlattenExtractor):
-            return None
+        if not isinstance(extractor, FlattenExtractor) or not _flat_box(policy.observation_space):
+            return None  # the observation is preprocessed (one-hot, images scaled ...)
         parts: list[FloatArray] = []
         rows: list[list[int]] = []
         offset = 0
@@ -147,6 +155,8 @@ class ActorChain:
         """The action (float32, the action space's shape flattened) for one normalised
         observation."""
         x = np.asarray(normalized, dtype=np.float64).ravel()
+        if x.size != self.table[0, 1]:
+            raise ValueError(f"the actor takes {self.table[0, 1]} values, got {x.size}")
         out = _forward(x, self.weights, self.table)
         if self.squashed:  # SB3's unscale_action
             out = self.low + 0.5 * (out + 1.0) * (self.high - self.low)

@@ -50,7 +50,7 @@ def test_the_chain_is_predict_within_float32_rounding(algorithm, kwargs) -> None
         assert -2.0 <= got[0] <= 2.0
 
 
-def test_a_layer_it_does_not_know_leaves_the_action_to_torch() -> None:
+def test_a_layer_or_an_observation_it_does_not_know_leaves_the_action_to_torch() -> None:
     model = PPO(
         "MlpPolicy",
         _env(),
@@ -59,6 +59,17 @@ def test_a_layer_it_does_not_know_leaves_the_action_to_torch() -> None:
         policy_kwargs={"net_arch": [8], "activation_fn": torch.nn.ELU},
     )
     assert ActorChain.from_policy(model.policy) is None
+    # SB3 one-hot encodes a discrete observation before the first layer.
+    discrete = PPO("MlpPolicy", gym.make("FrozenLake-v1"), seed=0, device="cpu")
+    assert ActorChain.from_policy(discrete.policy) is None
+
+
+def test_an_observation_of_another_size_is_refused() -> None:
+    model = PPO("MlpPolicy", _env(), seed=0, device="cpu", policy_kwargs={"net_arch": [8]})
+    chain = ActorChain.from_policy(model.policy)
+    assert chain is not None
+    with pytest.raises(ValueError, match="takes 3 values, got 4"):
+        chain(np.zeros(4, np.float32))
 
 
 def test_the_committed_policy_acts_through_the_chain() -> None:
@@ -95,4 +106,5 @@ def test_the_chain_has_the_same_bits_under_every_torch_kernel() -> None:
         )
         found.add(tuple(done.stdout.split()))
     assert len({chain for chain, _ in found}) == 1, found
-    assert len({torch for _, torch in found}) > 1, found  # the settings are really different
+    if len({torch for _, torch in found}) == 1:
+        pytest.skip("torch's own bits do not change under these settings on this machine")
