@@ -181,6 +181,9 @@ class MPCController(ObserverController):
         self._upper = np.full(2 * horizon, np.inf)
         self._lower[horizon:] = -self._step_max
         self._upper[horizon:] = self._step_max
+        #: OSQP's statuses of a usable plan (max-iterations, infeasible ... are not).
+        done = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+        self._solved = {int(status.value) for status in done}
         self._qp = osqp.OSQP()
         self._qp.setup(
             upper,
@@ -222,8 +225,10 @@ class MPCController(ObserverController):
         self._qp.update_settings(rho=_RHO)  # not the last solve's adapted step size
         result: Any = self._qp.solve(raise_error=False)
         self.solves += 1
-        if result.x is None or not np.all(np.isfinite(result.x)) or result.info.status_val < 0:
-            # not solved (never seen on the protocol): the LQR's move within the limits
+        solved = result.info.status_val in self._solved
+        if not solved or result.x is None or not np.all(np.isfinite(result.x)):
+            # not solved (never seen on the protocol: every solve of the four variants'
+            # 20 test episodes is OSQP_SOLVED): the LQR's move within the limits
             self.fallbacks += 1
             self._warm = None
             u0 = float(self.gain @ state)

@@ -156,3 +156,15 @@ def test_a_plan_depends_on_its_episode_alone(flight):
     fresh.reset(None)
     for _ in range(35):
         np.testing.assert_array_equal(used.act(obs, None), fresh.act(obs, None))
+
+
+def test_a_plan_osqp_did_not_solve_is_not_flown(flight):
+    """Only OSQP_SOLVED (or _INACCURATE) plans are used and warm-start the next; stopped at
+    its iteration limit, the LQR's move is flown instead and the next plan starts cold."""
+    mpc = make_controller("mpc", flight[0], "RocketRollFlight-v0")
+    assert isinstance(mpc, MPCController)
+    mpc.reset(None)
+    mpc._qp.update_settings(max_iter=1)
+    mpc.act(np.array([2.0, 1.0, -4.0, -4.0], dtype=np.float32), None)
+    assert (mpc.solves, mpc.fallbacks) == (1, 1)
+    assert mpc._warm is None
