@@ -235,7 +235,7 @@ def _build_registered(methods: list[tuple[str, Any, str, dict[str, Any]]], *args
     """:func:`_build` with the identification methods of ``methods`` (a snapshot of the
     calling process's registry, the methods the build runs: the pinned process knows what
     that process registered, and nothing unpicklable it does not run)."""
-    METHODS.restore(methods)
+    METHODS.merge(methods)  # in this process (a fallback): the same entries again
     return _build(*args)
 
 

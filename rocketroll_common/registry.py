@@ -153,18 +153,17 @@ class Registry(Generic[T]):
         self, names: Sequence[str] | None = None
     ) -> list[tuple[str, Any, str, dict[str, Any]]]:
         """The entries of ``names`` (default: every one) as plain values, picklable when
-        each target is importable by name, for :meth:`restore` in another process."""
+        each target is importable by name, for :meth:`merge` in another process."""
         chosen = self.entries() if names is None else [self.entry(n) for n in names]
         return [(e.name, e.target, e.summary, dict(e.info)) for e in chosen]
 
-    def restore(self, snapshot: list[tuple[str, Any, str, dict[str, Any]]]) -> None:
-        """Make the entries those of :meth:`snapshot`, in its order (after the plugins have
-        registered theirs, so they cannot come back later)."""
+    def merge(self, snapshot: list[tuple[str, Any, str, dict[str, Any]]]) -> None:
+        """Register every entry of :meth:`snapshot` under its name, replacing what is
+        registered under it (after the plugins have registered theirs, so they cannot come
+        back over it later); other entries stay."""
         load_plugins()
-        self._entries = {
-            name: Entry(name, target, summary, MappingProxyType(dict(info)))
-            for name, target, summary, info in snapshot
-        }
+        for name, target, summary, info in snapshot:
+            self._entries[name] = Entry(name, target, summary, MappingProxyType(dict(info)))
 
     def unregister(self, name: str) -> None:
         """Remove ``name`` (tests and plugins that replace a built-in)."""

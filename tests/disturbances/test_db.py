@@ -463,6 +463,7 @@ def test_a_build_is_pinned_and_its_fingerprint_says_so(
     )
     with DisturbanceDB(path, create=False) as db:
         assert db.info()["fingerprint"] == found
+    assert "flight" in METHODS  # the build's registry merged, nothing of this one lost
 
 
 def test_default_build_is_atomic_and_marked(
