@@ -447,7 +447,11 @@ class Args:
         output="folder",
     )
     db: str | None = setting(
-        None, "database (default: $ROCKETROLL_DB or the default database)", metavar="DB"
+        None,
+        "database (default: $ROCKETROLL_DB or the default database)",
+        metavar="DB",
+        input=True,
+        kind="sqlite",
     )
     settings: dict[str, Any] = setting(
         default_factory=dict,

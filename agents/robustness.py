@@ -98,7 +98,11 @@ class Args:
         output="folder",
     )
     db: str | None = setting(
-        None, "database (default: $ROCKETROLL_DB or the default database)", metavar="DB"
+        None,
+        "database (default: $ROCKETROLL_DB or the default database)",
+        metavar="DB",
+        input=True,
+        kind="sqlite",
     )
 
     def __post_init__(self) -> None:

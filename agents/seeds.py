@@ -214,7 +214,11 @@ class Args:
         None, "folder for seeds.md, seeds.json, seeds.png (none: print only)", output="folder"
     )
     db: str | None = setting(
-        None, "database (default: $ROCKETROLL_DB or the default database)", metavar="DB"
+        None,
+        "database (default: $ROCKETROLL_DB or the default database)",
+        metavar="DB",
+        input=True,
+        kind="sqlite",
     )
 
     def __post_init__(self) -> None:

@@ -788,7 +788,7 @@ def _on_ray(
 class RunArgs:
     """``rocketroll sweep run``."""
 
-    spec: Path = setting(help="the sweep spec (YAML)", positional=True, metavar="SPEC")
+    spec: Path = setting(help="the sweep spec (YAML)", positional=True, metavar="SPEC", input=True)
     out: Path | None = setting(
         None,
         "folder of the results store and trial outputs (default: runs/sweeps/NAME)",
@@ -796,7 +796,11 @@ class RunArgs:
     )
     jobs: int = setting(1, "trials run side by side (worker processes)", ge=1, le=256)
     db: str | None = setting(
-        None, "database (default: $ROCKETROLL_DB or the default database)", metavar="DB"
+        None,
+        "database (default: $ROCKETROLL_DB or the default database)",
+        metavar="DB",
+        input=True,
+        kind="sqlite",
     )
     progress: bool = setting(True, "show the progress bar")
     ray: str | None = setting(

@@ -193,9 +193,11 @@ class Args:
         None,
         "disturbance database (default: $ROCKETROLL_DB or the default database)",
         metavar="DB",
+        input=True,
+        kind="sqlite",
     )
     hyperparams: Path = setting(
-        DEFAULT_HYPERPARAMS, "YAML file of hyperparameters keyed by environment id"
+        DEFAULT_HYPERPARAMS, "YAML file of hyperparameters keyed by environment id", input=True
     )
     eval_freq: int = setting(
         100_000,
@@ -222,6 +224,7 @@ class Args:
         None,
         "continue from this checkpoint (model zip; its VecNormalize pickle is found beside it), "
         "e.g. the one an interrupted run saved",
+        input=True,
     )
     progress_bar: bool = setting(True, "show SB3's progress bar (rich)")
     torch_threads: int = setting(

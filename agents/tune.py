@@ -56,7 +56,9 @@ class TuneArgs:
     """``rocketroll tune pid`` / ``python -m agents.tune``."""
 
     env_id: str = setting("RocketRoll-v0", "environment id", choices=VARIANTS.names, always=True)
-    db: str | None = setting(None, "database (default: the default one)", metavar="DB")
+    db: str | None = setting(
+        None, "database (default: the default one)", metavar="DB", input=True, kind="sqlite"
+    )
     episodes: int = setting(30, "train episodes per ω", ge=1, le=100_000)
     seed: int = setting(0, "seed of the train episodes", ge=0, le=2**63 - 1)
     omegas: tuple[float, ...] = setting(

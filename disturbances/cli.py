@@ -43,7 +43,13 @@ _DB_HELP = (
 
 
 def _db_setting(new: bool = False) -> Any:
-    return setting(None, _DB_HELP + ("; created if missing" if new else ""), metavar="DB")
+    return setting(
+        None,
+        _DB_HELP + ("; created if missing" if new else ""),
+        metavar="DB",
+        input=True,
+        kind="sqlite",
+    )
 
 
 def _methods_help(text: str) -> Callable[[], str]:
@@ -116,7 +122,9 @@ def _new_database(db: str | None) -> Iterator[None]:
 class FlightArgs:
     """``rocketroll flight``."""
 
-    out: Path = setting(help="recording file to write (CSV, format 1.1)", output="file")
+    out: Path = setting(
+        help="recording file to write (CSV, format 1.1)", output="file", kind="recording"
+    )
     spec: FlightLogSpec = setting(default_factory=FlightLogSpec, flatten=True)
 
 
@@ -139,9 +147,9 @@ def flight(args: FlightArgs) -> int:
 class IdentifyArgs:
     """``rocketroll identify``."""
 
-    recording: Path = setting(help="recording file (CSV, format v1)", positional=True)
+    recording: Path = setting(help="recording file (CSV, format v1)", positional=True, input=True)
     json: Path | None = setting(
-        None, "also write machine-readable results (JSON) here", output="file"
+        None, "also write machine-readable results (JSON) here", output="file", kind="json"
     )
     report: Path | None = setting(
         None, "also write PNG figures and report.md into this folder", output="folder"
@@ -156,12 +164,15 @@ class IdentifyArgs:
         "also store the results (every method, both models) in this disturbance database; "
         "created if missing (not for a flight)",
         metavar="DB",
+        input=True,
+        kind="sqlite",
     )
     together: list[Path] = setting(
         default_factory=list,
         help="another flight of the same rocket, fitted together with RECORDING by the flight "
         "method (one rocket, one turbulence's statistics, one gyro; repeatable)",
         metavar="FLIGHT",
+        input=True,
     )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
@@ -187,7 +198,7 @@ def identify(args: IdentifyArgs) -> int:
     if args.db is not None and "://" not in args.db:
         from rocketroll_common.files import check_output
 
-        check_output(args.db, "--db")  # before the work, as every output
+        check_output(args.db, "--db", kind="sqlite")  # before the work, as every output
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
     together = [load_recording(path) for path in args.together]
@@ -372,6 +383,7 @@ class BuildArgs:
         help="recording files (default: the bundled ones)",
         positional=True,
         metavar="RECORDING",
+        input=True,
     )
 
 
@@ -516,7 +528,7 @@ class ShowArgs:
     db: str | None = _db_setting()
     json: bool = setting(False, "print JSON")
     plot: Path | None = setting(
-        None, "write a PNG: the trace, its histogram and PSD", output="file"
+        None, "write a PNG: the trace, its histogram and PSD", output="file", kind="png"
     )
 
 
@@ -581,7 +593,7 @@ def show(args: ShowArgs) -> int:
 class AddArgs:
     """``rocketroll db add``."""
 
-    recording: Path = setting(help="recording file (CSV, format v1)", positional=True)
+    recording: Path = setting(help="recording file (CSV, format v1)", positional=True, input=True)
     db: str | None = _db_setting(new=True)
     method: list[str] = setting(
         default_factory=_default_methods,
@@ -717,7 +729,9 @@ def export(args: ExportArgs) -> int:
 class ImportArgs:
     """``rocketroll db import``."""
 
-    folder: Path = setting(help="a folder written by `rocketroll db export`", positional=True)
+    folder: Path = setting(
+        help="a folder written by `rocketroll db export`", positional=True, input=True
+    )
     db: str | None = _db_setting(new=True)
 
 

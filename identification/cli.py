@@ -26,7 +26,7 @@ __all__ = ["COMMANDS", "ImportArgs", "InfoArgs", "TunnelArgs"]
 class TunnelArgs:
     """``rocketroll tunnel``."""
 
-    out: Path = setting(help="recording file to write (CSV)", output="file")
+    out: Path = setting(help="recording file to write (CSV)", output="file", kind="recording")
     spec: TunnelSpec = setting(default_factory=TunnelSpec, flatten=True)
 
 
@@ -45,16 +45,16 @@ def tunnel(args: TunnelArgs) -> int:
 class InfoArgs:
     """``rocketroll info``."""
 
-    recording: Path = setting(help="recording file (CSV, format v1)", positional=True)
-    json: Path | None = setting(None, "also write the summary as JSON here", output="file")
+    recording: Path = setting(help="recording file (CSV, format v1)", positional=True, input=True)
+    json: Path | None = setting(
+        None, "also write the summary as JSON here", output="file", kind="json"
+    )
     plot: Path | None = setting(
-        None, "also write a PNG figure (like the paper's Fig. 2)", output="file"
+        None, "also write a PNG figure (like the paper's Fig. 2)", output="file", kind="png"
     )
 
     def __post_init__(self) -> None:
         check(self)
-        if self.plot is not None and self.plot.suffix.lower() != ".png":
-            raise UsageError(f"--plot {self.plot}: the figure is a PNG; give a path ending in .png")
 
 
 def info(args: InfoArgs) -> int:
@@ -82,8 +82,8 @@ def info(args: InfoArgs) -> int:
 class ImportArgs:
     """``rocketroll import-csv``."""
 
-    input: Path = setting(help="input file", positional=True)
-    out: Path = setting(help="recording file to write", output="file")
+    input: Path = setting(help="input file", positional=True, input=True)
+    out: Path = setting(help="recording file to write", output="file", kind="recording")
     settings: ImportSettings = setting(default_factory=ImportSettings, flatten=True)
 
     def __post_init__(self) -> None:

@@ -8,7 +8,13 @@ would give (``mkstemp`` makes them private), a replaced one keeps its own.
 Errors name the user's path, never the temporary one.
 
 Before a command starts its work it checks that each output can be written
-(:func:`check_output`): a long run must not end in "File exists".
+(:func:`check_output`): a long run must not end in "File exists".  And that
+writing it destroys nothing the command did not make: an output that is one of
+the command's inputs (the same file, links included) is refused, and so is an
+existing file that holds another kind of content than the command writes
+(:func:`content_kind`, read from the file's first bytes, not its name).
+Writing again over a command's own earlier output of the same kind is what
+re-running a command does, and stays allowed.
 Missing folders above an output are created when it is written, for every
 output alike; nothing is created before the work has succeeded.
 """
@@ -19,14 +25,16 @@ import errno
 import os
 import stat
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
 from rocketroll_common.errors import UsageError
 
 __all__ = [
+    "KINDS",
     "check_output",
+    "content_kind",
     "created_folders_removed_on_error",
     "file_mode",
     "write_all_atomic",
@@ -69,8 +77,51 @@ def _existing_ancestor(path: Path) -> Path:
     return current
 
 
-def check_output(path: str | os.PathLike[str], what: str, *, folder: bool = False) -> Path:
-    """Refuse, before any work, an output that could not be written.
+#: What a file can hold, as :func:`content_kind` names it -> how a message says it.
+KINDS = {
+    "recording": "a rocketroll recording",
+    "json": "JSON",
+    "png": "a PNG image",
+    "sqlite": "an SQLite database",
+    "empty": "nothing",
+    "other": "other content (text or data of another kind)",
+}
+
+
+def content_kind(path: str | os.PathLike[str]) -> str:
+    """What the file at ``path`` holds, read from its first bytes: one of :data:`KINDS`."""
+    with open(path, "rb") as handle:
+        head = handle.read(64)
+    if not head:
+        return "empty"
+    if head.startswith(b"SQLite format 3\x00"):
+        return "sqlite"
+    if head.startswith(b"\x89PNG\r\n\x1a\n"):
+        return "png"
+    if head.startswith(b"# format: rocketroll-recording/"):
+        return "recording"
+    if head.lstrip(b" \t\r\n\xef\xbb\xbf")[:1] in (b"{", b"["):
+        return "json"
+    return "other"
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist
+        return False
+
+
+def check_output(
+    path: str | os.PathLike[str],
+    what: str,
+    *,
+    folder: bool = False,
+    kind: str | None = None,
+    inputs: Sequence[tuple[str, str | os.PathLike[str]]] = (),
+) -> Path:
+    """Refuse, before any work, an output that could not be written or that would destroy
+    a file the command did not make.
 
     Parameters
     ----------
@@ -81,6 +132,13 @@ def check_output(path: str | os.PathLike[str], what: str, *, folder: bool = Fals
         How the user named it, e.g. ``"--out"``, for the message.
     folder : bool
         The output is a folder.
+    kind : str, optional
+        What the command writes there (a key of :data:`KINDS`): an existing
+        file of another kind is refused (an empty one is not).  A PNG's name
+        must end in ``.png``.
+    inputs : sequence of (name, path)
+        The command's input files, by the name the user gave them: an output
+        that is one of them is refused.
 
     Returns
     -------
@@ -90,8 +148,9 @@ def check_output(path: str | os.PathLike[str], what: str, *, folder: bool = Fals
     Raises
     ------
     UsageError
-        A file output that is a folder, a folder output that is a file, or a
-        place whose nearest existing folder is not a writable folder.
+        A file output that is a folder, a folder output that is a file, a
+        place whose nearest existing folder is not a writable folder, an
+        output that is an input, or an existing file of another kind.
     """
     target = Path(path)
     if folder:
@@ -99,6 +158,21 @@ def check_output(path: str | os.PathLike[str], what: str, *, folder: bool = Fals
             raise UsageError(f"{what} {target}: exists and is not a folder")
     elif target.is_dir():
         raise UsageError(f"{what} {target}: is a folder; give a file name")
+    if not folder:
+        if kind == "png" and target.suffix.lower() != ".png":
+            raise UsageError(f"{what} {target}: the figure is a PNG; give a path ending in .png")
+        for name, source in inputs:
+            if _same_file(target, Path(source)):
+                raise UsageError(
+                    f"{what} {target}: is the input {name}; write the output to another file"
+                )
+        if kind is not None and target.is_file():
+            found = content_kind(target)
+            if found not in (kind, "empty"):
+                raise UsageError(
+                    f"{what} {target}: exists and holds {KINDS[found]}, not {KINDS[kind]}; "
+                    "give another file (or remove that one)"
+                )
     base = _existing_ancestor(target if folder else target.parent)
     if not base.is_dir():
         raise UsageError(f"{what} {target}: {base} is not a folder")

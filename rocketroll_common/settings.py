@@ -45,10 +45,11 @@ import argparse
 import dataclasses
 import math
 import numbers
+import os
 import re
 import sys
 import types
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
@@ -89,6 +90,8 @@ class _Spec:
     parse: Callable[[str], Any] | None
     format: Callable[[Any], str] | None
     output: str | None
+    kind: str | None
+    input: bool
     flatten: bool
     cli: bool
     always: bool
@@ -111,6 +114,8 @@ def setting(
     parse: Callable[[str], Any] | None = None,
     format: Callable[[Any], str] | None = None,
     output: Literal["file", "folder"] | None = None,
+    kind: str | None = None,
+    input: bool = False,
     flatten: bool = False,
     cli: bool = True,
     always: bool = False,
@@ -143,7 +148,16 @@ def setting(
         Text to value and value to text, for types the module does not know.
     output : {"file", "folder"}, optional
         The field names an output; :func:`run_command` checks it can be
-        written before the command works.
+        written before the command works, and that writing it destroys
+        nothing (:func:`rocketroll_common.files.check_output`).
+    kind : str, optional
+        What the file holds (a key of :data:`rocketroll_common.files.KINDS`):
+        for an output, what the command writes there (an existing file of
+        another kind is refused); for an input, what it must hold if it exists.
+    input : bool
+        The field names input files (a path, or a list of them; a database
+        given as ``scheme://...`` is not a file): no output may be one of
+        them.
     flatten : bool
         The field is itself a settings dataclass whose options are added
         here, without a prefix.
@@ -166,6 +180,8 @@ def setting(
         parse=parse,
         format=format,
         output=output,
+        kind=kind,
+        input=input,
         flatten=flatten,
         cli=cli,
         always=always,
@@ -690,15 +706,46 @@ def guarded(prog: str, work: Callable[[], int | None]) -> int:
     return 0 if code is None else int(code)
 
 
-def _check_outputs(cls: type, args: Any) -> None:
+def _files(cls: type, args: Any) -> Iterator[tuple[_Field, Any]]:
+    """Every field of ``args`` (flattened ones opened) with its value."""
     for f in _fields(cls):
         value = getattr(args, f.name)
         if f.spec.flatten:
-            _check_outputs(f.base, value)
-        elif f.spec.output is not None and value is not None:
-            from rocketroll_common.files import check_output
+            yield from _files(f.base, value)
+        else:
+            yield f, value
 
-            check_output(value, f.shown, folder=f.spec.output == "folder")
+
+def _paths(value: Any) -> list[str | os.PathLike[str]]:
+    """The file paths a field's value names (none for a ``scheme://`` database)."""
+    values = value if isinstance(value, list | tuple) else [value]
+    return [v for v in values if isinstance(v, str | os.PathLike) and "://" not in str(v)]
+
+
+def _check_files(cls: type, args: Any) -> None:
+    """Refuse, before any work, outputs that cannot be written or would destroy a file the
+    command did not make, and inputs that hold another kind of content than they should."""
+    from rocketroll_common.files import KINDS, check_output, content_kind
+
+    fields = list(_files(cls, args))
+    inputs = [(f.shown, p) for f, value in fields if f.spec.input for p in _paths(value)]
+    for f, value in fields:
+        if f.spec.output is not None and value is not None:
+            check_output(
+                value,
+                f.shown,
+                folder=f.spec.output == "folder",
+                kind=f.spec.kind,
+                inputs=[(name, p) for name, p in inputs if name != f.shown],
+            )
+        elif f.spec.input and f.spec.kind is not None:
+            for path in _paths(value):
+                if Path(path).is_file():
+                    found = content_kind(path)
+                    if found not in (f.spec.kind, "empty"):
+                        raise UsageError(
+                            f"{f.shown} {path}: holds {KINDS[found]}, not {KINDS[f.spec.kind]}"
+                        )
 
 
 def run_command(command: Command, argv: Sequence[str], prog: str) -> int:
@@ -710,7 +757,7 @@ def run_command(command: Command, argv: Sequence[str], prog: str) -> int:
         if leaf.args is None or leaf.run is None:
             return leaf.run(None) if leaf.run is not None else 0
         args = from_namespace(leaf.args, ns)
-        _check_outputs(leaf.args, args)
+        _check_files(leaf.args, args)
         return leaf.run(args)
 
     return guarded(prog, work)

@@ -137,10 +137,12 @@ class RolloutArgs:
     episodes: int = setting(3, "episodes", ge=1, le=100_000)
     seed: int = setting(0, "seed of the env and the policy", ge=0, le=2**63 - 1)
     frames: Path | None = setting(
-        None, "save frames of the first episode to this PNG", output="file"
+        None, "save frames of the first episode to this PNG", output="file", kind="png"
     )
     frames_count: int = setting(6, "frames in the PNG", ge=1, le=100)
-    db: str | None = setting(None, "database (default: the default database)", metavar="DB")
+    db: str | None = setting(
+        None, "database (default: the default database)", metavar="DB", input=True, kind="sqlite"
+    )
     set: dict[str, Any] = setting(
         default_factory=dict,
         help="environment option, e.g. --set split=test --set sensors=false (repeatable)",
@@ -189,9 +191,10 @@ class FlightArgs:
         "the ascent: 'default', a rocket YAML (identification/data/ascent-default.yml's keys) "
         "or a recorded V(t) CSV (time_s, airspeed_mps[, altitude_m])",
         metavar="FLIGHT",
+        input=True,
     )
     plot: Path | None = setting(
-        None, "save V, h, q and Mach against time to this PNG", output="file"
+        None, "save V, h, q and Mach against time to this PNG", output="file", kind="png"
     )
 
     def __post_init__(self) -> None:

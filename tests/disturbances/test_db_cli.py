@@ -608,10 +608,11 @@ def test_the_identification_layer_imports_nothing_above_it() -> None:
     assert out.strip() == "[]"
 
 
-def test_build_over_a_file_that_is_not_a_database_asks_for_force(
+def test_build_over_a_file_that_is_not_a_database_is_refused_even_with_force(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = tmp_path / "notes.sqlite"
     path.write_text("not a database\n")
-    fails(["db", "build", "--db", str(path)], capsys, str(path), "--force")
+    for force in ([], ["--force"]):
+        fails(["db", "build", "--db", str(path), *force], capsys, str(path), "not an SQLite")
     assert path.read_text() == "not a database\n"
