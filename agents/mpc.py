@@ -47,7 +47,7 @@ from agents.nominal import NominalModel
 from agents.observer import ObserverController, Turbulence, designed_on, scheduling
 from rollenv.core import RollConfig
 
-__all__ = ["DEFAULT_HORIZON", "MPCController", "make_mpc"]
+__all__ = ["DEFAULT_HORIZON", "MAX_HORIZON", "MPCController", "make_mpc"]
 
 FloatArray = NDArray[np.float64]
 
@@ -56,6 +56,9 @@ FloatArray = NDArray[np.float64]
 #: digit on both tasks: with the Riccati terminal cost the horizon only has to see the
 #: limits coming, and 20 covers the servo's full swing (80° at 15° a step) with room.
 DEFAULT_HORIZON = 20
+#: Longest horizon, steps (10 s): its condensed QP is MAX_HORIZON² and each control step
+#: solves it -- 600 steps took over 30 s an episode, 100 000 asked for 522 GiB.
+MAX_HORIZON = 100
 
 #: A planned command closer than this to a limit is set on it, °.
 _SNAP_DEG = 1e-3
@@ -84,8 +87,8 @@ class MPCController(ObserverController):
         *,
         scheduled: bool = False,
     ) -> None:
-        if horizon < 1:
-            raise ValueError(f"the MPC's horizon must be >= 1 step, got {horizon}")
+        if not 1 <= horizon <= MAX_HORIZON:
+            raise ValueError(f"the MPC's horizon must be 1 to {MAX_HORIZON} steps, got {horizon}")
         self.horizon = horizon
         super().__init__(config, rocket, turbulence, weights, scheduled=scheduled)
         self.name = "MPC" if horizon == DEFAULT_HORIZON else f"MPC N={horizon}"
@@ -271,8 +274,11 @@ def make_mpc(design: Design) -> MPCController:
             raise ValueError(
                 f"mpc:HORIZON needs a whole number of steps, got {design.arg!r}"
             ) from None
-        if horizon < 1:
-            raise ValueError(f"mpc:HORIZON must be >= 1 step, got {horizon}")
+        if not 1 <= horizon <= MAX_HORIZON:
+            raise ValueError(
+                f"mpc:HORIZON must be 1 to {MAX_HORIZON} steps ({MAX_HORIZON / 10:g} s ahead), "
+                f"got {horizon}"
+            )
     nominal, turbulence = designed_on(design.design_bank, design.config)
     return MPCController(
         design.config, nominal, turbulence, horizon=horizon, **scheduling(design.config)

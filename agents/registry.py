@@ -163,7 +163,7 @@ register_controller(
     "mpc",
     "agents.mpc:make_mpc",
     usage="mpc[:HORIZON]",
-    summary="the observer's estimate, a plan over HORIZON steps (default 20) within the "
+    summary="the observer's estimate, a plan over HORIZON steps (1 to 100, default 20) within the "
     "servo's rate and range limits, solved by OSQP each step",
     default=True,
 )

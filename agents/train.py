@@ -157,6 +157,15 @@ def _variant_ids() -> tuple[str, ...]:
     return VARIANTS.names()
 
 
+#: Most environments stepped side by side (training and its evaluation): ppo-fast.yml
+#: runs 512, the vector env is benchmarked at 4096.
+MAX_ENVS = 4096
+#: Most checkpoints one run may write (each is a few MB).
+MAX_CHECKPOINTS = 200
+#: Largest share of this machine's memory a run's rollout or replay buffer may take.
+MEMORY_SHARE = 0.5
+
+
 @dataclass(frozen=True)
 class Args:
     """Arguments of a training run (``rocketroll train ppo --help``)."""
@@ -184,7 +193,7 @@ class Args:
         None,
         "environments stepped side by side (default: n_envs of the hyperparameter file)",
         ge=1,
-        le=1_000_000,
+        le=MAX_ENVS,
     )
     out: Path | None = setting(
         None, "output folder (default: runs/<algorithm>/<env-id>/seed<seed>)", output="folder"
@@ -206,7 +215,7 @@ class Args:
         le=10**12,
     )
     eval_episodes: int = setting(
-        20, "test-split episodes per evaluation (run side by side)", ge=1, le=100_000
+        20, "test-split episodes per evaluation (run side by side)", ge=1, le=MAX_ENVS
     )
     eval_seed: int = setting(
         1000,
@@ -791,6 +800,45 @@ def _print_table(rows: list[tuple[str, Any]]) -> None:
 
 
 # ----------------------------------------------------------------------------- training
+def _memory_bytes() -> int | None:
+    """This machine's physical memory, where the system tells it."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _check_size(
+    args: Args,
+    hp: Hyperparameters,
+    algo: str,
+    n_envs: int,
+    steps: int,
+    kwargs: dict[str, Any],
+) -> None:
+    """Refuse, before anything is allocated, a run whose checkpoints or buffer would swamp
+    the disk or the memory."""
+    if args.checkpoint_freq and steps // args.checkpoint_freq > MAX_CHECKPOINTS:
+        raise UsageError(
+            f"--checkpoint-freq {args.checkpoint_freq:,} over {steps:,} env-steps writes "
+            f"{steps // args.checkpoint_freq:,} checkpoints, more than {MAX_CHECKPOINTS}: give "
+            f"at least --checkpoint-freq {-(-steps // MAX_CHECKPOINTS):,}, or 0 for none"
+        )
+    width = len(observation_names(hp.history, hp.observer, hp.flight_clock)) + 1
+    if algo == "ppo":  # SB3's rollout buffer: observation, action and six float32s a step
+        n_steps = int(kwargs.get("n_steps", 2048))
+        need, what = 4 * n_steps * n_envs * (width + 6), f"--envs {n_envs} x n_steps {n_steps}"
+    else:  # the replay buffer: observation and next observation, action, reward, done
+        size = int(kwargs.get("buffer_size", 1_000_000))
+        need, what = 4 * size * (2 * width + 3), f"buffer_size {size:,}"
+    memory = _memory_bytes()
+    if memory is not None and need > MEMORY_SHARE * memory:
+        raise UsageError(
+            f"{what} ({hp.source}) needs a {need / 2**30:.1f} GiB buffer, more than half of "
+            f"this machine's {memory / 2**30:.1f} GiB"
+        )
+
+
 def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, Any]:
     """Train PPO as ``args`` says; write the output folder; return ``settings.json``'s data.
 
@@ -813,14 +861,24 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         raise UsageError(f"--timesteps is needed: {hp.source}, {hp.env_id} has no n_timesteps")
     ppo_kwargs = ppo_arguments(hp)
     ppo_kwargs.setdefault("device", "cpu")
+    planned = timesteps
     if algo == "ppo":
         n_steps = int(ppo_kwargs.get("n_steps", 2048))
         batch_size = int(ppo_kwargs.get("batch_size", 64))
-        if (n_steps * n_envs) % batch_size != 0 or n_steps * n_envs < 2:
+        rollout = n_steps * n_envs
+        if rollout % batch_size != 0 or rollout < 2:
             raise UsageError(
-                f"--envs {n_envs} x n_steps {n_steps} = {n_steps * n_envs} steps per rollout is "
+                f"--envs {n_envs} x n_steps {n_steps} = {rollout} steps per rollout is "
                 f"not a multiple of batch_size {batch_size} ({hp.source}, {hp.env_id})"
             )
+        if args.resume is None and timesteps < rollout:
+            raise UsageError(
+                f"--timesteps {timesteps:,} is less than one rollout: --envs {n_envs} x n_steps "
+                f"{n_steps} ({hp.source}) = {rollout:,} env-steps; train at least that, or use "
+                "fewer --envs"
+            )
+        planned = -(-timesteps // rollout) * rollout  # PPO trains whole rollouts
+    _check_size(args, hp, algo, n_envs, planned, ppo_kwargs)
     out = (
         args.out if args.out is not None else Path("runs") / algo / args.env_id / f"seed{args.seed}"
     )
@@ -841,7 +899,12 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
 
     rows: list[tuple[str, Any]] = [
         ("env_id", args.env_id),
-        ("timesteps", f"{timesteps:,}"),
+        (
+            "timesteps",
+            f"{planned:,}"
+            if planned == timesteps or args.resume is not None
+            else f"{planned:,} (whole rollouts: {timesteps:,} asked)",
+        ),
         ("seed", args.seed),
         ("envs", n_envs),
         ("out", out),

@@ -296,8 +296,17 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
     if settings.unwrap and "roll_deg" in out:
         out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
 
+    if rate_hz is not None:
+        time_read = f"--rate {rate_hz:g} Hz"
+    else:
+        label = names[index] if names is not None else f"column {index + 1}"
+        time_read = f"the time column ({label!r}, read in {time_unit})"
     validate_samples(
-        out, path=where, lines=np.array(lines, dtype=np.int64), header_line=header_line
+        out,
+        path=where,
+        lines=np.array(lines, dtype=np.int64),
+        header_line=header_line,
+        time_read=time_read,
     )
     meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
     meta["import.units"] = units

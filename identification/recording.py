@@ -112,6 +112,12 @@ SAMPLING_RTOL = 0.01
 STEADY_AIRSPEED_RTOL = 0.1
 #: Fewest samples a recording may have.
 MIN_SAMPLES = 50
+#: Median sampling interval a recording may have, s: a roll log is sampled at 1 kHz to 1 Hz.
+#: Outside, the time column is most likely in another unit (ms read as s: 100 s a step), and
+#: the work would run away (a fine grid of 10 ms steps over 573 000 s).
+INTERVAL_RANGE_S = (1e-3, 1.0)
+#: Duration a recording may have, s: 4.9 s (50 samples at 10 Hz) to a day.
+DURATION_RANGE_S = (4.9, 86_400.0)
 #: Smallest fin-angle range (max - min) that gives something to identify, °.
 MIN_FIN_CHANGE_DEG = 0.1
 
@@ -177,6 +183,7 @@ def validate_samples(
     header_line: int | None = None,
     source: str | None = None,
     version: str | None = None,
+    time_read: str = "time_s",
 ) -> None:
     """Check the sample columns of a recording; raise :class:`RecordingError`.
 
@@ -195,6 +202,9 @@ def validate_samples(
         The recording's source; ``ud_true_deg`` needs ``"synthetic"``.
     version : str, optional
         The file's declared format; the flight columns need :data:`FORMAT`.
+    time_read : str
+        How the times were read, for messages about their unit (an importer:
+        its time column and the unit it was read in).
     """
     unknown = [c for c in columns if c not in COLUMNS]
     if unknown:
@@ -285,6 +295,7 @@ def validate_samples(
             f"{time[i]:g} s follows {time[i - 1]:g} s",
         )
     median = float(np.median(dt))
+    _check_time_scale(path, time_read, median, float(time[-1] - time[0]))
     deviation = np.abs(dt - median) / median
     bad = np.flatnonzero(deviation > SAMPLING_RTOL)
     if bad.size:
@@ -319,6 +330,40 @@ def validate_samples(
             f"the fin angle ({', '.join(fins)}) never changes by {MIN_FIN_CHANGE_DEG}° or more: "
             "nothing to identify",
         )
+
+
+def _seconds(value: float) -> str:
+    """``value`` s as a person would say it."""
+    if value < 1.0:
+        return f"{value * 1e3:g} ms"
+    if value < 3600.0:
+        return f"{value:g} s"
+    return f"{value / 3600.0:.3g} h"
+
+
+def _check_time_scale(path: str, time_read: str, interval: float, duration: float) -> None:
+    """Refuse a sampling interval or a duration no roll log has: a time column in the wrong
+    unit, most likely, whose identification would run away."""
+    (low, high), (shortest, longest) = INTERVAL_RANGE_S, DURATION_RANGE_S
+
+    def plausible(scale: float) -> bool:
+        return low <= interval * scale <= high and shortest <= duration * scale <= longest
+
+    if plausible(1.0):
+        return
+    if not low <= interval <= high:
+        found = f"{time_read} steps every {_seconds(interval)} (median), outside "
+        found += f"{_seconds(low)} to {_seconds(high)}"
+    else:
+        found = f"{time_read} spans {_seconds(duration)}, outside "
+        found += f"{_seconds(shortest)} to {_seconds(longest)}"
+    if plausible(1e-3):
+        hint = "is the time in milliseconds? (rocketroll import-csv --time-unit ms)"
+    elif plausible(1e-6):
+        hint = "is the time in microseconds? (rocketroll import-csv --time-unit us)"
+    else:
+        hint = "a roll log is sampled at 1 Hz to 1 kHz for 5 s to a day"
+    raise RecordingError(path, None, f"{found}; {hint}")
 
 
 _NUMBER = re.compile(

@@ -425,7 +425,12 @@ def _tuple_parser(kind: type) -> Callable[[str], tuple[Any, ...]]:
 
 
 def _help(f: _Field) -> str:
+    """The option's help: its text, the range its value must lie in, its default."""
     text = f.spec.help() if callable(f.spec.help) else f.spec.help
+    spec = f.spec
+    bounded = any(b is not None for b in (spec.ge, spec.gt, spec.le, spec.lt))
+    integer = f.base is int or f.item is int
+    limits = _bounds_text(spec, integer).removeprefix("must be ") if bounded else ""
     shown = f.default
     if (
         shown is not MISSING
@@ -439,7 +444,9 @@ def _help(f: _Field) -> str:
         elif f.base is list:
             shown = " ".join(map(str, shown))
         unit = f" {f.spec.unit}" if f.spec.unit else ""
-        text = f"{text} (default: {shown}{unit})"
+        text = f"{text} ({limits + '; ' if limits else ''}default: {shown}{unit})"
+    elif limits:
+        text = f"{text} ({limits})"
     elif f.spec.unit and f.spec.unit not in text:
         text = f"{text} ({f.spec.unit})"
     return text.replace("%", "%%")
@@ -703,6 +710,15 @@ def guarded(prog: str, work: Callable[[], int | None]) -> int:
         where = f": {exc.filename}" if exc.filename else ""
         print(f"{prog}: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
+    except SystemError as exc:
+        # Ctrl-C inside a compiled call (numba's dispatcher): Python reports the interrupt as
+        # a SystemError caused by the KeyboardInterrupt ("returned a result with an
+        # exception set").
+        if not isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+            raise
+        _close_progress_bars()
+        print(f"\n{prog}: interrupted", file=sys.stderr)
+        return 130
     return 0 if code is None else int(code)
 
 

@@ -79,7 +79,12 @@ def test_the_mpc_pickles_and_takes_a_horizon(default_db):
     clone = pickle.loads(pickle.dumps(mpc))
     obs = np.array([2.0, 1.0, -4.0, -4.0], dtype=np.float32)
     np.testing.assert_array_equal(mpc.act(obs, None), clone.act(obs, None))
-    for bad, message in [("mpc:0", "must be >= 1"), ("mpc:x", "whole number")]:
+    for bad, message in [
+        ("mpc:0", "must be 1 to 100 steps"),
+        ("mpc:101", "must be 1 to 100 steps"),
+        ("mpc:100000", "got 100000"),
+        ("mpc:x", "whole number"),
+    ]:
         with pytest.raises(ValueError, match=message):
             make_controller(bad, cfg, "RocketRoll-v0")
 

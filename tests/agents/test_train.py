@@ -274,8 +274,9 @@ def test_rocketroll_train_ppo_is_the_same_command():
     [
         (["--env-id", "CartPole-v1"], "argument --env-id: invalid choice: 'CartPole-v1'"),
         (["--timesteps", "0"], "--timesteps: must be in [1, 1000000000000], got 0"),
-        (["--envs", "-2"], "--envs: must be in [1, 1000000], got -2"),
-        (["--eval-episodes", "0"], "--eval-episodes: must be in [1, 100000], got 0"),
+        (["--envs", "-2"], "--envs: must be in [1, 4096], got -2"),
+        (["--envs", "100000"], "--envs: must be in [1, 4096], got 100000"),
+        (["--eval-episodes", "0"], "--eval-episodes: must be in [1, 4096], got 0"),
         (["--torch-threads", "0"], "--torch-threads: must be in [1, 1024], got 0"),
         (["--checkpoint-freq", "-1"], "--checkpoint-freq: must be in [0, 1000000000000], got -1"),
         (["--db", "/nonexistent/db.sqlite"], "--db: /nonexistent/db.sqlite: no such file"),

@@ -143,7 +143,7 @@ def test_bad_flight_columns_are_named_at_their_line(tmp_path, fmt, header, rows,
 
 
 def test_import_csv_reads_airspeed_and_altitude_in_their_units(tmp_path: Path):
-    t = np.arange(100) * 0.01
+    t = np.arange(600) * 0.01  # 6 s at 100 Hz
     rows = [
         f"{ti:.2f},{10.0 if i > 50 else 0.0},{i * 0.5},{180.0 + i},{1000.0 + i}"
         for i, ti in enumerate(t)

@@ -105,19 +105,21 @@ def test_import_options_name_source_notes(
 
 # --------------------------------------------------------------------------- (b) header, ms, ';'
 
-N = 60
-STEP = 30
+N = 300
+STEP = 150
 
 
 def daq_export(status: str) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
-    """Semicolon export with a header, time in ms (50 Hz from 1 s) and a text column."""
+    """Semicolon export with a header, time in ms (50 Hz from 1 s, 6 s long) and a text
+    column."""
     k = np.arange(N)
     time_ms = 1000.0 + 20.0 * k
     fin = np.where(k < STEP, -2.5, 7.5)
     roll = 0.125 * np.maximum(k - STEP, 0) ** 2
     lines = ["# DAQ export, v3", "sample;time_ms;status;fin_meas;roll_enc"]
     lines += [
-        f"{i};{t:g};{status};{f:g};{r:g}" for i, t, f, r in zip(k, time_ms, fin, roll, strict=True)
+        f"{i};{t:g};{status};{f:g};{r:.10g}"
+        for i, t, f, r in zip(k, time_ms, fin, roll, strict=True)
     ]
     return "\n".join(lines) + "\n", time_ms, fin, roll
 
@@ -279,7 +281,7 @@ def assert_same_recording(a: Recording, b: Recording, atol: float = 1e-6) -> Non
 
 def synthetic_recording() -> Recording:
     rng = np.random.default_rng(11)
-    n = 200
+    n = 400
     t = 12.5 + 0.02 * np.arange(n, dtype=np.float64)
     fin_cmd = np.repeat(rng.uniform(-40, 40, 4), n // 4)
     return Recording(
@@ -404,12 +406,14 @@ def test_byte_order_mark_is_tolerated(tmp_path: Path) -> None:
 
 
 def test_fast_logger_round_trips_uniformly(tmp_path: Path) -> None:
-    # 30 kHz: time needs more than 6 decimals to stay uniform within 1 %.
-    n = 200
+    # 1 kHz, the fastest a recording may be sampled; 3 kHz (a third of a millisecond) is not.
+    n = 5_000
     raw = tmp_path / "fast.txt"
-    raw.write_text("".join(f"{0 if k < 100 else 0.1} {k * 1e-3}\n" for k in range(n)))
-    rec = import_csv(raw, ["fin", "roll"], header=False, rate_hz=30_000.0, units="rad")
+    raw.write_text("".join(f"{0 if k < 100 else 0.1} {k * 1e-6}\n" for k in range(n)))
+    rec = import_csv(raw, ["fin", "roll"], header=False, rate_hz=1_000.0, units="rad")
     path = tmp_path / "fast.csv"
     save_recording(rec, path)
-    # Times are written to the nanosecond: 1 ns in 33 µs is 3e-5 relative.
-    assert load_recording(path).dt_s == pytest.approx(1 / 30_000, rel=1e-4)
+    # Times are written to the nanosecond: 1 ns in 1 ms is 1e-6 relative.
+    assert load_recording(path).dt_s == pytest.approx(1e-3, rel=1e-6)
+    with pytest.raises(RecordingError, match=r"--rate 3000 Hz steps every 0\.333333 ms"):
+        import_csv(raw, ["fin", "roll"], header=False, rate_hz=3_000.0, units="rad")

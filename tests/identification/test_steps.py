@@ -211,8 +211,9 @@ def test_fine_grid_contains_every_sample() -> None:
     assert grid.per_sample == 10 and grid.step_s == pytest.approx(H, abs=1e-12)
     assert grid.time_s.size == 199 * 10 + 1
     np.testing.assert_allclose(grid.time_s[::10], 2.0 + DT * np.arange(200), atol=1e-12)
-    grid100 = fine_grid(recording(200, fin_cmd=cmd, dt=0.01))
-    assert grid100.per_sample == 1 and grid100.time_s.size == 200
+    cmd500 = command_levels(500, [250], [5.0])
+    grid100 = fine_grid(recording(500, fin_cmd=cmd500, dt=0.01))  # 5 s at 100 Hz
+    assert grid100.per_sample == 1 and grid100.time_s.size == 500
 
 
 # --------------------------------------------------------------------------- step 2
