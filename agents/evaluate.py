@@ -49,6 +49,7 @@ __all__ = [
     "Evaluation",
     "check_unique_names",
     "env_id_setting",
+    "env_options_setting",
     "evaluate",
     "headline_scores",
     "markdown_table",
@@ -412,6 +413,19 @@ def env_id_setting() -> Any:
     )
 
 
+def env_options_setting() -> Any:
+    """The ``--set KEY=VALUE`` setting of the commands that run episodes on a database
+    (eval, tune): environment options, among them the replay (``method``,
+    ``disturbance``, ``model``)."""
+    return setting(
+        default_factory=dict,
+        help="an environment option for every episode, e.g. setpoint=zero, or the replay: "
+        "method=paper, disturbance=replay (repeatable)",
+        flag="--set",
+        metavar="KEY=VALUE",
+    )
+
+
 def check_unique_names(controllers: Sequence[Controller]) -> None:
     """Refuse (``UsageError``) two controllers of one name: their rows would merge."""
     names = [c.name for c in controllers]
@@ -453,12 +467,7 @@ class Args:
         input=True,
         kind="sqlite",
     )
-    settings: dict[str, Any] = setting(
-        default_factory=dict,
-        help="an environment option for every episode, e.g. setpoint=zero (repeatable)",
-        flag="--set",
-        metavar="KEY=VALUE",
-    )
+    settings: dict[str, Any] = env_options_setting()
     minari: str | None = setting(
         None,
         "also save every episode as a Minari dataset per controller, PREFIX-<controller>-v0 "

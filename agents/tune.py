@@ -13,11 +13,12 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Any, Literal
 
-from agents.evaluate import evaluate, protocol_episodes
+from agents.evaluate import env_options_setting, evaluate, protocol_episodes
 from agents.nominal import NominalModel
 from agents.pid import PIDController, PIDGains
+from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv import VARIANTS
 from rollenv.core import RollConfig
@@ -70,6 +71,7 @@ class TuneArgs:
     metric: Literal["rms_error", "settled_rms_error", "return"] = setting(
         "rms_error", "what the best ω optimises (default: the protocol's RMS error)"
     )
+    settings: dict[str, Any] = env_options_setting()
 
     def __post_init__(self) -> None:
         check(self)
@@ -79,7 +81,10 @@ def tune(args: TuneArgs) -> int:
     """Re-tune the PID for a database and print the gains."""
     from rollenv.bank import load_bank, variant_config
 
-    config = variant_config(args.env_id, {"split": "train"})
+    try:
+        config = variant_config(args.env_id, {**args.settings, "split": "train"})
+    except ValueError as exc:
+        raise UsageError(f"--set: {exc}") from None
     task = config.task
     model = NominalModel.from_bank(load_bank(config, args.db))
     print(f"nominal model: {model.source}")

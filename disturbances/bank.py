@@ -21,8 +21,17 @@ from disturbances.rows import TraceRow
 from disturbances.stores import Store
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import RocketrollError
 
-__all__ = ["TraceBank", "Window"]
+__all__ = ["REPLAY_OF_KIND", "BankError", "TraceBank", "Window", "interval_means"]
+
+#: The environment's ``disturbance`` option that replays each kind of trace.
+REPLAY_OF_KIND = {"identified": "replay", "surrogate": "surrogate", "posterior": "posterior"}
+
+
+class BankError(RocketrollError, ValueError):
+    """A database or bank lacks what a replay needs; the message says what it holds and
+    how to get what is missing."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,6 +71,56 @@ class Window:
             f"Window(uid={self.uid!r}, start={self.start_s:g} s, n={self.u_d_deg.size}, "
             f"dt={self.dt_s:g} s)"
         )
+
+
+def _lacking(db: Store, split: str, method: str, model: str, kind: Any, described: str) -> str:
+    """Why ``db`` has no traces of a selection: what it holds, and how to replay that or
+    add what is missing."""
+    held: dict[tuple[str, str, str], int] = {}
+    for row in db.traces():
+        if row.model == model:
+            key = (str(row.split), row.method, row.kind)
+            held[key] = held.get(key, 0) + 1
+    kinds = [kind] if isinstance(kind, str) else list(kind)
+    want = f"{'/'.join(kinds)} traces of {method}'s {model} model in the {split} split"
+    if not any(s == split for s, _, _ in held):
+        splits = sorted({s for s, _, _ in held}) or ["none"]
+        return (
+            f"{db.path}: no {want} ({described}): none of its recordings is in the {split} "
+            f"split (it has {', '.join(splits)}); add one there with `rocketroll db add "
+            f"RECORDING --db {db.path} --split {split}`"
+        )
+    have = sorted((m, k, n) for (s, m, k), n in held.items() if s == split)
+    if any(m == method and k in kinds for m, k, _ in have):  # other filters left none
+        return f"{db.path}: no traces match {described}"
+    listed = ", ".join(f"{n} {k} of {m}" for m, k, n in have)
+    other_method, other_kind, _ = have[0]
+    replay = REPLAY_OF_KIND.get(other_kind, other_kind)
+    draws = " --posterior 8" if "posterior" in kinds else ""
+    return (
+        f"{db.path}: no {want} ({described}); its {split} split holds {listed}: replay those "
+        f"(--set method={other_method} --set disturbance={replay}) or add them (`rocketroll "
+        f"db add RECORDING --db {db.path} --method {method}{draws}`)"
+    )
+
+
+def interval_means(u_deg: FloatArray, dt_s: float, edges_s: FloatArray) -> FloatArray:
+    """The exact average of a trace held ``dt_s`` per sample over each interval between
+    consecutive ``edges_s`` (s from its first sample; a zero-width interval: the value
+    there).  Linear interpolation of the running integral is exact for a held signal."""
+    u = np.asarray(u_deg, dtype=float)
+    edges = np.asarray(edges_s, dtype=float)
+    grid = dt_s * np.arange(u.size + 1)
+    integral = np.concatenate([[0.0], np.cumsum(u) * dt_s])  # ∫u, exact at the sample edges
+    at = np.interp(edges, grid, integral)
+    width = np.diff(edges)
+    return np.asarray(
+        np.where(
+            width > 0,
+            np.diff(at) / np.where(width > 0, width, 1.0),
+            np.interp(edges[:-1], grid[:-1], u),
+        )
+    )
 
 
 class TraceBank:
@@ -130,7 +189,7 @@ class TraceBank:
         infos = db.traces(**filters)
         described = ", ".join(f"{k}={v!r}" for k, v in filters.items() if v is not None)
         if not infos:
-            raise ValueError(f"{db.path}: no traces match {described or 'the database'}")
+            raise BankError(_lacking(db, split, method, model, kind, described))
         return cls(db.load_traces(infos), described or "all traces")
 
     @classmethod
@@ -213,14 +272,42 @@ class TraceBank:
             self._plans[duration_s] = plan
         return plan
 
+    def on_grid(self, dt_s: float, substep_s: float) -> TraceBank:
+        """This bank, replayable on a grid of ``substep_s``: as it is where every trace has
+        one Δt that is a whole number of substeps; otherwise with every trace of another Δt
+        than ``dt_s`` (the control period) replaced by its exact averages over the whole
+        ``dt_s`` intervals it covers (:func:`interval_means`), under its own uid."""
+        from disturbances.rows import derived_row
+
+        per = self._dts / substep_s
+        whole = np.all(np.abs(per - np.round(per)) <= 1e-9 * per) and np.all(np.round(per) >= 1)
+        if whole and np.unique(np.round(per)).size == 1:
+            return self
+        rows = []
+        for row, values, dt in zip(self.traces, self._arrays, self._dts, strict=True):
+            if abs(dt - dt_s) <= 1e-9 * dt_s:
+                rows.append(row)
+                continue
+            count = math.floor(values.size * dt / dt_s + 1e-9)
+            if count < 2:
+                raise ValueError(
+                    f"trace {row.uid} ({values.size * dt:g} s) is shorter than two {dt_s:g}-s "
+                    "control periods"
+                )
+            edges = np.arange(count + 1, dtype=np.float64) * dt_s
+            u = interval_means(values, float(dt), edges)
+            rows.append(derived_row(row, u, dt_s, None, {"averaged_from_dt_s": float(dt)}))
+        return TraceBank(rows, f"{self.description}, averaged onto {dt_s:g}-s steps")
+
     def require(self, duration_s: float) -> None:
-        """Raise ``ValueError`` unless some trace is at least ``duration_s`` long."""
+        """Raise :class:`BankError` unless some trace is at least ``duration_s`` long."""
         if not (math.isfinite(duration_s) and duration_s > 0):
             raise ValueError(f"window duration must be positive, got {duration_s!r}")
         if not np.any(self._sizes >= self.samples_for(duration_s)):
-            raise ValueError(
-                f"no trace in {self.description} is {duration_s:g} s long; the longest is "
-                f"{self.longest_s:g} s (shorten the episode or add longer recordings)"
+            raise BankError(
+                f"an episode is {duration_s:g} s, and the longest trace of {self.description} "
+                f"is {self.longest_s:g} s: shorten the episode (--set episode_s={self.longest_s:g} "
+                "or less) or add a longer recording"
             )
 
     def window(self, rng: np.random.Generator, duration_s: float) -> Window:

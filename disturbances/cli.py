@@ -613,6 +613,11 @@ class AddArgs:
         le=1000,
     )
     posterior_seed: int = setting(0, "seed of the first posterior draw", ge=0, le=2**63 - 1)
+    split: Literal["train", "test"] | None = setting(
+        None,
+        "store the recording in this split (default: its metadata's split, else chosen by "
+        "its samples, a quarter of recordings test)",
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
@@ -641,6 +646,10 @@ def add(args: AddArgs) -> int:
 
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
+    if args.split is not None:
+        recording = dataclasses.replace(
+            recording, metadata={**recording.metadata, "split": args.split}
+        )
     with _new_database(args.db), _open(args.db, create=True) as db:
         result = add_recording(
             db,

@@ -36,17 +36,16 @@ G. I. Taylor, "The spectrum of turbulence", Proc. R. Soc. Lond. A 164 (1938) 476
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from disturbances.bank import TraceBank
-from disturbances.rows import TraceRow, checksum, plain_statistics
+from disturbances.bank import TraceBank, interval_means
+from disturbances.rows import TraceRow, derived_row
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["flight_bank", "flown_row", "fly_trace", "tunnel_time"]
+__all__ = ["flight_bank", "fly_trace", "tunnel_time"]
 
 
 def tunnel_time(edges_s: FloatArray, airspeed_mps: FloatArray, v_ref_mps: float) -> FloatArray:
@@ -87,17 +86,7 @@ def fly_trace(
     ndarray, shape (m,)
         The flown ``u_d``, °.
     """
-    u = np.asarray(u_deg, dtype=float)
-    grid = dt_s * np.arange(u.size + 1)
-    integral = np.concatenate([[0.0], np.cumsum(u) * dt_s])  # ∫u, exact at the sample edges
-    at = np.interp(start_s + np.asarray(tau_s), grid, integral)  # linear between: exact
-    width = np.diff(tau_s)
-    mean = np.where(
-        width > 0,
-        np.diff(at) / np.where(width > 0, width, 1.0),
-        np.interp(start_s + tau_s[:-1], grid[:-1], u),
-    )
-    return np.asarray(mean * amplitude)
+    return np.asarray(interval_means(u_deg, dt_s, start_s + np.asarray(tau_s)) * amplitude)
 
 
 def flight_bank(
@@ -177,24 +166,5 @@ def flight_bank(
             "v_ref_mps": v_ref_mps,
             **(marks or {}),
         }
-        rows.append(flown_row(source, u, h, f"{start:g}s", settings))
+        rows.append(derived_row(source, u, h, f"{start:g}s", settings))
     return TraceBank(rows, f"{bank.description}, flown")
-
-
-def flown_row(
-    source: TraceRow, u: FloatArray, dt_s: float, suffix: str, settings: Mapping[str, Any]
-) -> TraceRow:
-    """A flight's trace made from ``source``: its rocket and provenance, the samples ``u``
-    held ``dt_s`` each, uid ``<source uid>@<suffix>``, ``settings`` added to the source's
-    (in memory only: such traces are made per configuration, not stored)."""
-    return dataclasses.replace(
-        source,
-        uid=f"{source.uid}@{suffix}",
-        dt_s=float(dt_s),
-        t0_s=0.0,
-        u_d_deg=u,
-        checksum=checksum(u),
-        settings={**dict(source.settings), **settings},
-        statistics=plain_statistics(u),
-        id=None,
-    )

@@ -58,6 +58,7 @@ from identification.pipeline import Identification, IdentifyOptions
 from identification.recording import Recording
 from identification.statistics import trace_statistics
 from rocketroll_common.arrays import FloatArray
+from rocketroll_common.errors import UsageError
 
 __all__ = [
     "add_identification",
@@ -289,6 +290,8 @@ def add_recording(
     chosen = _methods(methods)
     _check_posterior(chosen, posterior)
     source_method = _surrogate_method(chosen, surrogate_method)
+    if surrogates:
+        _check_surrogate_length(recording, options or IdentifyOptions())
     recording_hash = content_hash(recording.columns())
     missing = [
         m
@@ -318,6 +321,21 @@ def add_recording(
         posterior=posterior,
         posterior_seed=posterior_seed,
     )
+
+
+def _check_surrogate_length(recording: Recording, options: IdentifyOptions) -> None:
+    """Refuse, before any work, surrogates of a recording too short to check them."""
+    from disturbances.surrogate import checked_min_samples
+
+    needed = checked_min_samples()
+    have = int(recording.duration_s / options.ud_interval_s)
+    if have < needed:
+        raise UsageError(
+            f"{recording.name}: its u_d traces would hold {have} samples of "
+            f"{options.ud_interval_s:g} s ({recording.duration_s:g} s), and a checked surrogate "
+            f"needs {needed} ({needed * options.ud_interval_s:g} s): add it without surrogates "
+            "(--surrogates 0) or record longer"
+        )
 
 
 def add_identification(

@@ -28,6 +28,7 @@ sees a disturbance that training saw in another form.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from collections.abc import Mapping
@@ -53,6 +54,7 @@ __all__ = [
     "TraceRow",
     "checksum",
     "content_hash",
+    "derived_row",
     "identified_uid",
     "json_safe",
     "plain_statistics",
@@ -500,3 +502,28 @@ class TraceRow(_Row):
             f"TraceRow(uid={self.uid!r}, kind={self.kind}, {self.method}/{self.model}, "
             f"split={self.split or '?'}, n={self.n_samples}, dt={self.dt_s:g} s)"
         )
+
+
+def derived_row(
+    source: TraceRow,
+    u: FloatArray,
+    dt_s: float,
+    suffix: str | None,
+    settings: Mapping[str, Any],
+) -> TraceRow:
+    """A trace made from ``source`` (flown in a flight, averaged onto another grid): its
+    rocket and provenance, the samples ``u`` held ``dt_s`` each, uid ``<source
+    uid>@<suffix>`` (the source's own without one: the same turbulence on another grid),
+    ``settings`` added to the source's (in memory only: such traces are made per
+    configuration, not stored)."""
+    return dataclasses.replace(
+        source,
+        uid=source.uid if suffix is None else f"{source.uid}@{suffix}",
+        dt_s=float(dt_s),
+        t0_s=0.0,
+        u_d_deg=u,
+        checksum=checksum(u),
+        settings={**dict(source.settings), **settings},
+        statistics=plain_statistics(u),
+        id=None,
+    )

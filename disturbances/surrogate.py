@@ -66,6 +66,7 @@ from identification.statistics import decorrelation_stride
 from rocketroll_common.arrays import readonly_array
 
 __all__ = [
+    "CHECK_NPERSEG",
     "KS_ALPHA",
     "MIN_SAMPLES",
     "PSD_TOLERANCE_DECADES",
@@ -74,6 +75,7 @@ __all__ = [
     "SurrogateCheck",
     "ar_surrogate",
     "check_surrogate",
+    "checked_min_samples",
     "fit_ar",
     "iaaft",
     "make_surrogate",
@@ -619,12 +621,21 @@ def make_surrogate(x: ArrayLike, method: str, rng: np.random.Generator, **kw: An
 # --------------------------------------------------------------------------- check
 
 
+#: Welch segment of :func:`check_surrogate`, samples.
+CHECK_NPERSEG = 256
+
+
+def checked_min_samples(nperseg: int = CHECK_NPERSEG) -> int:
+    """Fewest samples a trace needs for its surrogates to be checked (two Welch segments)."""
+    return max(MIN_SAMPLES, 2 * nperseg)
+
+
 def check_surrogate(
     source: ArrayLike,
     surrogate: Surrogate | ArrayLike,
     dt_s: float,
     *,
-    nperseg: int = 256,
+    nperseg: int = CHECK_NPERSEG,
 ) -> SurrogateCheck:
     """Compare a surrogate's marginal and spectrum with its source's.
 
@@ -676,7 +687,7 @@ def check_surrogate(
         raise ValueError(f"nperseg must be at least 8, got {nperseg}")
     if not (math.isfinite(dt_s) and dt_s > 0.0):
         raise ValueError(f"dt_s must be a positive sampling interval, got {dt_s}")
-    minimum = max(MIN_SAMPLES, 2 * nperseg)
+    minimum = checked_min_samples(nperseg)
     src = _trace(source, "source", minimum)
     values = surrogate.u_d_deg if isinstance(surrogate, Surrogate) else surrogate
     sur = _trace(values, "surrogate", minimum)

@@ -100,6 +100,11 @@ class ImportSettings:
         "wind-tunnel", "where the data come from"
     )
     notes: str | None = setting(None, "free-text notes stored in the metadata")
+    split: Literal["train", "test"] | None = setting(
+        None,
+        "the database split the recording belongs to, stored in its metadata (default: "
+        "chosen by its samples, a quarter of recordings test)",
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "columns", tuple(c.strip() for c in self.columns))
@@ -316,6 +321,8 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         meta["import.altitude_unit"] = settings.altitude_unit
     if settings.notes:
         meta["notes"] = settings.notes
+    if settings.split is not None:
+        meta["split"] = settings.split
     return Recording(
         name=settings.name or Path(where).stem, source=settings.source, metadata=meta, **out
     )

@@ -655,6 +655,7 @@ class RollBatch:
         if n < 1:
             raise ValueError(f"the batch needs at least one environment, got {n}")
         bank = config.flights(bank)  # in flight, a tunnel bank is flown first
+        bank = bank.on_grid(config.dt_s, config.substep_s)  # mixed or off-grid Δt: averaged
         schedule = config.flight_schedule
         self.config = config
         self.bank = bank

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from disturbances.bank import TraceBank
-from disturbances.flight import flight_bank, flown_row
+from disturbances.flight import flight_bank
+from disturbances.rows import derived_row
 from identification.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
@@ -258,5 +259,5 @@ def _dryden(
             "flight": k,
             "split_seed": [_DRYDEN_SEED, _SPLIT_INDEX[split]],
         }
-        rows.append(flown_row(source, u, h, f"dryden-{severity}-{k}", settings))
+        rows.append(derived_row(source, u, h, f"dryden-{severity}-{k}", settings))
     return TraceBank(rows, f"{bank.description}, Dryden {severity} flights")

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from disturbances.bank import TraceBank, Window
+from disturbances.bank import BankError, TraceBank, Window
 from disturbances.db import DisturbanceDB
 from disturbances.rows import TraceRow
 from identification.model import PAPER_THETA, RollParams
@@ -177,9 +177,9 @@ def test_from_arrays_params_and_copies() -> None:
 
 def test_window_longer_than_every_trace(bank: TraceBank) -> None:
     rng = np.random.default_rng(0)
-    with pytest.raises(ValueError, match=r"is 600 s long; the longest is 573 s"):
+    with pytest.raises(ValueError, match=r"an episode is 600 s, and the longest trace .* 573 s"):
         bank.window(rng, 600.0)
-    with pytest.raises(ValueError, match="longest is 573 s"):
+    with pytest.raises(BankError, match=r"is 573 s: shorten the episode \(--set episode_s=573"):
         bank.require(573.1)
     bank.require(573.0)  # the whole trace is one window
     w = bank.window(rng, 573.0)
@@ -191,9 +191,9 @@ def test_window_longer_than_every_trace(bank: TraceBank) -> None:
 
 def test_filters_with_no_match(small_db: Path) -> None:
     with DisturbanceDB(small_db, create=False) as db:
-        with pytest.raises(ValueError, match=r"no traces match split=.train.*no-such-recording"):
+        with pytest.raises(BankError, match=r"no traces match split='train'.*no-such-recording"):
             TraceBank.from_db(db, "train", recording="no-such-recording")
-        with pytest.raises(ValueError, match=r"no traces match split=.test.*kind=.ar."):
+        with pytest.raises(BankError, match=r"no ar traces of paper's theta model .*kind='ar'"):
             TraceBank.from_db(db, "test", kind="ar")  # no AR surrogates in small_db
         with pytest.raises(ValueError, match="split must be 'train' or 'test'"):
             TraceBank.from_db(db, "validation")

@@ -227,11 +227,12 @@ def test_scalar_and_column_actions_are_accepted(bank):
 
 def test_a_bank_without_a_long_enough_trace_is_refused():
     short = TraceBank.from_arrays([np.zeros(100), np.zeros(250)], 0.1)
-    with pytest.raises(ValueError, match=r"the longest is 25 s"):
+    longest = r"an episode is 60 s, and the longest trace of .* is 25 s: .*episode_s=25 or less"
+    with pytest.raises(ValueError, match=longest):
         RocketRollEnv(bank=short)
-    with pytest.raises(ValueError, match=r"the longest is 25 s"):
+    with pytest.raises(ValueError, match=longest):
         gym.make("RocketRoll-v0", bank=short)
-    with pytest.raises(ValueError, match=r"the longest is 25 s"):
+    with pytest.raises(ValueError, match=longest):
         gym.make_vec("RocketRoll-v0", num_envs=2, bank=short)
     RocketRollEnv(bank=short, episode_s=25.0)  # exactly long enough
 
@@ -882,11 +883,16 @@ def test_gyro_noise_is_multiplicative(bank):
     assert abs(np.mean(ratios)) < 0.01
 
 
-def test_traces_off_the_substep_grid_are_refused():
-    odd = TraceBank.from_arrays([np.zeros(5000)], dt_s=0.015)
-    with pytest.raises(ValueError, match=r"whole number of 0\.01 s substeps"):
-        RocketRollEnv(bank=odd)
-    RocketRollEnv(bank=TraceBank.from_arrays([np.zeros(3000)], dt_s=0.02))  # on the grid
+def test_traces_off_the_substep_grid_are_averaged_onto_the_control_steps():
+    odd = TraceBank.from_arrays([np.arange(5000.0)], dt_s=0.015)  # 75 s
+    env = RocketRollEnv(bank=odd)
+    (trace,) = env.core.bank.traces
+    assert (trace.dt_s, trace.n_samples) == (0.1, 750)
+    assert trace.u_d_deg is not None
+    # The first 0.1 s holds samples 0-5 (0.015 s each) and 0.01 s of sample 6: exactly.
+    assert trace.u_d_deg[0] == pytest.approx((0.015 * 15 + 0.01 * 6) / 0.1, rel=1e-12)
+    on_grid = TraceBank.from_arrays([np.zeros(3000)], dt_s=0.02)
+    assert RocketRollEnv(bank=on_grid).core.bank is on_grid  # replayed as it is
 
 
 def test_a_bank_with_a_finer_trace_grid_replays_it(bank):

@@ -1,0 +1,150 @@
+"""A user's own database works with every command: what it lacks is said in one line with
+the option that replays what it holds or the command that adds what is missing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from disturbances.bank import TraceBank, interval_means
+from identification.bundled import bundled_path
+from identification.recording import load_recording
+from rocketroll.cli import main as rocketroll
+
+#: Fast identification: no Monte Carlo noise study.
+FAST = ["--mc-runs", "0"]
+#: The paper's replay (the default replays ml's posterior draws).
+PAPER = ["--set", "method=paper", "--set", "disturbance=replay"]
+
+
+def ok(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    code = rocketroll(argv)
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return out
+
+
+def refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
+    code = rocketroll(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert len(err.splitlines()) == 1, err
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Two 10-Hz tunnel runs and one at 100 Hz."""
+    folder = tmp_path_factory.mktemp("recordings")
+    made = {}
+    for name, extra in (("a", ["--seed", "5"]), ("b", ["--seed", "8"])):
+        made[name] = folder / f"{name}.csv"
+        assert rocketroll(["tunnel", *extra, "--out", str(made[name])]) == 0
+    made["fast"] = folder / "fast.csv"
+    assert (
+        rocketroll(["tunnel", "--seed", "7", "--log-dt", "0.01", "--out", str(made["fast"])]) == 0
+    )
+    return made
+
+
+def test_a_database_without_the_default_replay_says_what_it_holds(
+    recordings: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`tune pid --db my.sqlite` on paper and output-error fits was a traceback."""
+    db = str(tmp_path / "my.sqlite")
+    add = ["db", "add", str(recordings["a"]), "--db", db, "--method", "paper", *FAST]
+    ok(capsys, [*add, "--method", "output-error", "--split", "train"])
+    refused(
+        capsys,
+        ["tune", "pid", "--db", db, "--episodes", "2"],
+        "no posterior traces of ml's theta model in the train split",
+        "its train split holds 1 identified of output-error, 1 identified of paper",
+        "(--set method=output-error --set disturbance=replay)",
+        f"rocketroll db add RECORDING --db {db} --method ml --posterior 8",
+    )
+    out = ok(capsys, ["tune", "pid", "--db", db, "--episodes", "2", "--omegas", "2,3", *PAPER])
+    assert "best ω by rms_error" in out
+    # No recording in the test split: eval says so and how to add one.
+    refused(
+        capsys,
+        ["eval", "--db", db, "--policy", "pid", *PAPER, "--episodes", "2"],
+        "none of its recordings is in the test split (it has train)",
+        "--split test",
+    )
+    ok(capsys, ["db", "add", str(recordings["b"]), "--db", db, "--method", "paper", *FAST,
+                "--split", "test"])  # fmt: skip
+    out = ok(capsys, ["eval", "--db", db, "--policy", "pid", *PAPER, "--episodes", "2"])
+    assert "| PID |" in out
+
+
+def test_import_csv_and_db_add_take_the_split(
+    recordings: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = load_recording(recordings["a"])
+    assert rec.fin_cmd_deg is not None and rec.roll_deg is not None
+    log = tmp_path / "log.csv"
+    np.savetxt(log, np.column_stack([rec.time_s, rec.fin_cmd_deg, rec.roll_deg]), delimiter=",")
+    out = tmp_path / "rec.csv"
+    argv = ["import-csv", str(log), "--out", str(out), "--columns", "time,fin_cmd,roll"]
+    ok(capsys, [*argv, "--no-header", "--split", "test"])
+    assert load_recording(out).metadata["split"] == "test"
+
+
+def test_traces_of_another_sampling_interval_are_averaged_onto_the_control_steps(
+    recordings: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """After a 100-Hz import, `db add --method ml` and eval: 'all traces of a bank must
+    share one Δt' (traceback)."""
+    db = str(tmp_path / "mixed.sqlite")
+    for name, split in (("a", "train"), ("b", "test"), ("fast", "test")):
+        argv = ["db", "add", str(recordings[name]), "--db", db, "--method", "paper", *FAST]
+        ok(capsys, [*argv, "--split", split])
+    out = ok(capsys, ["eval", "--db", db, "--policy", "pid", *PAPER, "--episodes", "4"])
+    assert "| PID |" in out
+
+
+def test_averaging_a_held_trace_is_exact() -> None:
+    u = np.random.default_rng(0).normal(0.0, 10.0, 1000)  # 100 Hz, 10 s
+    edges = np.arange(101, dtype=np.float64) * 0.1
+    means = interval_means(u, 0.01, edges)
+    np.testing.assert_allclose(means, u.reshape(100, 10).mean(axis=1), rtol=0, atol=1e-12)
+    fine, coarse = TraceBank.from_arrays([u], 0.01), TraceBank.from_arrays([u[:500]], 0.1)
+    mixed = TraceBank([*fine.traces, *coarse.traces]).on_grid(0.1, 0.01)
+    assert [(t.dt_s, t.n_samples) for t in mixed.traces] == [(0.1, 100), (0.1, 500)]
+    assert mixed.traces[0].uid == fine.traces[0].uid  # the same turbulence, another grid
+    off = TraceBank.from_arrays([u], 0.015).on_grid(0.1, 0.01)  # not whole substeps
+    assert [(t.dt_s, t.n_samples) for t in off.traces] == [(0.1, 150)]
+    assert fine.on_grid(0.1, 0.01) is fine  # one Δt of whole substeps: replayed as it is
+
+
+def test_an_episode_longer_than_every_trace_is_one_line(
+    default_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    refused(
+        capsys,
+        ["eval", "--policy", "pid", "--episodes", "1", "--set", "episode_s=3000"],
+        "an episode is 3000 s, and the longest trace of",
+        "--set episode_s=",
+    )
+
+
+def test_surrogates_of_a_recording_too_short_to_check_them_are_refused_first(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`db add REC --surrogates 2` on a 15-s recording was a traceback after the work."""
+    short = tmp_path / "short.csv"
+    argv = ["tunnel", "--schedule", "staircase", "--steps", "2", "--dwell-min", "6"]
+    ok(capsys, [*argv, "--dwell-max", "8", "--seed", "1", "--out", str(short)])
+    db = tmp_path / "s.sqlite"
+    refused(
+        capsys,
+        ["db", "add", str(short), "--db", str(db), "--method", "paper", "--surrogates", "2"],
+        "a checked surrogate needs 512 (51.2 s)",
+        "--surrogates 0",
+    )
+    assert not db.exists()
+    assert bundled_path("tunnel-paper-seed0").exists()
