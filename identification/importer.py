@@ -121,10 +121,15 @@ def _cells(line: str, delimiter: str) -> list[str]:
     return [c.strip() for c in row]
 
 
+#: A number written with a decimal comma (``-1,25``, ``3,5e-2``), as semicolon exports do.
+_DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d*(?:[eE][+-]?\d+)?")
+
+
 def _guess_delimiter(line: str) -> str:
-    """Comma, semicolon or tab -- the first found outside quotes -- else whitespace."""
+    """The delimiter of a file whose first line is ``line``: a semicolon if it has one
+    outside quotes (a decimal-comma export), else a tab, else a comma, else whitespace."""
     bare = re.sub(r'"[^"]*"', "", line)
-    return next((d for d in (",", ";", "\t") if d in bare), " ")
+    return next((d for d in (";", "\t", ",") if d in bare), " ")
 
 
 def import_csv(
@@ -249,8 +254,10 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
-        try:  # without --delimiter, each line's own separator (as before the csv module)
-            cells = _cells(line, delimiter or _guess_delimiter(line))
+        if delimiter is None:  # without --delimiter, the first line's, for every line
+            delimiter = _guess_delimiter(line)
+        try:
+            cells = _cells(line, delimiter)
         except csv.Error as exc:
             raise RecordingError(where, lineno, f"unreadable cells ({exc})") from None
         if len(cells) != len(roles):
@@ -267,6 +274,8 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
             if role == "skip" and time_column is None:
                 row.append(0.0)
                 continue
+            if delimiter == ";" and _DECIMAL_COMMA.fullmatch(cell.strip()):
+                cell = cell.replace(",", ".")  # a semicolon export's decimal comma
             try:
                 row.append(parse_number(cell))
             except ValueError:

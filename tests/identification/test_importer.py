@@ -156,20 +156,38 @@ def test_header_time_column_in_ms_semicolons_and_text_column(
     assert loaded.metadata["import.columns"] == "skip,skip,skip,fin,roll"
 
 
-def test_each_line_is_split_on_its_own_separator_outside_quotes(tmp_path: Path) -> None:
-    """Without --delimiter every line is guessed alone (a space-separated header over comma
-    data imports), and a separator inside quotes does not count."""
+def test_the_first_line_chooses_the_separator_and_quotes_hide_it(tmp_path: Path) -> None:
+    """Without --delimiter the first line's separator splits every line (a semicolon before
+    a tab before a comma), and a separator inside quotes does not count."""
     t = np.arange(200) * 0.1
     fin = np.where(t < 10, 0.0, 10.0)
     body = "".join(
         f'"{a:.1f}";"{b:g}";"{3 * a:.3f}";"ok, logged"\n' for a, b in zip(t, fin, strict=True)
     )
     src = tmp_path / "quoted.csv"
-    src.write_text("t fin roll status\n" + body, encoding="utf-8")
+    src.write_text("t;fin;roll;status\n" + body, encoding="utf-8")
     rec = import_csv(src, ["time", "fin_cmd", "roll", "skip"], source="wind-tunnel")
     assert rec.fin_cmd_deg is not None and rec.roll_deg is not None
     np.testing.assert_allclose(rec.fin_cmd_deg, fin)
     np.testing.assert_allclose(rec.roll_deg, np.round(3 * t, 3))
+    # A space-separated header over semicolon data: the header decides, and line 2 says so.
+    src.write_text("t fin roll status\n" + body, encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"quoted.csv:2: 2 cells but --columns names 4"):
+        import_csv(src, ["time", "fin_cmd", "roll", "skip"], source="wind-tunnel")
+
+
+def test_a_semicolon_export_with_decimal_commas_imports(tmp_path: Path) -> None:
+    """A European logger's export: ';' between cells, ',' in the numbers (it failed with
+    '2 cells but --columns names 3')."""
+    t = np.arange(100) * 0.1
+    lines = ["zeit;flosse;rollwinkel"]
+    lines += [f"{a:.1f};{0 if a < 5 else 7.5:g};{-1.25 * a:.3f}".replace(".", ",") for a in t]
+    src = tmp_path / "export.csv"
+    src.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    rec = import_csv(src, ["time", "fin_cmd", "roll"], source="wind-tunnel")
+    assert rec.roll_deg is not None and rec.fin_cmd_deg is not None
+    np.testing.assert_allclose(rec.roll_deg, np.round(-1.25 * t, 3))
+    assert rec.fin_cmd_deg[-1] == 7.5
 
 
 def test_a_cell_the_csv_module_cannot_read_is_one_error_naming_its_line(tmp_path: Path) -> None:
