@@ -8,9 +8,11 @@ meets the same turbulence, setpoints and gyro noise.  Metrics per episode
 and aggregated (mean ± SD and worst case) go to a Markdown table, a JSON
 file and PNG plots.
 
-``rocketroll eval --policy pid|ppo[:PATH]|oracle|trim [--policy ...]``, or
-``python -m agents.evaluate`` with the same arguments.  Controllers come from
-the registry of :mod:`agents.registry`.
+``rocketroll eval --policy POLICY [--policy ...]``, or ``python -m
+agents.evaluate`` with the same arguments; ``--help`` lists every controller
+of the registry of :mod:`agents.registry` (trim, pid[:OMEGA],
+pid-tunnel[:OMEGA], observer, mpc[:HORIZON], ppo[:DIR], sac:DIR, td3:DIR,
+oracle, and what plugins add).
 """
 
 from __future__ import annotations

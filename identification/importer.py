@@ -26,6 +26,7 @@ from identification.recording import (
     Recording,
     RecordingError,
     parse_number,
+    read_text,
     validate_samples,
 )
 from rocketroll_common.arrays import FloatArray
@@ -241,10 +242,7 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
             "or --time-column NAME",
         )
 
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a BOM (Excel)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RecordingError(where, None, f"cannot read: {exc}") from exc
+    text = read_text(path)
 
     names: list[str] | None = None
     header_line: int | None = None

@@ -69,6 +69,7 @@ __all__ = [
     "Recording",
     "RecordingError",
     "load_recording",
+    "read_text",
     "save_recording",
     "validate_samples",
 ]
@@ -554,6 +555,26 @@ class Recording:
         )
 
 
+def read_text(path: str | os.PathLike[str]) -> str:
+    """A text file's contents, UTF-8 (a byte-order mark tolerated, as Excel writes it); a
+    byte that is not UTF-8 is a :class:`RecordingError` naming its line."""
+    name = os.fspath(path)
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise RecordingError(name, None, f"cannot read: {exc.strerror or exc}") from exc
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise RecordingError(
+            name,
+            line,
+            f"byte 0x{data[exc.start]:02x} is not UTF-8 (a Latin-1 or Windows export?): save "
+            "the file as UTF-8",
+        ) from None
+
+
 def _parse_metadata_line(path: str, lineno: int, text: str) -> tuple[str, str]:
     body = text[1:].strip()
     key, sep, value = body.partition(":")
@@ -583,10 +604,7 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         Naming the file, the line and the problem.
     """
     name = os.fspath(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a BOM (Excel)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RecordingError(name, None, f"cannot read: {exc}") from exc
+    text = read_text(path)
 
     meta: dict[str, str] = {}
     meta_lines: dict[str, int] = {}

@@ -85,6 +85,13 @@ GUST_SEVERITIES = ("light", "moderate", "severe")
 TUNNEL_EPISODE_S = 60.0
 
 
+#: The largest value of the configuration's unbounded options: a gyro noise of 100 % (the
+#: paper studies 10 %), ten times the identified turbulence, a starting angle of half a turn.
+_UPPER = {"gyro_noise_pct": 100.0, "disturbance_scale": 10.0, "initial_angle_deg": 180.0}
+#: The longest episode, s (a day: an episode's history is kept in memory).
+MAX_EPISODE_S = 86_400.0
+
+
 @dataclass(frozen=True)
 class RollConfig:
     """Every setting of a RocketRoll environment (see :class:`rollenv.env.RocketRollEnv`).
@@ -249,10 +256,14 @@ class RollConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name in ("gyro_noise_pct", "disturbance_scale", "initial_angle_deg"):
+        for name, most in _UPPER.items():
             value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+            if not (math.isfinite(value) and 0 <= value <= most):
+                raise ValueError(f"{name} must be a number in [0, {most:g}], got {value!r}")
+        if self.episode_s is not None and self.episode_s > MAX_EPISODE_S:
+            raise ValueError(
+                f"episode_s must be at most {MAX_EPISODE_S:g} s, got {self.episode_s!r}"
+            )
         for name in ("rate_weight", "fin_weight"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):

@@ -116,3 +116,31 @@ def test_training_that_would_run_away_is_refused(
         "--checkpoint-freq 50,013",
     )
     assert not out.exists()
+
+
+def test_an_environment_option_beyond_reason_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    """`eval --set gyro_noise_pct=1e9` was accepted."""
+    base = ["eval", "--policy", "pid", "--episodes", "1"]
+    refused(
+        capsys,
+        [*base, "--set", "gyro_noise_pct=1e9"],
+        "gyro_noise_pct must be a number in [0, 100]",
+    )
+    refused(
+        capsys,
+        [*base, "--set", "disturbance_scale=50"],
+        "disturbance_scale must be a number in [0, 10]",
+    )
+    refused(capsys, [*base, "--set", "episode_s=1e7"], "episode_s must be at most 86400 s")
+
+
+def test_a_file_that_is_not_utf8_is_refused_at_its_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A Latin-1 CSV's error gave a byte offset, not a line."""
+    latin = tmp_path / "latin.csv"
+    latin.write_bytes(b"t,fin,roll\n0,0,0\n0.1,0,caf\xe9\n")
+    refused(capsys, ["info", str(latin)], "latin.csv:3: byte 0xe9 is not UTF-8")
+    out = tmp_path / "rec.csv"
+    argv = ["import-csv", str(latin), "--out", str(out), "--columns", "time,fin,roll"]
+    refused(capsys, argv, "latin.csv:3: byte 0xe9 is not UTF-8", "save the file as UTF-8")

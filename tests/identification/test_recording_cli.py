@@ -462,7 +462,7 @@ def test_info_rejects_non_utf8_file(tmp_path: Path, capsys: pytest.CaptureFixtur
     )
     code, out, err = run_cli(capsys, "info", bad, "--json", tmp_path / "o.json")
     assert code == 2
-    assert_one_line_error(err, "info", bad, None, ["cannot read", "utf-8"])
+    assert_one_line_error(err, "info", bad, 1, ["byte 0xe9 is not UTF-8", "save the file as"])
     assert out == ""
     assert files_in(tmp_path) == ["latin1.csv"]
 
