@@ -15,7 +15,7 @@ from agents.actor import ActorChain
 from agents.base import Design, FlightView
 from agents.memory import FlightClock, History
 from agents.observer import ObserverFeatures
-from agents.registry import COMMITTED
+from agents.registry import COMMITTED, shipped_path
 from disturbances.bank import TraceBank
 from rollenv.core import RollConfig
 from rollenv.layout import Obs
@@ -255,7 +255,7 @@ def make_learned(design: Design, algorithm: str) -> PPOController:
     """``--policy ALGO[:DIR]``: a ``rocketroll train ALGO`` output (PPO: by default the
     committed policy of the env id)."""
     if design.arg:
-        path = Path(design.arg)
+        path = shipped_path(design.arg)
     elif algorithm == "ppo":
         path = COMMITTED / design.env_id
     else:

@@ -36,6 +36,7 @@ __all__ = [
     "make_controller",
     "policy_help",
     "register_controller",
+    "shipped_path",
     "unnamed_defaults",
 ]
 
@@ -45,6 +46,18 @@ Factory = Callable[[Design], Controller]
 
 #: Where the committed policies are: one folder per environment id.
 COMMITTED = Path(__file__).resolve().parent / "policies"
+
+
+def shipped_path(given: str) -> Path:
+    """``given`` as a path; a relative one that is not there but names a folder shipped with
+    the package (``agents/policies/seeds/...``, as the README writes it from the repository)
+    is the installed package's."""
+    path = Path(given)
+    if not path.exists() and not path.is_absolute():
+        installed = COMMITTED.parents[1] / path
+        if installed.exists():
+            return installed
+    return path
 
 
 def has_committed(env_id: str) -> bool:

@@ -50,6 +50,7 @@ import io
 import itertools
 import json
 import os
+import re
 import shutil
 import sqlite3
 import subprocess
@@ -144,6 +145,10 @@ class SweepSpec:
     source: str = "<spec>"
 
 
+#: The sweep specs shipped with the package: ``rocketroll sweep run NAME`` finds them.
+SHIPPED = Path(__file__).resolve().parent / "sweeps"
+#: What a sweep's name may be: it names its folder under runs/sweeps/.
+_SWEEP_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
 _TOP_KEYS = ("name", "env_ids", "controllers", "seeds", "episodes", "eval_seed", "settings")
 _CONTROLLER_KEYS = ("name", "policy", "train", "hyperparams", "timesteps", "grid")
 
@@ -180,8 +185,11 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
     from rollenv.variants import VARIANTS
 
     path = Path(path)
+    if not path.is_file() and path.parent == Path() and (SHIPPED / f"{path}.yml").is_file():
+        path = SHIPPED / f"{path}.yml"  # a shipped spec by name
     if not path.is_file():
-        raise UsageError(f"{path}: no such sweep spec")
+        shipped = ", ".join(sorted(p.stem for p in SHIPPED.glob("*.yml")))
+        raise UsageError(f"{path}: no such sweep spec (shipped, by name: {shipped})")
     try:
         document = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
@@ -197,8 +205,11 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         if key not in document:
             raise UsageError(f"{path}: {key!r} is missing")
     name = document["name"]
-    if not isinstance(name, str) or not name.strip():
-        raise UsageError(f"{path}: name must be a non-empty text, got {name!r}")
+    if not isinstance(name, str) or not _SWEEP_NAME.fullmatch(name):
+        raise UsageError(
+            f"{path}: name must be one word of letters, digits, '.', '_' and '-' (it names the "
+            f"sweep's folder, which it must not leave), got {name!r}"
+        )
     env_ids = [str(e) for e in _values(document["env_ids"], f"{path}: env_ids")]
     for env_id in env_ids:
         if env_id not in VARIANTS.names():
@@ -704,6 +715,8 @@ def run_sweep(
 
         db = str(default_path())
     db = str(Path(db).resolve())  # Ray runs each trial in a folder of its own
+    if ray:
+        _ray_module(ray)  # refused before anything is made
     if trials is None:
         trials = expand(spec)
     with ResultStore(root / "results.sqlite") as store:
@@ -767,6 +780,15 @@ def _on_ray(
 ) -> dict[str, str]:
     """The trials as Ray Tune trials (one CPU each); ``take`` gets each record as its trial
     ends (:mod:`agents.sweep_ray`); the errors of trials that gave none, by trial id."""
+    sweep_ray = _ray_module(address)
+    if not trials:
+        return {}
+    return sweep_ray.run(trials, run_trial, root, db, address, take)
+
+
+def _ray_module(address: str) -> Any:
+    """:mod:`agents.sweep_ray`, or a ``UsageError`` when Ray Tune is missing or ``address``
+    cannot hold the results store (before anything is made)."""
     try:
         from agents import sweep_ray
     except ImportError as exc:
@@ -778,9 +800,7 @@ def _on_ray(
             f"--ray {address}: Ray Client runs Tune away from this process, where the results "
             "store is; run the sweep on the cluster's head node (--ray auto) instead"
         )
-    if not trials:
-        return {}
-    return sweep_ray.run(trials, run_trial, root, db, address, take)
+    return sweep_ray
 
 
 # ----------------------------------------------------------------------------- command
@@ -816,6 +836,8 @@ class RunArgs:
 
 def _run(args: RunArgs) -> int:
     spec = load_spec(args.spec)
+    if args.ray:
+        _ray_module(args.ray)  # refused before anything is made or printed
     out = args.out if args.out is not None else Path("runs") / "sweeps" / spec.name
     trials = expand(spec)
     print(f"rocketroll sweep: {spec.name} ({spec.source}), {len(trials)} trials, out {out}")

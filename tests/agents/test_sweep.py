@@ -7,6 +7,7 @@ import io
 import json
 import re
 import sqlite3
+import sys
 from pathlib import Path
 
 import pytest
@@ -111,6 +112,14 @@ def test_a_spec_expands_to_its_grid_and_a_random_sample_of_it(tmp_path):
             "name: x\nenv_ids: [RocketRoll-v0]\ncontrollers: [{name: p, policy: pid}]\n"
             "search: {kind: random}\n",
             "kind random needs trials",
+        ),
+        (  # it names the sweep's folder, which it must not leave
+            "name: ../../etc\nenv_ids: [RocketRoll-v0]\ncontrollers: [{name: p, policy: pid}]\n",
+            "name must be one word of letters, digits",
+        ),
+        (
+            "name: .hidden\nenv_ids: [RocketRoll-v0]\ncontrollers: [{name: p, policy: pid}]\n",
+            "got '.hidden'",
         ),
     ],
 )
@@ -265,10 +274,11 @@ def test_the_report_summarises_seeds_against_the_pid(tmp_path, default_db):
 
 
 def test_the_shipped_sweep_spec_loads():
-    """sweeps/pid-ppo-seeds.yml (the README's): PID, observer, five PPO seeds, both tasks."""
+    """agents/sweeps/pid-ppo-seeds.yml (the README's, by name): PID, observer, five PPO
+    seeds, both tasks."""
     from agents.sweep import expand
 
-    spec = load_spec(Path(__file__).resolve().parents[2] / "sweeps" / "pid-ppo-seeds.yml")
+    spec = load_spec("pid-ppo-seeds")
     trials = expand(spec)
     assert len(trials) == 2 * (1 + 1 + 5)
     assert {t.controller.name for t in trials} == {"pid", "observer", "ppo"}
@@ -334,3 +344,20 @@ def test_a_trial_whose_worker_died_is_stored_as_failed(tmp_path, monkeypatch, de
     assert record["status"] == "failed" and record["error"] == "no result came back"
     with ResultStore(tmp_path / "out" / "results.sqlite") as store:
         assert store.done() == set() and len(store.rows()) == 1
+
+
+def test_ray_without_the_extra_is_refused_before_anything_is_made(
+    tmp_path, monkeypatch: pytest.MonkeyPatch
+):
+    """`sweep run ... --ray auto` without Ray started its progress bar and left
+    results.sqlite before it refused."""
+    import agents
+
+    monkeypatch.setitem(sys.modules, "agents.sweep_ray", None)  # as if Ray were not installed
+    monkeypatch.delattr(agents, "sweep_ray", raising=False)
+    out = tmp_path / "out"
+    argv = ["run", str(_spec(tmp_path, TWO_TRIALS)), "--out", str(out), "--ray", "auto"]
+    with contextlib.redirect_stderr(io.StringIO()) as errors:
+        assert run_command(command("sweep"), argv, "rocketroll sweep") == 2
+    assert "--ray needs Ray Tune, an optional extra" in errors.getvalue()
+    assert not out.exists()
