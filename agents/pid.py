@@ -204,8 +204,11 @@ class PIDController:
         self.reset()
 
     def _back_calculation(self, gains: PIDGains) -> float:
-        """The anti-windup factor ``Δt/(T_t·k_i)`` of ``gains``."""
-        return self._dt / gains.tt_s / gains.ki if gains.ki > 0 else 0.0
+        """The anti-windup factor ``min(Δt/T_t, 1)/k_i`` of ``gains``: a tracking time
+        shorter than the control step (a rate loop placed near the open-loop pole, where
+        ``k_p`` nears 0) would overcorrect the integral each step and diverge; at most one
+        step resets it fully."""
+        return min(self._dt / gains.tt_s, 1.0) / gains.ki if gains.ki > 0 else 0.0
 
     @classmethod
     def for_env(

@@ -137,6 +137,21 @@ def test_back_calculation_limits_the_overshoot_after_a_saturated_slew(train_mode
     assert overshoot(with_aw) < 3.0 < 10.0 < overshoot(without)
 
 
+def test_a_rate_loop_placed_near_the_open_loop_pole_stays_finite(train_model, default_db):
+    # ω just below a/2: k_p ≈ 0, so Åström's tracking time T_t = k_p/k_i is far shorter
+    # than the 0.1-s step; an uncapped back-calculation then overcorrected the integral each
+    # step and ran to NaN (rocketroll tune pid --env-id RocketRollRate-v0 --set method=paper).
+    cfg = config(task="rate", split="test")
+    bank = load_bank(cfg, None)
+    slow = 0.499 * train_model.a_per_s
+    gains = PIDGains.place(train_model, "rate", slow)
+    assert abs(gains.kp) < 0.01 and gains.tt_s < 0.1 * cfg.dt_s
+    pid = PIDController(gains, cfg)
+    steps = (10.0, -10.0, 10.0, -10.0, 10.0, -10.0)  # slews that saturate the servo
+    rollout = run_episode(env_on(cfg, bank), pid, EpisodeSpec(0, 3, bank.traces[0].uid, 0, steps))
+    assert np.isfinite(rollout.fin_deg).all() and np.isfinite(rollout.error).all()
+
+
 @pytest.mark.parametrize("task", ["angle", "rate"])
 def test_oracle_beats_pid_beats_trim_on_a_fixed_episode(task, train_model, default_db):
     def errors(cfg: RollConfig) -> list[dict[str, float]]:
