@@ -87,10 +87,11 @@ class Controller(Protocol):
 
 def design_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
     """The train split's tunnel traces for ``config`` (in flight, the traces its flights fly:
-    :mod:`disturbances.flight`), from ``db``."""
+    :mod:`disturbances.flight`), from ``db``; all of its recordings, whichever one
+    ``config.recording`` replays."""
     from rollenv.bank import load_bank
 
-    return load_bank(replace(config, split="train", flight=None), db)
+    return load_bank(replace(config, split="train", recording=None, flight=None), db)
 
 
 @dataclass
@@ -117,10 +118,10 @@ class Design:
     @cached_property
     def train_bank(self) -> TraceBank:
         """The traces of the *train* split: what a design may look at (never the test split
-        the protocol evaluates on)."""
+        the protocol evaluates on); all of its recordings, whichever one is replayed."""
         from rollenv.bank import load_bank
 
-        return load_bank(replace(self.config, split="train"), self.db)
+        return load_bank(replace(self.config, split="train", recording=None), self.db)
 
     @cached_property
     def design_bank(self) -> TraceBank:

@@ -32,12 +32,13 @@ from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
 from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
+from agents.replay import check_options, env_options_setting, options_config
 from disturbances.bank import TraceBank
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting, to_argv
 from rollenv import VARIANTS
-from rollenv.bank import load_bank, variant_config
+from rollenv.bank import load_bank
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.history import EpisodeHistory, HistoryRecorder
@@ -51,7 +52,6 @@ __all__ = [
     "Evaluation",
     "check_unique_names",
     "env_id_setting",
-    "env_options_setting",
     "evaluate",
     "headline_scores",
     "markdown_table",
@@ -415,19 +415,6 @@ def env_id_setting() -> Any:
     )
 
 
-def env_options_setting() -> Any:
-    """The ``--set KEY=VALUE`` setting of the commands that run episodes on a database
-    (eval, tune): environment options, among them the replay (``method``,
-    ``disturbance``, ``model``)."""
-    return setting(
-        default_factory=dict,
-        help="an environment option for every episode, e.g. setpoint=zero, or the replay: "
-        "method=paper, disturbance=replay (repeatable)",
-        flag="--set",
-        metavar="KEY=VALUE",
-    )
-
-
 def check_unique_names(controllers: Sequence[Controller]) -> None:
     """Refuse (``UsageError``) two controllers of one name: their rows would merge."""
     names = [c.name for c in controllers]
@@ -482,18 +469,14 @@ class Args:
         repeated = sorted({p for p in self.policy if self.policy.count(p) > 1})
         if repeated:
             raise UsageError(f"--policy {repeated[0]} is given twice")
-        fixed = sorted({"task", "split"} & set(self.settings))
-        if fixed:
-            raise UsageError(
-                f"--set {fixed[0]}=... is not allowed: the task follows --env-id, the split --split"
-            )
+        check_options(self.settings)
 
 
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
     args = replace(args, policy=unnamed_defaults(args.policy, default_policies(), args.env_id))
+    config = options_config(args.env_id, args.settings, args.split)
     try:
-        config = variant_config(args.env_id, {**args.settings, "split": args.split})
         controllers = [make_controller(p, config, args.env_id, db=args.db) for p in args.policy]
     except ValueError as exc:
         raise UsageError(str(exc)) from exc

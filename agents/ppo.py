@@ -274,10 +274,26 @@ def make_learned(design: Design, algorithm: str) -> PPOController:
     except ValueError as exc:
         raise ValueError(f"--policy {algorithm}:{path}: {exc} ({design.env_id})") from None
     if learned.needs_observer:
+        _check_observer_design(learned, design.config, f"--policy {algorithm}:{path}")
         learned.attach_observer(design.config, design.design_bank)
     if design.arg:
         learned.name = f"{learned.name} {path.name}"
     return learned
+
+
+def _check_observer_design(learned: PPOController, config: RollConfig, where: str) -> None:
+    """Refuse (``ValueError``) to design a policy's observer on another method's or model's
+    rockets and traces than training designed it on (another ``--set method=`` given to
+    ``train`` than to this command): the policy reads that observer's estimate.  The
+    disturbance and recording replayed may differ (a design reads the whole train split)."""
+    trained = learned.settings.get("env_settings") or {}
+    for name in ("method", "model"):
+        if name in trained and trained[name] != getattr(config, name):
+            raise ValueError(
+                f"{where}: its policy reads an observer designed with {name}={trained[name]!r} "
+                f"(training's environment), this environment has {name}="
+                f"{getattr(config, name)!r}; give the same --set {name}=... as training did"
+            )
 
 
 def make_sac(design: Design) -> PPOController:

@@ -47,10 +47,11 @@ from agents.evaluate import (
     protocol_episodes,
 )
 from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
+from agents.replay import check_options, env_options_setting, options_config
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv.bank import load_bank, variant_config
+from rollenv.bank import load_bank
 
 __all__ = ["COMMAND", "CONDITIONS", "Args", "run"]
 
@@ -104,9 +105,11 @@ class Args:
         input=True,
         kind="sqlite",
     )
+    settings: dict[str, Any] = env_options_setting()
 
     def __post_init__(self) -> None:
         check(self)
+        check_options(self.settings)
         for name in self.condition:
             if name not in CONDITIONS:
                 raise UsageError(
@@ -177,15 +180,15 @@ def plot(
 def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     """Design every controller once, evaluate it under every condition, report."""
     args = replace(args, policy=unnamed_defaults(args.policy, _default_policy(), args.env_id))
+    design = options_config(args.env_id, args.settings, args.split)
+    configs = {
+        c: options_config(args.env_id, {**args.settings, **CONDITIONS[c]}, args.split)
+        for c in args.condition
+    }
     try:
-        design = variant_config(args.env_id, {"split": args.split})
         controllers: list[Controller] = [
             make_controller(p, design, args.env_id, db=args.db) for p in args.policy
         ]
-        configs = {
-            c: variant_config(args.env_id, {**CONDITIONS[c], "split": args.split})
-            for c in args.condition
-        }
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
     check_unique_names(controllers)

@@ -57,10 +57,11 @@ from agents.evaluate import (
     protocol_episodes,
 )
 from agents.registry import make_controller
+from agents.replay import check_options, env_options_setting, options_config
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv.bank import load_bank, variant_config
+from rollenv.bank import load_bank
 
 __all__ = [
     "COMMAND",
@@ -220,9 +221,11 @@ class Args:
         input=True,
         kind="sqlite",
     )
+    settings: dict[str, Any] = env_options_setting()
 
     def __post_init__(self) -> None:
         check(self)
+        check_options(self.settings)
         if not self.run:
             raise UsageError("--run: give the trained runs, e.g. --run ppo:runs/ppo/seed0 ...")
         groups = _groups(self.run)
@@ -347,8 +350,8 @@ def plot(
 def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
     """Evaluate every run and reference, print the table, write the outputs."""
     groups = _groups(args.run)
+    config = options_config(args.env_id, args.settings, args.split)
     try:
-        config = variant_config(args.env_id, {"split": args.split})
         controllers = {
             label: [make_controller(p, config, args.env_id, db=args.db) for p in runs]
             for label, runs in groups.items()

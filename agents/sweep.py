@@ -44,6 +44,7 @@ raises records its error and the sweep goes on.  ``--jobs N`` runs trials in
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import hashlib
 import io
@@ -56,7 +57,7 @@ import sqlite3
 import subprocess
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -64,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.replay import FIXED_OPTIONS, check_options, env_options_setting, options_config
 from rocketroll_common import __version__
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -169,8 +171,9 @@ def _whole(value: Any, where: str, low: int = 0) -> int:
     return int(value)
 
 
-def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
-    """The spec in the YAML file ``path``, checked key by key.
+def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = None) -> SweepSpec:
+    """The spec in the YAML file ``path``, checked key by key; ``options`` (``sweep run
+    --set``) are environment options of every trial, over the spec's ``settings``.
 
     Raises
     ------
@@ -223,20 +226,17 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
     if not isinstance(settings_in, dict):
         raise UsageError(f"{path}: settings must be a mapping of setting -> values")
     settings = {str(k): _values(v, f"{path}: settings.{k}") for k, v in settings_in.items()}
-    fixed = sorted({"split", "task"} & set(settings))
+    fixed = sorted(set(FIXED_OPTIONS) & set(settings))
     if fixed:
         raise UsageError(
             f"{path}: settings.{fixed[0]}: not a setting to search (the task follows env_ids, "
             "the evaluation's split is the test split)"
         )
-    from rollenv.bank import variant_config
-
+    check_options(options or {})
+    settings.update({k: [v] for k, v in (options or {}).items()})
     for env_id in env_ids:
         for point in _points(settings):
-            try:
-                variant_config(env_id, {**point, "split": "test"})
-            except (TypeError, ValueError) as exc:
-                raise UsageError(f"{path}: settings {point} on {env_id}: {exc}") from None
+            options_config(env_id, point, "test", flag=f"{path}: settings {point} on {env_id}")
     search = document.get("search") or {"kind": "grid"}
     if not isinstance(search, dict) or search.get("kind") not in ("grid", "random"):
         raise UsageError(f"{path}: search must be {{kind: grid}} or {{kind: random, trials: N}}")
@@ -535,7 +535,7 @@ def _train_and_evaluate(trial: Trial, folder: Path, db: str | None) -> dict[str,
 
     from agents.evaluate import HEADLINE, evaluate, headline_scores, protocol_episodes
     from agents.registry import make_controller
-    from rollenv.bank import load_bank, variant_config
+    from rollenv.bank import load_bank
 
     c = trial.controller
     artifacts: dict[str, str] = {}
@@ -568,7 +568,7 @@ def _train_and_evaluate(trial: Trial, folder: Path, db: str | None) -> dict[str,
         artifacts.update(run=str(run), model=str(run / "model.zip"), hyperparams=str(hyperparams))
         policy = f"{c.train}:{run}"
     assert policy is not None
-    config = variant_config(trial.env_id, {**trial.settings, "split": "test"})
+    config = options_config(trial.env_id, trial.settings, "test")
     controller = make_controller(policy, config, trial.env_id, db=db)
     bank = load_bank(config, db)
     specs = protocol_episodes(config, trial.episodes, trial.eval_seed, bank=bank)
@@ -829,15 +829,18 @@ class RunArgs:
         "a cluster's ADDRESS (HOST:6379); the optional extra rocketroll[ray]",
         metavar="ADDRESS",
     )
+    settings: dict[str, Any] = env_options_setting()
 
     def __post_init__(self) -> None:
         check(self)
+        check_options(self.settings)
 
 
 def _run(args: RunArgs) -> int:
-    spec = load_spec(args.spec)
+    spec = load_spec(args.spec, args.settings)
     if args.ray:
         _ray_module(args.ray)  # refused before anything is made or printed
+    _check_replays(spec, args.db)
     out = args.out if args.out is not None else Path("runs") / "sweeps" / spec.name
     trials = expand(spec)
     print(f"rocketroll sweep: {spec.name} ({spec.source}), {len(trials)} trials, out {out}")
@@ -852,6 +855,19 @@ def _run(args: RunArgs) -> int:
         f"results in {out / 'results.sqlite'}"
     )
     return 1 if failed else 0
+
+
+def _check_replays(spec: SweepSpec, db: str | None) -> None:
+    """Refuse (:class:`disturbances.bank.BankError`, one line) a sweep whose database lacks
+    a replay it asks for, before any trial: every trial would fail on it.  The designs
+    read the train split (all its recordings), the evaluation the test split."""
+    from rollenv.bank import load_bank
+
+    for env_id in spec.env_ids:
+        for point in _points(spec.settings):
+            evaluated = options_config(env_id, point, "test")
+            load_bank(evaluated, db)
+            load_bank(dataclasses.replace(evaluated, split="train", recording=None), db)
 
 
 @dataclass(frozen=True)

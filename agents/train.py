@@ -55,6 +55,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from agents.replay import check_options, env_options_setting
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
 from rocketroll_common.settings import Command, check, parse, run_command, setting, to_argv
 
@@ -111,6 +112,7 @@ OBSERVER_DESIGN = (
     "method",
     "disturbance",
     "model",
+    "recording",
     "dt_s",
     "substep_s",
     "rate_limit_dps",
@@ -246,9 +248,11 @@ class Args:
     verbose: int = setting(
         0, "SB3's verbosity: 0 quiet, 1 its training table after each update", ge=0, le=2
     )
+    settings: dict[str, Any] = env_options_setting()
 
     def __post_init__(self) -> None:
         check(self)
+        check_options(self.settings)
         if self.db is not None and "://" not in self.db and not Path(self.db).is_file():
             raise SettingError("db", f"{self.db}: no such file")
         if self.resume is not None and not Path(self.resume).is_file():
@@ -548,7 +552,9 @@ def make_env(
 
     The monitor is inside, so it records the raw returns whatever
     ``VecNormalize`` does to rewards.  ``training=False`` (evaluation):
-    frozen statistics (synced from training by the caller) and raw rewards.
+    frozen statistics (synced from training by the caller), raw rewards, and
+    every recording of the split (a ``recording`` option chooses what is
+    trained on, not the held-out set).
 
     Returns
     -------
@@ -566,8 +572,11 @@ def make_env(
     for forbidden in ("split", "task"):
         if forbidden in hp.env_kwargs:
             raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs may not set {forbidden!r}")
+    options = dict(hp.env_kwargs)
+    if not training:  # the held-out check replays the whole test split
+        options.pop("recording", None)
     try:
-        adapter = RollVecEnv(n_envs, hp.env_id, db=db, seed=seed, split=split, **hp.env_kwargs)
+        adapter = RollVecEnv(n_envs, hp.env_id, db=db, seed=seed, split=split, **options)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
@@ -855,6 +864,8 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     started = time.perf_counter()
     algo = args.ALGO
     hp = load_hyperparameters(args.hyperparams, args.env_id, algo)
+    if args.settings:  # the replay and options of --set, over the entry's env_kwargs
+        hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **args.settings})
     n_envs = args.envs if args.envs is not None else hp.n_envs
     timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
     if timesteps is None:

@@ -73,11 +73,35 @@ class Window:
         )
 
 
-def _lacking(db: Store, split: str, method: str, model: str, kind: Any, described: str) -> str:
+def _lacking(
+    db: Store,
+    split: str,
+    method: str,
+    model: str,
+    kind: Any,
+    described: str,
+    recording: str | None = None,
+) -> str:
     """Why ``db`` has no traces of a selection: what it holds, and how to replay that or
     add what is missing."""
+    rows = db.traces()
+    if recording is not None and not any(r.recording == recording for r in rows):
+        names = sorted({r.recording for r in rows if r.split == split}) or ["none"]
+        return (
+            f"{db.path}: no recording named {recording!r} ({described}); its {split} split "
+            f"holds {', '.join(names)} (recording=NAME, as `rocketroll db list --db {db.path}` "
+            "names them)"
+        )
+    if recording is not None:
+        rows = [r for r in rows if r.recording == recording]
+        where = {str(r.split) for r in rows}
+        if split not in where:
+            return (
+                f"{db.path}: recording {recording!r} is in the {', '.join(sorted(where))} split, "
+                f"not {split} ({described})"
+            )
     held: dict[tuple[str, str, str], int] = {}
-    for row in db.traces():
+    for row in rows:
         if row.model == model:
             key = (str(row.split), row.method, row.kind)
             held[key] = held.get(key, 0) + 1
@@ -102,6 +126,11 @@ def _lacking(db: Store, split: str, method: str, model: str, kind: Any, describe
         f"(--set method={other_method} --set disturbance={replay}) or add them (`rocketroll "
         f"db add RECORDING --db {db.path} --method {method}{draws}`)"
     )
+
+
+def _one(value: Any) -> str | None:
+    """A filter's single value (None for none or a list)."""
+    return value if isinstance(value, str) else None
 
 
 def interval_means(u_deg: FloatArray, dt_s: float, edges_s: FloatArray) -> FloatArray:
@@ -189,7 +218,9 @@ class TraceBank:
         infos = db.traces(**filters)
         described = ", ".join(f"{k}={v!r}" for k, v in filters.items() if v is not None)
         if not infos:
-            raise BankError(_lacking(db, split, method, model, kind, described))
+            raise BankError(
+                _lacking(db, split, method, model, kind, described, _one(filters.get("recording")))
+            )
         return cls(db.load_traces(infos), described or "all traces")
 
     @classmethod

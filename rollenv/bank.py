@@ -58,7 +58,8 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     still takes the rocket's parameters from them), validated surrogates for
     ``"surrogate"``, posterior draws for ``"posterior"`` (a method with a
     posterior, ``method="ml"``); ``config.method`` (the paper's by default);
-    ``config.model``; ``config.split``.
+    ``config.model``; ``config.split``; ``config.recording`` (one recording's
+    traces, when given).
     Banks are cached per file state and selection, so a vector of
     environments in one process loads the traces once.  For a flight
     (``config.flight``) the bank holds the flights
@@ -80,12 +81,21 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
             config.method,
             config.model,
             kind,
+            config.recording,
         )
         with _LOCK:
             bank = _CACHE.get(key)
             if bank is None:
+                only: dict[str, Any] = {}
+                if config.recording is not None:
+                    only["recording"] = config.recording
                 bank = TraceBank.from_db(
-                    database, config.split, method=config.method, model=config.model, kind=kind
+                    database,
+                    config.split,
+                    method=config.method,
+                    model=config.model,
+                    kind=kind,
+                    **only,
                 )
                 if len(_CACHE) >= 16:
                     _CACHE.clear()

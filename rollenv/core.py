@@ -161,6 +161,10 @@ class RollConfig:
         registered one (:data:`identification.methods.METHODS`).
     split : str
         Database split the traces come from: ``"train"`` or ``"test"``.
+    recording : str or None
+        Only the traces of the recording of this name (as ``rocketroll db
+        list`` shows it; it must be in ``split``).  Default (None): every
+        recording of the split.
     domain_randomization : bool
         Draw α, θ̄, β̄ and ᾱ at each reset uniformly over the range found in
         the bank instead of using the trace's own; a draw whose damping
@@ -201,6 +205,7 @@ class RollConfig:
     model: str = "theta"
     method: str = "ml"
     split: str = "train"
+    recording: str | None = None
     domain_randomization: bool = False
     setpoint: str = "steps"
     setpoint_period_s: float = 10.0
@@ -239,6 +244,10 @@ class RollConfig:
                 raise ValueError(
                     f"{name} must be one of {', '.join(map(repr, allowed))}, not {value!r}"
                 )
+        if self.recording is not None and not (
+            isinstance(self.recording, str) and self.recording.strip()
+        ):
+            raise TypeError(f"recording must be a recording's name, got {self.recording!r}")
         if self.flight is not None and not isinstance(self.flight, str):
             raise TypeError(f"flight must be a profile name or path, got {self.flight!r}")
         self._resolve_episode()

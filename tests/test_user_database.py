@@ -67,7 +67,7 @@ def test_a_database_without_the_default_replay_says_what_it_holds(
         f"rocketroll db add RECORDING --db {db} --method ml --posterior 8",
     )
     out = ok(capsys, ["tune", "pid", "--db", db, "--episodes", "2", "--omegas", "2,3", *PAPER])
-    assert "best ω by rms_error" in out
+    assert "best ω by regulation_rms_error" in out
     # No recording in the test split: eval says so and how to add one.
     refused(
         capsys,
@@ -148,3 +148,106 @@ def test_surrogates_of_a_recording_too_short_to_check_them_are_refused_first(
     )
     assert not db.exists()
     assert bundled_path("tunnel-paper-seed0").exists()
+
+
+TINY_PPO = """\
+RocketRoll-v0:
+  n_envs: 1
+  n_timesteps: 64
+  n_steps: 32
+  batch_size: 32
+  n_epochs: 1
+  policy_kwargs: {net_arch: [8], activation_fn: tanh}
+"""
+
+
+@pytest.fixture(scope="module")
+def paper_db(recordings: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Paper fits only: a train recording and two test recordings."""
+    db = tmp_path_factory.mktemp("paper") / "paper.sqlite"
+    for name, split in (("a", "train"), ("b", "test"), ("fast", "test")):
+        argv = ["db", "add", str(recordings[name]), "--db", str(db), "--method", "paper"]
+        assert rocketroll([*argv, *FAST, "--split", split]) == 0
+    return db
+
+
+def test_a_recording_is_chosen_by_name_and_a_wrong_name_is_one_line(
+    paper_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from agents.replay import options_config
+    from rollenv.bank import load_bank
+
+    capsys.readouterr()
+    b, fast = "tunnel-paper-seed8", "tunnel-paper-seed7"  # the tunnel's names of b and fast
+    config = options_config("RocketRoll-v0", {"method": "paper", "recording": b}, "test")
+    assert {t.recording for t in load_bank(config, paper_db).traces} == {b}
+    everything = options_config("RocketRoll-v0", {"method": "paper"}, "test")
+    assert {t.recording for t in load_bank(everything, paper_db).traces} == {b, fast}
+    db = str(paper_db)
+    base = ["eval", "--db", db, "--policy", "pid", "--episodes", "2", *PAPER]
+    assert "| PID |" in ok(capsys, [*base, "--set", f"recording={fast}"])
+    refused(
+        capsys,
+        [*base, "--set", "recording=nope"],
+        "no recording named 'nope'",
+        f"its test split holds {fast}, {b}",
+    )
+    train = "tunnel-paper-seed5"
+    refused(
+        capsys,
+        [*base, "--set", f"recording={train}"],
+        f"recording '{train}' is in the train split, not test",
+    )
+
+
+def test_every_command_that_runs_episodes_replays_what_set_selects(
+    paper_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """tune, eval, train, seeds, robustness and sweep run take --set and read it through
+    one function: on a database of paper fits each runs on the paper replay and each
+    says in one line what it lacks without it."""
+    db = str(paper_db)
+    runs = Path(__file__).resolve().parents[1] / "agents" / "policies" / "seeds" / "RocketRoll-v0"
+    seeds = ["seeds", "--run", f"ppo:{runs / 'ppo' / 'seed1'}", "--run"]
+    seeds += [f"ppo:{runs / 'ppo' / 'seed2'}", "--reference", "pid"]
+    hyperparams = tmp_path / "tiny.yml"
+    hyperparams.write_text(TINY_PPO, encoding="utf-8")
+    spec = tmp_path / "spec.yml"
+    spec.write_text(
+        "name: mine\nenv_ids: [RocketRoll-v0]\nepisodes: 2\ncontrollers:\n"
+        "  - {name: pid, policy: pid}\n",
+        encoding="utf-8",
+    )
+    train = ["train", "ppo", "--hyperparams", str(hyperparams), "--eval-freq", "0"]
+    train += ["--eval-episodes", "1", "--checkpoint-freq", "0", "--no-progress-bar"]
+    commands = {
+        "tune": ["tune", "pid", "--omegas", "2,3"],
+        "eval": ["eval", "--policy", "pid"],
+        "robustness": ["robustness", "--policy", "pid", "--condition", "default"],
+        "seeds": seeds,
+        "sweep": ["sweep", "run", str(spec), "--out", str(tmp_path / "sweep"), "--no-progress"],
+        "train": [*train, "--out", str(tmp_path / "run"), "--timesteps", "32"],
+    }
+    episodes = {"tune": ["--episodes", "2"], "eval": ["--episodes", "2"]}
+    episodes.update(robustness=["--episodes", "2"], seeds=["--episodes", "2"])
+    for name, argv in commands.items():
+        lacking = "no posterior traces of ml's theta model in the"
+        refused(capsys, [*argv, *episodes.get(name, []), "--db", db], lacking, "--set method=")
+        ok(capsys, [*argv, *episodes.get(name, []), "--db", db, *PAPER])
+    import json
+
+    trained = json.loads((tmp_path / "run" / "settings.json").read_text(encoding="utf-8"))
+    assert trained["env_settings"]["method"] == "paper"
+    assert trained["env_settings"]["disturbance"] == "replay"
+
+
+def test_a_policy_reading_an_observer_is_evaluated_on_the_replay_it_was_trained_on(
+    default_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    residual = "agents/policies/seeds/RocketRoll-v0/ppo-residual/seed0"
+    refused(
+        capsys,
+        ["eval", "--policy", f"ppo:{residual}", "--episodes", "1", *PAPER],
+        "its policy reads an observer designed with method='ml'",
+        "give the same --set method=... as training did",
+    )

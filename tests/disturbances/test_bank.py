@@ -191,8 +191,10 @@ def test_window_longer_than_every_trace(bank: TraceBank) -> None:
 
 def test_filters_with_no_match(small_db: Path) -> None:
     with DisturbanceDB(small_db, create=False) as db:
-        with pytest.raises(BankError, match=r"no traces match split='train'.*no-such-recording"):
+        with pytest.raises(BankError, match=r"no recording named 'no-such-recording' \(split="):
             TraceBank.from_db(db, "train", recording="no-such-recording")
+        with pytest.raises(BankError, match=r"no traces match split='train'.*metadata="):
+            TraceBank.from_db(db, "train", metadata={"rig": "no-such-rig"})
         with pytest.raises(BankError, match=r"no ar traces of paper's theta model .*kind='ar'"):
             TraceBank.from_db(db, "test", kind="ar")  # no AR surrogates in small_db
         with pytest.raises(ValueError, match="split must be 'train' or 'test'"):
