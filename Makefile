@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip
 DEMO   ?= build/demo
 
-.PHONY: demo test lint typecheck pytest pytest-varied venv clean recordings
+.PHONY: demo test lint typecheck pytest pytest-varied venv clean recordings help
 
 $(BIN)/python:
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required, found " + sys.version'
@@ -95,6 +95,11 @@ pytest-varied: $(VENV)/.installed-dev
 	env $(VARIED) $(BIN)/pytest -p no:cacheprovider tests/test_readme.py
 
 test: lint typecheck pytest pytest-varied
+
+# Write rocketroll/help.json again (every command's --help, read without importing the
+# command's module); a test fails while it is not current.
+help: $(VENV)/.installed
+	$(BIN)/python -m rocketroll.help
 
 # Regenerate the bundled synthetic recordings from their recorded commands.
 recordings: $(VENV)/.installed

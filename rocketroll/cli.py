@@ -1,7 +1,8 @@
 """The ``rocketroll`` command line: one table of commands, each defined by its layer.
 
 ``rocketroll --help`` imports nothing but this module and the standard
-library, so it answers at once.  ``rocketroll COMMAND ...`` imports the
+library, so it answers at once; so does ``rocketroll COMMAND --help``, from
+the help kept with the package (:mod:`rocketroll.help`).  ``rocketroll COMMAND ...`` imports the
 command's module, builds its parser from the command's settings dataclass
 (:mod:`rocketroll_common.settings`) and runs it: errors a user can cause
 become one line on stderr and exit code 2, Ctrl-C one line and 130.
@@ -85,9 +86,16 @@ def command(name: str) -> Command:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    from rocketroll.help import cached_help
+
     words = list(sys.argv[1:] if argv is None else argv)
     ns, rest = build_parser().parse_known_args(words)
-    return run_command(command(ns.command), rest, prog=f"rocketroll {ns.command}")
+    prog = f"rocketroll {ns.command}"
+    text = cached_help(ns.command, rest, prog)  # without importing the command's module
+    if text is not None:
+        sys.stdout.write(text)
+        return 0
+    return run_command(command(ns.command), rest, prog=prog)
 
 
 if __name__ == "__main__":

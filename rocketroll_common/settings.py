@@ -454,6 +454,13 @@ def _help(f: _Field) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
     """One option (or positional) per :func:`setting` field of ``cls``, flattened."""
+    for flags, kwargs in argument_specs(cls):
+        parser.add_argument(*flags, **kwargs)
+
+
+def argument_specs(cls: type) -> list[tuple[tuple[str, ...], dict[str, Any]]]:
+    """The ``parser.add_argument(*flags, **kwargs)`` calls of :func:`add_arguments`."""
+    specs: list[tuple[tuple[str, ...], dict[str, Any]]] = []
     seen: set[str] = set()
     for f in _leaves(cls):
         if not f.spec.cli:
@@ -474,7 +481,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
                 kwargs["default"] = True
             else:
                 kwargs["action"] = "store_true"
-            parser.add_argument(f.flag, dest=f.name, **kwargs)
+            specs.append(((f.flag,), {"dest": f.name, **kwargs}))
             continue
         if parse is None:
             if f.base in (int, float):
@@ -495,7 +502,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
                 kwargs["nargs"] = "?"
                 kwargs["default"] = f.default
             kwargs.setdefault("metavar", f.spec.metavar or f.name)
-            parser.add_argument(f.name, **kwargs)
+            specs.append(((f.name,), kwargs))
             continue
         if f.base in (list, dict):
             kwargs["action"] = "append"
@@ -504,7 +511,8 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
             kwargs["required"] = True
         else:
             kwargs["default"] = f.default
-        parser.add_argument(f.flag, dest=f.name, **kwargs)
+        specs.append(((f.flag,), {"dest": f.name, **kwargs}))
+    return specs
 
 
 def _value(f: _Field, ns: argparse.Namespace) -> Any:
@@ -617,6 +625,18 @@ def plain(docstring: str) -> str:
     return _LITERAL.sub(r"\1", _ROLE.sub(r"\1", docstring))
 
 
+def _shown(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The ``add_argument`` keywords that ``--help`` shows, as JSON: no parsing function, and
+    a default only where argparse prints it (a ``--flag/--no-flag``'s)."""
+    shown = {k: v for k, v in kwargs.items() if k not in ("type", "default")}
+    if kwargs.get("action") is argparse.BooleanOptionalAction:
+        shown["action"] = "boolean_optional"
+        shown["default"] = kwargs["default"]
+    if "choices" in shown:
+        shown["choices"] = [str(c) for c in shown["choices"]]
+    return shown
+
+
 @dataclass(frozen=True)
 class Command:
     """A command: its settings dataclass, the function it runs, its help.
@@ -653,6 +673,22 @@ class Command:
         )
         self._fill(parser, prog)
         return parser
+
+    def help_tree(self) -> dict[str, Any]:
+        """What this command's parser is made of, as far as its help shows (JSON): the
+        description, each option's flags, metavar, choices and help, the subcommands'
+        trees; no parsing functions (:mod:`rocketroll.help` rebuilds the help from it)."""
+        tree: dict[str, Any] = {"description": plain(self.description or self.help)}
+        if self.subcommands:
+            tree["dest"] = f"_{self.name}_command"
+            tree["subcommands"] = [
+                {"name": c.name, "help": c.help, **c.help_tree()} for c in self.subcommands
+            ]
+        elif self.args is not None:
+            tree["arguments"] = [
+                [list(flags), _shown(kwargs)] for flags, kwargs in argument_specs(self.args)
+            ]
+        return tree
 
     def _fill(self, parser: argparse.ArgumentParser, prog: str) -> None:
         if self.subcommands:

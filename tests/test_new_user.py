@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import os
 import signal
 import stat
@@ -525,8 +526,17 @@ def test_the_wheel_carries_what_the_readme_runs_from_an_installed_package(
         "agents/policies/seeds/RocketRoll-v0/ppo-residual/seed4/model.zip",
         "agents/policies/seeds/RocketRollRate-v0/sac/seed0/normalize.json",
         "identification/data/tunnel-paper-seed0.csv",
+        "rocketroll/help.json",
     ):
         assert wanted in names, wanted
+    # The installed package answers `rocketroll COMMAND --help` from help.json: its sources
+    # are those the file was written from.
+    from rocketroll import help as kept
+
+    installed = tmp_path / "installed"
+    zipfile.ZipFile(wheel).extractall(installed)
+    written = json.loads((installed / "rocketroll" / "help.json").read_text(encoding="utf-8"))
+    assert written["digest"] == kept.source_digest(installed)
 
 
 # ------------------------------------------------------------------ 10. SB3 keywords and statistics

@@ -1,0 +1,77 @@
+"""``rocketroll COMMAND --help`` from rocketroll/help.json: current, the same text as the
+command's own parser at any width, and without importing the command's module."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+
+from rocketroll import help as kept
+from rocketroll.cli import COMMANDS, command
+from rocketroll_common.settings import run_command
+
+
+def _words() -> Iterator[list[str]]:
+    """Every command and every subcommand, as the words before ``--help``."""
+    for name in COMMANDS:
+        yield [name]
+        for sub in command(name).subcommands:
+            yield [name, sub.name]
+
+
+WORDS = list(_words())
+
+
+def test_the_kept_help_is_current() -> None:
+    cache = json.loads(kept.CACHE.read_text(encoding="utf-8"))
+    assert cache["digest"] == kept.source_digest(), (
+        "rocketroll/help.json was written from other sources: run `make help` "
+        "(python -m rocketroll.help)"
+    )
+    assert sorted(cache["commands"]) == sorted(COMMANDS)
+
+
+@pytest.mark.parametrize("columns", ["60", "100", "200"])
+@pytest.mark.parametrize("words", WORDS, ids=" ".join)
+def test_the_kept_help_is_what_the_command_prints(
+    words: list[str],
+    columns: str,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    monkeypatch.setenv("COLUMNS", columns)
+    prog = f"rocketroll {words[0]}"
+    with pytest.raises(SystemExit) as stop:
+        run_command(command(words[0]), [*words[1:], "--help"], prog)
+    assert stop.value.code == 0
+    live = capsys.readouterr().out
+    assert kept.cached_help(words[0], [*words[1:], "--help"], prog) == live
+    assert kept.cached_help(words[0], [*words[1:], "-h"], prog) == live
+
+
+def test_only_a_bare_help_is_answered_from_the_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert kept.cached_help("eval", ["--episodes", "3", "--help"], "rocketroll eval") is None
+    assert kept.cached_help("db", ["no-such", "--help"], "rocketroll db") is None
+    assert kept.cached_help("eval", ["--help", "x"], "rocketroll eval") is None
+    assert kept.cached_help("eval", [], "rocketroll eval") is None
+    monkeypatch.setattr(kept, "source_digest", lambda: "edited sources")
+    assert kept.cached_help("eval", ["--help"], "rocketroll eval") is None  # the slow way
+
+
+def test_command_help_imports_nothing_heavy() -> None:
+    code = (
+        "import sys, contextlib, io\n"
+        "from rocketroll.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "    for words in (['eval', '--help'], ['tunnel', '--help'], ['db', 'add', '-h']):\n"
+        "        assert main(words) == 0\n"
+        "assert 'usage: rocketroll db add' in out.getvalue()\n"
+        "heavy = {'numpy', 'scipy', 'numba', 'torch', 'gymnasium'} & set(sys.modules)\n"
+        "print(sorted(heavy))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]", done.stderr
