@@ -403,6 +403,8 @@ def load_hyperparameters(
             raise UsageError(f"{where}: noise_std must be a number in (0, 10), got {sd!r}")
         noise = ("normal", float(sd))
     normalize = entry.get("normalize", False)
+    if isinstance(normalize, str):  # rl-baselines3-zoo's "dict(norm_obs=True, ...)"
+        normalize = zoo_mapping(normalize, f"{where}: normalize")
     if normalize is True:
         normalize = {}
     if normalize is False or normalize is None:
@@ -451,6 +453,8 @@ def load_hyperparameters(
                 f"{where}: flight_clock is the phase of a flight; {env_id} is not a flight variant"
             )
     ppo = {key: entry[key] for key in keywords if key in entry}
+    if isinstance(ppo.get("policy_kwargs"), str):  # rl-baselines3-zoo's "dict(...)"
+        ppo["policy_kwargs"] = zoo_mapping(ppo["policy_kwargs"], f"{where}: policy_kwargs")
     _ppo_arguments(ppo, where)  # fail now on a bad schedule or activation
     return Hyperparameters(
         env_id=env_id,
@@ -494,6 +498,54 @@ class _LinearSchedule:
 
     def __call__(self, progress_remaining: float) -> float:
         return self.initial * progress_remaining
+
+
+#: ``torch.nn`` activations as rl-baselines3-zoo's files name them -> :data:`ACTIVATIONS`.
+ZOO_ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu", "ELU": "elu", "LeakyReLU": "leaky_relu"}
+
+
+def zoo_mapping(text: str, where: str) -> dict[str, Any]:
+    """A mapping written as rl-baselines3-zoo writes one in a YAML string, read without
+    ``eval``: ``dict(net_arch=[64, 64], activation_fn=nn.Tanh)`` or ``{'norm_obs': True}``
+    -- literals, nested ``dict(...)``, and the ``nn.X`` activations of
+    :data:`ZOO_ACTIVATIONS` (as their names: ``nn.Tanh`` is ``tanh``)."""
+    import ast
+
+    def value(node: ast.expr) -> Any:
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id == "dict"
+            and not node.args
+        ):
+            if any(k.arg is None for k in node.keywords):
+                raise ValueError("dict(**...) is not read")
+            return {str(k.arg): value(k.value) for k in node.keywords}
+        if isinstance(node, ast.Dict):
+            pairs = []
+            for k, v in zip(node.keys, node.values, strict=True):
+                if k is None:
+                    raise ValueError("{**...} is not read")
+                pairs.append((ast.literal_eval(k), value(v)))
+            return dict(pairs)
+        if isinstance(node, ast.List | ast.Tuple):
+            return [value(item) for item in node.elts]
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            if node.value.id == "nn" and node.attr in ZOO_ACTIVATIONS:
+                return ZOO_ACTIVATIONS[node.attr]
+            raise ValueError(
+                f"{node.value.id}.{node.attr}: the activations read are "
+                f"{', '.join('nn.' + a for a in ZOO_ACTIVATIONS)}"
+            )
+        return ast.literal_eval(node)
+
+    try:
+        read = value(ast.parse(text.strip(), mode="eval").body)
+    except (SyntaxError, ValueError, TypeError) as exc:
+        raise UsageError(f"{where}: {text!r} is not a dict(...) of literals: {exc}") from None
+    if not isinstance(read, dict):
+        raise UsageError(f"{where}: {text!r} is not a mapping")
+    return read
 
 
 def _ppo_arguments(ppo: dict[str, Any], where: str) -> dict[str, Any]:
@@ -1184,7 +1236,7 @@ class SACArgs(Args):
 
     ALGO: ClassVar[str] = "sac"
     hyperparams: Path = setting(
-        HYPERPARAMS_DIR / "sac.yml", "YAML file of hyperparameters keyed by environment id"
+        HYPERPARAMS_DIR / "sac-history.yml", "YAML file of hyperparameters keyed by environment id"
     )
 
 
@@ -1194,7 +1246,7 @@ class TD3Args(Args):
 
     ALGO: ClassVar[str] = "td3"
     hyperparams: Path = setting(
-        HYPERPARAMS_DIR / "td3.yml", "YAML file of hyperparameters keyed by environment id"
+        HYPERPARAMS_DIR / "td3-history.yml", "YAML file of hyperparameters keyed by environment id"
     )
 
 

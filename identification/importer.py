@@ -97,8 +97,10 @@ class ImportSettings:
     )
     unwrap: bool = setting(False, "unwrap a roll angle that wraps at 360°")
     name: str | None = setting(None, "recording name (default: the input file's stem)")
-    source: Literal["wind-tunnel", "flight", "synthetic"] = setting(
-        "wind-tunnel", "where the data come from"
+    source: Literal["wind-tunnel", "flight"] = setting(
+        "wind-tunnel",
+        "where the data come from (a synthetic recording, with its known truth, is written "
+        "by rocketroll tunnel or flight, not imported)",
     )
     notes: str | None = setting(None, "free-text notes stored in the metadata")
     split: Literal["train", "test"] | None = setting(
@@ -179,7 +181,9 @@ def import_csv(
     unwrap : bool
         Unwrap a roll angle that wraps around (e.g. at ±180° or 0/360°).
     name, source, notes : str, optional
-        Metadata of the new recording; ``name`` defaults to the file stem.
+        Metadata of the new recording; ``name`` defaults to the file stem; ``source``
+        is ``"wind-tunnel"`` or ``"flight"`` (an import is measured data: a synthetic
+        recording carries its truth and comes from the virtual tunnel or flight).
     speed_unit : {"mps", "kmh", "fps", "kn"}
         Unit of an ``airspeed`` column (a flight; the recording is then format 1.1).
     altitude_unit : {"m", "ft"}

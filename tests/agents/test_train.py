@@ -449,8 +449,8 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
 
     for env_id in ("RocketRoll-v0", "RocketRollRate-v0"):
         for name, algo in [
-            ("sac", "sac"),
-            ("td3", "td3"),
+            ("sac-history", "sac"),
+            ("td3-history", "td3"),
             ("ppo-history", "ppo"),
             ("ppo-observer", "ppo"),
         ]:

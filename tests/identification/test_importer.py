@@ -435,3 +435,12 @@ def test_fast_logger_round_trips_uniformly(tmp_path: Path) -> None:
     assert load_recording(path).dt_s == pytest.approx(1e-3, rel=1e-6)
     with pytest.raises(RecordingError, match=r"--rate 3000 Hz steps every 0\.333333 ms"):
         import_csv(raw, ["fin", "roll"], header=False, rate_hz=3_000.0, units="rad")
+
+
+def test_an_import_is_never_labelled_synthetic(tmp_path: Path) -> None:
+    """`--source synthetic` was accepted for a foreign log: reports then called measured
+    data the virtual tunnel's, which carries a known truth an import never has."""
+    log = tmp_path / "log.csv"
+    log.write_text("0,1,2\n0.1,1,2\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"source: must be one of wind-tunnel, flight, not"):
+        import_csv(log, ["time", "fin_cmd", "roll"], header=False, source="synthetic")
