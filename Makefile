@@ -99,7 +99,7 @@ test: lint typecheck pytest pytest-varied
 # Write rocketroll/help.json again (every command's --help, read without importing the
 # command's module); a test fails while it is not current.
 help: $(VENV)/.installed
-	$(BIN)/python -m rocketroll.help
+	$(BIN)/python -c 'from rocketroll.cli import write_help; write_help()'
 
 # Regenerate the bundled synthetic recordings from their recorded commands.
 recordings: $(VENV)/.installed

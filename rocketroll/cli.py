@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from rocketroll_common import __version__
 from rocketroll_common.settings import Command, run_command
 
-__all__ = ["COMMANDS", "build_parser", "main"]
+__all__ = ["COMMANDS", "build_parser", "main", "write_help"]
 
 #: Command -> (module defining it in its ``COMMANDS``, one line of help).
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -82,6 +82,15 @@ def command(name: str) -> Command:
     module, _ = COMMANDS[name]
     found: Command = importlib.import_module(module).COMMANDS[name]
     return found
+
+
+def write_help() -> None:
+    """Write ``rocketroll/help.json``: every command's help, for ``rocketroll COMMAND
+    --help`` without importing the command (``make help``; imports every command)."""
+    from rocketroll.help import CACHE, write
+
+    write({name: command(name).help_tree() for name in COMMANDS})
+    print(f"wrote {CACHE}: the help of {len(COMMANDS)} commands")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -11,9 +11,10 @@ width.
 
 The file records a digest of the package's sources (:func:`source_digest`);
 when they have changed since it was written -- an edited checkout -- the help
-comes from the command's own module as before, only slower (as it does with
-``ROCKETROLL_HELP_FROM_SOURCE`` set).  Write it again
-with ``python -m rocketroll.help`` (``make help``) after changing any source:
+comes from the command's own module as before, only slower; so it does while a
+plugin is installed or named (:mod:`rocketroll_common.plugins`: its entries
+are in the help) and with ``ROCKETROLL_HELP_FROM_SOURCE`` set.  Write it again
+with ``make help`` (:func:`rocketroll.cli.write_help`) after changing any source:
 a test checks that it is current and matches every command's own parser.
 """
 
@@ -23,7 +24,6 @@ import argparse
 import hashlib
 import json
 import os
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -104,6 +104,10 @@ def cached_help(command: str, argv: Sequence[str], prog: str) -> str | None:
         return None
     if os.environ.get("ROCKETROLL_HELP_FROM_SOURCE"):  # benchmarks/cli_startup.py compares
         return None
+    from rocketroll_common.plugins import plugin_modules
+
+    if plugin_modules():  # a plugin's controllers and methods are in the help
+        return None
     try:
         cache = json.loads(CACHE.read_text(encoding="utf-8"))
     except (OSError, ValueError):
@@ -118,22 +122,12 @@ def cached_help(command: str, argv: Sequence[str], prog: str) -> str | None:
     return None if child is None else child.format_help()
 
 
-def write(path: Path = CACHE) -> dict[str, Any]:
-    """Make every command's help tree and write :data:`CACHE` (imports every command)."""
-    from rocketroll.cli import COMMANDS, command
-
-    cache = {
-        "digest": source_digest(),
-        "commands": {name: command(name).help_tree() for name in COMMANDS},
-    }
+def write(trees: dict[str, dict[str, Any]], path: Path = CACHE) -> None:
+    """Write :data:`CACHE`: every command's help tree
+    (:meth:`rocketroll_common.settings.Command.help_tree`) with the sources' digest
+    (``make help`` calls :func:`rocketroll.cli.write_help`)."""
+    cache = {"digest": source_digest(), "commands": trees}
     text = json.dumps(cache, indent=1, ensure_ascii=False, sort_keys=True) + "\n"
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
-    return cache
-
-
-if __name__ == "__main__":
-    written = write()
-    print(f"wrote {CACHE}: the help of {len(written['commands'])} commands")
-    sys.exit(0)

@@ -21,23 +21,18 @@ from __future__ import annotations
 
 import difflib
 import importlib
-import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import partial
 from types import MappingProxyType
 from typing import Any, Generic, TypeVar
 
 from rocketroll_common.errors import UsageError
+from rocketroll_common.plugins import PLUGIN_GROUP, PLUGIN_VARIABLE, plugin_modules
 
 __all__ = ["PLUGIN_GROUP", "PLUGIN_VARIABLE", "Entry", "Registry", "load_plugins"]
 
 T = TypeVar("T")
 
-#: Entry-point group of rocketroll plugins.
-PLUGIN_GROUP = "rocketroll.plugins"
-#: Environment variable naming plugin modules (comma-separated).
-PLUGIN_VARIABLE = "ROCKETROLL_PLUGINS"
 
 _plugins_loaded = False
 
@@ -48,20 +43,7 @@ def load_plugins() -> None:
     if _plugins_loaded:
         return
     _plugins_loaded = True  # first: a plugin's own registrations come back here
-    from importlib.metadata import entry_points
-
-    modules = [
-        (f"entry point {p.name!r} ({p.value})", p.load) for p in entry_points(group=PLUGIN_GROUP)
-    ]
-    for name in os.environ.get(PLUGIN_VARIABLE, "").split(","):
-        if name.strip():
-            modules.append(
-                (
-                    f"${PLUGIN_VARIABLE} module {name.strip()!r}",
-                    partial(importlib.import_module, name.strip()),
-                )
-            )
-    for what, load in modules:
+    for what, load in plugin_modules():
         try:
             load()
         except Exception as exc:
