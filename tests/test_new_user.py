@@ -477,10 +477,11 @@ def test_every_package_is_typed_and_licensed() -> None:
     assert 'license = "MIT"' in text and "license = {" not in text
 
 
-def test_the_sdist_carries_tests_docs_and_license(tmp_path: Path) -> None:
-    pytest.importorskip("build", reason="the sdist is built with `build` (dev extra)")
+def _built(kind: str, folder: Path) -> Path:
+    """The package built as ``kind`` (``sdist`` or ``wheel``) into ``folder`` by `build`."""
+    pytest.importorskip("build", reason=f"the {kind} is built with `build` (dev extra)")
     done = subprocess.run(
-        [sys.executable, "-m", "build", "--sdist", "--outdir", str(tmp_path), str(REPO)],
+        [sys.executable, "-m", "build", f"--{kind}", "--outdir", str(folder), str(REPO)],
         capture_output=True,
         text=True,
         timeout=600,
@@ -488,7 +489,12 @@ def test_the_sdist_carries_tests_docs_and_license(tmp_path: Path) -> None:
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "deprecated" not in done.stderr.lower()
-    (sdist,) = tmp_path.glob("*.tar.gz")
+    (built,) = folder.glob("*.tar.gz" if kind == "sdist" else "*.whl")
+    return built
+
+
+def test_the_sdist_carries_tests_docs_and_license(tmp_path: Path) -> None:
+    sdist = _built("sdist", tmp_path)
     with tarfile.open(sdist) as tar:
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     for wanted in (
@@ -508,16 +514,7 @@ def test_the_wheel_carries_what_the_readme_runs_from_an_installed_package(
     from an installed package: the specs and the seed policies are in the wheel."""
     import zipfile
 
-    pytest.importorskip("build", reason="the wheel is built with `build` (dev extra)")
-    done = subprocess.run(
-        [sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp_path), str(REPO)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
-    (wheel,) = tmp_path.glob("*.whl")
+    wheel = _built("wheel", tmp_path)
     names = set(zipfile.ZipFile(wheel).namelist())
     for wanted in (
         "agents/sweeps/pid-ppo-seeds.yml",
