@@ -424,6 +424,10 @@ def _tuple_parser(kind: type) -> Callable[[str], tuple[Any, ...]]:
     return parse
 
 
+#: The folder holding rocketroll's packages (a checkout, or site-packages).
+_PACKAGES = Path(__file__).resolve().parents[1]
+
+
 def _help(f: _Field) -> str:
     """The option's help: its text, the range its value must lie in, its default."""
     text = f.spec.help() if callable(f.spec.help) else f.spec.help
@@ -439,6 +443,8 @@ def _help(f: _Field) -> str:
         and "default" not in text
         and not f.spec.positional
     ):
+        if isinstance(shown, Path) and shown.is_absolute() and shown.is_relative_to(_PACKAGES):
+            shown = shown.relative_to(_PACKAGES)  # a file of the package, wherever installed
         if f.base is tuple:
             shown = ",".join(map(str, shown))
         elif f.base is list:

@@ -4,6 +4,7 @@ command's own parser at any width, and without importing the command's module.""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -32,6 +33,9 @@ def test_the_kept_help_is_current() -> None:
         "rocketroll/help.json was written from other sources: run `make help`"
     )
     assert sorted(cache["commands"]) == sorted(COMMANDS)
+    # Nothing of this machine in it (a default path is shown relative to the packages).
+    text = kept.CACHE.read_text(encoding="utf-8")
+    assert str(kept.ROOT) not in text and os.path.expanduser("~") + "/" not in text
 
 
 @pytest.mark.parametrize("columns", ["60", "100", "200"])
