@@ -53,7 +53,8 @@ def check_options(options: Mapping[str, Any], flag: str = "--set") -> None:
     fixed = [name for name in FIXED_OPTIONS if name in options]
     if fixed:
         raise UsageError(
-            f"{flag} {fixed[0]}=... is not allowed: the task follows --env-id, the split --split"
+            f"{flag} {fixed[0]}=... is not allowed: the command sets the task (from the "
+            "environment id) and the split itself"
         )
 
 

@@ -52,6 +52,7 @@ from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv.bank import load_bank
+from rollenv.core import RollConfig
 
 __all__ = ["COMMAND", "CONDITIONS", "Args", "run"]
 
@@ -177,14 +178,28 @@ def plot(
     return png_bytes(fig, dpi=110)
 
 
+def _condition_config(args: Args, condition: str) -> RollConfig:
+    """The environment of ``condition``: the ``--set`` options with the condition's changes
+    on top; a condition that replays another method takes that method's own disturbance
+    unless it names one (``--set disturbance=posterior`` is ml's, not the paper's)."""
+    changes = CONDITIONS[condition]
+    options = dict(args.settings)
+    if "method" in changes and "disturbance" not in changes:
+        options.pop("disturbance", None)
+    return options_config(args.env_id, {**options, **changes}, args.split)
+
+
 def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     """Design every controller once, evaluate it under every condition, report."""
     args = replace(args, policy=unnamed_defaults(args.policy, _default_policy(), args.env_id))
     design = options_config(args.env_id, args.settings, args.split)
-    configs = {
-        c: options_config(args.env_id, {**args.settings, **CONDITIONS[c]}, args.split)
-        for c in args.condition
-    }
+    configs = {c: _condition_config(args, c) for c in args.condition}
+    banks = {}
+    for condition, config in configs.items():  # every condition's replay, before any work
+        try:
+            banks[condition] = load_bank(config, args.db)
+        except ValueError as exc:
+            raise UsageError(f"--condition {condition!r}: {exc}") from exc
     try:
         controllers: list[Controller] = [
             make_controller(p, design, args.env_id, db=args.db) for p in args.policy
@@ -199,10 +214,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     )
     scores: dict[str, dict[str, np.ndarray]] = {c.name: {} for c in controllers}
     for condition, config in configs.items():
-        try:
-            bank = load_bank(config, args.db)
-        except ValueError as exc:
-            raise UsageError(f"--condition {condition!r}: {exc}") from exc
+        bank = banks[condition]
         specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
         print(f"  {condition}: {bank.description}")
         for controller in controllers:

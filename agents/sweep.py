@@ -447,11 +447,18 @@ def expand(spec: SweepSpec) -> list[Trial]:
                     recipe = None
                     if controller.learned:
                         assert controller.hyperparams is not None and controller.train
+                        # The disturbance set is trained on too (checked with the entry,
+                        # before any trial); training reads the whole train split, so a
+                        # recording chooses only what is evaluated.
+                        trained_on = {
+                            f"env_kwargs.{k}": v for k, v in settings.items() if k != "recording"
+                        }
                         recipe = _entry_with(
-                            Path(controller.hyperparams), env_id, controller.train, params
+                            Path(controller.hyperparams),
+                            env_id,
+                            controller.train,
+                            {**params, **trained_on},
                         )
-                        if settings:  # the disturbance set is trained on too
-                            recipe["env_kwargs"] = {**(recipe.get("env_kwargs") or {}), **settings}
                     for seed in seeds:
                         trial = Trial(
                             spec.name,

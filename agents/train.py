@@ -55,7 +55,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from agents.replay import check_options, env_options_setting
+from agents.replay import check_options, env_options_setting, options_config
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
 from rocketroll_common.settings import Command, check, parse, run_command, setting, to_argv
 
@@ -520,14 +520,14 @@ def zoo_mapping(text: str, where: str) -> dict[str, Any]:
         ):
             if any(k.arg is None for k in node.keywords):
                 raise ValueError("dict(**...) is not read")
-            return {str(k.arg): value(k.value) for k in node.keywords}
+            return unique([(str(k.arg), value(k.value)) for k in node.keywords])
         if isinstance(node, ast.Dict):
             pairs = []
             for k, v in zip(node.keys, node.values, strict=True):
                 if k is None:
                     raise ValueError("{**...} is not read")
                 pairs.append((ast.literal_eval(k), value(v)))
-            return dict(pairs)
+            return unique(pairs)
         if isinstance(node, ast.List | ast.Tuple):
             return [value(item) for item in node.elts]
         if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
@@ -537,11 +537,21 @@ def zoo_mapping(text: str, where: str) -> dict[str, Any]:
                 f"{node.value.id}.{node.attr}: the activations read are "
                 f"{', '.join('nn.' + a for a in ZOO_ACTIVATIONS)}"
             )
-        return ast.literal_eval(node)
+        literal = ast.literal_eval(node)
+        if literal is not None and not isinstance(literal, bool | int | float | str):
+            raise ValueError(f"{type(literal).__name__} values are not read")
+        return literal
+
+    def unique(pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
+        keys = [k for k, _ in pairs]
+        repeated = sorted({str(k) for k in keys if keys.count(k) > 1})
+        if repeated:
+            raise ValueError(f"{repeated[0]!r} is given twice")
+        return dict(pairs)
 
     try:
         read = value(ast.parse(text.strip(), mode="eval").body)
-    except (SyntaxError, ValueError, TypeError) as exc:
+    except (SyntaxError, ValueError, TypeError, RecursionError, MemoryError) as exc:
         raise UsageError(f"{where}: {text!r} is not a dict(...) of literals: {exc}") from None
     if not isinstance(read, dict):
         raise UsageError(f"{where}: {text!r} is not a mapping")
@@ -638,8 +648,13 @@ def make_env(
         from agents.vecenv import VecObserver
 
         train_bank = adapter.bank
-        if split != "train" or adapter.config.flight_schedule is not None:
-            # the observer is designed on the train split, always; in flight on its tunnel traces
+        if (
+            split != "train"
+            or adapter.config.flight_schedule is not None
+            or adapter.config.recording is not None
+        ):
+            # the observer is designed on the whole train split, always (as --policy designs
+            # it when the policy is evaluated); in flight on its tunnel traces
             train_bank = design_bank(adapter.config, db)
         features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs, hp.residual)
         env = VecObserver(env, features)
@@ -917,6 +932,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     algo = args.ALGO
     hp = load_hyperparameters(args.hyperparams, args.env_id, algo)
     if args.settings:  # the replay and options of --set, over the entry's env_kwargs
+        options_config(args.env_id, args.settings, "train")  # a bad one is named as --set
         hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **args.settings})
     n_envs = args.envs if args.envs is not None else hp.n_envs
     timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps

@@ -87,11 +87,13 @@ class TuneArgs:
 
 def tune(args: TuneArgs) -> int:
     """Re-tune the PID for a database and print the gains."""
-    from rollenv.bank import load_bank
+    from agents.base import Design
 
     config = options_config(args.env_id, args.settings, "train")
     task = config.task
-    model = NominalModel.from_bank(load_bank(config, args.db))
+    # The rocket eval's PID is placed on: the whole train split (whichever recording the
+    # episodes replay).
+    model = NominalModel.from_bank(Design(config, args.env_id, db=args.db).train_bank)
     print(f"nominal model: {model.source}")
     print(f"  a = {model.a_per_s:.4g} 1/s, α = {model.alpha:.4g}, θ̄ = {model.theta_bar_deg:.4g}°")
     results = tune_bandwidth(
@@ -112,7 +114,7 @@ def tune(args: TuneArgs) -> int:
         f"best ω by {args.metric} = {best:g} rad/s: kp = {gains.kp:.4g}, ki = {gains.ki:.4g}, "
         f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°{where}"
     )
-    same = "".join(f" --set {k}={v}" for k, v in args.settings.items())
+    same = "".join(f" --set {k}={v}" for k, v in args.settings.items() if k != "recording")
     same += f" --db {args.db}" if args.db is not None else ""
     print(f"use it with: rocketroll eval --env-id {args.env_id} --policy pid:{best:g}{same}")
     return 0

@@ -251,3 +251,53 @@ def test_a_policy_reading_an_observer_is_evaluated_on_the_replay_it_was_trained_
         "its policy reads an observer designed with method='ml'",
         "give the same --set method=... as training did",
     )
+
+
+def test_one_recording_is_replayed_but_designs_read_the_whole_train_split(
+    paper_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """tune's nominal rocket is eval's (the whole train split); its hint leaves the
+    recording out (eval's episodes come from the test split)."""
+    db = str(paper_db)
+    base = ["tune", "pid", "--db", db, "--episodes", "1", "--omegas", "3", *PAPER]
+    whole = ok(capsys, base)
+    one = ok(capsys, [*base, "--set", "recording=tunnel-paper-seed5"])
+    nominal = [line for line in whole.splitlines() if line.startswith("  a = ")]
+    assert nominal and nominal == [line for line in one.splitlines() if line.startswith("  a = ")]
+    hint = one.splitlines()[-1]
+    assert hint.startswith("use it with: rocketroll eval") and "recording" not in hint
+
+
+def test_set_errors_name_set_and_conditions_take_their_own_disturbance(
+    default_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    refused(
+        capsys,
+        ["train", "ppo", "--set", "gyro_nois=1", "--out", str(tmp_path / "run")],
+        "--set: RocketRoll-v0: unknown option 'gyro_nois' (did you mean 'gyro_noise_pct'?)",
+    )
+    refused(capsys, ["sweep", "run", "pid-ppo-seeds", "--set", "split=test"], "--set split=")
+    # --set disturbance=posterior is ml's; the paper-replay condition replays the paper's own
+    argv = ["robustness", "--policy", "pid", "--condition", "default", "--condition"]
+    out = ok(capsys, [*argv, "paper replay", "--episodes", "2", "--set", "disturbance=posterior"])
+    assert "paper replay" in out
+
+
+def test_a_sweep_refuses_an_observer_recipe_on_another_replay_before_any_trial(
+    tmp_path: Path,
+) -> None:
+    from agents.sweep import expand, load_spec
+    from rocketroll_common.errors import UsageError
+
+    spec = tmp_path / "spec.yml"
+    spec.write_text(
+        "name: obs\nenv_ids: [RocketRoll-v0]\nepisodes: 2\ncontrollers:\n"
+        "  - {name: res, train: ppo, hyperparams: ppo-residual.yml}\n"
+        "settings: {method: [paper]}\n",
+        encoding="utf-8",
+    )
+    (tmp_path / "ppo-residual.yml").write_bytes(
+        (Path(__file__).resolve().parents[1] / "agents/hyperparams/ppo-residual.yml").read_bytes()
+    )
+    with pytest.raises(UsageError, match="observer: true with env_kwargs 'method'"):
+        expand(load_spec(spec))

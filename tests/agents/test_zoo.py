@@ -63,6 +63,9 @@ def test_a_zoo_string_is_read_without_eval() -> None:
         ("dict(act=nn.Sigmoid)", "nn.Sigmoid: the activations read are"),
         ("[1, 2]", "is not a mapping"),
         ("dict(**x)", "dict(**...) is not read"),
+        ("dict(a=1, a=2)", "'a' is given twice"),
+        ("{'a': {1, 2}}", "set values are not read"),
+        ("dict(a=" + "1+" * 100_000 + "1)", "not a dict(...) of literals"),
     ):
         with pytest.raises(UsageError, match=re.escape(said)):
             zoo_mapping(bad, "ppo.yml, RocketRoll-v0: policy_kwargs")
