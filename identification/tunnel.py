@@ -13,7 +13,9 @@ Ingredients
   ᾱ = -0.0289, β̄ = 2.4075 (eq. 48); or the constant-damping model eq. 29 with
   a = 1.314 1/s (eq. 46).
 * Servo eq. 23 (150 °/s) with the ±40° fin range.
-* Fin schedule: Table 1 of the paper, or a random staircase.
+* Fin schedule: Table 1 of the paper, a random staircase, or what real rigs
+  run: ramps between the staircase's levels, doublets, a pseudo-random binary
+  sequence, a chirp.
 * Turbulence as an equivalent fin angle ``u_d``, piecewise constant over each
   0.1 s log interval (paper §2.7.1), from a stationary process with a chosen
   marginal (Gaussian, Laplace or Student-t) and correlation time: a Gaussian
@@ -79,8 +81,10 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     "PAPER_TABLE1",
     "FinSchedule",
+    "SmoothSchedule",
     "TunnelSpec",
     "Turbulence",
+    "fin_schedule",
     "run_tunnel",
 ]
 
@@ -239,7 +243,16 @@ class FinSchedule:
         dwells = np.round(rng.uniform(lo, hi, size=steps) / grid_s) * grid_s
         edges = np.round((lead_s + np.concatenate([[0.0], np.cumsum(dwells)])) / grid_s) * grid_s
         times = tuple(round(float(t), 6) for t in edges[:-1])
-        return cls(times, tuple(levels), round(float(edges[-1]), 6))
+        return cls.starting(times, tuple(levels), round(float(edges[-1]), 6))
+
+    @classmethod
+    def starting(
+        cls, times: tuple[float, ...], levels: tuple[float, ...], end_s: float
+    ) -> FinSchedule:
+        """The schedule of these changes; one at time 0 (no lead) is the initial level."""
+        if times and times[0] <= 0.0:
+            return cls(times[1:], levels[1:], end_s, initial_deg=levels[0])
+        return cls(times, levels, end_s)
 
     def command(self, time_s: FloatArray) -> FloatArray:
         """The commanded level at each time, °."""
@@ -247,6 +260,131 @@ class FinSchedule:
         # side="right" plus a tolerance: a change at T applies from t = T on.
         index = np.searchsorted(np.asarray(self.change_times_s) - 1e-9, time_s, side="right")
         return levels[index]
+
+    @classmethod
+    def doublets(
+        cls,
+        rng: np.random.Generator,
+        count: int,
+        range_deg: float,
+        pulse_s: float,
+        dwell_s: tuple[float, float],
+        lead_s: float,
+        grid_s: float,
+    ) -> FinSchedule:
+        """``count`` doublets: ``+A`` for ``pulse_s``, ``-A`` for ``pulse_s``, back to 0°,
+        ``A`` uniform in [``range_deg``/2, ``range_deg``] with a random sign, each followed
+        by a dwell at 0° uniform in ``dwell_s``; times on the ``grid_s`` log grid."""
+        times: list[float] = []
+        levels: list[float] = []
+        t = lead_s
+        for _ in range(count):
+            amplitude = float(rng.uniform(range_deg / 2, range_deg)) * float(rng.choice([-1, 1]))
+            for level, hold in ((amplitude, pulse_s), (-amplitude, pulse_s), (0.0, None)):
+                times.append(t)
+                levels.append(round(level, 2))
+                t += pulse_s if hold is not None else float(rng.uniform(*dwell_s))
+        return cls.starting(*_on_grid(times, levels, t, grid_s))
+
+    @classmethod
+    def prbs(
+        cls,
+        rng: np.random.Generator,
+        duration_s: float,
+        range_deg: float,
+        bit_s: float,
+        lead_s: float,
+        grid_s: float,
+    ) -> FinSchedule:
+        """A pseudo-random binary sequence: ``±range_deg``, a fair coin every ``bit_s`` for
+        ``duration_s`` after the lead (white up to about 1/(2·``bit_s``) Hz)."""
+        bits = max(1, round(duration_s / bit_s))
+        signs = rng.choice([-1.0, 1.0], size=bits)
+        times = [lead_s + k * bit_s for k in range(bits)]
+        end = lead_s + bits * bit_s
+        return cls.starting(*_on_grid(times, list(range_deg * signs), end, grid_s))
+
+
+def _on_grid(
+    times: list[float], levels: list[float], end_s: float, grid_s: float
+) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+    """Change times rounded to the log grid (a change that lands on the one before it
+    replaces it), the levels, and the end one grid step on."""
+    kept_t: list[float] = []
+    kept_l: list[float] = []
+    for t, level in zip(times, levels, strict=True):
+        on = round(round(t / grid_s) * grid_s, 6)
+        if kept_t and on <= kept_t[-1]:
+            kept_l[-1] = level
+            continue
+        kept_t.append(on)
+        kept_l.append(level)
+    end = max(round(round(end_s / grid_s) * grid_s, 6), kept_t[-1] + grid_s if kept_t else grid_s)
+    return tuple(kept_t), tuple(kept_l), round(end, 6)
+
+
+@dataclass(frozen=True)
+class SmoothSchedule:
+    """A fin command that moves continuously: linear between breakpoints (ramps), or a
+    sine sweep (chirp); logged, like any command, as its value at each log time.
+
+    Attributes
+    ----------
+    times_s, values_deg : tuple of float
+        Breakpoints of a piecewise-linear command (held after the last one).
+    end_s : float
+        End of the run, s.
+    chirp : tuple of float or None
+        ``(amplitude °, f0 Hz, f1 Hz, start s, duration s)``: a linear sweep
+        ``A·sin(2π(f0·τ + (f1 - f0)·τ²/(2T)))``, τ = t - start, 0 outside it.
+    """
+
+    times_s: tuple[float, ...]
+    values_deg: tuple[float, ...]
+    end_s: float
+    chirp: tuple[float, float, float, float, float] | None = None
+
+    @classmethod
+    def ramps(
+        cls,
+        rng: np.random.Generator,
+        steps: int,
+        range_deg: float,
+        ramp_s: float,
+        dwell_s: tuple[float, float],
+        lead_s: float,
+    ) -> SmoothSchedule:
+        """The staircase's levels (:meth:`FinSchedule.staircase`), each reached by a linear
+        ramp of ``ramp_s`` and held for a dwell uniform in ``dwell_s``: as a rig that
+        slews its fins at a set rate commands them."""
+        stairs = FinSchedule.staircase(rng, steps, range_deg, dwell_s, lead_s, grid_s=1e-6)
+        times, values, previous = [0.0], [0.0], 0.0
+        for start, level in zip(stairs.change_times_s, stairs.levels_deg, strict=True):
+            times += [start, start + ramp_s]
+            values += [previous, level]
+            previous = level
+        return cls(tuple(times), tuple(values), stairs.end_s + ramp_s)
+
+    @classmethod
+    def sweep(
+        cls, range_deg: float, f0_hz: float, f1_hz: float, duration_s: float, lead_s: float
+    ) -> SmoothSchedule:
+        """A chirp of amplitude ``range_deg`` from ``f0_hz`` to ``f1_hz`` over ``duration_s``
+        after ``lead_s`` at 0°, then 0° for 5 s."""
+        chirp = (range_deg, f0_hz, f1_hz, lead_s, duration_s)
+        return cls((0.0,), (0.0,), lead_s + duration_s + 5.0, chirp)
+
+    def command(self, time_s: FloatArray) -> FloatArray:
+        """The command at each time, °."""
+        t = np.asarray(time_s, dtype=float)
+        out = np.interp(t, self.times_s, self.values_deg)
+        if self.chirp is not None:
+            amplitude, f0, f1, start, duration = self.chirp
+            tau = t - start
+            inside = (tau >= 0) & (tau <= duration)
+            phase = f0 * tau + (f1 - f0) * tau**2 / (2.0 * duration)
+            out = np.where(inside, amplitude * np.sin(2.0 * np.pi * phase), out)
+        return np.asarray(out)
 
 
 #: A virtual rocket's truth settings: default, help (``{at}`` the operating point, the
@@ -348,15 +486,39 @@ class TunnelSpec:
     seed: int = setting(
         0, "random seed; the same seed gives a byte-identical file", ge=0, le=2**63 - 1, always=True
     )
-    schedule: Literal["paper", "staircase"] = setting(
-        "paper", "fin-command schedule: the paper's Table 1, or a random staircase"
+    schedule: Literal["paper", "staircase", "ramps", "doublets", "prbs", "chirp"] = setting(
+        "paper",
+        "fin-command schedule: the paper's Table 1; a random staircase; the staircase's levels "
+        "reached by linear ramps (--ramp); doublets (--pulse); a pseudo-random binary "
+        "sequence (--pulse bits for --duration); a chirp (--chirp-from to --chirp-to Hz over "
+        "--duration)",
     )
-    steps: int = setting(10, "number of staircase steps", ge=1, le=200)
+    steps: int = setting(10, "number of staircase or ramp levels, or of doublets", ge=1, le=200)
     fin_range: float = setting(
-        40.0, "staircase levels are uniform in ±this", gt=MIN_STEP_DEG / 2, le=40.0, unit="°"
+        40.0,
+        "staircase and ramp levels are uniform in ±this; the amplitude of the other schedules",
+        gt=MIN_STEP_DEG / 2,
+        le=40.0,
+        unit="°",
     )
-    dwell_min: float = setting(20.0, "shortest staircase dwell", gt=0.0, le=3600.0, unit="s")
-    dwell_max: float = setting(60.0, "longest staircase dwell", gt=0.0, le=3600.0, unit="s")
+    dwell_min: float = setting(
+        20.0, "shortest dwell (staircase, ramps, after a doublet)", gt=0.0, le=3600.0, unit="s"
+    )
+    dwell_max: float = setting(
+        60.0, "longest dwell (staircase, ramps, after a doublet)", gt=0.0, le=3600.0, unit="s"
+    )
+    lead: float = setting(
+        20.0, "the command holds 0° this long before the schedule", ge=0.0, le=3600.0, unit="s"
+    )
+    ramp: float = setting(1.0, "time of each ramp (ramps)", gt=0.0, le=600.0, unit="s")
+    pulse: float = setting(
+        1.0, "a doublet's pulse, a PRBS bit (doublets, prbs)", gt=0.0, le=600.0, unit="s"
+    )
+    duration: float = setting(
+        60.0, "length of the PRBS or the chirp", gt=0.0, le=86_400.0, unit="s"
+    )
+    chirp_from: float = setting(0.05, "the chirp's first frequency", gt=0.0, le=500.0, unit="Hz")
+    chirp_to: float = setting(2.0, "the chirp's last frequency", gt=0.0, le=500.0, unit="Hz")
     model: str = setting(
         "theta", "damping model: theta (eq. 49) or constant (eq. 29)", choices=MODEL_NAMES
     )
@@ -418,7 +580,20 @@ class TunnelSpec:
         check_rocket(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
         if self.no_encoder and self.gyro_noise is None:
             raise SettingError("no_encoder", "needs a rate gyro (give --gyro-noise, e.g. 0)")
+        if self.schedule in ("doublets", "prbs") and self.pulse < self.log_dt:
+            raise SettingError(
+                "pulse", f"{self.pulse:g} s is shorter than the logging interval {self.log_dt:g} s"
+            )
+        nyquist = 0.5 / self.log_dt
+        if self.schedule == "chirp" and max(self.chirp_from, self.chirp_to) > nyquist / 2:
+            raise SettingError(
+                "chirp_to" if self.chirp_to >= self.chirp_from else "chirp_from",
+                f"above {nyquist / 2:g} Hz, half the Nyquist frequency of --log-dt "
+                f"{self.log_dt:g} s: the logged command would not show the sweep",
+            )
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
+        # The run's length, from the schedule the seed draws (cheap), before any simulation.
+        _check_length(self, fin_schedule(self, _streams(self.seed)[0]).end_s)
 
     def params(self) -> RollParams:
         """Ground-truth roll parameters of this run."""
@@ -465,6 +640,55 @@ def _streams(seed: int) -> tuple[np.random.Generator, ...]:
     return tuple(np.random.default_rng(child) for child in children)
 
 
+def fin_schedule(spec: TunnelSpec, rng: np.random.Generator) -> FinSchedule | SmoothSchedule:
+    """The fin-command schedule ``spec`` asks for, drawn from ``rng``."""
+    dwell = (spec.dwell_min, spec.dwell_max)
+    if spec.schedule == "paper":
+        return FinSchedule.paper()
+    if spec.schedule == "staircase":
+        return FinSchedule.staircase(
+            rng, spec.steps, spec.fin_range, dwell, spec.lead, grid_s=spec.log_dt
+        )
+    if spec.schedule == "ramps":
+        return SmoothSchedule.ramps(rng, spec.steps, spec.fin_range, spec.ramp, dwell, spec.lead)
+    if spec.schedule == "doublets":
+        return FinSchedule.doublets(
+            rng, spec.steps, spec.fin_range, spec.pulse, dwell, spec.lead, spec.log_dt
+        )
+    if spec.schedule == "prbs":
+        return FinSchedule.prbs(
+            rng, spec.duration, spec.fin_range, spec.pulse, spec.lead, spec.log_dt
+        )
+    return SmoothSchedule.sweep(
+        spec.fin_range, spec.chirp_from, spec.chirp_to, spec.duration, spec.lead
+    )
+
+
+#: Most samples a tunnel run logs (each column 8 bytes a sample; 14 h at 100 Hz).
+MAX_SAMPLES = 5_000_000
+
+
+def _check_length(spec: TunnelSpec, end_s: float) -> None:
+    """Refuse (before simulating) a run a recording cannot hold, or too many samples."""
+    from identification.recording import DURATION_RANGE_S
+
+    shortest, longest = DURATION_RANGE_S
+    what = "--duration" if spec.schedule in ("prbs", "chirp") else "--steps and the dwells"
+    if not shortest <= end_s <= longest:
+        raise SettingError(
+            "duration" if spec.schedule in ("prbs", "chirp") else "steps",
+            f"the {spec.schedule} schedule runs {end_s:g} s, outside the {shortest:g} s to "
+            f"{longest / 3600:g} h a recording may span (set by {what})",
+        )
+    samples = end_s / spec.log_dt
+    if samples > MAX_SAMPLES:
+        raise SettingError(
+            "log_dt",
+            f"{end_s:g} s every {spec.log_dt:g} s is {samples:,.0f} samples, more than "
+            f"{MAX_SAMPLES:,}: log less often or run shorter",
+        )
+
+
 def run_tunnel(spec: TunnelSpec) -> Recording:
     """Run the virtual wind tunnel.
 
@@ -489,16 +713,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     ('synthetic', 5731)
     """
     rng_schedule, rng_turbulence, rng_sensor = _streams(spec.seed)
-    if spec.schedule == "paper":
-        schedule = FinSchedule.paper()
-    else:
-        schedule = FinSchedule.staircase(
-            rng_schedule,
-            spec.steps,
-            range_deg=spec.fin_range,
-            dwell_s=(spec.dwell_min, spec.dwell_max),
-            grid_s=spec.log_dt,
-        )
+    schedule = fin_schedule(spec, rng_schedule)
     n = round(schedule.end_s / spec.log_dt)
     time = spec.log_dt * np.arange(n + 1, dtype=float)
     command = schedule.command(time)

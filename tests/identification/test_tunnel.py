@@ -116,6 +116,85 @@ def test_staircase_schedule() -> None:
     assert np.count_nonzero(np.diff(rec.fin_cmd_deg)) == 5
 
 
+#: A short, fast-logged run, as a real rig records one.
+RIG = {"log_dt": 0.01, "steps": 6, "dwell_min": 2.0, "dwell_max": 4.0, "lead": 2.0}
+
+
+def _command(schedule: str, **extra: object) -> tuple[np.ndarray, np.ndarray, TunnelSpec]:
+    spec = TunnelSpec(seed=7, schedule=schedule, fin_range=30.0, **{**RIG, **extra})  # type: ignore[arg-type]
+    rec = run_tunnel(spec)
+    assert rec.fin_cmd_deg is not None
+    # The recorded command reproduces the run.
+    again = run_tunnel(spec_from_command(rec.metadata["command"]))
+    np.testing.assert_array_equal(again.columns()["fin_cmd_deg"], rec.fin_cmd_deg)
+    return rec.time_s, rec.fin_cmd_deg, spec
+
+
+def test_ramps_reach_each_level_at_the_ramp_rate_and_hold_it() -> None:
+    t, cmd, _ = _command("ramps", ramp=1.0)
+    slope = np.abs(np.diff(cmd)) / 0.01
+    assert slope.max() <= 60.0 + 1e-6  # at most a ±30° swing in 1 s
+    moving = slope > 1e-9
+    assert 0.1 < moving.mean() < 0.6  # ramps, then dwells
+    assert np.abs(cmd).max() <= 30.0 and cmd[t < 2.0].max() == 0.0
+
+
+def test_doublets_are_zero_mean_pulse_pairs() -> None:
+    _, cmd, _ = _command("doublets", pulse=0.5)
+    changes = np.flatnonzero(np.diff(cmd)) + 1
+    assert changes.size == 3 * 6  # +A, -A, back to 0, six times
+    for k in range(6):
+        up, down, back = changes[3 * k : 3 * k + 3]
+        assert cmd[up] == -cmd[down] != 0.0 and cmd[back] == 0.0
+        assert down - up == back - down == 50  # two pulses of 0.5 s
+        assert 15.0 <= abs(cmd[up]) <= 30.0
+
+
+def test_prbs_switches_between_two_levels_on_its_bit_grid() -> None:
+    t, cmd, _ = _command("prbs", pulse=0.2, duration=30.0)
+    after = cmd[t >= 2.0]
+    assert set(np.unique(after)) == {-30.0, 30.0}
+    changes = np.flatnonzero(np.diff(cmd)) + 1
+    assert np.all((changes[1:] - changes[0]) % 20 == 0)  # whole bits of 0.2 s
+    assert 0.35 < np.mean(after > 0) < 0.65
+
+
+def test_a_chirp_sweeps_from_its_first_to_its_last_frequency() -> None:
+    t, cmd, _ = _command("chirp", duration=40.0, chirp_from=0.1, chirp_to=2.0)
+    inside = (t >= 2.0) & (t <= 42.0)
+    crossings = t[inside][1:][np.diff(np.sign(cmd[inside])) != 0]
+    half_periods = np.diff(crossings)
+    assert half_periods[0] > 5 * half_periods[-1]  # faster and faster
+    assert 1.6 < 0.5 / half_periods[-3:].mean() < 2.2  # ends near 2 Hz
+    assert np.abs(cmd).max() <= 30.0 and np.all(cmd[t > 42.01] == 0.0)
+
+
+def test_a_schedule_without_a_lead_starts_at_its_first_level() -> None:
+    for schedule in ("staircase", "ramps", "doublets", "prbs", "chirp"):
+        _command(schedule, lead=0.0, duration=10.0)
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["--schedule", "chirp", "--chirp-to", "10"], "--chirp-to: above 2.5 Hz"),
+        (["--schedule", "prbs", "--pulse", "0.05"], "--pulse: 0.05 s is shorter than the log"),
+        (["--schedule", "prbs", "--duration", "86000", "--log-dt", "0.001"], "--log-dt: 86"),
+        (["--schedule", "staircase", "--steps", "200", "--dwell-min", "3000", "--dwell-max",
+          "3600"], "--steps: the staircase schedule runs"),
+        (["--schedule", "prbs", "--duration", "1", "--lead", "0"], "outside the 4.9 s to 24 h"),
+    ],
+)  # fmt: skip
+def test_a_schedule_a_recording_cannot_hold_is_refused_in_one_line(
+    argv: list[str], said: str, tmp_path, capsys
+) -> None:
+    out = tmp_path / "r.csv"
+    assert main(["tunnel", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and said in err, err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("distribution", ["gaussian", "laplace", "student-t"])
 def test_turbulence_marginal_is_exact(distribution: Distribution) -> None:
     turb = Turbulence(distribution=distribution, sd_deg=8.4, mean_deg=1.0, correlation_time_s=0.0)
