@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -95,6 +96,31 @@ class ImportSettings:
         "cell separator (default: each line's comma, semicolon or tab, else whitespace)",
         parse=_delimiter,
     )
+    unit: dict[str, Any] = setting(
+        default_factory=dict,
+        help="the unit of one column, over --units, --time-unit, --speed-unit and "
+        "--altitude-unit, e.g. roll=rad (repeatable)",
+        metavar="ROLE=UNIT",
+    )
+    scale: dict[str, Any] = setting(
+        default_factory=dict,
+        help="multiply a column by FACTOR after its unit, e.g. fin=-1 for a fin whose sign is "
+        "the other way round (repeatable)",
+        metavar="ROLE=FACTOR",
+    )
+    offset: dict[str, Any] = setting(
+        default_factory=dict,
+        help="add VALUE to a column after its unit and scale, in °, °/s, s, m/s or m, e.g. "
+        "fin=-1.5 for a fin trimmed off zero (repeatable)",
+        metavar="ROLE=VALUE",
+    )
+    time_from: float | None = setting(
+        None, "keep the rows from this time on (the time column, after its unit)",
+        flag="--from", ge=-1e9, le=1e9, unit="s",
+    )  # fmt: skip
+    time_to: float | None = setting(
+        None, "keep the rows up to this time", flag="--to", ge=-1e9, le=1e9, unit="s"
+    )
     unwrap: bool = setting(False, "unwrap a roll angle that wraps at 360°")
     name: str | None = setting(None, "recording name (default: the input file's stem)")
     source: Literal["wind-tunnel", "flight"] = setting(
@@ -114,6 +140,55 @@ class ImportSettings:
         check(self)
         if self.delimiter is not None and len(self.delimiter) != 1:
             raise SettingError("delimiter", f"must be one character, not {self.delimiter!r}")
+        for field, given in (("unit", self.unit), ("scale", self.scale), ("offset", self.offset)):
+            for role, value in given.items():
+                _check_column_setting(field, role, value, self.columns)
+        if (
+            self.time_from is not None
+            and self.time_to is not None
+            and not self.time_from < self.time_to
+        ):
+            raise SettingError(
+                "time_from", f"{self.time_from:g} s must come before --to {self.time_to:g} s"
+            )
+
+    def column_unit(self, role: str) -> float:
+        """The factor that takes column ``role`` to the recording's unit."""
+        table, default = _UNIT_TABLES.get(role, (ANGLE_UNITS, self.units))
+        if role == "time":
+            default = self.time_unit
+        elif role == "airspeed":
+            default = self.speed_unit
+        elif role == "altitude":
+            default = self.altitude_unit
+        return table[str(self.unit.get(role, default))]
+
+
+#: Column role -> (its units, by name, to the recording's), for --unit ROLE=UNIT.
+_UNIT_TABLES: dict[str, tuple[dict[str, float], str]] = {
+    "time": (TIME_UNITS, "s"),
+    "airspeed": (SPEED_UNITS, "mps"),
+    "altitude": (ALTITUDE_UNITS, "m"),
+}
+
+
+def _check_column_setting(field: str, role: str, value: Any, columns: tuple[str, ...]) -> None:
+    """Refuse (``SettingError``) a ``--unit``/``--scale``/``--offset`` entry that names no
+    column of ``--columns`` or gives a value that is not one."""
+    if role not in columns or role == "skip":
+        named = ", ".join(c for c in columns if c != "skip") or "none"
+        raise SettingError(field, f"{role!r} is not a column of --columns ({named})")
+    if field == "unit":
+        table = _UNIT_TABLES.get(role, (ANGLE_UNITS, "deg"))[0]
+        if value not in table:
+            raise SettingError(
+                field, f"{role}={value!r}: the units of {role} are {', '.join(table)}"
+            )
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise SettingError(field, f"{role}={value!r} is not a finite number")
+    if field == "scale" and value == 0:
+        raise SettingError(field, f"{role}=0 would erase the column")
 
 
 def _cells(line: str, delimiter: str) -> list[str]:
@@ -300,17 +375,22 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
             if time_column is None
             else _time_index(where, time_column, names, roles, header_line)
         )
-        out["time_s"] = data[:, index] * TIME_UNITS[time_unit]
-    scales = {
-        "airspeed_mps": SPEED_UNITS[settings.speed_unit],
-        "altitude_m": ALTITUDE_UNITS[settings.altitude_unit],
-    }
+        out["time_s"] = data[:, index] * settings.column_unit("time")
     for j, role in enumerate(roles):
         target = ROLES[role]
         if target is not None and target != "time_s":
-            out[target] = data[:, j] * scales.get(target, ANGLE_UNITS[units])
+            out[target] = data[:, j] * settings.column_unit(role)
+    for role in roles:
+        target = ROLES[role]
+        if target is not None and (role in settings.scale or role in settings.offset):
+            out[target] = out[target] * settings.scale.get(role, 1.0) + settings.offset.get(
+                role, 0.0
+            )
     if settings.unwrap and "roll_deg" in out:
         out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
+    kept = np.asarray(lines, dtype=np.int64)
+    if settings.time_from is not None or settings.time_to is not None:
+        out, kept = _window(where, out, kept, settings.time_from, settings.time_to)
 
     if rate_hz is not None:
         time_read = f"--rate {rate_hz:g} Hz"
@@ -320,12 +400,18 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
     validate_samples(
         out,
         path=where,
-        lines=np.array(lines, dtype=np.int64),
+        lines=kept,
         header_line=header_line,
         time_read=time_read,
     )
     meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
     meta["import.units"] = units
+    for field in ("unit", "scale", "offset"):
+        given = getattr(settings, field)
+        if given:
+            meta[f"import.{field}"] = ",".join(f"{k}={v}" for k, v in given.items())
+    if settings.time_from is not None or settings.time_to is not None:
+        meta["import.window_s"] = f"{settings.time_from},{settings.time_to}"
     if "airspeed_mps" in out:
         meta["import.speed_unit"] = settings.speed_unit
     if "altitude_m" in out:
@@ -337,6 +423,27 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
     return Recording(
         name=settings.name or Path(where).stem, source=settings.source, metadata=meta, **out
     )
+
+
+def _window(
+    where: str,
+    columns: dict[str, FloatArray],
+    lines: np.ndarray,
+    start: float | None,
+    stop: float | None,
+) -> tuple[dict[str, FloatArray], np.ndarray]:
+    """The rows whose time lies in [``start``, ``stop``] (``--from``/``--to``)."""
+    t = columns["time_s"]
+    keep = np.ones(t.size, dtype=bool)
+    if start is not None:
+        keep &= t >= start
+    if stop is not None:
+        keep &= t <= stop
+    if not keep.any():
+        finite = t[np.isfinite(t)]
+        span = f"{finite.min():g} to {finite.max():g} s" if finite.size else "no finite times"
+        raise RecordingError(where, None, f"--from/--to keep no rows: the time column runs {span}")
+    return {name: values[keep] for name, values in columns.items()}, lines[keep]
 
 
 def _time_index(

@@ -444,3 +444,55 @@ def test_an_import_is_never_labelled_synthetic(tmp_path: Path) -> None:
     log.write_text("0,1,2\n0.1,1,2\n", encoding="utf-8")
     with pytest.raises(RecordingError, match=r"source: must be one of wind-tunnel, flight, not"):
         import_csv(log, ["time", "fin_cmd", "roll"], header=False, source="synthetic")
+
+
+def test_a_window_per_column_units_scale_offset_and_sign(tmp_path: Path) -> None:
+    """A real log as it comes: a stretch of it, the roll in radians beside a fin in
+    degrees, a fin whose sign is the other way round and trimmed 1.5° off zero."""
+    from identification.importer import ImportSettings, read_csv
+
+    t = np.arange(0.0, 20.0, 0.01)
+    fin = np.where(t < 10.0, 10.0, -10.0)
+    roll = np.radians(3.0 * t)
+    log = tmp_path / "log.csv"
+    np.savetxt(log, np.column_stack([t, fin, roll]), delimiter=",", fmt="%.10g")
+    settings = ImportSettings(
+        columns=("time", "fin", "roll"),
+        header=False,
+        unit={"roll": "rad"},
+        scale={"fin": -1},
+        offset={"fin": -1.5},
+        time_from=5.0,
+        time_to=15.0,
+    )
+    rec = read_csv(log, settings)
+    assert rec.time_s[0] == pytest.approx(5.0) and rec.time_s[-1] == pytest.approx(15.0)
+    assert rec.fin_deg is not None and rec.roll_deg is not None
+    np.testing.assert_allclose(rec.fin_deg, -np.where(rec.time_s < 10.0, 10.0, -10.0) - 1.5)
+    np.testing.assert_allclose(rec.roll_deg, 3.0 * rec.time_s, atol=1e-6)
+    assert rec.metadata["import.scale"] == "fin=-1"
+    assert rec.metadata["import.window_s"] == "5.0,15.0"
+
+
+@pytest.mark.parametrize(
+    ("extra", "said"),
+    [
+        (["--scale", "time=2"], "--scale: 'time' is not a column of --columns (roll, fin)"),
+        (["--unit", "fin=km"], "--unit: fin='km': the units of fin are deg, rad"),
+        (["--scale", "fin=0"], "--scale: fin=0 would erase the column"),
+        (["--offset", "fin=nan"], "--offset: fin=nan is not a finite number"),
+        (["--from", "30"], "--from/--to keep no rows: the time column runs 0 to 9.9 s"),
+        (["--from", "5", "--to", "2"], "--from: 5 s must come before --to 2 s"),
+    ],
+)
+def test_a_bad_column_setting_or_window_is_one_line(
+    extra: list[str], said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = tmp_path / "log.csv"
+    log.write_text("".join(f"{k},{k % 7}\n" for k in range(100)), encoding="utf-8")
+    out = tmp_path / "rec.csv"
+    argv = ["import-csv", str(log), "--out", str(out), "--columns", "roll,fin", "--no-header"]
+    assert main([*argv, "--rate", "10", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and said in err, err
+    assert not out.exists()
