@@ -115,7 +115,7 @@ class ImportSettings:
         metavar="ROLE=VALUE",
     )
     time_from: float | None = setting(
-        None, "keep the rows from this time on (the time column, after its unit)",
+        None, "keep the rows from this time on (the time column after its unit, scale and offset)",
         flag="--from", ge=-1e9, le=1e9, unit="s",
     )  # fmt: skip
     time_to: float | None = setting(
@@ -142,7 +142,8 @@ class ImportSettings:
             raise SettingError("delimiter", f"must be one character, not {self.delimiter!r}")
         for field, given in (("unit", self.unit), ("scale", self.scale), ("offset", self.offset)):
             for role, value in given.items():
-                _check_column_setting(field, role, value, self.columns)
+                timed = ("time",) if self.time_column is not None else ()
+                _check_column_setting(field, role, value, (*self.columns, *timed))
         if (
             self.time_from is not None
             and self.time_to is not None
@@ -380,7 +381,8 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         target = ROLES[role]
         if target is not None and target != "time_s":
             out[target] = data[:, j] * settings.column_unit(role)
-    for role in roles:
+    timed = ["time"] if rate_hz is None else []  # a time column, by role or by name
+    for role in {*roles, *timed}:
         target = ROLES[role]
         if target is not None and (role in settings.scale or role in settings.offset):
             out[target] = out[target] * settings.scale.get(role, 1.0) + settings.offset.get(
@@ -396,7 +398,7 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         time_read = f"--rate {rate_hz:g} Hz"
     else:
         label = names[index] if names is not None else f"column {index + 1}"
-        time_read = f"the time column ({label!r}, read in {time_unit})"
+        time_read = f"the time column ({label!r}, read in {settings.unit.get('time', time_unit)})"
     validate_samples(
         out,
         path=where,
@@ -410,12 +412,14 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         given = getattr(settings, field)
         if given:
             meta[f"import.{field}"] = ",".join(f"{k}={v}" for k, v in given.items())
-    if settings.time_from is not None or settings.time_to is not None:
-        meta["import.window_s"] = f"{settings.time_from},{settings.time_to}"
+    if settings.time_from is not None:
+        meta["import.from_s"] = repr(settings.time_from)
+    if settings.time_to is not None:
+        meta["import.to_s"] = repr(settings.time_to)
     if "airspeed_mps" in out:
-        meta["import.speed_unit"] = settings.speed_unit
+        meta["import.speed_unit"] = str(settings.unit.get("airspeed", settings.speed_unit))
     if "altitude_m" in out:
-        meta["import.altitude_unit"] = settings.altitude_unit
+        meta["import.altitude_unit"] = str(settings.unit.get("altitude", settings.altitude_unit))
     if settings.notes:
         meta["notes"] = settings.notes
     if settings.split is not None:
@@ -439,7 +443,8 @@ def _window(
         keep &= t >= start
     if stop is not None:
         keep &= t <= stop
-    if not keep.any():
+    keep |= ~np.isfinite(t)  # kept for the validation to name its line
+    if not keep[np.isfinite(t)].any():
         finite = t[np.isfinite(t)]
         span = f"{finite.min():g} to {finite.max():g} s" if finite.size else "no finite times"
         raise RecordingError(where, None, f"--from/--to keep no rows: the time column runs {span}")

@@ -54,6 +54,7 @@ the recovery.
 
 from __future__ import annotations
 
+import math
 import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -274,17 +275,17 @@ class FinSchedule:
     ) -> FinSchedule:
         """``count`` doublets: ``+A`` for ``pulse_s``, ``-A`` for ``pulse_s``, back to 0°,
         ``A`` uniform in [``range_deg``/2, ``range_deg``] with a random sign, each followed
-        by a dwell at 0° uniform in ``dwell_s``; times on the ``grid_s`` log grid."""
-        times: list[float] = []
+        by a dwell at 0° uniform in ``dwell_s``; every time a whole number of ``grid_s``
+        log steps (the pulse at least one), so both halves last alike."""
+        k, pulse = round(lead_s / grid_s), _whole_steps(pulse_s, grid_s)
+        times: list[int] = []
         levels: list[float] = []
-        t = lead_s
         for _ in range(count):
             amplitude = float(rng.uniform(range_deg / 2, range_deg)) * float(rng.choice([-1, 1]))
-            for level, hold in ((amplitude, pulse_s), (-amplitude, pulse_s), (0.0, None)):
-                times.append(t)
-                levels.append(round(level, 2))
-                t += pulse_s if hold is not None else float(rng.uniform(*dwell_s))
-        return cls.starting(*_on_grid(times, levels, t, grid_s))
+            times += [k, k + pulse, k + 2 * pulse]
+            levels += [round(amplitude, 2), round(-amplitude, 2), 0.0]
+            k += 2 * pulse + _whole_steps(float(rng.uniform(*dwell_s)), grid_s)
+        return cls.starting(_seconds(times, grid_s), tuple(levels), _seconds([k], grid_s)[0])
 
     @classmethod
     def prbs(
@@ -296,31 +297,25 @@ class FinSchedule:
         lead_s: float,
         grid_s: float,
     ) -> FinSchedule:
-        """A pseudo-random binary sequence: ``±range_deg``, a fair coin every ``bit_s`` for
-        ``duration_s`` after the lead (white up to about 1/(2·``bit_s``) Hz)."""
-        bits = max(1, round(duration_s / bit_s))
+        """A pseudo-random binary sequence: ``±range_deg``, a fair coin every ``bit_s`` (a
+        whole number of ``grid_s`` log steps) for ``duration_s`` after the lead (white up
+        to about 1/(2·``bit_s``) Hz)."""
+        lead, bit = round(lead_s / grid_s), _whole_steps(bit_s, grid_s)
+        bits = max(1, round(duration_s / (bit * grid_s)))
         signs = rng.choice([-1.0, 1.0], size=bits)
-        times = [lead_s + k * bit_s for k in range(bits)]
-        end = lead_s + bits * bit_s
-        return cls.starting(*_on_grid(times, list(range_deg * signs), end, grid_s))
+        times = _seconds([lead + j * bit for j in range(bits)], grid_s)
+        end = _seconds([lead + bits * bit], grid_s)[0]
+        return cls.starting(times, tuple(range_deg * signs), end)
 
 
-def _on_grid(
-    times: list[float], levels: list[float], end_s: float, grid_s: float
-) -> tuple[tuple[float, ...], tuple[float, ...], float]:
-    """Change times rounded to the log grid (a change that lands on the one before it
-    replaces it), the levels, and the end one grid step on."""
-    kept_t: list[float] = []
-    kept_l: list[float] = []
-    for t, level in zip(times, levels, strict=True):
-        on = round(round(t / grid_s) * grid_s, 6)
-        if kept_t and on <= kept_t[-1]:
-            kept_l[-1] = level
-            continue
-        kept_t.append(on)
-        kept_l.append(level)
-    end = max(round(round(end_s / grid_s) * grid_s, 6), kept_t[-1] + grid_s if kept_t else grid_s)
-    return tuple(kept_t), tuple(kept_l), round(end, 6)
+def _whole_steps(seconds: float, grid_s: float) -> int:
+    """The whole number of log steps nearest ``seconds``, at least one."""
+    return max(1, round(seconds / grid_s))
+
+
+def _seconds(steps: Sequence[int], grid_s: float) -> tuple[float, ...]:
+    """Times in s of whole log steps (rounded to µs, as the staircase's)."""
+    return tuple(round(k * grid_s, 6) for k in steps)
 
 
 @dataclass(frozen=True)
@@ -335,14 +330,15 @@ class SmoothSchedule:
     end_s : float
         End of the run, s.
     chirp : tuple of float or None
-        ``(amplitude °, f0 Hz, f1 Hz, start s, duration s)``: a linear sweep
-        ``A·sin(2π(f0·τ + (f1 - f0)·τ²/(2T)))``, τ = t - start, 0 outside it.
+        ``(amplitude °, f0 Hz, f1 Hz, start s, duration T s, stop s)``: a linear sweep
+        ``A·sin(2π(f0·τ + (f1 - f0)·τ²/(2T)))``, τ = t - start, from τ = 0 to its last
+        zero crossing ``stop`` ≤ T, 0 outside it.
     """
 
     times_s: tuple[float, ...]
     values_deg: tuple[float, ...]
     end_s: float
-    chirp: tuple[float, float, float, float, float] | None = None
+    chirp: tuple[float, float, float, float, float, float] | None = None
 
     @classmethod
     def ramps(
@@ -358,7 +354,8 @@ class SmoothSchedule:
         ramp of ``ramp_s`` and held for a dwell uniform in ``dwell_s``: as a rig that
         slews its fins at a set rate commands them."""
         stairs = FinSchedule.staircase(rng, steps, range_deg, dwell_s, lead_s, grid_s=1e-6)
-        times, values, previous = [0.0], [0.0], 0.0
+        previous = stairs.initial_deg  # the first level, without a lead
+        times, values = [0.0], [previous]
         for start, level in zip(stairs.change_times_s, stairs.levels_deg, strict=True):
             times += [start, start + ramp_s]
             values += [previous, level]
@@ -371,7 +368,15 @@ class SmoothSchedule:
     ) -> SmoothSchedule:
         """A chirp of amplitude ``range_deg`` from ``f0_hz`` to ``f1_hz`` over ``duration_s``
         after ``lead_s`` at 0°, then 0° for 5 s."""
-        chirp = (range_deg, f0_hz, f1_hz, lead_s, duration_s)
+        # The sweep stops at its last zero crossing within duration_s: no step at its end.
+        rate = (f1_hz - f0_hz) / (2.0 * duration_s)
+        half_cycles = math.floor(2.0 * (f0_hz * duration_s + rate * duration_s**2))
+        target = half_cycles / 2.0
+        if abs(rate) < 1e-15:
+            stop = target / f0_hz
+        else:
+            stop = (-f0_hz + math.sqrt(f0_hz**2 + 4.0 * rate * target)) / (2.0 * rate)
+        chirp = (range_deg, f0_hz, f1_hz, lead_s, duration_s, min(stop, duration_s))
         return cls((0.0,), (0.0,), lead_s + duration_s + 5.0, chirp)
 
     def command(self, time_s: FloatArray) -> FloatArray:
@@ -379,9 +384,9 @@ class SmoothSchedule:
         t = np.asarray(time_s, dtype=float)
         out = np.interp(t, self.times_s, self.values_deg)
         if self.chirp is not None:
-            amplitude, f0, f1, start, duration = self.chirp
+            amplitude, f0, f1, start, duration, stop = self.chirp
             tau = t - start
-            inside = (tau >= 0) & (tau <= duration)
+            inside = (tau >= 0) & (tau <= stop)
             phase = f0 * tau + (f1 - f0) * tau**2 / (2.0 * duration)
             out = np.where(inside, amplitude * np.sin(2.0 * np.pi * phase), out)
         return np.asarray(out)
@@ -550,7 +555,7 @@ class TunnelSpec:
     dof: float = setting(
         Turbulence().dof, "degrees of freedom of the student-t marginal", gt=2.0, le=1000.0
     )
-    log_dt: float = setting(0.1, "logging interval (the paper: 0.1)", ge=0.001, le=10.0, unit="s")
+    log_dt: float = setting(0.1, "logging interval (the paper: 0.1)", ge=0.001, le=1.0, unit="s")
     substeps: int = setting(10, "exact-update substeps per logging interval", ge=1, le=1000)
     encoder_counts: int = setting(
         1024,
@@ -592,8 +597,13 @@ class TunnelSpec:
                 f"{self.log_dt:g} s: the logged command would not show the sweep",
             )
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
-        # The run's length, from the schedule the seed draws (cheap), before any simulation.
-        _check_length(self, fin_schedule(self, _streams(self.seed)[0]).end_s)
+        if self.schedule == "ramps" and self.ramp > self.dwell_min:
+            raise SettingError(
+                "ramp",
+                f"{self.ramp:g} s is longer than --dwell-min {self.dwell_min:g} s: each level "
+                "must be reached before the next ramp starts",
+            )
+        _check_schedule(self)  # the schedule the seed draws (cheap), before any simulation
 
     def params(self) -> RollParams:
         """Ground-truth roll parameters of this run."""
@@ -667,24 +677,52 @@ def fin_schedule(spec: TunnelSpec, rng: np.random.Generator) -> FinSchedule | Sm
 #: Most samples a tunnel run logs (each column 8 bytes a sample; 14 h at 100 Hz).
 MAX_SAMPLES = 5_000_000
 
+#: What sets each schedule's length, for the message that refuses one.
+_LENGTH_SET_BY = {
+    "paper": "the paper's Table 1",
+    "staircase": "--lead, --steps and the dwells",
+    "ramps": "--lead, --steps, the dwells and --ramp",
+    "doublets": "--lead, --steps, --pulse and the dwells",
+    "prbs": "--lead and --duration",
+    "chirp": "--lead and --duration (and 5 s at 0° after it)",
+}
 
-def _check_length(spec: TunnelSpec, end_s: float) -> None:
-    """Refuse (before simulating) a run a recording cannot hold, or too many samples."""
-    from identification.recording import DURATION_RANGE_S
 
+def _check_schedule(spec: TunnelSpec) -> None:
+    """Refuse (``SettingError``, before anything is simulated) a run a recording cannot
+    hold -- its span, its number of samples -- or a command that never changes."""
+    from identification.recording import DURATION_RANGE_S, MIN_SAMPLES
+
+    flag = "duration" if spec.schedule in ("prbs", "chirp") else "steps"
+    if spec.schedule in ("prbs", "chirp"):  # known before the sequence is drawn
+        _check_samples(spec, spec.lead + spec.duration + (5.0 if spec.schedule == "chirp" else 0))
+    schedule = fin_schedule(spec, _streams(spec.seed)[0])
+    n = round(schedule.end_s / spec.log_dt)
+    span = n * spec.log_dt
     shortest, longest = DURATION_RANGE_S
-    what = "--duration" if spec.schedule in ("prbs", "chirp") else "--steps and the dwells"
-    if not shortest <= end_s <= longest:
+    if not shortest <= span <= longest or n + 1 < MIN_SAMPLES:
         raise SettingError(
-            "duration" if spec.schedule in ("prbs", "chirp") else "steps",
-            f"the {spec.schedule} schedule runs {end_s:g} s, outside the {shortest:g} s to "
-            f"{longest / 3600:g} h a recording may span (set by {what})",
+            flag,
+            f"the {spec.schedule} schedule runs {span:g} s in {n + 1} samples; a recording spans "
+            f"{shortest:g} s to {longest / 3600:g} h in at least {MIN_SAMPLES} samples (set by "
+            f"{_LENGTH_SET_BY[spec.schedule]}, and --log-dt)",
         )
-    samples = end_s / spec.log_dt
+    _check_samples(spec, span)
+    command = schedule.command(spec.log_dt * np.arange(n + 1, dtype=float))
+    if np.ptp(command) == 0.0:
+        raise SettingError(
+            flag,
+            f"the {spec.schedule} schedule never moves the fins (at {command[0]:g}° "
+            "throughout): give it more steps, a lead or a longer run",
+        )
+
+
+def _check_samples(spec: TunnelSpec, span_s: float) -> None:
+    samples = span_s / spec.log_dt
     if samples > MAX_SAMPLES:
         raise SettingError(
             "log_dt",
-            f"{end_s:g} s every {spec.log_dt:g} s is {samples:,.0f} samples, more than "
+            f"{span_s:g} s every {spec.log_dt:g} s is {samples:,.0f} samples, more than "
             f"{MAX_SAMPLES:,}: log less often or run shorter",
         )
 

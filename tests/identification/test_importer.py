@@ -471,7 +471,7 @@ def test_a_window_per_column_units_scale_offset_and_sign(tmp_path: Path) -> None
     np.testing.assert_allclose(rec.fin_deg, -np.where(rec.time_s < 10.0, 10.0, -10.0) - 1.5)
     np.testing.assert_allclose(rec.roll_deg, 3.0 * rec.time_s, atol=1e-6)
     assert rec.metadata["import.scale"] == "fin=-1"
-    assert rec.metadata["import.window_s"] == "5.0,15.0"
+    assert (rec.metadata["import.from_s"], rec.metadata["import.to_s"]) == ("5.0", "15.0")
 
 
 @pytest.mark.parametrize(
@@ -496,3 +496,24 @@ def test_a_bad_column_setting_or_window_is_one_line(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and said in err, err
     assert not out.exists()
+
+
+def test_the_time_column_by_name_takes_its_own_unit_and_offset_and_nan_times_are_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = tmp_path / "log.csv"
+    rows = ["t_ms,fin,roll", *(f"{k * 100},{10 if k < 40 else -10},{k * 0.5}" for k in range(100))]
+    log.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    out = tmp_path / "rec.csv"
+    argv = ["import-csv", str(log), "--out", str(out), "--columns", "skip,fin,roll"]
+    argv += ["--time-column", "t_ms", "--unit", "time=ms", "--offset", "time=-1"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    rec = load_recording(out)
+    assert rec.time_s[0] == pytest.approx(-1.0) and rec.time_s[1] == pytest.approx(-0.9)
+    # A window leaves rows without a finite time to the validation, which names their line.
+    nan = tmp_path / "nan.csv"
+    nan.write_text("".join(f"{'nan' if k in (0, 99) else k / 10},1,{k}\n" for k in range(100)))
+    argv = ["import-csv", str(nan), "--out", str(tmp_path / "n.csv"), "--columns"]
+    assert main([*argv, "time,fin,roll", "--no-header", "--from", "-100"]) == 2
+    assert "nan.csv:1: time_s is nan (not finite)" in capsys.readouterr().err

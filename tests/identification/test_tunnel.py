@@ -171,7 +171,37 @@ def test_a_chirp_sweeps_from_its_first_to_its_last_frequency() -> None:
 
 def test_a_schedule_without_a_lead_starts_at_its_first_level() -> None:
     for schedule in ("staircase", "ramps", "doublets", "prbs", "chirp"):
-        _command(schedule, lead=0.0, duration=10.0)
+        _, cmd, _ = _command(schedule, lead=0.0, duration=10.0)
+        if schedule in ("staircase", "ramps", "prbs"):
+            assert cmd[0] != 0.0, schedule  # the first level from the first sample
+
+
+def test_pulses_and_bits_are_whole_log_steps_so_both_halves_last_alike() -> None:
+    # 0.15 s at 0.1-s logging: each half one step (not 0.1 and 0.2 s), from any lead
+    for lead in (20.0, 20.05, 0.05):
+        _, cmd, _ = _command("doublets", pulse=0.15, log_dt=0.1, lead=lead)
+        changes = np.flatnonzero(np.diff(cmd)) + 1
+        if lead < 0.1:  # a doublet from the first sample: its +A is the initial level
+            changes = np.concatenate([[0], changes])
+        assert changes.size == 3 * 6, (lead, changes.size)  # no doublet lost to a collision
+        for k in range(6):
+            up, down, back = changes[3 * k : 3 * k + 3]
+            assert down - up == back - down == 1, (lead, k)
+    # 0.25-s bits at 0.1-s logging: whole two-step bits from the lead (no 0.2/0.3 s mix)
+    _, cmd, _ = _command("prbs", pulse=0.25, log_dt=0.1, lead=20.05, duration=10.0)
+    changes = np.flatnonzero(np.diff(cmd)) + 1
+    assert np.all((changes - changes[0]) % 2 == 0) and np.diff(changes).min() == 2
+
+
+def test_a_chirp_stops_at_a_zero_crossing() -> None:
+    from identification.tunnel import SmoothSchedule
+
+    sweep = SmoothSchedule.sweep(30.0, 0.1, 2.0, 10.0, 1.0)
+    assert sweep.chirp is not None
+    stop = sweep.chirp[5]
+    assert 9.5 < stop <= 10.0
+    t = 1.0 + stop + np.array([-1e-6, 0.0, 1e-6])
+    assert np.abs(sweep.command(t)).max() < 0.01  # no step where the sweep ends
 
 
 @pytest.mark.parametrize(
@@ -182,7 +212,15 @@ def test_a_schedule_without_a_lead_starts_at_its_first_level() -> None:
         (["--schedule", "prbs", "--duration", "86000", "--log-dt", "0.001"], "--log-dt: 86"),
         (["--schedule", "staircase", "--steps", "200", "--dwell-min", "3000", "--dwell-max",
           "3600"], "--steps: the staircase schedule runs"),
-        (["--schedule", "prbs", "--duration", "1", "--lead", "0"], "outside the 4.9 s to 24 h"),
+        (["--schedule", "prbs", "--duration", "1", "--lead", "0"], "a recording spans 4.9 s to"),
+        (["--schedule", "prbs", "--lead", "0", "--duration", "5", "--log-dt", "0.2", "--pulse",
+          "0.2"], "in 26 samples; a recording spans 4.9 s to 24 h in at least 50 samples"),
+        (["--schedule", "ramps", "--ramp", "30"], "--ramp: 30 s is longer than --dwell-min 20 s"),
+        (["--schedule", "ramps", "--steps", "1", "--lead", "0"], "never moves the fins"),
+        (["--schedule", "prbs", "--lead", "0", "--pulse", "10", "--duration", "10"],
+         "--duration: the prbs schedule never moves the fins"),
+        (["--schedule", "prbs", "--duration", "86000", "--log-dt", "0.001", "--pulse", "0.001"],
+         "--log-dt: 86020 s every 0.001 s is 86,020,000 samples"),
     ],
 )  # fmt: skip
 def test_a_schedule_a_recording_cannot_hold_is_refused_in_one_line(
