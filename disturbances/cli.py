@@ -15,7 +15,7 @@ import json
 import os
 import sys
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -186,11 +186,34 @@ class IdentifyArgs:
             )
 
 
+def _fit_each(context: Any, methods: Sequence[str]) -> tuple[dict[str, Any], dict[str, str]]:
+    """Each method's fits, and the reason of each method that cannot fit the recording (its
+    :class:`~identification.steps.IdentificationError`: the paper's method on a recording
+    without held fin steps, ...); when none can, the first one's error."""
+    from identification.methods import fit
+    from identification.steps import IdentificationError
+
+    fits: dict[str, Any] = {}
+    refused: dict[str, str] = {}
+    first: IdentificationError | None = None
+    for method in methods:
+        try:
+            fits[method] = fit(context, method, _models_of(method))
+        except IdentificationError as exc:
+            refused[method] = str(exc)
+            first = first or exc
+    if not fits and first is not None:
+        if "needs fin steps" in str(first) and "ml" not in methods:
+            raise IdentificationError(f"{first}; --method ml reads no fin steps") from None
+        raise first
+    return fits, refused
+
+
 def identify(args: IdentifyArgs) -> int:
     """Identify a recording by every method asked for; print, write and store the results."""
     import dataclasses
 
-    from identification.methods import Context, fit, is_flight_method
+    from identification.methods import Context, is_flight_method
     from identification.recording import load_recording
     from identification.tables import methods_table, parameter_table
     from rocketroll_common.files import write_all_atomic
@@ -213,8 +236,8 @@ def identify(args: IdentifyArgs) -> int:
             f"--report: the paper's report is of a tunnel run; {args.recording} is a flight"
         )
     context = Context(recording, options, together=together)
-    fits = {method: fit(context, method, _models_of(method)) for method in methods}
-    result = context.paper if "paper" in methods else None
+    fits, refused = _fit_each(context, methods)
+    result = context.paper if "paper" in fits else None
     outputs: dict[str | os.PathLike[str], str | bytes] = {}
     if args.json is not None:
         data = {} if result is None else result.to_dict()
@@ -242,12 +265,13 @@ def identify(args: IdentifyArgs) -> int:
         from disturbances.ingest import add_identification
 
         with _new_database(args.db), _open(args.db, create=True) as db:
+            fitted = list(fits)  # a method that refused the recording adds nothing
             if result is not None:
-                added = add_identification(db, result, methods=methods)
+                added = add_identification(db, result, methods=fitted)
             else:
                 from disturbances.ingest import add_recording
 
-                added = add_recording(db, recording, options, methods=methods)
+                added = add_recording(db, recording, options, methods=fitted)
         stored = (
             f"{args.db}: this recording is already stored (same samples); nothing added"
             if added.recordings == 0 and added.traces == 0
@@ -255,6 +279,8 @@ def identify(args: IdentifyArgs) -> int:
             f"{added.traces} traces (ids {', '.join(map(str, added.trace_ids))})"
         )
     write_all_atomic(outputs)  # all or nothing
+    for method, reason in refused.items():  # the others ran
+        print(f"rocketroll identify: method {method} cannot fit it: {reason}", file=sys.stderr)
     if result is not None:
         print(parameter_table(result))
     flown = {method: f for method, f in fits.items() if is_flight_method(method)}

@@ -253,7 +253,7 @@ class Identification:
     def measurements(self) -> Measurements:
         """What this run started from (steps 1 and 5, §3.2), for other methods."""
         return Measurements(
-            segments=self.segments,
+            steps_found=self.segments,
             velocity_dps=self.velocity_dps,
             velocity_source=self.velocity_source,
             grid=self.grid,
@@ -372,7 +372,10 @@ class Measurements:
     Attributes
     ----------
     segments : Segments
-        Step 1.
+        Step 1 (a property): the fin steps, or the :class:`IdentificationError`
+        that says the recording has none -- raised only for a method that
+        reads them (the paper's, output-error); one that does not (ml) still
+        runs on ramps-free doublets, chirps and the like.
     velocity_dps, velocity_source
         The smoothed measured roll rate at the samples and where it came from.
     grid : FineGrid
@@ -387,7 +390,7 @@ class Measurements:
         The recording.
     """
 
-    segments: Segments
+    steps_found: Segments | IdentificationError
     velocity_dps: FloatArray
     velocity_source: str
     grid: FineGrid
@@ -397,6 +400,13 @@ class Measurements:
     angle_source: str
     velocity_fine: FloatArray
     recording: Recording
+
+    @property
+    def segments(self) -> Segments:
+        """The fin steps (step 1); an :class:`IdentificationError` where there are none."""
+        if isinstance(self.steps_found, IdentificationError):
+            raise IdentificationError(str(self.steps_found))
+        return self.steps_found
 
     def require_steps(self) -> None:
         """Refuse a recording with fewer than two fin steps: nothing to fit α and θ̄ on."""
@@ -409,7 +419,11 @@ class Measurements:
 
 def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:
     """Fin steps (step 1), smoothed velocity (§3.2), 100 Hz grid and fin angle (step 5)."""
-    segments = detect_segments(recording, min_step_deg=options.min_step_deg)
+    segments: Segments | IdentificationError
+    try:
+        segments = detect_segments(recording, min_step_deg=options.min_step_deg)
+    except IdentificationError as exc:  # for the methods that need steps to say
+        segments = exc
     velocity, velocity_source = measured_velocity(
         recording, options.smoothing_passes, options.smoothing_window_s
     )
@@ -419,7 +433,7 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
     angle, angle_source = measured_angle(recording)
     velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
     return Measurements(
-        segments=segments,
+        steps_found=segments,
         velocity_dps=velocity,
         velocity_source=velocity_source,
         grid=grid,

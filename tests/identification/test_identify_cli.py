@@ -187,3 +187,30 @@ def test_single_step_recording_is_a_clear_error(
     db = tmp_path / "x.sqlite"
     assert main(["db", "add", str(path), "--db", str(db), "--method", "output-error"]) == 2
     assert "at least two" in capsys.readouterr().err and not db.exists()
+
+
+def test_a_method_that_cannot_fit_a_recording_says_so_and_the_others_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Doublets have no held fin steps: the paper's method (and output-error, which starts
+    from the first step) refuse them in one line each, ml (which reads no steps) fits them;
+    when every method asked refuses, the first one's line is the error."""
+    rec = tmp_path / "doublets.csv"
+    tunnel = ["tunnel", "--schedule", "doublets", "--steps", "8", "--dwell-min", "2"]
+    argv = [*tunnel, "--dwell-max", "4", "--lead", "2", "--log-dt", "0.01", "--gyro-noise", "2"]
+    assert main([*argv, "--seed", "3", "--out", str(rec)]) == 0
+    capsys.readouterr()
+    out_json, db = tmp_path / "fit.json", tmp_path / "db.sqlite"
+    argv = ["identify", str(rec), "--method", "paper", "--method", "ml", "--mc-runs", "0"]
+    assert main([*argv, "--json", str(out_json), "--db", str(db)]) == 0
+    out, err = capsys.readouterr()
+    assert err.strip().splitlines() == [
+        "rocketroll identify: method paper cannot fit it: tunnel-doublets-seed3: the fin angle "
+        "(fin_cmd_deg) never steps by 1° or more; the identification needs fin steps (paper §2.3)"
+    ]
+    assert "ml            theta" in out and "stored in" in out
+    assert list(json.loads(out_json.read_text(encoding="utf-8"))["methods"]) == ["ml"]
+    # Every method asked refuses: one line, exit 2, and the method that would not.
+    assert main(["identify", str(rec), "--method", "paper", "--mc-runs", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.endswith("--method ml reads no fin steps"), err
