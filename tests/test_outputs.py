@@ -16,20 +16,10 @@ import pytest
 from identification.bundled import bundled_path
 from rocketroll.cli import main as rocketroll
 from rocketroll_common.files import content_kind
+from tests.cli import refused
 
 RECORDING = bundled_path("tunnel-paper-seed0")
 PNG = b"\x89PNG\r\n\x1a\n" + b"\0" * 32
-
-
-def refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
-    """Run ``argv``: exit 2, one line on stderr naming ``needles``; that line."""
-    code = rocketroll(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, err
-    assert len(err.splitlines()) == 1, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 @pytest.fixture

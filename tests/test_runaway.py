@@ -10,16 +10,7 @@ import pytest
 
 from identification.bundled import load_bundled
 from rocketroll.cli import main as rocketroll
-
-
-def refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
-    code = rocketroll(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, err
-    assert len(err.splitlines()) == 1, err
-    for needle in needles:
-        assert needle in err, err
-    return err
+from tests.cli import refused
 
 
 @pytest.fixture

@@ -12,28 +12,12 @@ from disturbances.bank import TraceBank, interval_means
 from identification.bundled import bundled_path
 from identification.recording import load_recording
 from rocketroll.cli import main as rocketroll
+from tests.cli import ok, refused
 
 #: Fast identification: no Monte Carlo noise study.
 FAST = ["--mc-runs", "0"]
 #: The paper's replay (the default replays ml's posterior draws).
 PAPER = ["--set", "method=paper", "--set", "disturbance=replay"]
-
-
-def ok(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    code = rocketroll(argv)
-    out, err = capsys.readouterr()
-    assert code == 0, err
-    return out
-
-
-def refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
-    code = rocketroll(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, err
-    assert len(err.splitlines()) == 1, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 @pytest.fixture(scope="module")
