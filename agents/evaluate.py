@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
 from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
-from agents.replay import check_options, env_options_setting, options_config
+from agents.replay import check_options, db_setting, env_options_setting, options_config
 from disturbances.bank import TraceBank
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -449,13 +449,7 @@ class Args:
         "folder for table.md, results.json, episode.png, errors.png (none: print only)",
         output="folder",
     )
-    db: str | None = setting(
-        None,
-        "database (default: $ROCKETROLL_DB or the default database)",
-        metavar="DB",
-        input=True,
-        kind="sqlite",
-    )
+    db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
     minari: str | None = setting(
         None,

@@ -26,12 +26,24 @@ if TYPE_CHECKING:
 __all__ = [
     "FIXED_OPTIONS",
     "check_options",
+    "db_setting",
     "env_options_setting",
     "options_config",
 ]
 
 #: Environment options a command sets itself (``--env-id``, ``--split``), never ``--set``.
 FIXED_OPTIONS = ("task", "split")
+
+
+def db_setting() -> Any:
+    """The ``--db`` setting of the commands that replay a database's traces."""
+    return setting(
+        None,
+        "database (default: $ROCKETROLL_DB or the default database)",
+        metavar="DB",
+        input=True,
+        kind="sqlite",
+    )
 
 
 def env_options_setting() -> Any:

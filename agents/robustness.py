@@ -47,7 +47,7 @@ from agents.evaluate import (
     protocol_episodes,
 )
 from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
-from agents.replay import check_options, env_options_setting, options_config
+from agents.replay import check_options, db_setting, env_options_setting, options_config
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
@@ -99,13 +99,7 @@ class Args:
         "folder for robustness.md, robustness.json, robustness.png (none: print only)",
         output="folder",
     )
-    db: str | None = setting(
-        None,
-        "database (default: $ROCKETROLL_DB or the default database)",
-        metavar="DB",
-        input=True,
-        kind="sqlite",
-    )
+    db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
 
     def __post_init__(self) -> None:

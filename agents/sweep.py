@@ -65,7 +65,13 @@ from typing import Any
 
 import numpy as np
 
-from agents.replay import FIXED_OPTIONS, check_options, env_options_setting, options_config
+from agents.replay import (
+    FIXED_OPTIONS,
+    check_options,
+    db_setting,
+    env_options_setting,
+    options_config,
+)
 from rocketroll_common import __version__
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -822,13 +828,7 @@ class RunArgs:
         output="folder",
     )
     jobs: int = setting(1, "trials run side by side (worker processes)", ge=1, le=256)
-    db: str | None = setting(
-        None,
-        "database (default: $ROCKETROLL_DB or the default database)",
-        metavar="DB",
-        input=True,
-        kind="sqlite",
-    )
+    db: str | None = db_setting()
     progress: bool = setting(True, "show the progress bar")
     ray: str | None = setting(
         None,

@@ -55,7 +55,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from agents.replay import check_options, env_options_setting, options_config
+from agents.replay import check_options, db_setting, env_options_setting, options_config
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
 from rocketroll_common.settings import Command, check, parse, run_command, setting, to_argv
 
@@ -200,13 +200,7 @@ class Args:
     out: Path | None = setting(
         None, "output folder (default: runs/<algorithm>/<env-id>/seed<seed>)", output="folder"
     )
-    db: str | None = setting(
-        None,
-        "disturbance database (default: $ROCKETROLL_DB or the default database)",
-        metavar="DB",
-        input=True,
-        kind="sqlite",
-    )
+    db: str | None = db_setting()
     hyperparams: Path = setting(
         DEFAULT_HYPERPARAMS, "YAML file of hyperparameters keyed by environment id", input=True
     )

@@ -22,7 +22,7 @@ from agents.evaluate import (
 )
 from agents.nominal import NominalModel
 from agents.pid import PIDController, PIDGains
-from agents.replay import check_options, env_options_setting, options_config
+from agents.replay import check_options, db_setting, env_options_setting, options_config
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv import VARIANTS
 from rollenv.core import RollConfig
@@ -61,9 +61,7 @@ class TuneArgs:
     """``rocketroll tune pid`` / ``python -m agents.tune``."""
 
     env_id: str = setting("RocketRoll-v0", "environment id", choices=VARIANTS.names, always=True)
-    db: str | None = setting(
-        None, "database (default: the default one)", metavar="DB", input=True, kind="sqlite"
-    )
+    db: str | None = db_setting()
     episodes: int = setting(30, "train episodes per ω", ge=1, le=100_000)
     seed: int = setting(0, "seed of the train episodes", ge=0, le=2**63 - 1)
     omegas: tuple[float, ...] = setting(
