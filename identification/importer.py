@@ -154,23 +154,29 @@ class ImportSettings:
             )
 
     def column_unit(self, role: str) -> float:
-        """The factor that takes column ``role`` to the recording's unit."""
-        table, default = _UNIT_TABLES.get(role, (ANGLE_UNITS, self.units))
-        if role == "time":
-            default = self.time_unit
-        elif role == "airspeed":
-            default = self.speed_unit
-        elif role == "altitude":
-            default = self.altitude_unit
-        return table[str(self.unit.get(role, default))]
+        """The factor that takes column ``role`` to the recording's unit: ``--unit ROLE=``,
+        else its kind's flag (``--time-unit``, ``--speed-unit``, ``--altitude-unit``,
+        ``--units`` for angles)."""
+        kinds = {
+            "time": self.time_unit,
+            "airspeed": self.speed_unit,
+            "altitude": self.altitude_unit,
+        }
+        default = kinds.get(role, self.units)
+        return _units_of(role)[str(self.unit.get(role, default))]
 
 
-#: Column role -> (its units, by name, to the recording's), for --unit ROLE=UNIT.
-_UNIT_TABLES: dict[str, tuple[dict[str, float], str]] = {
-    "time": (TIME_UNITS, "s"),
-    "airspeed": (SPEED_UNITS, "mps"),
-    "altitude": (ALTITUDE_UNITS, "m"),
+#: Column role -> its units, by name, to the recording's (--unit ROLE=UNIT); angles else.
+_UNIT_TABLES: dict[str, dict[str, float]] = {
+    "time": TIME_UNITS,
+    "airspeed": SPEED_UNITS,
+    "altitude": ALTITUDE_UNITS,
 }
+
+
+def _units_of(role: str) -> dict[str, float]:
+    """The units column ``role`` may be in (an angle's, or a rate's per second, by default)."""
+    return _UNIT_TABLES.get(role, ANGLE_UNITS)
 
 
 def _check_column_setting(field: str, role: str, value: Any, columns: tuple[str, ...]) -> None:
@@ -180,7 +186,7 @@ def _check_column_setting(field: str, role: str, value: Any, columns: tuple[str,
         named = ", ".join(c for c in columns if c != "skip") or "none"
         raise SettingError(field, f"{role!r} is not a column of --columns ({named})")
     if field == "unit":
-        table = _UNIT_TABLES.get(role, (ANGLE_UNITS, "deg"))[0]
+        table = _units_of(role)
         if value not in table:
             raise SettingError(
                 field, f"{role}={value!r}: the units of {role} are {', '.join(table)}"

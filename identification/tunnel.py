@@ -54,6 +54,7 @@ the recovery.
 
 from __future__ import annotations
 
+import functools
 import math
 import shlex
 from collections.abc import Sequence
@@ -605,6 +606,11 @@ class TunnelSpec:
             )
         _check_schedule(self)  # the schedule the seed draws (cheap), before any simulation
 
+    @functools.cached_property
+    def schedule_drawn(self) -> FinSchedule | SmoothSchedule:
+        """The fin-command schedule of this run, drawn from the seed's schedule stream."""
+        return fin_schedule(self, _streams(self.seed)[0])
+
     def params(self) -> RollParams:
         """Ground-truth roll parameters of this run."""
         return rocket_params(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
@@ -696,7 +702,7 @@ def _check_schedule(spec: TunnelSpec) -> None:
     flag = "duration" if spec.schedule in ("prbs", "chirp") else "steps"
     if spec.schedule in ("prbs", "chirp"):  # known before the sequence is drawn
         _check_samples(spec, spec.lead + spec.duration + (5.0 if spec.schedule == "chirp" else 0))
-    schedule = fin_schedule(spec, _streams(spec.seed)[0])
+    schedule = spec.schedule_drawn
     n = round(schedule.end_s / spec.log_dt)
     span = n * spec.log_dt
     shortest, longest = DURATION_RANGE_S
@@ -750,8 +756,8 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     >>> rec.source, rec.n_samples
     ('synthetic', 5731)
     """
-    rng_schedule, rng_turbulence, rng_sensor = _streams(spec.seed)
-    schedule = fin_schedule(spec, rng_schedule)
+    _, rng_turbulence, rng_sensor = _streams(spec.seed)
+    schedule = spec.schedule_drawn  # from the schedule's stream, drawn once with the spec
     n = round(schedule.end_s / spec.log_dt)
     time = spec.log_dt * np.arange(n + 1, dtype=float)
     command = schedule.command(time)
