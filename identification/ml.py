@@ -16,7 +16,13 @@ from the asymmetry θ̄: θ̄ carries it, as in the paper).  With the state
 model (:mod:`identification.statespace`) whose measurements are the
 recording's columns: the encoder angle with its quantisation (variance
 ``q²/12``, ``q`` read off the data), the rate gyro with the multiplicative
-noise of eq. 52 (its level estimated), or both.
+noise of eq. 52 (its level estimated), or both.  Real sensors are noisier
+than the paper's: an angle that scatters more than its grid explains (a
+potentiometer, an attitude estimate, a log converted from radians) gets a
+white-noise SD of its own, and a gyro whose readings scatter at rest (a MEMS
+gyro's additive noise) an additive floor, kept where it raises the likelihood
+by an effect size (:data:`_FLOOR_GAIN`).  Read as exact, either noise would be
+carried by the turbulence, and the fit runs away.
 
 The parameters -- α, θ̄, the damping (``a``, or ᾱ and β̄), the AR
 coefficients, the innovation SD and the gyro's noise level -- maximise the
@@ -143,6 +149,7 @@ class _Data:
     observed: np.ndarray  # state index of each column: 0 rate, 1 angle
     angle_var: float  # encoder quantisation variance, or NaN without an encoder
     has_gyro: bool
+    angle_noise: float  # the angle's noise SD beyond its grid read off the data, ° (0: none)
     theta_min: float
     theta_max: float
 
@@ -166,12 +173,30 @@ def _quantum(values: FloatArray) -> float:
     return q
 
 
+#: The angle's sample-to-sample noise, as a multiple of its grid's ``q/√12``, beyond
+#: which it is not an encoder's quantisation alone and its SD is a parameter.
+_BEYOND_GRID = 2.0
+
+
+def _noise_beyond_grid(angle: FloatArray, grid_var: float) -> float:
+    """The angle's white-noise SD as its second differences show it (``SD(Δ²φ)/√6``),
+    where that is more than :data:`_BEYOND_GRID` times what the grid explains; else 0.
+
+    An encoder's reading scatters by its quantisation only (``q²/12``); an analogue
+    angle (a potentiometer, an attitude estimate, a converted log) has noise of its
+    own, which read as exact would make the turbulence carry it.
+    """
+    sd = float(np.std(np.diff(angle, 2))) / math.sqrt(6.0)
+    return sd if sd > _BEYOND_GRID * math.sqrt(grid_var) else 0.0
+
+
 def _prepare(inputs: Measurements) -> _Data:
     rec = inputs.recording
     # A validated recording has at least 50 samples and a fin that moves.
     theta = np.asarray(inputs.theta_fine, dtype=float)
     columns, observed = [], []
     angle_var = math.nan
+    angle_noise = 0.0
     if rec.roll_rate_dps is not None:
         columns.append(np.asarray(rec.roll_rate_dps, dtype=float))
         observed.append(0)
@@ -179,6 +204,7 @@ def _prepare(inputs: Measurements) -> _Data:
         roll = np.asarray(rec.roll_deg, dtype=float)
         q = _quantum(roll)
         angle_var = max(q * q / 12.0, _VAR_FLOOR)
+        angle_noise = _noise_beyond_grid(roll, angle_var)
         columns.append(roll)
         observed.append(1)
     return _Data(
@@ -191,6 +217,7 @@ def _prepare(inputs: Measurements) -> _Data:
         observed=np.asarray(observed, dtype=np.intp),
         angle_var=angle_var,
         has_gyro=rec.roll_rate_dps is not None,
+        angle_noise=angle_noise,
         theta_min=float(theta.min()),
         theta_max=float(theta.max()),
     )
@@ -210,24 +237,38 @@ class _Layout:
     order: int
     gyro: bool
     pivot: float = 1.0
+    angle: bool = False  # the angle's noise beyond its grid is a parameter
+    floor: bool = False  # the gyro's additive noise is a parameter
 
     @property
     def names(self) -> tuple[str, ...]:
         damping = ("a",) if self.model == "constant" else ("a_mid", "slope")
         ar = tuple(f"ar{i + 1}" for i in range(self.order))
-        return ("alpha", "theta_bar", *damping, *ar, "sd", *(("gyro",) if self.gyro else ()))
+        return (
+            "alpha",
+            "theta_bar",
+            *damping,
+            *ar,
+            "sd",
+            *(("gyro",) if self.gyro else ()),
+            *(("angle",) if self.angle else ()),
+            *(("floor",) if self.floor else ()),
+        )
 
     def natural(self, x: FloatArray) -> dict[str, Any]:
         """Parameters from the optimiser's vector: AR coefficients stationary by
-        construction (partial autocorrelations through tanh), SDs positive (log)."""
+        construction (partial autocorrelations through tanh), SDs positive (log), both
+        held in a box (:data:`_PACF_BOX`, :data:`_LOG_SD_BOX`) where they stay regular."""
         values = dict(zip(self.names, x.tolist(), strict=True))
-        pacf = np.tanh([values[f"ar{i + 1}"] for i in range(self.order)])
+        pacf = np.tanh(np.clip([values[f"ar{i + 1}"] for i in range(self.order)], *_PACF_BOX))
         out: dict[str, Any] = {
             "alpha": values["alpha"],
             "theta_bar": values["theta_bar"],
             "ar": _ar_from_pacf(pacf),
-            "innovation_sd": math.exp(values["sd"]),
-            "gyro": math.exp(values["gyro"]) if self.gyro else 0.0,
+            "innovation_sd": _level(values["sd"]),
+            "gyro": _level(values["gyro"]) if self.gyro else 0.0,
+            "angle_sd": _level(values["angle"]) if self.angle else 0.0,
+            "gyro_floor": _level(values["floor"]) if self.floor else 0.0,
         }
         if self.model == "constant":
             out["alpha_bar"], out["beta_bar"] = 0.0, values["a"]
@@ -248,12 +289,28 @@ class _Layout:
             "slope": slope,
             "sd": math.log(nat["innovation_sd"]),
             "gyro": math.log(max(nat["gyro"], 1e-6)),
+            "angle": math.log(max(nat.get("angle_sd", 0.0), 1e-6)),
+            "floor": math.log(max(nat.get("gyro_floor", 0.0), 1e-6)),
             **{
                 f"ar{i + 1}": float(np.arctanh(np.clip(r, -0.999, 0.999)))
                 for i, r in enumerate(pacf)
             },
         }
         return np.array([values[name] for name in self.names], dtype=float)
+
+
+#: Box of a partial autocorrelation's ``atanh``: ``|pacf| ≤ tanh(7) = 1 - 1.7e-6``.  A
+#: turbulence the data cannot tell from a constant walks towards the unit root, where
+#: ``tanh`` rounds to 1 and its stationary covariance is singular; the box stops it.
+_PACF_BOX = (-7.0, 7.0)
+#: Box of a noise level's natural log (SDs from 2e-9 to 2e4, ° or °/s, or a fraction):
+#: a level the data do not need walks towards 0, where its variance underflows.
+_LOG_SD_BOX = (-20.0, 10.0)
+
+
+def _level(log_sd: float) -> float:
+    """A noise level from its log, held in :data:`_LOG_SD_BOX`."""
+    return math.exp(min(max(log_sd, _LOG_SD_BOX[0]), _LOG_SD_BOX[1]))
 
 
 def _ar_from_pacf(pacf: FloatArray) -> FloatArray:
@@ -296,6 +353,7 @@ class _Parts:
     ar: FloatArray
     innovation_var: float
     gyro_var: float  # g² of eq. 52
+    floor_var: float  # the gyro's additive noise variance, (°/s)²
     obs_var: FloatArray  # the gyro's columns NaN until a filter pass fills them
     initial_mean: FloatArray
     initial_cov: FloatArray
@@ -316,7 +374,7 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
     obs_var = np.empty(data.y.shape)
     for j, index in enumerate(data.observed.tolist()):
         if index == 1:
-            obs_var[:, j] = data.angle_var
+            obs_var[:, j] = data.angle_var + nat.get("angle_sd", 0.0) ** 2
         else:  # eq. 52: Var = g²·v², filled in by the filter (:func:`_roll_loglike`)
             obs_var[:, j] = math.nan
     u_cov = stationary_cov(ar, nat["innovation_sd"])
@@ -333,7 +391,14 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
     else:
         initial_cov[1, 1] = 1.0
     return _Parts(
-        maps, ar, nat["innovation_sd"] ** 2, nat["gyro"] ** 2, obs_var, initial_mean, initial_cov
+        maps,
+        ar,
+        nat["innovation_sd"] ** 2,
+        nat["gyro"] ** 2,
+        nat.get("gyro_floor", 0.0) ** 2,
+        obs_var,
+        initial_mean,
+        initial_cov,
     )
 
 
@@ -469,6 +534,7 @@ def _roll_loglike(
     ar: FloatArray,
     innovation_var: float,
     gyro_var: float,
+    floor_var: float,
     y: FloatArray,
     observed: np.ndarray,
     obs_var: FloatArray,
@@ -493,7 +559,7 @@ def _roll_loglike(
     for k in range(n):
         for j in range(d):
             if observed[j] == 0:  # the rate is updated first: a, p are the prediction
-                obs_var[k, j] = gyro_var * (a[0] * a[0] + p[0, 0]) + _VAR_FLOOR
+                obs_var[k, j] = gyro_var * (a[0] * a[0] + p[0, 0]) + floor_var + _VAR_FLOOR
         ll += update(a, p, y[k], observed, obs_var[k], gains)
         if not ll > -np.inf:
             return -np.inf
@@ -522,6 +588,7 @@ def _filter(data: _Data, parts: _Parts) -> float:
             parts.ar,
             parts.innovation_var,
             parts.gyro_var,
+            parts.floor_var,
             data.y,
             data.observed,
             parts.obs_var,
@@ -555,6 +622,40 @@ def _start(data: _Data, inputs: Measurements, model: str, order: int) -> dict[st
         "ar": ar,
         "innovation_sd": sd_u * math.sqrt(1.0 - 0.25),
         "gyro": 0.02,
+        "angle_sd": data.angle_noise,
+    }
+
+
+def _equation_error_start(data: _Data, inputs: Measurements) -> dict[str, Any] | None:
+    """A second starting point, from the one-step regression of the smoothed rate on
+    itself and the fin (``v[k+1] = e·v[k] + c·θ[k] + d``: the model's sample map with
+    ``u_d`` in the residual), for any input; None where it gives no damped rocket.
+
+    :func:`_start`'s line through rate against fin reads the steady state, which a
+    chirp or a fast PRBS never reaches: its slope then says a tiny gain and a huge
+    asymmetry, from where the optimiser finds a rocket the fin barely moves.
+    """
+    fin = np.asarray(inputs.theta_fine[:: data.per], dtype=float)
+    rate = np.asarray(inputs.velocity_dps, dtype=float)
+    design = np.column_stack([rate[:-1], fin[:-1], np.ones(rate.size - 1)])
+    (e, c, d), *_ = np.linalg.lstsq(design, rate[1:], rcond=None)
+    if not (0.0 < e < 1.0 and abs(c) > 1e-9):
+        return None
+    dt = float(np.median(np.diff(data.time_s)))
+    alpha = c / (1.0 - e)
+    residual = (rate[1:] - design @ np.array([e, c, d])) / c
+    sd_u = max(float(np.std(residual)), 0.5)
+    ar = np.zeros(1)
+    ar[0] = 0.5
+    return {
+        "alpha": float(alpha),
+        "theta_bar": float(d / c),
+        "alpha_bar": 0.0,
+        "beta_bar": max(-math.log(e) / dt, 2.0 * MIN_DAMPING),
+        "ar": ar,
+        "innovation_sd": sd_u * math.sqrt(1.0 - 0.25),
+        "gyro": 0.02,
+        "angle_sd": data.angle_noise,
     }
 
 
@@ -574,6 +675,12 @@ class MLFit:
         SD of the AR innovation and of ``u_d`` itself, °.
     gyro_noise : float
         Estimated gyro noise level (eq. 52, fraction), 0 without a gyro.
+    gyro_floor_dps : float
+        Estimated additive white noise SD of the gyro, °/s (0 where eq. 52 alone
+        describes it).
+    angle_noise_deg : float
+        Estimated white noise SD of the angle beyond its grid's quantisation, ° (0
+        for an encoder).
     loglike, aic : float
         Log-likelihood at the optimum and ``2k - 2·loglike``.
     n_params : int
@@ -599,6 +706,8 @@ class MLFit:
     innovation_sd_deg: float
     sd_deg: float
     gyro_noise: float
+    gyro_floor_dps: float
+    angle_noise_deg: float
     loglike: float
     aic: float
     n_params: int
@@ -701,7 +810,7 @@ def _hessian(f: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
 def _std_errors(data: _Data, model: str, nat: dict[str, Any]) -> dict[str, float]:
     """Standard errors of the rocket's parameters from the observed information
     (the Hessian of the log-likelihood over all free parameters, inverted)."""
-    layout = _Layout(model, int(np.size(nat["ar"])), data.has_gyro, _pivot(data, nat["theta_bar"]))
+    layout = _layout(data, model, int(np.size(nat["ar"])), nat)
     rocket = (
         ["alpha", "theta_bar", "beta_bar"]
         if model == "constant"
@@ -742,30 +851,103 @@ class _Search:
     def order(self, model: str, order: int) -> tuple[float, dict[str, Any], bool, str]:
         """(−log-likelihood, natural parameters, converged, message) of one model and order."""
         key = (model, order)
-        if key in self.found:
-            return self.found[key]
-        if order > 1:
-            warm = dict(self.order(model, order - 1)[1])
-            warm["ar"] = np.append(warm["ar"], 0.0)
-        elif model == "theta":
-            warm = dict(self.order("constant", 1)[1])  # ᾱ = 0: the nested model
-        else:
-            warm = _start(self.data, self.inputs, model, order)
-        layout = _Layout(model, order, self.data.has_gyro, _pivot(self.data, warm["theta_bar"]))
+        if key not in self.found:
+            if order > 1:
+                warm = dict(self.order(model, order - 1)[1])
+                warm["ar"] = np.append(warm["ar"], 0.0)
+                self.found[key] = self._run(model, order, warm)
+            elif model == "theta":  # ᾱ = 0: the nested model
+                self.found[key] = self._run(model, order, dict(self.order("constant", 1)[1]))
+            else:
+                self.found[key] = self._first()
+        return self.found[key]
+
+    def _run(
+        self, model: str, order: int, warm: dict[str, Any]
+    ) -> tuple[float, dict[str, Any], bool, str]:
+        layout = _layout(self.data, model, order, warm)
         result = _minimize(self.data, layout, warm)
         # Each call of the objective is one value and one forward difference per parameter.
         self.nfev += int(result.nfev) * (result.x.size + 1)
-        self.found[key] = (
+        return (
             float(result.fun),
             layout.natural(result.x),
             bool(result.success),
             str(result.message),
         )
-        return self.found[key]
+
+    def _first(self) -> tuple[float, dict[str, Any], bool, str]:
+        """The constant model's AR(1) fit from the data alone, which also settles the
+        gyro's noise for every fit after it: eq. 52's multiplicative noise, or that with
+        an additive floor (a MEMS gyro's white noise, there when the rocket is still)
+        where the floor raises the likelihood by at least :data:`_FLOOR_GAIN` per reading.
+
+        Where the first start's optimum disagrees with the one-step regression
+        (:func:`_equation_error_start`), each is fitted from that second start too, and
+        its optimum kept where it is better by :data:`_START_GAIN`.
+        """
+        start = _start(self.data, self.inputs, "constant", 1)
+        second = _equation_error_start(self.data, self.inputs)
+        floors = [0.0, _quiet_noise(self.data)] if self.data.has_gyro else [0.0]
+        best = []
+        for floor in floors:
+            found = self._run("constant", 1, dict(start, gyro_floor=floor))
+            if second is not None and _disagree(self.data, found[1], second):
+                other = self._run("constant", 1, dict(second, gyro_floor=floor))
+                if other[0] < found[0] - _START_GAIN:
+                    found = other
+            best.append(found)
+        if len(best) > 1 and best[0][0] - best[1][0] >= _FLOOR_GAIN * self.data.n:
+            return best[1]
+        return best[0]
 
 
-def _n_params(model: str, order: int, gyro: bool) -> int:
-    return len(_Layout(model, order, gyro).names)
+def _disagree(data: _Data, found: dict[str, Any], other: dict[str, Any]) -> bool:
+    """Whether a fit and another estimate tell different rockets: gains more than 25 %
+    apart (or of opposite sign), or asymmetries more than a quarter of the fin's span."""
+    span = max(data.theta_max - data.theta_min, 1e-6)
+    return bool(
+        abs(found["alpha"] - other["alpha"]) > 0.25 * abs(other["alpha"])
+        or abs(found["theta_bar"] - other["theta_bar"]) > 0.25 * span
+    )
+
+
+#: Log-likelihood by which the second start's optimum must beat the first's to be kept
+#: (the same optimum reached from two starts differs in its last digits).
+_START_GAIN = 1.0
+#: Log-likelihood gain per reading from which the gyro's additive floor is kept: an
+#: effect size, not AIC's 1 in total, which on a long record of eq. 52's gyro adopts a
+#: floor that only soaks up the model's small misfit (the virtual tunnel's gyros,
+#: multiplicative only: 0.0002-0.0024 nats per reading; with 0.5 °/s of white noise
+#: added: 0.04-0.12; the public aircraft roll rig's gyro: 0.14).
+_FLOOR_GAIN = 0.01
+
+
+def _quiet_noise(data: _Data) -> float:
+    """A first guess of the gyro's additive noise SD: ``SD(Δ²y)/√6`` over the fifth of
+    the readings nearest zero rate, °/s."""
+    rate = data.y[:, int(np.flatnonzero(data.observed == 0)[0])]
+    second = np.diff(rate, 2) / math.sqrt(6.0)
+    quiet = np.abs(rate[1:-1]) <= np.percentile(np.abs(rate[1:-1]), 20.0)
+    return max(float(np.std(second[quiet])), 1e-3)
+
+
+def _layout(data: _Data, model: str, order: int, nat: dict[str, Any]) -> _Layout:
+    """The optimiser's parameters for ``data`` near ``nat``: the recording's sensors, and
+    the gyro's noise chosen by the first fit (:meth:`_Search._first`), decide which
+    noise levels are free."""
+    return _Layout(
+        model,
+        order,
+        data.has_gyro,
+        _pivot(data, nat["theta_bar"]),
+        angle=data.angle_noise > 0.0,
+        floor=nat.get("gyro_floor", 0.0) > 0.0,
+    )
+
+
+def _n_params(data: _Data, model: str, order: int, nat: dict[str, Any]) -> int:
+    return len(_layout(data, model, order, nat).names)
 
 
 def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
@@ -775,8 +957,8 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
     orders: dict[int, float] = {}
     best = 1
     for order in range(1, max_order + 1):
-        fun = search.order(model, order)[0]
-        orders[order] = 2.0 * _n_params(model, order, data.has_gyro) + 2.0 * fun
+        fun, nat = search.order(model, order)[:2]
+        orders[order] = 2.0 * _n_params(data, model, order, nat) + 2.0 * fun
         if orders[order] < orders[best]:
             best = order
         elif order > best:
@@ -794,7 +976,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         parts,
         loglike=-fun,
         aic=float(orders[best]),
-        n_params=_n_params(model, best, data.has_gyro),
+        n_params=_n_params(data, model, best, nat),
         std_errors=_std_errors(data, model, nat),
         orders=orders,
         converged=converged,
@@ -828,6 +1010,8 @@ def _result(
         innovation_sd_deg=float(nat["innovation_sd"]),
         sd_deg=float(math.sqrt(u_cov[0, 0])),
         gyro_noise=float(nat["gyro"]),
+        gyro_floor_dps=float(nat.get("gyro_floor", 0.0)),
+        angle_noise_deg=float(nat.get("angle_sd", 0.0)),
         loglike=float(loglike),
         aic=aic,
         n_params=n_params,
@@ -994,6 +1178,8 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "u_d_sd_deg": found.sd_deg,
             "innovation_sd_deg": found.innovation_sd_deg,
             "gyro_noise": found.gyro_noise,
+            "gyro_floor_dps": found.gyro_floor_dps,
+            "angle_noise_deg": found.angle_noise_deg,
             "std_errors": found.std_errors,
             "aic_by_order": {str(k): v for k, v in found.orders.items()},
             "nfev": found.nfev,

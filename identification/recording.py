@@ -346,6 +346,8 @@ def _check_time_scale(path: str, time_read: str, interval: float, duration: floa
     """Refuse a sampling interval or a duration no roll log has: a time column in the wrong
     unit, most likely, whose identification would run away."""
     (low, high), (shortest, longest) = INTERVAL_RANGE_S, DURATION_RANGE_S
+    # A 1 kHz log's times, written in decimal seconds, step 0.000999... s on the median.
+    low, high = low * (1.0 - SAMPLING_RTOL), high * (1.0 + SAMPLING_RTOL)
 
     def plausible(scale: float) -> bool:
         return low <= interval * scale <= high and shortest <= duration * scale <= longest
@@ -354,7 +356,7 @@ def _check_time_scale(path: str, time_read: str, interval: float, duration: floa
         return
     if not low <= interval <= high:
         found = f"{time_read} steps every {_seconds(interval)} (median), outside "
-        found += f"{_seconds(low)} to {_seconds(high)}"
+        found += f"{_seconds(INTERVAL_RANGE_S[0])} to {_seconds(INTERVAL_RANGE_S[1])}"
     else:
         found = f"{time_read} spans {_seconds(duration)}, outside "
         found += f"{_seconds(shortest)} to {_seconds(longest)}"

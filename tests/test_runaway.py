@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from identification.bundled import load_bundled
+from identification.recording import load_recording
 from rocketroll.cli import main as rocketroll
 from tests.cli import refused
 
@@ -135,3 +136,12 @@ def test_a_file_that_is_not_utf8_is_refused_at_its_line(
     out = tmp_path / "rec.csv"
     argv = ["import-csv", str(latin), "--out", str(out), "--columns", "time,fin,roll"]
     refused(capsys, argv, "latin.csv:3: byte 0xe9 is not UTF-8", "save the file as UTF-8")
+
+
+def test_a_log_at_one_kilohertz_is_read(tmp_path: Path) -> None:
+    """1 kHz times written in decimal seconds step 0.000999... s on the median: the
+    interval's lower bound (1 ms) must not refuse them."""
+    t = np.round(np.arange(6000) * 0.001, 6)
+    fin = np.where(t % 2.0 < 1.0, 5.0, -5.0)
+    path = _recording_file(tmp_path / "khz.csv", t, fin)
+    assert load_recording(path).n_samples == 6000
