@@ -215,7 +215,7 @@ def identify(args: IdentifyArgs) -> int:
 
     from identification.methods import Context, is_flight_method
     from identification.recording import load_recording
-    from identification.tables import methods_table, parameter_table
+    from identification.tables import adequacy_table, methods_table, parameter_table
     from rocketroll_common.files import write_all_atomic
 
     if args.db is not None and "://" not in args.db:
@@ -290,6 +290,9 @@ def identify(args: IdentifyArgs) -> int:
     if any(method != "paper" for method in tunnel):
         print("\nidentification methods (parameters; re-simulation of each one's u_d, §3.5)")
         print(methods_table(tunnel))
+    if tunnel:
+        print("\nfit adequacy (the model without u_d against the raw rate, the fin in u_d)")
+        print(adequacy_table(tunnel))
     if stored:
         print(stored)
     if args.json is not None:

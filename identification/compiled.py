@@ -13,10 +13,13 @@ from typing import Any
 
 import numba
 import numba.extending
+import numpy as np
 
 from identification import model
+from identification.model import RollParams
+from rocketroll_common.arrays import FloatArray
 
-__all__ = ["piece"]
+__all__ = ["interval_maps", "piece"]
 
 
 @numba.extending.overload(model.select)
@@ -48,3 +51,75 @@ def _phi_functions_scalar(z: Any) -> Any:
 #: ``piece(alpha, theta_bar, beta_bar, alpha_bar, theta0, theta1, u_d, h) -> (E, c, A, B)``
 #: for scalars, compiled (see :func:`identification.model.piece_coefficients`).
 piece = numba.njit(cache=True, nogil=True)(model.piece_coefficients)
+
+
+@numba.njit(cache=True, nogil=True)
+def _interval_maps(
+    alpha: float,
+    theta_bar: float,
+    beta_bar: float,
+    alpha_bar: float,
+    theta_fine: FloatArray,
+    per: int,
+    h: float,
+) -> FloatArray:
+    """Per sample interval ``[E, G, f, A, B, g]`` of the affine update (module docstring).
+
+    An interval with the fin at rest is one exact piece; one with the fin
+    moving is the composition of its substeps, the fin linear in each.
+    """
+    n = (theta_fine.size - 1) // per
+    out = np.empty((n, 6))
+    for k in range(n):
+        lo = k * per
+        th = theta_fine[lo]
+        rest = True
+        for j in range(1, per + 1):
+            if theta_fine[lo + j] != th:
+                rest = False
+                break
+        if rest:
+            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 0.0, per * h)
+            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 1.0, per * h)
+            out[k, 0] = e
+            out[k, 1] = c1 - c0
+            out[k, 2] = c0
+            out[k, 3] = a
+            out[k, 4] = b1 - b0
+            out[k, 5] = b0
+            continue
+        e_v, g_v, f_v, a_p, b_p, g_p = 1.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        for j in range(per):
+            t0 = theta_fine[lo + j]
+            t1 = theta_fine[lo + j + 1]
+            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 0.0, h)
+            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 1.0, h)
+            # φ gains a·v + b with v the rate at the substep's start.
+            a_p += a * e_v
+            b_p += a * g_v + (b1 - b0)
+            g_p += a * f_v + b0
+            e_v, g_v, f_v = e * e_v, e * g_v + (c1 - c0), e * f_v + c0
+        out[k] = (e_v, g_v, f_v, a_p, b_p, g_p)
+    return out
+
+
+def interval_maps(params: RollParams, theta_fine: FloatArray, per: int, h: float) -> FloatArray:
+    """``[E, G, f, A, B, g]`` of each sample interval of ``per`` substeps of ``h`` s
+    (module docstring) for the fin path ``theta_fine`` (one value per substep
+    boundary, ``n·per + 1`` of them) under the rocket ``params``."""
+    theta = np.ascontiguousarray(theta_fine, dtype=float)
+    if per < 1 or (theta.size - 1) % per:
+        raise ValueError(
+            f"theta_fine needs n·{per} + 1 values (a whole number of intervals), got {theta.size}"
+        )
+    return np.asarray(
+        _interval_maps(
+            params.alpha,
+            params.theta_bar_deg,
+            params.beta_bar_per_s,
+            params.alpha_bar_per_deg_s,
+            theta,
+            per,
+            h,
+        )
+    )

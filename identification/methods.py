@@ -26,7 +26,7 @@ the measurements are prepared, and the paper's pipeline run, at most once.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
@@ -320,7 +320,23 @@ def fit(
     missing = [m for m in models if m not in fits]
     if missing:
         raise RuntimeError(f"method {method!r} returned no fit for model(s) {missing}")
+    if not flight_method:
+        fits = {model: with_adequacy(f, context) for model, f in fits.items()}
     return {m: fits[m] for m in models}
+
+
+def with_adequacy(found: ModelFit, context: Context) -> ModelFit:
+    """``found`` with its adequacy (:mod:`identification.adequacy`) in its metrics."""
+    from identification.adequacy import adequacy
+
+    figures = adequacy(
+        context.measurements,
+        found.params,
+        found.disturbance,
+        dict(found.metrics),
+        method=found.method,
+    )
+    return replace(found, metrics={**found.metrics, "adequacy": figures.as_dict()})
 
 
 def paper_method(context: Context, models: Sequence[str]) -> list[ModelFit]:

@@ -51,7 +51,7 @@ import numba
 import numpy as np
 from scipy import linalg, optimize
 
-from identification.compiled import piece
+from identification.compiled import _interval_maps, interval_maps
 from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.model import RollParams, check_model
 from identification.pipeline import IdentifyOptions, Measurements, measurements, model_inputs
@@ -84,56 +84,6 @@ MAX_ORDER = 3
 MIN_DAMPING = 0.01
 #: Variance floor of a measurement, (° or °/s)², so an ideal sensor stays regular.
 _VAR_FLOOR = 1e-8
-
-
-@numba.njit(cache=True, nogil=True)
-def _interval_maps(
-    alpha: float,
-    theta_bar: float,
-    beta_bar: float,
-    alpha_bar: float,
-    theta_fine: FloatArray,
-    per: int,
-    h: float,
-) -> FloatArray:
-    """Per sample interval ``[E, G, f, A, B, g]`` of the affine update (module docstring).
-
-    An interval with the fin at rest is one exact piece; one with the fin
-    moving is the composition of its substeps, the fin linear in each.
-    """
-    n = (theta_fine.size - 1) // per
-    out = np.empty((n, 6))
-    for k in range(n):
-        lo = k * per
-        th = theta_fine[lo]
-        rest = True
-        for j in range(1, per + 1):
-            if theta_fine[lo + j] != th:
-                rest = False
-                break
-        if rest:
-            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 0.0, per * h)
-            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 1.0, per * h)
-            out[k, 0] = e
-            out[k, 1] = c1 - c0
-            out[k, 2] = c0
-            out[k, 3] = a
-            out[k, 4] = b1 - b0
-            out[k, 5] = b0
-            continue
-        e_v, g_v, f_v, a_p, b_p, g_p = 1.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        for j in range(per):
-            t0 = theta_fine[lo + j]
-            t1 = theta_fine[lo + j + 1]
-            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 0.0, h)
-            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 1.0, h)
-            # φ gains a·v + b with v the rate at the substep's start.
-            a_p += a * e_v
-            b_p += a * g_v + (b1 - b0)
-            g_p += a * f_v + b0
-            e_v, g_v, f_v = e * e_v, e * g_v + (c1 - c0), e * f_v + c0
-        out[k] = (e_v, g_v, f_v, a_p, b_p, g_p)
-    return out
 
 
 @dataclass(frozen=True)
@@ -429,28 +379,6 @@ def roll_transition(maps: FloatArray, ar: FloatArray) -> tuple[FloatArray, Float
     intercept[:, 0] = maps[:, 2]
     intercept[:, 1] = maps[:, 5]
     return transition, intercept
-
-
-def interval_maps(params: RollParams, theta_fine: FloatArray, per: int, h: float) -> FloatArray:
-    """``[E, G, f, A, B, g]`` of each sample interval of ``per`` substeps of ``h`` s
-    (module docstring) for the fin path ``theta_fine`` (one value per substep
-    boundary, ``n·per + 1`` of them) under the rocket ``params``."""
-    theta = np.ascontiguousarray(theta_fine, dtype=float)
-    if per < 1 or (theta.size - 1) % per:
-        raise ValueError(
-            f"theta_fine needs n·{per} + 1 values (a whole number of intervals), got {theta.size}"
-        )
-    return np.asarray(
-        _interval_maps(
-            params.alpha,
-            params.theta_bar_deg,
-            params.beta_bar_per_s,
-            params.alpha_bar_per_deg_s,
-            theta,
-            per,
-            h,
-        )
-    )
 
 
 def _state_space(data: _Data, parts: _Parts) -> LinearGaussian:

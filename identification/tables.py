@@ -116,3 +116,33 @@ def methods_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
                 f"{'' if angle is None else f'{angle:.3f}':>13}"
             )
     return "\n".join(lines)
+
+
+def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
+    """Each fit's adequacy (:mod:`identification.adequacy`): the model without ``u_d``
+    against the raw rate, its prediction a time constant ahead, the share of ``u_d``
+    the fin explains, ``|u_d|`` against the fins' range, α's standard error, and the
+    verdict with its reasons below the table.  Fits without figures are left out."""
+    lines = [
+        f"{'method':<14}{'model':<10}{'rate R²':>9}{'ahead R²':>10}{'fin→u_d':>9}"
+        f"{'|u_d|/range':>13}{'α SE %':>8}  verdict"
+    ]
+    reasons = []
+    for method, by_model in fits.items():
+        for model, f in by_model.items():
+            a = f.metrics.get("adequacy")
+            if not a:
+                continue
+
+            def num(value: float | None, fmt: str) -> str:
+                return "" if value is None else format(value, fmt)
+
+            se = a["alpha_rel_se"]
+            lines.append(
+                f"{method:<14}{model:<10}{num(a['rate_r2'], '.3f'):>9}"
+                f"{num(a['ahead_r2'], '.3f'):>10}{num(a['fin_share'], '.2f'):>9}"
+                f"{num(a['ud_range_fraction'], '.2f'):>13}"
+                f"{'' if se is None else num(100 * se, '.1f'):>8}  {a['verdict']}"
+            )
+            reasons += [f"  {method} {model}: {reason}" for reason in a["reasons"]]
+    return "\n".join(lines + reasons)

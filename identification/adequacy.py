@@ -1,0 +1,268 @@
+"""Fit adequacy: does an identified model describe the recording, and how well?
+
+Every method's own figure (the re-simulation error with its ``u_d`` added back,
+§3.5) cannot tell a good model from a bad one: ``u_d`` absorbs any model error.
+These figures read the model without it, against the raw measurements:
+
+* **model only** -- the model simulated from the first reading with ``u_d = 0``
+  over the whole recording: R² and MAE of the rate against the raw rate (the
+  gyro, else the velocity measured from the angle) and MAE of the angle;
+* **ahead** -- the rate predicted ``k`` readings ahead from each measured
+  velocity with ``u_d = 0``, ``k`` the rocket's time constant ``1/a`` (at least
+  one reading): R² against the raw rate, a figure long records cannot drift;
+* **u_d explained by the fin** -- the share of ``u_d``'s variance a line in
+  the fin angle, its size ``|θ + θ̄|`` and its change over the interval
+  explains: turbulence does not know the fin, so a gain, a damping law or a
+  servo that is wrong leaks into ``u_d`` as a fin-shaped part (an effect size,
+  not a p-value, which on a long record rejects everything);
+* **u_d against the fins' range** -- the 99th percentile of ``|u_d|``, as a
+  fraction of the servo's range: a "disturbance" the fins could not cancel is
+  the model's error, not turbulence;
+* **the gain's relative standard error**, where the method reports one;
+* for the paper's method, its assumptions: a steady state in each dwell
+  (steady-state R²) and a positive damping ``a_i`` from each step.
+
+Each figure feeds the verdict, ``good``, ``weak`` or ``unreliable``, through the
+thresholds below, with the reasons that set it.  They are calibrated on known
+truths (``benchmarks/adequacy.py``: correct fits of the virtual tunnel's rockets
+on ramps, doublets and PRBS against deliberately wrong ones).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from identification.model import RollParams, Servo, _linear_recurrence, damping
+from identification.pipeline import Measurements
+from identification.steps import Disturbance
+from rocketroll_common.arrays import FloatArray
+
+__all__ = ["VERDICTS", "Adequacy", "adequacy"]
+
+#: The verdicts, best first.
+VERDICTS = ("good", "weak", "unreliable")
+
+#: Model-only rate R² below which a fit is weak / unreliable.
+RATE_R2 = (0.5, 0.2)
+#: Rate R² ``k`` readings ahead below which a fit is weak / unreliable.
+AHEAD_R2 = (0.5, 0.2)
+#: Share of ``u_d``'s variance the fin explains above which a fit is weak / unreliable.
+FIN_SHARE = (0.15, 0.25)
+#: Newey-West p-value below which that share counts (it is not chance).
+FIN_SHARE_P = 0.001
+#: 99th percentile of ``|u_d|`` as a fraction of the fins' range above which a fit is
+#: weak / unreliable.
+UD_RANGE = (1.0, 1.5)
+#: The gain's relative standard error above which a fit is weak / unreliable.
+ALPHA_REL_SE = (0.25, 0.5)
+#: The paper's steady-state R² below which its dwells did not settle (weak).
+STEADY_STATE_R2 = 0.95
+
+
+@dataclass(frozen=True)
+class Adequacy:
+    """How well one fit describes its recording (module docstring)."""
+
+    rate_source: str
+    rate_r2: float
+    rate_mae_dps: float
+    angle_mae_deg: float
+    ahead_s: float
+    ahead_r2: float
+    fin_share: float
+    fin_share_p: float
+    ud_p99_deg: float
+    ud_range_fraction: float
+    alpha_rel_se: float
+    verdict: str
+    reasons: tuple[str, ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-safe (NaN as None)."""
+        out = asdict(self)
+        out["reasons"] = list(self.reasons)
+        return {
+            k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in out.items()
+        }
+
+
+def _r2(predicted: FloatArray, measured: FloatArray) -> float:
+    spread = float(np.sum((measured - measured.mean()) ** 2))
+    if spread <= 0.0:
+        return float("nan")
+    return 1.0 - float(np.sum((measured - predicted) ** 2)) / spread
+
+
+def _fin_share(
+    u: FloatArray, fin: FloatArray, theta_bar: float, lag: FloatArray
+) -> tuple[float, float]:
+    """Share of ``u``'s variance explained by a line in the fin, its size ``|θ + θ̄|``,
+    its change, the model's own lag behind its steady state ``lag`` and that times the
+    size (what a wrong gain, damping law or servo leaves), and the p-value of that line
+    (a Wald test with Newey-West covariance: turbulence correlated over many readings
+    meets the fin's few moves in a short record, and explains some of it by chance)."""
+    import statsmodels.api as sm
+
+    size = np.abs(fin[:-1] + theta_bar)
+    design = np.column_stack(
+        [np.ones(u.size), fin[:-1], size, np.diff(fin), lag[:-1], lag[:-1] * size]
+    )
+    centred = u - u.mean()
+    if not np.dot(centred, centred) > 0.0:
+        return 0.0, 1.0
+    # Lags of the covariance: u's correlation length (first lag below 1/e), at most n/4.
+    acf = np.correlate(centred[: min(u.size, 4096)], centred[: min(u.size, 4096)], "full")
+    acf = acf[acf.size // 2 :] / acf[acf.size // 2]
+    below = np.flatnonzero(acf < math.exp(-1.0))
+    maxlags = int(min(2 * (below[0] if below.size else acf.size), u.size // 4))
+    # Columns that repeat others (the size is the fin itself where θ + θ̄ keeps one sign).
+    keep = np.zeros(design.shape[1], dtype=bool)
+    for j in range(design.shape[1]):
+        trial = keep.copy()
+        trial[j] = True
+        scaled = design[:, trial] / np.maximum(np.abs(design[:, trial]).max(axis=0), 1e-300)
+        keep[j] = np.linalg.matrix_rank(scaled, tol=1e-8) == trial.sum()
+    fit = sm.OLS(u, design[:, keep]).fit(cov_type="HAC", cov_kwds={"maxlags": max(maxlags, 1)})
+    if keep.sum() < 2 or not np.isfinite(fit.rsquared):
+        return 0.0, 1.0
+    restriction = np.eye(int(keep.sum()))[1:]
+    p_value = float(fit.wald_test(restriction, scalar=True).pvalue)
+    return max(float(fit.rsquared), 0.0), p_value
+
+
+def adequacy(
+    inputs: Measurements,
+    params: RollParams,
+    disturbance: Disturbance,
+    metrics: dict[str, Any] | None = None,
+    *,
+    method: str = "",
+    servo: Servo | None = None,
+) -> Adequacy:
+    """The adequacy figures and verdict of one fit (module docstring).
+
+    Parameters
+    ----------
+    inputs : Measurements
+        The recording as the methods read it.
+    params : RollParams
+        The fit.
+    disturbance : Disturbance
+        Its ``u_d``.
+    metrics : dict, optional
+        The method's metrics (standard errors, the paper's steady state and steps).
+    method : str
+        The method's name (``paper`` adds its assumptions).
+    servo : Servo, optional
+        The fins' range (default: eq. 23's servo, ±40°).
+    """
+    from identification.compiled import interval_maps
+
+    rec = inputs.recording
+    metrics = dict(metrics or {})
+    grid = inputs.grid
+    maps = interval_maps(params, np.asarray(inputs.theta_fine), grid.per_sample, grid.step_s)
+    e, f, a_phi, g_phi = maps[:, 0], maps[:, 2], maps[:, 3], maps[:, 5]
+    smoothed = np.asarray(inputs.velocity_dps, dtype=float)
+    if rec.roll_rate_dps is not None:
+        rate, source = np.asarray(rec.roll_rate_dps, dtype=float), "gyro"
+    else:
+        rate, source = smoothed, "velocity from the angle"
+    n = rate.size
+    # Model only: from the first reading, u_d = 0.
+    v = _linear_recurrence(e, f, float(smoothed[0]))
+    phi = float(np.asarray(inputs.angle_deg)[0]) + np.concatenate(
+        [[0.0], np.cumsum(a_phi * v[:-1] + g_phi)]
+    )
+    rate_r2 = _r2(v, rate)
+    rate_mae = float(np.mean(np.abs(v - rate)))
+    angle_mae = (
+        float(np.mean(np.abs(phi - np.asarray(rec.roll_deg, dtype=float))))
+        if rec.roll_deg is not None
+        else float("nan")
+    )
+    # Ahead: k readings from each measured velocity.
+    fin = np.asarray(inputs.theta_fine[:: grid.per_sample], dtype=float)
+    dt = float(np.median(np.diff(rec.time_s)))
+    a_mean = float(np.mean(damping(params, fin)))
+    k = max(1, round(1.0 / (a_mean * dt))) if a_mean > 0 else 1
+    k = min(k, n - 2)
+    ahead = smoothed[: n - k].copy()
+    for j in range(k):
+        ahead = e[j : n - k + j] * ahead + f[j : n - k + j]
+    ahead_r2 = _r2(ahead, rate[k:])
+    # u_d against the fin and the fins' range.
+    u = disturbance.at(np.asarray(rec.time_s)[:-1])
+    # The model's own distance from its steady state, in fin degrees: input-driven only.
+    lag = fin + params.theta_bar_deg - v / params.alpha
+    share, share_p = _fin_share(u, fin, params.theta_bar_deg, lag)
+    p99 = float(np.percentile(np.abs(u), 99.0))
+    fin_range = (servo or Servo()).range_deg
+    se = metrics.get("std_errors") or {}
+    alpha_se = se.get("alpha") if isinstance(se, dict) else None
+    rel_se = abs(float(alpha_se) / params.alpha) if alpha_se is not None else float("nan")
+    if alpha_se is not None and not np.isfinite(float(alpha_se)):
+        rel_se = float("inf")
+
+    weak: list[str] = []
+    bad: list[str] = []
+
+    def check(value: float, limits: tuple[float, float], text: str, above: bool) -> None:
+        if np.isnan(value):
+            return
+        worse = (lambda x, t: x > t) if above else (lambda x, t: x < t)
+        if worse(value, limits[1]):
+            bad.append(text)
+        elif worse(value, limits[0]):
+            weak.append(text)
+
+    check(rate_r2, RATE_R2, f"the model without u_d explains {rate_r2:.2f} of the rate (R²)", False)
+    check(
+        ahead_r2, AHEAD_R2, f"{k * dt:.2g} s ahead it predicts the rate to R² {ahead_r2:.2f}", False
+    )
+    if share_p < FIN_SHARE_P:
+        check(
+            share,
+            FIN_SHARE,
+            f"the fin explains {100 * share:.0f} % of u_d (p = {share_p:.2g}): model error",
+            True,
+        )
+    check(
+        p99 / fin_range,
+        UD_RANGE,
+        f"u_d reaches {p99:.3g}° (99th percentile), "
+        f"{p99 / fin_range:.2g} of the fins' ±{fin_range:g}°",
+        True,
+    )
+    check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
+    if method == "paper":
+        steps = metrics.get("steps") or []
+        negative = [s for s in steps if isinstance(s, dict) and not s.get("a_per_s", 1.0) > 0.0]
+        if negative:
+            bad.append(
+                f"{len(negative)} of {len(steps)} steps give a damping a_i <= 0: the dwells "
+                "are not the steps from rest to a steady state the method assumes"
+            )
+        ss = metrics.get("steady_state_r2")
+        if ss is not None and ss < STEADY_STATE_R2:
+            weak.append(f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate")
+    verdict = "unreliable" if bad else "weak" if weak else "good"
+    return Adequacy(
+        rate_source=source,
+        rate_r2=rate_r2,
+        rate_mae_dps=rate_mae,
+        angle_mae_deg=angle_mae,
+        ahead_s=k * dt,
+        ahead_r2=ahead_r2,
+        fin_share=share,
+        fin_share_p=share_p,
+        ud_p99_deg=p99,
+        ud_range_fraction=p99 / fin_range,
+        alpha_rel_se=rel_se,
+        verdict=verdict,
+        reasons=tuple(bad + weak),
+    )
