@@ -89,7 +89,9 @@ def main(argv: list[str] | None = None) -> int:
         record("right", label, rec, found.params, found.disturbance(),
                {"std_errors": found.std_errors}, model)  # fmt: skip
         off = replace(found.params, alpha=1.3 * found.params.alpha)
-        given = posterior_given(rec, off, found.ar, found.sd_deg, gyro_noise=found.gyro_noise)
+        given = posterior_given(
+            rec, off, found.ar.tolist(), found.sd_deg, gyro_noise=found.gyro_noise
+        )
         record("wrong", label + ", α +30 %", rec, off, given.disturbance(), {}, model)
         if seed == args.first_seed and name == "paper":
             steep = run_tunnel(spec_from_command(command + " --alpha-bar 0.06 --beta-bar 0.3"))

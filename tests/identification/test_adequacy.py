@@ -10,33 +10,43 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from identification.adequacy import VERDICTS, adequacy
+from identification.adequacy import VERDICTS, Adequacy, adequacy
 from identification.bundled import bundled_path, load_bundled
 from identification.methods import fit
 from identification.ml import maximum_likelihood, posterior_given
+from identification.model import RollParams
 from identification.pipeline import IdentifyOptions, model_inputs
 from identification.recording import Recording
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main as rocketroll
 
-PRBS = {"schedule": "prbs", "log_dt": 0.01, "duration": 58.0, "pulse": 0.5, "lead": 2.0}
+PRBS: dict[str, Any] = {
+    "schedule": "prbs",
+    "log_dt": 0.01,
+    "duration": 58.0,
+    "pulse": 0.5,
+    "lead": 2.0,
+}
 
 
-def _verdict(rec: Recording, model: str, params=None):  # type: ignore[no-untyped-def]
+def _verdict(rec: Recording, model: str, params: RollParams | None = None) -> Adequacy:
     found = maximum_likelihood(rec, model)
     if params is None:
         params, dist, metrics = found.params, found.disturbance(), {"std_errors": found.std_errors}
     else:
-        given = posterior_given(rec, params, found.ar, found.sd_deg, gyro_noise=found.gyro_noise)
+        given = posterior_given(
+            rec, params, found.ar.tolist(), found.sd_deg, gyro_noise=found.gyro_noise
+        )
         dist, metrics = given.disturbance(), {}
     return adequacy(model_inputs(rec, model, None), params, dist, metrics)
 
 
 @pytest.mark.parametrize("truth", [{}, {"alpha": 0.9, "beta": -3.0, "correlation_time": 0.3}])
-def test_a_right_fit_is_good_and_the_gain_30_percent_off_is_not(truth: dict) -> None:
+def test_a_right_fit_is_good_and_the_gain_30_percent_off_is_not(truth: dict[str, Any]) -> None:
     rec = run_tunnel(TunnelSpec(seed=11, gyro_noise=1.0, **PRBS, **truth))
     right = _verdict(rec, "theta")
     assert right.verdict == "good", right.reasons
