@@ -31,13 +31,16 @@ on ramps, doublets and PRBS against deliberately wrong ones).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
+from identification.compiled import interval_maps
 from identification.model import RollParams, Servo, _linear_recurrence, damping
 from identification.pipeline import Measurements
+from identification.statistics import decorrelation_stride
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
@@ -111,14 +114,10 @@ def _fin_share(
     design = np.column_stack(
         [np.ones(u.size), fin[:-1], size, np.diff(fin), lag[:-1], lag[:-1] * size]
     )
-    centred = u - u.mean()
-    if not np.dot(centred, centred) > 0.0:
+    if not np.ptp(u) > 0.0:
         return 0.0, 1.0
-    # Lags of the covariance: u's correlation length (first lag below 1/e), at most n/4.
-    acf = np.correlate(centred[: min(u.size, 4096)], centred[: min(u.size, 4096)], "full")
-    acf = acf[acf.size // 2 :] / acf[acf.size // 2]
-    below = np.flatnonzero(acf < math.exp(-1.0))
-    maxlags = int(min(2 * (below[0] if below.size else acf.size), u.size // 4))
+    # Lags of the covariance: twice u's correlation length (first lag below 1/e), at most n/4.
+    maxlags = min(2 * decorrelation_stride(u, math.exp(-1.0)), u.size // 4)
     # Columns that repeat others (the size is the fin itself where θ + θ̄ keeps one sign).
     keep = np.zeros(design.shape[1], dtype=bool)
     for j in range(design.shape[1]):
@@ -138,7 +137,7 @@ def adequacy(
     inputs: Measurements,
     params: RollParams,
     disturbance: Disturbance,
-    metrics: dict[str, Any] | None = None,
+    metrics: Mapping[str, Any] | None = None,
     *,
     method: str = "",
     servo: Servo | None = None,
@@ -160,10 +159,8 @@ def adequacy(
     servo : Servo, optional
         The fins' range (default: eq. 23's servo, ±40°).
     """
-    from identification.compiled import interval_maps
-
     rec = inputs.recording
-    metrics = dict(metrics or {})
+    metrics = metrics or {}
     grid = inputs.grid
     maps = interval_maps(params, np.asarray(inputs.theta_fine), grid.per_sample, grid.step_s)
     e, f, a_phi, g_phi = maps[:, 0], maps[:, 2], maps[:, 3], maps[:, 5]
@@ -202,22 +199,20 @@ def adequacy(
     share, share_p = _fin_share(u, fin, params.theta_bar_deg, lag)
     p99 = float(np.percentile(np.abs(u), 99.0))
     fin_range = (servo or Servo()).range_deg
-    se = metrics.get("std_errors") or {}
-    alpha_se = se.get("alpha") if isinstance(se, dict) else None
-    rel_se = abs(float(alpha_se) / params.alpha) if alpha_se is not None else float("nan")
-    if alpha_se is not None and not np.isfinite(float(alpha_se)):
-        rel_se = float("inf")
+    alpha_se = (metrics.get("std_errors") or {}).get("alpha")
+    if alpha_se is None:
+        rel_se = math.nan  # the method reports none
+    else:  # NaN where the information matrix is not positive definite: no precision at all
+        rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) else math.inf
 
     weak: list[str] = []
     bad: list[str] = []
 
     def check(value: float, limits: tuple[float, float], text: str, above: bool) -> None:
-        if np.isnan(value):
-            return
-        worse = (lambda x, t: x > t) if above else (lambda x, t: x < t)
-        if worse(value, limits[1]):
+        sign = 1.0 if above else -1.0  # which side of the limits is worse
+        if sign * value > sign * limits[1]:
             bad.append(text)
-        elif worse(value, limits[0]):
+        elif sign * value > sign * limits[0]:
             weak.append(text)
 
     check(rate_r2, RATE_R2, f"the model without u_d explains {rate_r2:.2f} of the rate (R²)", False)

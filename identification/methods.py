@@ -333,7 +333,7 @@ def with_adequacy(found: ModelFit, context: Context) -> ModelFit:
         context.measurements,
         found.params,
         found.disturbance,
-        dict(found.metrics),
+        found.metrics,
         method=found.method,
     )
     return replace(found, metrics={**found.metrics, "adequacy": figures.as_dict()})

@@ -112,8 +112,7 @@ def methods_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
             lines.append(
                 f"{method:<14}{model:<10}{p.alpha:>11.4f}{p.theta_bar_deg:>9.3f}"
                 f"{p.beta_bar_per_s:>13.4f}{p.alpha_bar_per_deg_s:>12.4f}"
-                f"{'' if rate is None else f'{rate:.3f}':>14}"
-                f"{'' if angle is None else f'{angle:.3f}':>13}"
+                f"{_blank(rate, '.3f'):>14}{_blank(angle, '.3f'):>13}"
             )
     return "\n".join(lines)
 
@@ -133,16 +132,17 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
             a = f.metrics.get("adequacy")
             if not a:
                 continue
-
-            def num(value: float | None, fmt: str) -> str:
-                return "" if value is None else format(value, fmt)
-
-            se = a["alpha_rel_se"]
+            se = None if a["alpha_rel_se"] is None else 100 * a["alpha_rel_se"]
             lines.append(
-                f"{method:<14}{model:<10}{num(a['rate_r2'], '.3f'):>9}"
-                f"{num(a['ahead_r2'], '.3f'):>10}{num(a['fin_share'], '.2f'):>9}"
-                f"{num(a['ud_range_fraction'], '.2f'):>13}"
-                f"{'' if se is None else num(100 * se, '.1f'):>8}  {a['verdict']}"
+                f"{method:<14}{model:<10}{_blank(a['rate_r2'], '.3f'):>9}"
+                f"{_blank(a['ahead_r2'], '.3f'):>10}{_blank(a['fin_share'], '.2f'):>9}"
+                f"{_blank(a['ud_range_fraction'], '.2f'):>13}{_blank(se, '.1f'):>8}"
+                f"  {a['verdict']}"
             )
             reasons += [f"  {method} {model}: {reason}" for reason in a["reasons"]]
     return "\n".join(lines + reasons)
+
+
+def _blank(value: float | None, fmt: str) -> str:
+    """``value`` formatted, or nothing for a figure a fit does not have."""
+    return "" if value is None else format(value, fmt)
