@@ -46,6 +46,7 @@ from identification.steps import (
     measured_angle,
     measured_velocity,
     resimulate,
+    smoothing_spread_s,
 )
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
@@ -452,6 +453,40 @@ def checked_model(name: str) -> str:
         return check_model(name)
     except ValueError as exc:
         raise IdentificationError(str(exc)) from None
+
+
+#: Largest spread of the velocity smoothing (:func:`identification.steps.smoothing_spread_s`)
+#: as a fraction of the rocket's time constant 1/a, for the methods that fit the smoothed
+#: rate.  The paper's three passes over 0.3 s spread 0.15 s: a fifth to a third of its
+#: rocket's 0.5-0.8 s.
+SMOOTHING_PER_TIME_CONSTANT = 0.5
+
+
+def smoothing_for(
+    params: RollParams, inputs: Measurements, options: IdentifyOptions
+) -> float | None:
+    """A velocity smoothing window short against ``params``' time constant, where the
+    one of ``options`` is not; ``None`` where it is.
+
+    The moving average of §3.2 is a low-pass filter.  Against a rocket whose time
+    constant 1/a is not long next to the filter's spread it reshapes the response being
+    fitted (a fast rocket's rate after a fin ramp is smeared over the filter's span), and
+    the ``u_d`` of eq. 35-44, recovered from the smoothed rate and the unsmoothed fin,
+    takes the difference up in the fin's shape.  The window returned is the longest whose
+    spread is at most :data:`SMOOTHING_PER_TIME_CONSTANT` of 1/a, ``a`` the median damping
+    along the recording's fin angle (an odd number of samples; one sample, i.e. no
+    smoothing, for a rocket faster than the sampling).
+    """
+    passes, dt = options.smoothing_passes, inputs.recording.dt_s
+    typical = float(np.median(damping(params, inputs.theta_fine)))
+    if passes == 0 or not typical > 0:
+        return None
+    limit_s = SMOOTHING_PER_TIME_CONSTANT / typical
+    if smoothing_spread_s(dt, passes, options.smoothing_window_s) <= limit_s:
+        return None
+    width = int(np.floor(np.sqrt(12.0 * limit_s**2 / (passes * dt**2) + 1.0)))
+    width = max(1, width if width % 2 else width - 1)
+    return round(width * dt, 9)
 
 
 def model_inputs(recording: Recording, model: str, options: IdentifyOptions | None) -> Measurements:

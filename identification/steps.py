@@ -293,6 +293,14 @@ def smoothing_width(dt_s: float, window_s: float = SMOOTHING_WINDOW_S) -> int:
     return width if width % 2 else width + 1
 
 
+def smoothing_spread_s(dt_s: float, passes: int, window_s: float = SMOOTHING_WINDOW_S) -> float:
+    """Standard deviation, s, of the kernel of :func:`moving_average` at ``passes`` passes
+    of :func:`smoothing_width` samples: how far in time the smoothing spreads a reading
+    (0.15 s for the paper's three passes over 0.3 s)."""
+    width = smoothing_width(dt_s, window_s)
+    return float(dt_s * np.sqrt(passes * (width**2 - 1) / 12.0))
+
+
 def measured_velocity(
     recording: Recording, smoothing_passes: int, window_s: float = SMOOTHING_WINDOW_S
 ) -> tuple[FloatArray, str]:

@@ -15,13 +15,21 @@ from typing import Any
 import pytest
 
 from identification.adequacy import VERDICTS, Adequacy, adequacy
+from identification.baselines import output_error
 from identification.bundled import bundled_path, load_bundled
 from identification.methods import fit
 from identification.ml import maximum_likelihood, posterior_given
 from identification.model import RollParams
-from identification.pipeline import IdentifyOptions, model_inputs
+from identification.pipeline import (
+    SMOOTHING_PER_TIME_CONSTANT,
+    IdentifyOptions,
+    model_inputs,
+    recover_disturbance,
+    smoothing_for,
+)
 from identification.recording import Recording
-from identification.tunnel import TunnelSpec, run_tunnel
+from identification.steps import smoothing_spread_s
+from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from rocketroll.cli import main as rocketroll
 
 PRBS: dict[str, Any] = {
@@ -94,3 +102,41 @@ def test_identify_prints_the_adequacy_table_and_writes_it_to_the_json(
     data = json.loads(out.read_text())
     for model in ("constant", "theta"):
         assert data["methods"]["output-error"][model]["metrics"]["adequacy"]["verdict"] == "good"
+
+
+FAST = "--model constant --alpha 3.4 --beta 0.2 --beta-bar 9.5"  # a 0.1-s time constant
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_output_error_smooths_a_fast_rocket_over_a_window_short_against_its_time_constant(
+    seed: int,
+) -> None:
+    # The paper's smoothing spreads 0.15 s, more than this rocket's time constant: fitted
+    # through it, the output-error u_d took up the smeared response in the fin's shape.
+    command = (
+        f"--seed {seed} --log-dt 0.01 --gyro-noise 1 --turbulence-sd 2 --correlation-time 0.2 "
+        f"--schedule ramps --steps 6 --dwell-min 2 --dwell-max 3 --lead 1 --ramp 1 {FAST}"
+    )
+    rec = run_tunnel(spec_from_command(command))
+    options = IdentifyOptions(noise_runs=0)
+    found = fit(rec, "output-error", ["constant"], options)["constant"]
+    window = found.metrics["smoothing_window_s"]
+    assert window < options.smoothing_window_s
+    spread = smoothing_spread_s(rec.dt_s, options.smoothing_passes, window)
+    assert spread <= SMOOTHING_PER_TIME_CONSTANT / found.params.beta_bar_per_s
+    assert found.metrics["adequacy"]["verdict"] == "good", found.metrics["adequacy"]["reasons"]
+    assert abs(found.params.alpha / 3.4 - 1) < 0.03
+    # through the paper's smoothing the same rocket's fit is not good
+    inputs = model_inputs(rec, "constant", options)
+    smeared = output_error(rec, "constant", options=options).params
+    dist, _ = recover_disturbance(inputs, smeared, "constant", options)
+    assert adequacy(inputs, smeared, dist, {}).verdict != "good"
+
+
+def test_the_paper_rocket_keeps_the_paper_smoothing() -> None:
+    options = IdentifyOptions(noise_runs=0)
+    for name in ("tunnel-paper-seed3", "tunnel-staircase-seed10"):
+        rec = load_bundled(name)
+        for model, found in fit(rec, "output-error", options=options).items():
+            assert "smoothing_window_s" not in found.metrics
+            assert smoothing_for(found.params, model_inputs(rec, model, options), options) is None
