@@ -187,7 +187,8 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
     fits = []
     for model in models:
         found = _output_error(inputs, model, None)
-        used, extra = inputs, {}
+        used = inputs
+        extra: dict[str, float] = {}
         for _ in range(MAX_RESMOOTHING):
             shorter = smoothing_for(found.params, used, options)
             if shorter is None or shorter >= extra.get("smoothing_window_s", np.inf):
