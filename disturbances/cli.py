@@ -152,7 +152,11 @@ class IdentifyArgs:
         None, "also write machine-readable results (JSON) here", output="file", kind="json"
     )
     report: Path | None = setting(
-        None, "also write PNG figures and report.md into this folder", output="folder"
+        None,
+        "also write PNG figures and report.md into this folder: every method's fit judged "
+        "(its model without u_d against the rate, u_d beside the fin), and with the paper's "
+        "method the paper's figures",
+        output="folder",
     )
     method: list[str] = setting(
         default_factory=list,
@@ -179,11 +183,6 @@ class IdentifyArgs:
     def __post_init__(self) -> None:
         check(self)
         _check_methods(self.method)
-        if self.report is not None and self.method and not {"paper", "flight"} & set(self.method):
-            raise UsageError(
-                "--report is the paper's report (add --method paper) or, for a flight, the "
-                "flight method's (--method flight)"
-            )
 
 
 def _fit_each(context: Any, methods: Sequence[str]) -> tuple[dict[str, Any], dict[str, str]]:
@@ -249,10 +248,16 @@ def identify(args: IdentifyArgs) -> int:
             for method, by_model in fits.items()
         }
         outputs[args.json] = json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n"
-    if args.report is not None and result is not None:
-        from identification.report import render_report
+    tunnel_fits = {method: f for method, f in fits.items() if not is_flight_method(method)}
+    if args.report is not None and tunnel_fits:
+        from identification.fitreport import render_fit_report
 
-        for name, content in render_report(result).items():
+        paper_report = None
+        if result is not None:
+            from identification.report import render_report
+
+            paper_report = render_report(result)
+        for name, content in render_fit_report(context, tunnel_fits, paper_report).items():
             outputs[args.report / name] = content
     elif args.report is not None and "flight" in fits:
         from identification.flightreport import render_flight_report
@@ -284,7 +289,7 @@ def identify(args: IdentifyArgs) -> int:
     if result is not None:
         print(parameter_table(result))
     flown = {method: f for method, f in fits.items() if is_flight_method(method)}
-    tunnel = {method: f for method, f in fits.items() if method not in flown}
+    tunnel = tunnel_fits
     if flown:
         print(_flight_table(flown))
     if any(method != "paper" for method in tunnel):
@@ -375,6 +380,9 @@ class TraceFilters:
     )
     source: str | None = setting(None, "where the recording came from", choices=SOURCES)
     recording: str | None = setting(None, "recording name")
+    verdict: str | None = setting(
+        None, "the identification's fit adequacy", choices=("good", "weak", "unreliable")
+    )
     meta: dict[str, str] = setting(
         default_factory=dict,
         help="recording metadata must have KEY equal to VALUE (repeatable)",
@@ -386,7 +394,7 @@ class TraceFilters:
         """The filters of :meth:`disturbances.db.DisturbanceDB.traces`."""
         out: dict[str, Any] = {
             name: getattr(self, name)
-            for name in ("split", "model", "method", "kind", "source", "recording")
+            for name in ("split", "model", "method", "kind", "source", "recording", "verdict")
             if getattr(self, name) is not None
         }
         if self.meta:
@@ -485,14 +493,15 @@ class ListArgs:
 def _trace_table(rows: list[TraceRow]) -> str:
     lines = [
         f"{'id':>4}  {'uid':<40} {'kind':<10} {'split':<5} {'method':<12} {'model':<8} "
-        f"{'dur s':>6} {'mean °':>7} {'SD °':>6} {'90 % interval °':>17} {'normal p':>8}"
+        f"{'dur s':>6} {'mean °':>7} {'SD °':>6} {'90 % interval °':>17} {'normal p':>8}  "
+        "fit"
     ]
     for i in rows:
         p = "" if i.normality_p is None else f"{i.normality_p:.3f}"
         lines.append(
             f"{i.id:>4}  {i.uid:<40} {i.kind:<10} {i.split:<5} {i.method:<12} {i.model:<8} "
             f"{i.duration_s:>6.0f} {i.mean_deg:>7.2f} {i.sd_deg:>6.2f} "
-            f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}] {p:>8}"
+            f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}] {p:>8}  {i.verdict or '-'}"
         )
     return "\n".join(lines)
 
@@ -519,6 +528,7 @@ def _row_json(row: TraceRow) -> dict[str, Any]:
         "package_version": row.package_version,
         "created_at": row.created_at,
         "validation": None if row.validation is None else dict(row.validation),
+        "verdict": row.verdict,
         "duration_s": row.duration_s,
         "recording_hash": row.recording_hash,  # (new: the recording across databases)
     }
@@ -612,6 +622,15 @@ def show(args: ShowArgs) -> int:
             f"  re-simulated rate MAE {m['resim_rate_mae_dps']:.3f} °/s, angle MAE "
             f"{m['resim_angle_mae_deg']:.3f}°"
         )
+    figures = m.get("adequacy")
+    if isinstance(figures, dict):
+        r2, share = figures.get("rate_r2"), figures.get("fin_share")
+        detail = [
+            *([f"rate R² without u_d {r2:.3f}"] if r2 is not None else []),
+            *([f"the fin explains {100 * share:.0f} % of u_d"] if share is not None else []),
+            *(figures.get("reasons") or ()),
+        ]
+        lines.append(f"  fit          {figures['verdict']}: " + "; ".join(detail))
     print("\n".join(lines))
     if args.plot is not None:
         print(f"wrote {args.plot}")

@@ -60,6 +60,7 @@ from disturbances.rows import (
     TraceRow,
 )
 from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
+from identification.adequacy import VERDICTS
 from identification.methods import METHODS
 from identification.model import MODEL_NAMES, RollParams
 from identification.recording import SOURCES, Recording
@@ -162,6 +163,7 @@ TRACE_FILTERS = (
     "metadata",
     "min_duration_s",
     "validated",
+    "verdict",
 )
 
 
@@ -572,8 +574,8 @@ class DisturbanceDB:
         p = row.params
         cur = conn.execute(
             "INSERT INTO identifications (recording_id, method, model, alpha, theta_bar_deg, "
-            "beta_bar_per_s, alpha_bar_per_deg_s, metrics, options, package_version, created_at) "
-            "VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+            "beta_bar_per_s, alpha_bar_per_deg_s, metrics, options, package_version, created_at, "
+            "verdict) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 recording_id,
                 row.method,
@@ -586,6 +588,7 @@ class DisturbanceDB:
                 json.dumps(dict(row.options), allow_nan=False),
                 row.package_version,
                 row.created_at,
+                row.verdict,
             ),
         )
         return int(cur.lastrowid or 0)
@@ -712,9 +715,9 @@ class DisturbanceDB:
 
     def identifications(self, **filters: Any) -> list[IdentificationRow]:
         """Stored identifications; filters ``method``, ``model``, ``recording`` (name),
-        ``recording_hash``."""
+        ``recording_hash``, ``verdict``."""
         where, params = self._where(
-            filters, allowed=("method", "model", "recording", "recording_hash")
+            filters, allowed=("method", "model", "recording", "recording_hash", "verdict")
         )
         rows = self._query(
             "SELECT i.*, r.name AS recording_name, r.content_hash AS recording_hash "
@@ -744,7 +747,7 @@ class DisturbanceDB:
         "r.split, i.method, "
         "i.model, i.alpha, i.theta_bar_deg, i.beta_bar_per_s, i.alpha_bar_per_deg_s, t.dt_s, "
         "t.t0_s, t.n_samples, t.checksum, t.mean_deg, t.sd_deg, t.q05_deg, t.q95_deg, "
-        "t.normality_p, i.package_version, t.created_at, t.validation "
+        "t.normality_p, i.package_version, i.verdict, t.created_at, t.validation "
         "FROM traces t JOIN identifications i ON i.id = t.identification_id "
         "JOIN recordings r ON r.id = i.recording_id LEFT JOIN traces s ON s.id = t.source_trace_id"
     )
@@ -779,6 +782,7 @@ class DisturbanceDB:
                 source=r["source"],
                 split=r["split"],
                 package_version=r["package_version"],
+                verdict=r["verdict"],
                 id=r["id"],
                 recording_id=r["recording_id"],
             )
@@ -795,6 +799,7 @@ class DisturbanceDB:
         "source": ("r.source", SOURCES),
         "recording": ("r.name", None),
         "recording_hash": ("r.content_hash", None),
+        "verdict": ("i.verdict", VERDICTS),
     }
 
     def methods(self) -> list[str]:
@@ -851,8 +856,9 @@ class DisturbanceDB:
         ``surrogate`` for both, or posterior), ``source`` (synthetic, wind-tunnel,
         flight), ``recording`` (name); ``metadata`` (a mapping of the
         recording's metadata keys to required values), ``min_duration_s``,
-        and ``validated`` (``True``: identified traces and surrogates that
-        passed their check; ``False``: surrogates that failed).  An unknown
+        ``validated`` (``True``: identified traces and surrogates that
+        passed their check; ``False``: surrogates that failed), and ``verdict``
+        (the identification's adequacy: good, weak, unreliable).  An unknown
         filter or value is a ``ValueError``.
         """
         where, params = self._where(filters, allowed=TRACE_FILTERS)

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identification.adequacy import VERDICTS
 from identification.model import RollParams, check_model
 from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
@@ -301,6 +302,15 @@ class IdentificationRow(_Row):
         check_model(self.model)
         object.__setattr__(self, "metrics", _frozen(json_safe(self.metrics)))
         object.__setattr__(self, "options", _frozen(json_safe(self.options)))
+        if self.verdict not in (None, *VERDICTS):
+            raise ValueError(f"adequacy verdict {self.verdict!r}: must be one of {VERDICTS}")
+
+    @property
+    def verdict(self) -> str | None:
+        """The fit's adequacy verdict (good, weak, unreliable: :mod:`identification.adequacy`)
+        from its metrics; ``None`` where it was not assessed (a flight fit, an old row)."""
+        figures = self.metrics.get("adequacy")
+        return None if not isinstance(figures, Mapping) else figures.get("verdict")
 
     @property
     def key(self) -> tuple[str, str, str]:
@@ -387,6 +397,8 @@ class TraceRow(_Row):
         source's).
     package_version : str
         The rocketroll version that identified it.
+    verdict : str or None
+        Its identification's adequacy verdict (``None``: not assessed).
     id : int or None
         Row id in the database it was read from (use ``uid`` across databases).
     recording_id : int or None
@@ -414,6 +426,7 @@ class TraceRow(_Row):
     source: str = ""
     split: str = ""
     package_version: str = ""
+    verdict: str | None = None
     id: int | None = None
     recording_id: int | None = None
 

@@ -3,8 +3,10 @@
 Version :data:`SCHEMA_VERSION` is written to ``PRAGMA user_version``; the
 file is marked with ``PRAGMA application_id`` :data:`APPLICATION_ID`.
 
-Version 2 (this one) validates method, model, kind and source names in
-Python -- against the registries of identification methods
+Version 3 (this one) adds each identification's adequacy ``verdict`` (good, weak or
+unreliable: :mod:`identification.adequacy`; NULL where it was not assessed -- a flight
+fit, or one stored before version 3 without it in its metrics).  Version 2 validates
+method, model, kind and source names in Python -- against the registries of identification methods
 (:data:`identification.methods.METHODS`), damping models
 (:data:`identification.model.MODELS`), surrogate kinds and recording sources
 -- instead of in ``CHECK`` constraints, so a new identification method needs
@@ -28,7 +30,7 @@ from pathlib import Path
 __all__ = ["APPLICATION_ID", "SCHEMA", "SCHEMA_VERSION", "TABLES", "backup_path", "migrate"]
 
 #: Version of the schema this package writes and reads.
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: ``PRAGMA application_id`` of a rocketroll disturbance database ("RRDB").
 APPLICATION_ID = 0x52524442
 
@@ -61,8 +63,11 @@ CREATE TABLE identifications (
     options             TEXT NOT NULL,
     package_version     TEXT NOT NULL,
     created_at          TEXT NOT NULL,
+    verdict             TEXT,
     UNIQUE (recording_id, method, model)
 )"""
+#: The identifications table of version 2 (before its ``verdict``), what 1 -> 2 makes.
+_IDENTIFICATIONS_V2 = _IDENTIFICATIONS.replace("    verdict             TEXT,\n", "")
 _TRACES = """
 CREATE TABLE traces (
     id                INTEGER PRIMARY KEY,
@@ -118,7 +123,7 @@ def _migrate_1_to_2(conn: sqlite3.Connection) -> None:
     """
     for table, create in (
         ("recordings", _RECORDINGS),
-        ("identifications", _IDENTIFICATIONS),
+        ("identifications", _IDENTIFICATIONS_V2),
         ("traces", _TRACES),
     ):
         _rebuild(conn, table, create)
@@ -126,8 +131,21 @@ def _migrate_1_to_2(conn: sqlite3.Connection) -> None:
         conn.execute(statement)
 
 
+def _migrate_2_to_3(conn: sqlite3.Connection) -> None:
+    """Version 2 -> 3: each identification's adequacy ``verdict``, read from its metrics
+    where the fit was assessed when it was stored (NULL where it was not)."""
+    conn.execute("ALTER TABLE identifications ADD COLUMN verdict TEXT")
+    conn.execute(
+        "UPDATE identifications SET verdict = json_extract(metrics, '$.adequacy.verdict') "
+        "WHERE json_valid(metrics)"
+    )
+
+
 #: ``version -> migration`` to ``version + 1``, applied in order.
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _migrate_1_to_2}
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
+    1: _migrate_1_to_2,
+    2: _migrate_2_to_3,
+}
 
 
 def backup_path(path: Path, version: int) -> Path:

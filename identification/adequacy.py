@@ -44,7 +44,7 @@ from identification.statistics import decorrelation_stride
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["VERDICTS", "Adequacy", "adequacy"]
+__all__ = ["VERDICTS", "Adequacy", "ModelOnly", "adequacy", "model_only"]
 
 #: The verdicts, best first.
 VERDICTS = ("good", "weak", "unreliable")
@@ -133,6 +133,48 @@ def _fin_share(
     return max(float(fit.rsquared), 0.0), p_value
 
 
+@dataclass(frozen=True, eq=False)
+class ModelOnly:
+    """A fit's model driven by the fin alone (``u_d = 0``) from the first reading.
+
+    Attributes
+    ----------
+    rate_dps, angle_deg : ndarray
+        Its roll rate and angle at the recording's readings.
+    measured_rate_dps : ndarray
+        The rate it is judged against: the gyro's raw readings, else the velocity
+        differentiated from the angle (smoothed).
+    rate_source : str
+        ``gyro`` or ``velocity from the angle``.
+    maps : ndarray
+        The model's interval maps (:func:`identification.compiled.interval_maps`).
+    """
+
+    rate_dps: FloatArray
+    angle_deg: FloatArray
+    measured_rate_dps: FloatArray
+    rate_source: str
+    maps: FloatArray
+
+
+def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
+    """``params``' model without ``u_d`` on the recording of ``inputs``: what the fit
+    predicts from the fin alone, the figure the adequacy judges first."""
+    rec, grid = inputs.recording, inputs.grid
+    maps = interval_maps(params, np.asarray(inputs.theta_fine), grid.per_sample, grid.step_s)
+    e, f, a_phi, g_phi = maps[:, 0], maps[:, 2], maps[:, 3], maps[:, 5]
+    smoothed = np.asarray(inputs.velocity_dps, dtype=float)
+    if rec.roll_rate_dps is not None:
+        rate, source = np.asarray(rec.roll_rate_dps, dtype=float), "gyro"
+    else:
+        rate, source = smoothed, "velocity from the angle"
+    v = _linear_recurrence(e, f, float(smoothed[0]))
+    phi = float(np.asarray(inputs.angle_deg)[0]) + np.concatenate(
+        [[0.0], np.cumsum(a_phi * v[:-1] + g_phi)]
+    )
+    return ModelOnly(v, phi, rate, source, maps)
+
+
 def adequacy(
     inputs: Measurements,
     params: RollParams,
@@ -162,19 +204,12 @@ def adequacy(
     rec = inputs.recording
     metrics = metrics or {}
     grid = inputs.grid
-    maps = interval_maps(params, np.asarray(inputs.theta_fine), grid.per_sample, grid.step_s)
-    e, f, a_phi, g_phi = maps[:, 0], maps[:, 2], maps[:, 3], maps[:, 5]
+    model = model_only(inputs, params)
+    e, f = model.maps[:, 0], model.maps[:, 2]
     smoothed = np.asarray(inputs.velocity_dps, dtype=float)
-    if rec.roll_rate_dps is not None:
-        rate, source = np.asarray(rec.roll_rate_dps, dtype=float), "gyro"
-    else:
-        rate, source = smoothed, "velocity from the angle"
+    rate, source = model.measured_rate_dps, model.rate_source
+    v, phi = model.rate_dps, model.angle_deg
     n = rate.size
-    # Model only: from the first reading, u_d = 0.
-    v = _linear_recurrence(e, f, float(smoothed[0]))
-    phi = float(np.asarray(inputs.angle_deg)[0]) + np.concatenate(
-        [[0.0], np.cumsum(a_phi * v[:-1] + g_phi)]
-    )
     rate_r2 = _r2(v, rate)
     rate_mae = float(np.mean(np.abs(v - rate)))
     angle_mae = (

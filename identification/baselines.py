@@ -179,8 +179,9 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
     (:func:`identification.pipeline.smoothing_for`: a rocket several times faster than
     the paper's) the rate is smoothed again over a shorter window and the fit starts
     again from the previous one, until the window is short against the time constant
-    fitted through it (at most :data:`MAX_RESMOOTHING` times).  Metrics: the re-simulation errors, the output error's
-    RMS, the optimiser's work, and the shorter window where one was used.
+    fitted through it (at most :data:`MAX_RESMOOTHING` times).  Metrics: the
+    re-simulation errors, the output error's RMS, the optimiser's work, and the
+    shorter window where one was used.
     """
     inputs = context.measurements
     options = context.options

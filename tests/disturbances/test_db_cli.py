@@ -192,6 +192,12 @@ def test_list_filters(small_db: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert len(oe) == 4 and {r[4] for r in oe} == {"output-error"}
     by_name = table_rows(ok(["db", "list", "--db", db, "--recording", SEED0], capsys))
     assert len(by_name) == 6 and {r[3] for r in by_name} == {"train"}
+    # every fit of the paper's rocket on its own schedule is adequate; a surrogate shows
+    # its source's identification's verdict
+    good = table_rows(ok(["db", "list", "--db", db, "--verdict", "good"], capsys))
+    assert len(good) == 12 and {r[-1] for r in good} == {"good"}
+    out = ok(["db", "list", "--db", db, "--verdict", "unreliable"], capsys)
+    assert out.splitlines()[0].endswith("; 0 shown")
 
 
 def test_list_json(small_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -248,11 +254,13 @@ def test_show_by_id_and_uid(small_db: Path, capsys: pytest.CaptureFixture[str]) 
     assert "checksum verified" in by_id
     assert f"α = {ident.params.alpha:.4f}" in by_id and "ᾱ = " in by_id
     assert "re-simulated rate MAE" in by_id
+    assert "fit          good: rate R² without u_d 0.9" in by_id
 
     data = json.loads(ok(["db", "show", info.uid, "--db", db, "--json"], capsys))
     assert data["uid"] == info.uid and data["kind"] == "identified"
     assert data["params"]["alpha"] == ident.params.alpha
     assert data["metrics"]["n_steps"] == ident.metrics["n_steps"]
+    assert data["verdict"] == ident.verdict == data["metrics"]["adequacy"]["verdict"] == "good"
 
     surrogate = f"{info.uid}-iaaft-0"
     out = ok(["db", "show", surrogate, "--db", db], capsys)

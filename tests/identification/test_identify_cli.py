@@ -53,8 +53,25 @@ def test_table_json_and_report(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert data["noise_study"]["runs"] == 3
     assert set(data["resimulation"]) == {"constant", "theta"}
     assert all(math.isfinite(v) for v in params.values())
-    assert (report / "report.md").is_file()
-    assert len(list(report.glob("*.png"))) == 13
+    text = (report / "report.md").read_text()
+    # the paper's 13 figures, and a figure judging each method's fit
+    pngs = {p.name for p in report.glob("*.png")}
+    assert len(pngs) == 15 and {"fit-paper.png", "fit-output-error.png"} <= pngs
+    assert "## Fit adequacy of each method" in text and "](fit-output-error.png)" in text
+    assert text.count("**paper ") == 2 and "**output-error theta**: good" in text
+
+
+def test_report_for_any_method(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    report = tmp_path / "report"
+    argv = ["identify", str(PAPER), "--method", "output-error", "--report", str(report)]
+    assert main([*argv, "--mc-runs", "0"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert sorted(p.name for p in report.iterdir()) == ["fit-output-error.png", "report.md"]
+    text = (report / "report.md").read_text()
+    assert text.startswith("# Identification report: ") and "fig05" not in text
+    assert "**output-error constant**: good" in text
+    png = (report / "fit-output-error.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 20_000
 
 
 def test_real_recording_has_no_truth_column(
