@@ -118,9 +118,17 @@ class Design:
     @cached_property
     def train_bank(self) -> TraceBank:
         """The traces of the *train* split: what a design may look at (never the test split
-        the protocol evaluates on); all of its recordings, whichever one is replayed."""
+        the protocol evaluates on).  Where one recording is replayed and the train split
+        holds a part of it (``rocketroll db add --holdout``: the run before its held-out
+        end) that part, so the design is of that rocket; else all of the train split."""
+        from disturbances.bank import BankError
         from rollenv.bank import load_bank
 
+        if self.config.recording is not None:
+            try:
+                return load_bank(replace(self.config, split="train"), self.db)
+            except BankError:
+                pass  # no part of it to design on: the train split's rockets
         return load_bank(replace(self.config, split="train", recording=None), self.db)
 
     @cached_property

@@ -32,7 +32,13 @@ from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
 from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
-from agents.replay import check_options, db_setting, env_options_setting, options_config
+from agents.replay import (
+    check_options,
+    db_setting,
+    env_options_setting,
+    recording_setting,
+    replay_config,
+)
 from disturbances.bank import TraceBank
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -451,6 +457,7 @@ class Args:
     )
     db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
+    recording: str | None = recording_setting()
     minari: str | None = setting(
         None,
         "also save every episode as a Minari dataset per controller, PREFIX-<controller>-v0 "
@@ -469,7 +476,9 @@ class Args:
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
     args = replace(args, policy=unnamed_defaults(args.policy, default_policies(), args.env_id))
-    config = options_config(args.env_id, args.settings, args.split)
+    config, bank, settings, episode_note = replay_config(
+        args.env_id, args.settings, args.recording, args.split, args.db
+    )
     try:
         controllers = [make_controller(p, config, args.env_id, db=args.db) for p in args.policy]
     except ValueError as exc:
@@ -485,8 +494,10 @@ def run(args: Args) -> list[Evaluation]:
     print(
         f"  replay: {config.method}'s {draws.get(str(config.disturbance), config.disturbance)}"
         f" of u_d, {config.model} model"
+        + ("" if config.recording is None else f", recording {config.recording}")
     )
-    bank = load_bank(config, args.db)
+    if episode_note:
+        print(episode_note)
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
     steps: dict[str, list[dict[str, Any]]] = {c.name: [] for c in controllers}
     keep = args.minari is not None
@@ -509,7 +520,7 @@ def run(args: Args) -> list[Evaluation]:
             "seed": args.seed,
             "n_episodes": args.episodes,
             "policies": list(args.policy),
-            "settings": dict(args.settings),
+            "settings": settings,
             "bank": bank.description,
             "command": command_of(args),
         }
@@ -527,7 +538,7 @@ def run(args: Args) -> list[Evaluation]:
     if args.minari is not None:
         from agents.datasets import write_minari
 
-        env_settings = {**args.settings, "split": args.split}
+        env_settings = {**settings, "split": args.split}
         about = (
             f"rocketroll eval on {args.env_id} ({args.episodes} protocol episodes, seed "
             f"{args.seed}, {args.split} split)"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -278,7 +279,28 @@ def make_learned(design: Design, algorithm: str) -> PPOController:
         learned.attach_observer(design.config, design.design_bank)
     if design.arg:
         learned.name = f"{learned.name} {path.name}"
+    elsewhere = trained_elsewhere(learned.settings, design)
+    if elsewhere:
+        learned.name = f"{learned.name} ({elsewhere})"
     return learned
+
+
+def trained_elsewhere(settings: Mapping[str, Any], design: Design) -> str | None:
+    """How a learned policy's training differs from the rockets it is evaluated on, for
+    its label (``None``: the same selection): another database, or the whole split where
+    one recording is evaluated (a policy trained on the bundled rockets, evaluated on a
+    user's)."""
+    trained = settings.get("env_settings") or {}
+    trained_db = (settings.get("args") or {}).get("db")
+    here, there = design.db, trained_db
+    if (here is None) != (there is None) or (
+        here is not None and there is not None and Path(here).resolve() != Path(there).resolve()
+    ):
+        return "trained on another database's rockets"
+    recording = design.config.recording
+    if recording is not None and trained.get("recording") != recording:
+        return f"trained on other rockets than {recording}"
+    return None
 
 
 def _check_observer_design(learned: PPOController, config: RollConfig, where: str) -> None:

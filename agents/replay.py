@@ -14,13 +14,16 @@ This module imports nothing heavy: the commands' argument classes use it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import setting
 
 if TYPE_CHECKING:
+    from disturbances.bank import TraceBank
     from rollenv.core import RollConfig
 
 __all__ = [
@@ -28,7 +31,12 @@ __all__ = [
     "check_options",
     "db_setting",
     "env_options_setting",
+    "fit_episode",
+    "fitted_settings",
     "options_config",
+    "recording_setting",
+    "replay_config",
+    "replay_options",
 ]
 
 #: Environment options a command sets itself (``--env-id``, ``--split``), never ``--set``.
@@ -58,6 +66,89 @@ def env_options_setting() -> Any:
         flag="--set",
         metavar="KEY=VALUE",
     )
+
+
+def recording_setting() -> Any:
+    """The ``--recording NAME`` setting of the commands that run episodes on a database:
+    one recording of the split (``--set recording=NAME``), and designs on its part in
+    the train split where it has one (``rocketroll db add --holdout``)."""
+    return setting(
+        None,
+        "replay one recording of the database by name (as `rocketroll db list` shows it); "
+        "model-based designs then read its part in the train split where it has one "
+        "(`db add --holdout`), and an episode fits its trace",
+        metavar="NAME",
+    )
+
+
+def replay_options(settings: Mapping[str, Any], recording: str | None) -> dict[str, Any]:
+    """The ``--set`` options with ``--recording`` among them (``UsageError`` where both
+    name a recording and differ)."""
+    given = settings.get("recording")
+    if recording is None:
+        return dict(settings)
+    if given is not None and given != recording:
+        raise UsageError(f"--recording {recording} and --set recording={given} differ")
+    return {**settings, "recording": recording}
+
+
+def fit_episode(
+    config: RollConfig, banks: Sequence[TraceBank], settings: Mapping[str, Any]
+) -> tuple[RollConfig, str | None]:
+    """``config`` with an episode as long as the shortest of ``banks``' longest traces
+    (whole control steps) where one recording is replayed, that is shorter than the
+    default episode and ``--set episode_s`` was not given; and the line that says so
+    (None: unchanged)."""
+    if config.recording is None or "episode_s" in settings or config.flight is not None:
+        return config, None
+    longest = min(bank.longest_s for bank in banks)
+    steps = math.floor(longest / config.dt_s + 1e-9)
+    if steps * config.dt_s >= config.episode_length_s or steps < 2:
+        return config, None
+    fitted = replace(config, episode_s=round(steps * config.dt_s, 9))
+    return fitted, (
+        f"  episode: {fitted.episode_length_s:g} s, the length of {config.recording}'s "
+        f"trace (--set episode_s=... for another)"
+    )
+
+
+def fitted_settings(
+    env_id: str, settings: Mapping[str, Any], recording: str | None, db: str | None
+) -> tuple[dict[str, Any], str | None]:
+    """The ``--set`` options with ``--recording``, and ``episode_s`` fitted to the
+    recording's traces in both splits (a command that trains on one and checks on the
+    other: train, sweep run); with the line that says so (None: not fitted)."""
+    from rollenv.bank import load_bank
+
+    options = replay_options(settings, recording)
+    if options.get("recording") is None or "episode_s" in options:
+        return options, None
+    config = options_config(env_id, options, "train")
+    banks = [load_bank(config, db), load_bank(replace(config, split="test", recording=None), db)]
+    config, note = fit_episode(config, banks, options)
+    if note is None:
+        return options, None
+    return {**options, "episode_s": config.episode_s}, note
+
+
+def replay_config(
+    env_id: str,
+    settings: Mapping[str, Any],
+    recording: str | None,
+    split: str,
+    db: str | None,
+) -> tuple[RollConfig, TraceBank, dict[str, Any], str | None]:
+    """What a command replays: the configuration (:func:`options_config` of the ``--set``
+    options with ``--recording``, its episode fitted to the recording's trace by
+    :func:`fit_episode`), the bank of ``split``, the options as given, and the line that
+    says the episode was fitted (None: it was not)."""
+    from rollenv.bank import load_bank
+
+    options = replay_options(settings, recording)
+    config = options_config(env_id, options, split)
+    bank = load_bank(config, db)
+    config, note = fit_episode(config, [bank], options)
+    return config, bank, options, note
 
 
 def check_options(options: Mapping[str, Any], flag: str = "--set") -> None:

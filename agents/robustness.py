@@ -47,7 +47,14 @@ from agents.evaluate import (
     protocol_episodes,
 )
 from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
-from agents.replay import check_options, db_setting, env_options_setting, options_config
+from agents.replay import (
+    check_options,
+    db_setting,
+    env_options_setting,
+    options_config,
+    recording_setting,
+    replay_config,
+)
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
@@ -101,6 +108,7 @@ class Args:
     )
     db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
+    recording: str | None = recording_setting()
 
     def __post_init__(self) -> None:
         check(self)
@@ -186,7 +194,12 @@ def _condition_config(args: Args, condition: str) -> RollConfig:
 def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     """Design every controller once, evaluate it under every condition, report."""
     args = replace(args, policy=unnamed_defaults(args.policy, _default_policy(), args.env_id))
-    design = options_config(args.env_id, args.settings, args.split)
+    design, _, settings, episode_note = replay_config(
+        args.env_id, args.settings, args.recording, args.split, args.db
+    )
+    # every condition on the replayed recording, over the episode fitted to it
+    fitted = {} if episode_note is None else {"episode_s": design.episode_s}
+    args = replace(args, settings={**settings, **fitted})
     configs = {c: _condition_config(args, c) for c in args.condition}
     banks = {}
     for condition, config in configs.items():  # every condition's replay, before any work
@@ -206,6 +219,8 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
         f"rocketroll robustness: {args.env_id}, split={args.split}, {args.episodes} episodes "
         f"per condition, seed={args.seed}; controllers designed on the default environment"
     )
+    if episode_note:
+        print(episode_note)
     scores: dict[str, dict[str, np.ndarray]] = {c.name: {} for c in controllers}
     for condition, config in configs.items():
         bank = banks[condition]

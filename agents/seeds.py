@@ -57,11 +57,16 @@ from agents.evaluate import (
     protocol_episodes,
 )
 from agents.registry import make_controller
-from agents.replay import check_options, db_setting, env_options_setting, options_config
+from agents.replay import (
+    check_options,
+    db_setting,
+    env_options_setting,
+    recording_setting,
+    replay_config,
+)
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv.bank import load_bank
 
 __all__ = [
     "COMMAND",
@@ -216,6 +221,7 @@ class Args:
     )
     db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
+    recording: str | None = recording_setting()
 
     def __post_init__(self) -> None:
         check(self)
@@ -344,7 +350,9 @@ def plot(
 def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
     """Evaluate every run and reference, print the table, write the outputs."""
     groups = _groups(args.run)
-    config = options_config(args.env_id, args.settings, args.split)
+    config, bank, _, episode_note = replay_config(
+        args.env_id, args.settings, args.recording, args.split, args.db
+    )
     try:
         controllers = {
             label: [make_controller(p, config, args.env_id, db=args.db) for p in runs]
@@ -359,7 +367,8 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
         f"rocketroll seeds: {args.env_id}, split={args.split}, {args.episodes} episodes, "
         f"seed={args.seed}; {total} runs of {len(groups)} learner(s), headline {HEADLINE}"
     )
-    bank = load_bank(config, args.db)
+    if episode_note:
+        print(episode_note)
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
     evaluated_refs = [evaluate(config, c, specs, bank=bank, progress=True) for c in references]
     pid = pid_result(evaluated_refs)

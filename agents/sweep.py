@@ -70,7 +70,10 @@ from agents.replay import (
     check_options,
     db_setting,
     env_options_setting,
+    fitted_settings,
     options_config,
+    recording_setting,
+    replay_options,
 )
 from rocketroll_common import __version__
 from rocketroll_common.arrays import nan_to_none
@@ -837,6 +840,7 @@ class RunArgs:
         metavar="ADDRESS",
     )
     settings: dict[str, Any] = env_options_setting()
+    recording: str | None = recording_setting()
 
     def __post_init__(self) -> None:
         check(self)
@@ -844,7 +848,14 @@ class RunArgs:
 
 
 def _run(args: RunArgs) -> int:
-    spec = load_spec(args.spec, args.settings)
+    settings = replay_options(args.settings, args.recording)
+    if args.recording is not None:
+        spec = load_spec(args.spec, settings)
+        for env_id in spec.env_ids:
+            settings, note = fitted_settings(env_id, settings, None, args.db)
+            if note:
+                print(note)
+    spec = load_spec(args.spec, settings)
     if args.ray:
         _ray_module(args.ray)  # refused before anything is made or printed
     _check_replays(spec, args.db)

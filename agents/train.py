@@ -55,7 +55,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from agents.replay import check_options, db_setting, env_options_setting, options_config
+from agents.replay import (
+    check_options,
+    db_setting,
+    env_options_setting,
+    fitted_settings,
+    options_config,
+    recording_setting,
+)
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
 from rocketroll_common.settings import Command, check, parse, run_command, setting, to_argv
 
@@ -243,6 +250,7 @@ class Args:
         0, "SB3's verbosity: 0 quiet, 1 its training table after each update", ge=0, le=2
     )
     settings: dict[str, Any] = env_options_setting()
+    recording: str | None = recording_setting()
 
     def __post_init__(self) -> None:
         check(self)
@@ -925,9 +933,12 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     started = time.perf_counter()
     algo = args.ALGO
     hp = load_hyperparameters(args.hyperparams, args.env_id, algo)
-    if args.settings:  # the replay and options of --set, over the entry's env_kwargs
-        options_config(args.env_id, args.settings, "train")  # a bad one is named as --set
-        hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **args.settings})
+    settings, episode_note = fitted_settings(args.env_id, args.settings, args.recording, args.db)
+    if episode_note:
+        print(episode_note)
+    if settings:  # the replay and options of --set, over the entry's env_kwargs
+        options_config(args.env_id, settings, "train")  # a bad one is named as --set
+        hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **settings})
     n_envs = args.envs if args.envs is not None else hp.n_envs
     timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
     if timesteps is None:

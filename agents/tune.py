@@ -22,7 +22,13 @@ from agents.evaluate import (
 )
 from agents.nominal import NominalModel
 from agents.pid import PIDController, PIDGains
-from agents.replay import check_options, db_setting, env_options_setting, options_config
+from agents.replay import (
+    check_options,
+    db_setting,
+    env_options_setting,
+    recording_setting,
+    replay_config,
+)
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv import VARIANTS
 from rollenv.core import RollConfig
@@ -77,6 +83,7 @@ class TuneArgs:
         "the rocket, not the bandwidth, sets)",
     )
     settings: dict[str, Any] = env_options_setting()
+    recording: str | None = recording_setting()
 
     def __post_init__(self) -> None:
         check(self)
@@ -87,10 +94,14 @@ def tune(args: TuneArgs) -> int:
     """Re-tune the PID for a database and print the gains."""
     from agents.base import Design
 
-    config = options_config(args.env_id, args.settings, "train")
+    config, _, settings, note = replay_config(
+        args.env_id, args.settings, args.recording, "train", args.db
+    )
+    if note:
+        print(note)
     task = config.task
-    # The rocket eval's PID is placed on: the whole train split (whichever recording the
-    # episodes replay).
+    # The rocket eval's PID is placed on: its design bank (the train split, or the part of
+    # the replayed recording there).
     model = NominalModel.from_bank(Design(config, args.env_id, db=args.db).train_bank)
     print(f"nominal model: {model.source}")
     print(f"  a = {model.a_per_s:.4g} 1/s, α = {model.alpha:.4g}, θ̄ = {model.theta_bar_deg:.4g}°")
@@ -112,10 +123,24 @@ def tune(args: TuneArgs) -> int:
         f"best ω by {args.metric} = {best:g} rad/s: kp = {gains.kp:.4g}, ki = {gains.ki:.4g}, "
         f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°{where}"
     )
-    same = "".join(f" --set {k}={v}" for k, v in args.settings.items() if k != "recording")
+    same = "".join(f" --set {k}={v}" for k, v in settings.items() if k != "recording")
     same += f" --db {args.db}" if args.db is not None else ""
+    if config.recording is not None and _in_test_split(config, args.db):
+        same += f" --recording {config.recording}"  # its held-out part, where eval replays
     print(f"use it with: rocketroll eval --env-id {args.env_id} --policy pid:{best:g}{same}")
     return 0
+
+
+def _in_test_split(config: RollConfig, db: str | None) -> bool:
+    """Whether the test split, which eval replays, holds the recording ``config`` replays."""
+    from disturbances.bank import BankError
+    from rollenv.bank import load_bank
+
+    try:
+        load_bank(replace(config, split="test"), db)
+    except BankError:
+        return False
+    return True
 
 
 #: ``rocketroll tune pid``.

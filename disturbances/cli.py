@@ -666,11 +666,26 @@ class AddArgs:
         "store the recording in this split (default: its metadata's split, else chosen by "
         "its samples, a quarter of recordings test)",
     )
+    holdout: float | None = setting(
+        None,
+        "hold out this share of the run's end for evaluation: its earlier part goes to the "
+        "train split (identified alone: what designs see), the whole run to the test split "
+        "(identified on all of it) with its traces cut to the held-out end; both under the "
+        "run's name, for eval/tune/... --recording NAME",
+        ge=0.1,
+        le=0.8,
+        metavar="SHARE",
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
         check(self)
         _check_methods(self.method)
+        if self.holdout is not None and (self.split is not None or self.surrogates):
+            raise UsageError(
+                "--holdout splits the run between the train and test splits itself, without "
+                "surrogates: drop " + ("--split" if self.split is not None else "--surrogates")
+            )
         if self.posterior and not any(has_posterior(m) for m in self.method):
             raise UsageError(
                 "--posterior needs a method with a posterior (--method ml); none of "
@@ -708,6 +723,7 @@ def add(args: AddArgs) -> int:
             surrogate_kinds=tuple(args.surrogate_kind or ["iaaft"]),
             posterior=args.posterior,
             posterior_seed=args.posterior_seed,
+            holdout=args.holdout or 0.0,
         )
         if result.recordings == 0 and result.traces == 0:
             print(f"{db.path}: {recording.name} is already stored (same samples); nothing added")
@@ -716,6 +732,25 @@ def add(args: AddArgs) -> int:
             f"{db.path}: added {recording.name}: {result.identifications} identifications, "
             f"{result.traces} traces (ids {', '.join(map(str, result.trace_ids))})"
         )
+        if args.holdout:
+            parts = [
+                r for r in db.recordings() if r.name == recording.name and "part" in r.metadata
+            ]
+            for row in parts:
+                verdicts = sorted(
+                    {str(i.verdict) for i in db.identifications(recording_hash=row.content_hash)}
+                )
+                span = (
+                    f"to {row.metadata['part.to_s']} s"
+                    if row.metadata["part"] == "design"
+                    else f"from {row.metadata['part.from_s']} s"
+                )
+                print(
+                    f"  {row.metadata['part']} part ({span}): {row.split} split, fits "
+                    f"{', '.join(verdicts)}"
+                )
+            print(f"  evaluate on it: rocketroll eval --db {db.path} --recording {recording.name}")
+
     return 0
 
 

@@ -12,6 +12,14 @@ them and hands them over, one transaction per call:
   run (``rocketroll identify --db``);
 * :func:`add_surrogates` -- surrogates of a stored trace.
 
+With ``holdout`` :func:`add_recording` stores one run as two recordings of its
+name (:func:`holdout_rows`): the part before the last ``holdout`` of it, in the
+train split, identified on its own -- what a controller may be designed and
+tuned on -- and the whole run in the test split, identified on all of it (the
+best model of the rocket, the evaluation's judge), with its traces cut to the
+held-out end: what an evaluation replays.  ``--recording NAME`` then designs on
+the first and evaluates on the second.
+
 A method with a posterior (``ml``) can also store ``posterior`` draws of each
 of its traces (``kind="posterior"``): whole ``u_d`` traces from ``p(u_d |
 recording)``, each with its seed, the identified (posterior-mean) trace as
@@ -27,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -61,9 +70,11 @@ from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import UsageError
 
 __all__ = [
+    "HOLDOUT_RANGE",
     "add_identification",
     "add_recording",
     "add_surrogates",
+    "holdout_rows",
     "identification_rows",
     "posterior_rows",
     "surrogate_rows",
@@ -147,6 +158,71 @@ def posterior_rows(
             )
         )
     return rows
+
+
+#: The shares of a run that may be held out for evaluation (the design keeps the rest).
+HOLDOUT_RANGE = (0.1, 0.8)
+
+
+def holdout_rows(
+    context: Context,
+    fraction: float,
+    methods: Sequence[str] | None = None,
+    *,
+    posterior: int = 0,
+    posterior_seed: int = 0,
+) -> tuple[list[RecordingRow], list[IdentificationRow], list[TraceRow]]:
+    """Rows of one run split in time for an honest evaluation (module docstring): its part
+    before the last ``fraction`` (train split, identified on that part only) and the whole
+    run (test split, identified on all of it) with its traces -- identified and posterior
+    draws -- cut to the last ``fraction``.  Both keep the run's name; the parts' metadata
+    say which they are (``part``: ``design`` / ``held-out``, ``part.to_s`` /
+    ``part.from_s``)."""
+    low, high = HOLDOUT_RANGE
+    if not low <= fraction <= high:
+        raise ValueError(f"holdout must be in [{low:g}, {high:g}], got {fraction!r}")
+    rec = context.recording
+    t = np.asarray(rec.time_s, dtype=float)
+    cut = float(t[int(np.searchsorted(t, t[-1] - fraction * (t[-1] - t[0])))])
+    design = rec.part(float(t[0]), cut, split="train", part="design", **{"part.to_s": f"{cut:g}"})
+    judged = Recording(
+        name=rec.name,
+        source=rec.source,
+        metadata={**rec.metadata, "split": "test", "part": "held-out", "part.from_s": f"{cut:g}"},
+        **rec.columns(),
+    )
+    recordings, identifications, traces = [], [], []
+    for part in (design, judged):
+        recording, idents, rows = identification_rows(
+            Context(part, context.options),
+            methods,
+            posterior=posterior,
+            posterior_seed=posterior_seed,
+        )
+        if part is judged:
+            rows = [_from(row, cut) for row in rows]
+        recordings.append(recording)
+        identifications += idents
+        traces += rows
+    return recordings, identifications, traces
+
+
+def _from(row: TraceRow, start_s: float) -> TraceRow:
+    """``row``'s trace from the first interval that starts at or after ``start_s``."""
+    assert row.u_d_deg is not None
+    skip = max(0, math.ceil((start_s - row.t0_s) / row.dt_s - 1e-9))
+    u = np.asarray(row.u_d_deg[skip:], dtype=np.float64)
+    if u.size < 2:
+        raise ValueError(f"trace {row.uid}: nothing of it after {start_s:g} s")
+    return dataclasses.replace(
+        row,
+        t0_s=row.t0_s + skip * row.dt_s,
+        u_d_deg=u,
+        n_samples=u.size,
+        checksum=checksum(u),
+        statistics=trace_summary(u),
+        settings={**row.settings, "held_out_from_s": start_s},
+    )
 
 
 def _check_posterior(methods: Sequence[str], posterior: int) -> None:
@@ -242,6 +318,7 @@ def add_recording(
     surrogate_method: str | None = None,
     posterior: int = 0,
     posterior_seed: int = 0,
+    holdout: float = 0.0,
 ) -> StoreResult:
     """Identify a recording and store it with all its results, in one transaction.
 
@@ -278,6 +355,10 @@ def add_recording(
         method gets none).
     posterior_seed : int
         Seed of the first draw (the next ones count up).
+    holdout : float
+        0 (default): the recording as one.  Else the share of it at its end held out
+        for evaluation (:func:`holdout_rows`: a design part and the held-out one, in
+        :data:`HOLDOUT_RANGE`); no surrogates then.
     """
     if recording.is_flight:
         from identification.steps import IdentificationError
@@ -290,6 +371,19 @@ def add_recording(
     chosen = _methods(methods)
     _check_posterior(chosen, posterior)
     source_method = _surrogate_method(chosen, surrogate_method)
+    if holdout:
+        if surrogates:
+            raise ValueError("a run split for a held-out evaluation gets no surrogates")
+        db.check_version(writing=True)
+        return db.store(
+            *holdout_rows(
+                Context(recording, options),
+                holdout,
+                chosen,
+                posterior=posterior,
+                posterior_seed=posterior_seed,
+            )
+        )
     if surrogates:
         _check_surrogate_length(recording, options or IdentifyOptions())
     recording_hash = content_hash(recording.columns())

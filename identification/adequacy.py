@@ -14,7 +14,10 @@ These figures read the model without it, against the raw measurements:
   the fin angle, its size ``|θ + θ̄|`` and its change over the interval
   explains: turbulence does not know the fin, so a gain, a damping law or a
   servo that is wrong leaks into ``u_d`` as a fin-shaped part (an effect size,
-  not a p-value, which on a long record rejects everything);
+  not a p-value, which on a long record rejects everything), counted where that
+  part is material: its SD at least :data:`FIN_ERROR_MATERIAL` of the fin's own
+  (a share of a ``u_d`` that is all but zero -- a rig without turbulence -- is
+  the fit's rounding, not model error);
 * **u_d against the fins' range** -- the 99th percentile of ``|u_d|``, as a
   fraction of the servo's range: a "disturbance" the fins could not cancel is
   the model's error, not turbulence;
@@ -57,6 +60,9 @@ AHEAD_R2 = (0.5, 0.2)
 FIN_SHARE = (0.15, 0.25)
 #: Newey-West p-value below which that share counts (it is not chance).
 FIN_SHARE_P = 0.001
+#: The fin-shaped part of ``u_d`` (SD, ° of fin) as a fraction of the fin's SD below
+#: which it is immaterial, whatever its share.
+FIN_ERROR_MATERIAL = 0.02
 #: 99th percentile of ``|u_d|`` as a fraction of the fins' range above which a fit is
 #: weak / unreliable.
 UD_RANGE = (1.0, 1.5)
@@ -78,6 +84,7 @@ class Adequacy:
     ahead_r2: float
     fin_share: float
     fin_share_p: float
+    fin_error_ratio: float
     ud_p99_deg: float
     ud_range_fraction: float
     alpha_rel_se: float
@@ -254,7 +261,9 @@ def adequacy(
     check(
         ahead_r2, AHEAD_R2, f"{k * dt:.2g} s ahead it predicts the rate to R² {ahead_r2:.2f}", False
     )
-    if share_p < FIN_SHARE_P:
+    fin_sd = float(np.std(fin))
+    fin_error = math.sqrt(share) * float(np.std(u)) / fin_sd if fin_sd > 0 else math.inf
+    if share_p < FIN_SHARE_P and fin_error >= FIN_ERROR_MATERIAL:
         check(
             share,
             FIN_SHARE,
@@ -290,6 +299,7 @@ def adequacy(
         ahead_r2=ahead_r2,
         fin_share=share,
         fin_share_p=share_p,
+        fin_error_ratio=fin_error,
         ud_p99_deg=p99,
         ud_range_fraction=p99 / fin_range,
         alpha_rel_se=rel_se,

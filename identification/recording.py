@@ -549,6 +549,26 @@ class Recording:
             alpha_bar_per_deg_s=float(self.metadata.get("truth.alpha_bar_per_deg_s", "0")),
         )
 
+    def part(self, start_s: float, end_s: float, **metadata: str) -> Recording:
+        """The samples at ``start_s <= t < end_s`` as a recording of their own (same name,
+        source and sample times), with ``metadata`` added to its own.
+
+        The split of one run into the part a controller is designed on and the part it is
+        evaluated on (:func:`disturbances.ingest.holdout_parts`) is made with it.
+        """
+        keep = (self.time_s >= start_s) & (self.time_s < end_s)
+        if int(np.count_nonzero(keep)) < 2:
+            raise RecordingError(
+                self.name, None, f"no samples between {start_s:g} and {end_s:g} s to keep"
+            )
+        columns = {name: values[keep] for name, values in self.columns().items()}
+        return Recording(
+            name=self.name,
+            source=self.source,
+            metadata={**self.metadata, **metadata},
+            **columns,
+        )
+
     def __repr__(self) -> str:
         cols = ",".join(c for c in self.columns() if c != "time_s")
         return (
