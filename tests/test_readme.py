@@ -185,3 +185,47 @@ def test_the_seed_statistics_and_robustness_tables(
         assert rocketroll(argv) == 0
         printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
         assert printed == _readme_table_after(printed[0], len(printed)), argv[0]
+
+
+def guide_commands() -> list[list[str]]:
+    """The "Bring your own rocket" guide's commands, as the README writes them."""
+    import shlex
+
+    section = README.split("### Bring your own rocket", 1)[1]
+    block = section.split("```bash\n", 1)[1].split("```", 1)[0]
+    return [shlex.split(line)[1:] for line in block.splitlines() if line.startswith("rocketroll")]
+
+
+def test_the_bring_your_own_rocket_guide_runs_as_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The guide's commands on a user's raw log: a virtual-tunnel run of ramps (not the
+    paper's dwells) of a rocket unlike the bundled ones, written as the guide's raw file is
+    (headerless, radians, 100 Hz: roll, roll rate, measured fin)."""
+    from identification.tunnel import run_tunnel, spec_from_command
+
+    rec = run_tunnel(
+        spec_from_command(
+            "--seed 7 --log-dt 0.01 --gyro-noise 1 --measured-fin --schedule ramps --steps 10 "
+            "--dwell-min 2 --dwell-max 3 --lead 1 --ramp 1 --alpha 1.8 --beta -4 "
+            "--alpha-bar 0.02 --beta-bar 4 --turbulence-sd 4"
+        )
+    )
+    assert rec.roll_deg is not None and rec.roll_rate_dps is not None and rec.fin_deg is not None
+    raw = np.radians(np.column_stack([rec.roll_deg, rec.roll_rate_dps, rec.fin_deg]))
+    np.savetxt(tmp_path / "raw.csv", raw, delimiter=",", fmt="%.9g")
+    monkeypatch.chdir(tmp_path)
+    commands = guide_commands()
+    assert 1 <= len(commands) <= 4
+    printed = []
+    for argv in commands:
+        assert rocketroll(argv) == 0, argv
+        printed.append(capsys.readouterr().out)
+    assert "fit adequacy" in printed[1]
+    ml_rows = [line.split() for line in printed[1].splitlines() if line.startswith("ml ")]
+    assert ml_rows and all(abs(float(row[2]) / 1.8 - 1) < 0.05 for row in ml_rows[:2])
+    assert (tmp_path / "mine-report" / "fit-ml.png").is_file()
+    assert "held-out part" in printed[2]
+    assert "recording mine" in printed[3] and "episode:" in printed[3]
+    table = (tmp_path / "mine-eval" / "table.md").read_text()
+    assert "| observer |" in table and "(trained on another database's rockets)" in table
