@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from identification.tunnel import TunnelSpec
 
-__all__ = ["TRUTHS", "spec_of"]
+__all__ = ["SHAPES", "SHAPE_TRUTHS", "TRUTHS", "shape_command", "spec_of"]
 
 #: name -> (description, tunnel settings other than the seed)
 TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
@@ -52,3 +52,34 @@ def spec_of(truth: str, seed: int) -> TunnelSpec:
     _, settings = TRUTHS[truth]
     make: Callable[..., TunnelSpec] = TunnelSpec
     return make(seed=seed, **settings)
+
+
+#: Rockets tried on the input shapes a user's rig makes (tunnel command-line settings):
+#: the paper's, one with θ̄ < 0 and a shorter turbulence, one with constant damping.
+SHAPE_TRUTHS: dict[str, str] = {
+    "paper": "",
+    "negative": "--alpha 0.9 --beta -3.0 --correlation-time 0.3",
+    "constant": "--model constant --alpha 1.5 --beta 2 --beta-bar 4",
+}
+#: (shape, record length in s) -> its schedule: ramps, doublets and PRBS, not the
+#: paper's long dwells, in 15-s and 60-s records.
+SHAPES: dict[tuple[str, int], str] = {
+    ("ramps", 15): "--schedule ramps --steps 3 --dwell-min 2 --dwell-max 3 --lead 1 --ramp 1",
+    (
+        "doublets",
+        15,
+    ): "--schedule doublets --steps 4 --pulse 1 --dwell-min 1 --dwell-max 2 --lead 1",
+    ("prbs", 15): "--schedule prbs --duration 14 --pulse 0.5 --lead 1",
+    ("ramps", 60): "--schedule ramps --steps 12 --dwell-min 2 --dwell-max 4 --lead 2 --ramp 1",
+    (
+        "doublets",
+        60,
+    ): "--schedule doublets --steps 12 --pulse 1 --dwell-min 1 --dwell-max 3 --lead 2",
+    ("prbs", 60): "--schedule prbs --duration 58 --pulse 0.5 --lead 2",
+}
+
+
+def shape_command(truth: str, shape: tuple[str, int], seed: int) -> str:
+    """The ``rocketroll tunnel`` settings of ``truth`` on ``shape`` at 100 Hz with a 1 %
+    gyro, turbulence seed ``seed``."""
+    return f"--seed {seed} --log-dt 0.01 --gyro-noise 1 {SHAPE_TRUTHS[truth]} {SHAPES[shape]}"

@@ -24,6 +24,8 @@ import itertools
 import sys
 from dataclasses import replace
 
+from _truths import SHAPE_TRUTHS, SHAPES, shape_command
+
 from identification.adequacy import Adequacy, adequacy
 from identification.ml import maximum_likelihood, posterior_given
 from identification.model import RollParams
@@ -31,26 +33,6 @@ from identification.pipeline import model_inputs
 from identification.recording import Recording
 from identification.steps import Disturbance
 from identification.tunnel import run_tunnel, spec_from_command
-
-TRUTHS = {
-    "paper": "",
-    "negative": "--alpha 0.9 --beta -3.0 --correlation-time 0.3",
-    "constant": "--model constant --alpha 1.5 --beta 2 --beta-bar 4",
-}
-SHAPES = {
-    ("ramps", 15): "--schedule ramps --steps 3 --dwell-min 2 --dwell-max 3 --lead 1 --ramp 1",
-    (
-        "doublets",
-        15,
-    ): "--schedule doublets --steps 4 --pulse 1 --dwell-min 1 --dwell-max 2 --lead 1",
-    ("prbs", 15): "--schedule prbs --duration 14 --pulse 0.5 --lead 1",
-    ("ramps", 60): "--schedule ramps --steps 12 --dwell-min 2 --dwell-max 4 --lead 2 --ramp 1",
-    (
-        "doublets",
-        60,
-    ): "--schedule doublets --steps 12 --pulse 1 --dwell-min 1 --dwell-max 3 --lead 2",
-    ("prbs", 60): "--schedule prbs --duration 58 --pulse 0.5 --lead 2",
-}
 
 
 def _line(kind: str, label: str, a: Adequacy) -> str:
@@ -78,11 +60,9 @@ def main(argv: list[str] | None = None) -> int:
         print(_line(kind, label, a), flush=True)
 
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    for (name, truth), ((shape, length), schedule), seed in itertools.product(
-        TRUTHS.items(), SHAPES.items(), seeds
-    ):
-        command = f"--seed {seed} --log-dt 0.01 --gyro-noise 1 {truth} {schedule}"
-        model = "constant" if "constant" in truth else "theta"
+    for name, (shape, length), seed in itertools.product(SHAPE_TRUTHS, SHAPES, seeds):
+        command = shape_command(name, (shape, length), seed)
+        model = "constant" if "constant" in SHAPE_TRUTHS[name] else "theta"
         rec = run_tunnel(spec_from_command(command))
         found = maximum_likelihood(rec, model)
         label = f"{name} {shape} {length} s, seed {seed}"

@@ -36,10 +36,16 @@ Run from the repository root::
 
 from __future__ import annotations
 
+import os
+
+# One OpenBLAS thread unless the environment names a number: what the rocketroll command
+# runs with (rocketroll_common.numerics.one_blas_thread); OPENBLAS_NUM_THREADS=2 for the other.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import functools
-import os
 import platform
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -174,6 +180,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--strict", action="store_true", help="exit with status 1 when a target is missed"
     )
+    parser.add_argument(
+        "--busy",
+        type=int,
+        default=0,
+        metavar="N",
+        help="keep N cores busy (a spinning process each) while timing: a user's laptop is "
+        "rarely idle (default 0)",
+    )
     return parser
 
 
@@ -209,7 +223,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"recording {rec.name}: {rec.n_samples} samples, {rec.duration_s:.1f} s; "
         f"python {platform.python_version()}, numpy {np.__version__}, "
-        f"{os.cpu_count()} CPU(s), {platform.machine()}"
+        f"{os.cpu_count()} CPU(s), {platform.machine()}; OpenBLAS threads "
+        f"{os.environ['OPENBLAS_NUM_THREADS']}; {ns.busy} core(s) kept busy"
     )
 
     # The first identify() is the process's first call: it pays one-off costs.
@@ -226,6 +241,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         m for m in METHODS.names() if m != "paper" and not METHODS.entry(m).info.get("flight")
     ]
     ml_theta = maximum_likelihood(rec, "theta", options=options)
+    from identification.adequacy import adequacy
+    from identification.methods import Context
+
+    context = Context(rec, options)
+    judged = {m: fit(context, m, ["theta"])["theta"] for m in ("paper", *others)}
+    spinners = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(ns.busy)
+    ]
     remote, commit = start_against(__file__, words, ns.against)
     timings, before = time_interleaved(
         [
@@ -254,15 +277,34 @@ def main(argv: Sequence[str] | None = None) -> int:
                 for method in others
                 for model in METHODS.entry(method).info["models"]
             ),
+            *(
+                (
+                    f'adequacy("{method}", "theta")',
+                    functools.partial(
+                        adequacy,
+                        context.measurements,
+                        found.params,
+                        found.disturbance,
+                        found.metrics,
+                        method=method,
+                    ),
+                    ns.repeats,
+                )
+                for method, found in judged.items()
+            ),
         ],
         remote,
         [*common, mc_name],
     )
     if remote is not None:
         remote.close()
+    for spinner in spinners:
+        spinner.kill()
+        spinner.wait()
     pipeline, *peers = timings[:3]
     monte_carlo, ml_both, posterior = timings[3:6]
-    registered = timings[6:]
+    registered = timings[6 : len(timings) - len(judged)]
+    judging = timings[len(timings) - len(judged) :]
 
     header = (
         f"{'task':30s} {'n':>3s} {'median ms':>10s} {'IQR ms':>8s} {'min ms':>8s} {'1st ms':>8s} "
@@ -289,7 +331,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     row(posterior, POSTERIOR_TARGET_MS)
     for method in registered:
         row(method, None)
+    for one in judging:
+        row(one, None)
     print()
+    # What the adequacy adds to a fit of both models (fit() judges each model it fits).
+    fitted = {"paper": pipeline.median_ms}
+    for t in registered:
+        name = t.name.split('"')[1]
+        fitted[name] = fitted.get(name, 0.0) + t.median_ms
+    shares = [
+        f"{m} {100 * 2 * j.median_ms / fitted[m]:.0f} %"
+        for m, j in zip(judged, judging, strict=True)
+    ]
+    print(
+        "adequacy of both models / the fit of both models (target <= 20 %): "
+        + ", ".join(shares)
+        + " (the paper's fit: its pipeline, identify())"
+    )
     peer_total = sum(p.median_ms for p in peers)
     print(
         f"peer / pipeline: constant {peers[0].median_ms / pipeline.median_ms:.2f}x, "

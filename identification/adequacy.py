@@ -125,13 +125,20 @@ def _fin_share(
         return 0.0, 1.0
     # Lags of the covariance: twice u's correlation length (first lag below 1/e), at most n/4.
     maxlags = min(2 * decorrelation_stride(u, math.exp(-1.0)), u.size // 4)
-    # Columns that repeat others (the size is the fin itself where θ + θ̄ keeps one sign).
+    # Columns that repeat others (the size is the fin itself where θ + θ̄ keeps one sign):
+    # each kept where it is not, to 1e-8 of its own size, a combination of those before it
+    # (Gram-Schmidt in column order, the constant first).
     keep = np.zeros(design.shape[1], dtype=bool)
+    basis: list[FloatArray] = []
     for j in range(design.shape[1]):
-        trial = keep.copy()
-        trial[j] = True
-        scaled = design[:, trial] / np.maximum(np.abs(design[:, trial]).max(axis=0), 1e-300)
-        keep[j] = np.linalg.matrix_rank(scaled, tol=1e-8) == trial.sum()
+        column = design[:, j] / max(float(np.abs(design[:, j]).max()), 1e-300)
+        rest = column.copy()
+        for q in basis:
+            rest -= float(q @ rest) * q
+        norm = float(np.linalg.norm(rest))
+        if norm > 1e-8 * max(float(np.linalg.norm(column)), 1e-300):
+            basis.append(rest / norm)
+            keep[j] = True
     fit = sm.OLS(u, design[:, keep]).fit(cov_type="HAC", cov_kwds={"maxlags": max(maxlags, 1)})
     if keep.sum() < 2 or not np.isfinite(fit.rsquared):
         return 0.0, 1.0

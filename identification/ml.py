@@ -620,7 +620,10 @@ class MLFit:
     nfev : int
         Likelihood evaluations (all orders).
     u_d_mean_deg, u_d_sd_deg : ndarray, shape (n - 1,)
-        Posterior mean and SD of ``u_d`` over each sample interval.
+        Posterior mean and SD of ``u_d`` over each sample interval; the SD holds the
+        parameters' own uncertainty too (delta method over the observed information),
+        which on a short record is most of it.  The posterior draws
+        (:func:`posterior_traces`) are conditional on the fitted parameters.
     time_s : ndarray, shape (n,)
         Sample times.
     """
@@ -732,33 +735,93 @@ def _hessian(f: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
     return hess
 
 
-def _std_errors(data: _Data, model: str, nat: dict[str, Any]) -> dict[str, float]:
-    """Standard errors of the rocket's parameters from the observed information
-    (the Hessian of the log-likelihood over all free parameters, inverted)."""
+@dataclass(frozen=True)
+class _Information:
+    """The observed information at the optimum, over every free parameter: the rocket's
+    in natural units, then the turbulence's and the sensors' in the optimiser's.
+
+    ``trial`` maps such a vector to natural parameters; ``cov`` is the inverted
+    Hessian of the negative log-likelihood (None where it is not invertible)."""
+
+    rocket: tuple[str, ...]
+    point: FloatArray
+    cov: FloatArray | None
+    trial: Callable[[FloatArray], dict[str, Any]]
+
+
+def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
+    """The Hessian of the log-likelihood over all free parameters, inverted."""
     layout = _layout(data, model, int(np.size(nat["ar"])), nat)
     rocket = (
-        ["alpha", "theta_bar", "beta_bar"]
+        ("alpha", "theta_bar", "beta_bar")
         if model == "constant"
-        else ["alpha", "theta_bar", "alpha_bar", "beta_bar"]
+        else ("alpha", "theta_bar", "alpha_bar", "beta_bar")
     )
     x0 = layout.vector(nat)
     k = len(rocket)
 
-    def f(values: FloatArray) -> float:
+    def trial(values: FloatArray) -> dict[str, Any]:
         # Rocket parameters in natural units, the turbulence's in the optimiser's.
-        trial = layout.natural(np.concatenate([x0[:k], values[k:]]))
-        trial.update(zip(rocket, values[:k].tolist(), strict=True))
-        return _negloglike_natural(data, trial)
+        out = layout.natural(np.concatenate([x0[:k], values[k:]]))
+        out.update(zip(rocket, values[:k].tolist(), strict=True))
+        return out
 
     point = np.concatenate([[nat[name] for name in rocket], x0[k:]])
-    hess = _hessian(f, point)
+    hess = _hessian(lambda values: _negloglike_natural(data, trial(values)), point)
     try:
-        diag = np.diag(np.linalg.inv(hess))[:k]
-        se = np.sqrt(np.where(diag > 0, diag, np.nan))
+        cov: FloatArray | None = np.asarray(np.linalg.inv(hess), dtype=float)
     except np.linalg.LinAlgError:
+        cov = None
+    return _Information(rocket, point, cov, trial)
+
+
+def _std_errors(info: _Information, model: str) -> dict[str, float]:
+    """Standard errors of the rocket's parameters (NaN where the information matrix is
+    not positive definite)."""
+    k = len(info.rocket)
+    if info.cov is None:
         se = np.full(k, np.nan)
+    else:
+        diag = np.diag(info.cov)[:k]
+        se = np.sqrt(np.where(diag > 0, diag, np.nan))
     rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
-    return {rename.get(n, n): float(v) for n, v in zip(rocket, se, strict=True)}
+    return {rename.get(n, n): float(v) for n, v in zip(info.rocket, se, strict=True)}
+
+
+#: Step of the band's differences, in standard errors of each parameter.
+_BAND_STEP_SE = 0.1
+
+
+def _smoothed_u(data: _Data, nat: dict[str, Any]) -> FloatArray | None:
+    """The posterior mean ``u_d`` under ``nat`` (None: no stable model there)."""
+    parts = _parts(data, nat)
+    if parts is None:
+        return None
+    _filter(data, parts)
+    return np.asarray(smooth(_state_space(data, parts)).mean[:-1, 2], dtype=float)
+
+
+def _parameter_variance(data: _Data, info: _Information, u: FloatArray) -> FloatArray:
+    """The variance the parameters' own uncertainty adds to the posterior mean ``u_d``:
+    ``J·C·Jᵀ`` per interval (delta method), ``J`` forward differences of the smoothed
+    mean over each free parameter (steps of :data:`_BAND_STEP_SE` of its standard
+    error), ``C`` the parameters' covariance.  Zero where it cannot be had (an
+    information matrix not positive definite)."""
+    if info.cov is None or not np.all(np.isfinite(info.cov)):
+        return np.zeros_like(u)
+    sd = np.sqrt(np.clip(np.diag(info.cov), 0.0, None))
+    jac = np.zeros((u.size, info.point.size))
+    for i, step_se in enumerate(sd):
+        if not step_se > 0:
+            continue
+        step = _BAND_STEP_SE * step_se
+        moved = info.point.copy()
+        moved[i] += step
+        shifted = _smoothed_u(data, info.trial(moved))
+        if shifted is None:
+            continue
+        jac[:, i] = (shifted - u) / step
+    return np.clip(np.einsum("ti,ij,tj->t", jac, info.cov, jac), 0.0, None)
 
 
 @dataclass
@@ -894,6 +957,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         raise IdentificationError(
             f"{data.name}: maximum likelihood found no stable model ({message})"
         )
+    info = _information(data, model, nat)
     return _result(
         data,
         model,
@@ -902,10 +966,11 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         loglike=-fun,
         aic=float(orders[best]),
         n_params=_n_params(data, model, best, nat),
-        std_errors=_std_errors(data, model, nat),
+        std_errors=_std_errors(info, model),
         orders=orders,
         converged=converged,
         nfev=search.nfev,
+        information=info,
     )
 
 
@@ -922,11 +987,17 @@ def _result(
     orders: dict[int, float],
     converged: bool,
     nfev: int,
+    information: _Information | None = None,
 ) -> MLFit:
-    """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``."""
+    """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``; its band
+    widened by the parameters' uncertainty where their ``information`` is given."""
     _filter(data, parts)  # the gyro's variances, as the likelihood had them
     ss = _state_space(data, parts)
     smoothed = smooth(ss)
+    u_mean = np.asarray(smoothed.mean[:-1, 2], dtype=float)
+    u_var = np.clip(smoothed.cov[:-1, 2, 2], 0.0, None)
+    if information is not None:
+        u_var = u_var + _parameter_variance(data, information, u_mean)
     u_cov = stationary_cov(nat["ar"], nat["innovation_sd"])
     return MLFit(
         model=model,
@@ -944,8 +1015,8 @@ def _result(
         orders=orders,
         converged=converged,
         nfev=nfev,
-        u_d_mean_deg=readonly_array(smoothed.mean[:-1, 2]),
-        u_d_sd_deg=readonly_array(np.sqrt(np.clip(smoothed.cov[:-1, 2, 2], 0.0, None))),
+        u_d_mean_deg=readonly_array(u_mean),
+        u_d_sd_deg=readonly_array(np.sqrt(u_var)),
         time_s=readonly_array(data.time_s),
         _state_space=ss,
         _smoothed=smoothed,

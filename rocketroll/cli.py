@@ -104,6 +104,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if text is not None:
         sys.stdout.write(text)
         return 0
+    from rocketroll_common.numerics import one_blas_thread
+
+    one_blas_thread()  # before the command's module loads numpy
     return run_command(command(ns.command), rest, prog=prog)
 
 

@@ -56,11 +56,25 @@ __all__ = [
     "MARKER",
     "call_pinned",
     "is_pinned",
+    "one_blas_thread",
     "pinned_environment",
     "with_settings",
 ]
 
 T = TypeVar("T")
+
+
+def one_blas_thread() -> None:
+    """One OpenBLAS thread for this process, unless its environment names a number
+    (``OPENBLAS_NUM_THREADS``); effective only before numpy is first imported.
+
+    The arrays here are small -- thousands of readings by a few columns -- so a second
+    thread gains nothing on an idle machine, and where another program holds a core
+    OpenBLAS's threads wait for each other: the paper's pipeline then took 3x its idle
+    time and ml 1.6x (``benchmarks/speed.py --busy 1``).  The ``rocketroll`` command
+    calls this before it imports a command.
+    """
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 #: Set to ``pinned`` in a process started under :func:`pinned_environment`.
 MARKER = "ROCKETROLL_NUMERICS"

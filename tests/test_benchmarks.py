@@ -123,3 +123,37 @@ def test_train_curve_scores_each_seed_and_the_median(default_db: Path, tmp_path:
     median = next(line for line in out.splitlines() if "tiny, median of 2" in line)
     assert median.count("/2)") == 2  # seeds that reached each reference, of 2
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_truth(
+    default_db: Path, tmp_path: Path
+) -> None:
+    from identification.recording import save_recording
+    from identification.tunnel import run_tunnel, spec_from_command
+
+    rec = run_tunnel(
+        spec_from_command(
+            "--seed 2 --log-dt 0.01 --gyro-noise 1 --schedule ramps --steps 6 --dwell-min 2 "
+            "--dwell-max 3 --lead 1 --ramp 1 --model constant --alpha 2 --beta -3 --beta-bar 5 "
+            "--turbulence-sd 2"
+        )
+    )
+    path = tmp_path / "run.csv"
+    save_recording(rec, path)
+    out = run_script(
+        "real_data.py", str(path), "--every", "1", "--every", "10",
+        "--methods", "paper,output-error,ml", db=default_db,
+    )  # fmt: skip
+    assert out.count("Recording(name=") == 2 and "dt=0.1 s" in out
+    assert "truth: alpha = 2, theta_bar = -1.5, a = 5" in out
+    assert "paper        cannot fit it:" in out or "paper        constant" in out
+    ml = [line.split() for line in out.splitlines() if line.strip().startswith("ml ")]
+    assert len(ml) == 4 and all(row[-1] in ("good", "weak", "unreliable") for row in ml)
+    lines = out.splitlines()
+    ml_errors = [
+        lines[k + 1] for k, line in enumerate(lines) if line.strip().startswith("ml ")
+    ]  # each ml fit's error line follows its row
+    assert all("error: α" in e for e in ml_errors)
+    assert all(abs(float(e.split("α")[1].split("%")[0])) < 5 for e in ml_errors)
+    bad = run_benchmark("real_data.py", str(tmp_path / "missing.csv"), db=default_db)
+    assert bad.returncode == 2 and "missing.csv" in bad.stderr

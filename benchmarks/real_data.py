@@ -1,0 +1,165 @@
+"""Every identification method on recordings a user supplies: parameters, adequacy, errors.
+
+For each recording given (format v1, e.g. made by ``rocketroll import-csv`` from a
+rig's log; nothing is downloaded), and each sampling rate asked for (``--every N``
+keeps every N-th reading: 100 Hz, 50 Hz, 10 Hz of a 100-Hz log), every tunnel method
+(``--methods``; default all) fits both damping models through
+:func:`identification.methods.fit` with one shared context.  Printed per fit: α, θ̄, a
+(or β̄ and ᾱ), α's standard error where the method reports one, the adequacy figures
+(:mod:`identification.adequacy`: rate R² of the model without ``u_d``, R² a time
+constant ahead, the share of ``u_d`` the fin explains, ``|u_d|`` against the fins'
+range) and the verdict with its reasons; a method that cannot fit the recording
+says why in one line, and the others run.
+
+Where a truth is known -- the recording's ``truth.*`` metadata (the virtual tunnel's),
+or ``--truth alpha=3.39,a=9.55`` (e.g. an independent fit of the same rig) -- the
+errors of α and of the damping are printed beside each fit.
+
+    .venv/bin/python benchmarks/real_data.py rig.csv --every 1 --every 2 --every 10 \\
+        --truth alpha=3.39,a=9.55
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from identification.methods import Context, fit, tunnel_methods
+from identification.model import MODEL_NAMES, RollParams
+from identification.recording import Recording, RecordingError, load_recording
+from identification.steps import IdentificationError
+
+
+def thinned(rec: Recording, every: int) -> Recording:
+    """``rec`` with every ``every``-th reading kept (the first kept)."""
+    if every == 1:
+        return rec
+    return Recording(
+        name=rec.name,
+        source=rec.source,
+        metadata=rec.metadata,
+        **{name: values[::every] for name, values in rec.columns().items()},
+    )
+
+
+def parse_truth(text: str) -> dict[str, float]:
+    """``alpha=3.39,a=9.55`` -> ``{"alpha": 3.39, "a": 9.55}`` (``theta_bar`` too)."""
+    out: dict[str, float] = {}
+    for item in text.split(","):
+        key, _, value = item.partition("=")
+        if key.strip() not in ("alpha", "a", "theta_bar") or not value:
+            raise argparse.ArgumentTypeError(
+                f"--truth {text!r}: give alpha=, a= and/or theta_bar= (comma-separated)"
+            )
+        out[key.strip()] = float(value)
+    return out
+
+
+def truth_of(rec: Recording, given: dict[str, float] | None) -> dict[str, float]:
+    """The truth to score against: ``--truth``, else the recording's ``truth.*``."""
+    if given:
+        return given
+    params = rec.truth()
+    if params is None:
+        return {}
+    out = {"alpha": params.alpha, "theta_bar": params.theta_bar_deg}
+    if params.is_constant_damping:
+        out["a"] = params.beta_bar_per_s
+    return out
+
+
+def _errors(params: RollParams, model: str, truth: dict[str, float]) -> str:
+    parts = []
+    if "alpha" in truth:
+        parts.append(f"α {100 * (params.alpha / truth['alpha'] - 1):+6.2f} %")
+    if "theta_bar" in truth:
+        parts.append(f"θ̄ {params.theta_bar_deg - truth['theta_bar']:+6.2f}°")
+    if "a" in truth and model == "constant":
+        parts.append(f"a {100 * (params.beta_bar_per_s / truth['a'] - 1):+6.2f} %")
+    return "  ".join(parts)
+
+
+def _value(value: float | None, fmt: str) -> str:
+    return "" if value is None or not np.isfinite(value) else format(value, fmt)
+
+
+def report(rec: Recording, methods: Sequence[str], truth: dict[str, float]) -> None:
+    """Print every method's fits of ``rec``."""
+    print(f"\n{rec!r}")
+    if truth:
+        print("  truth: " + ", ".join(f"{k} = {v:g}" for k, v in truth.items()))
+    print(
+        f"  {'method':13}{'model':9}{'α':>9}{'α SE':>8}{'θ̄ °':>8}{'a or β̄':>9}{'ᾱ':>9}"
+        f"{'rate R²':>9}{'ahead':>7}{'fin→u_d':>8}{'|u_d|/rng':>10}  verdict"
+    )
+    context = Context(rec)
+    for method in methods:
+        started = time.perf_counter()
+        try:
+            fits = fit(context, method, MODEL_NAMES)
+        except IdentificationError as exc:
+            print(f"  {method:13}cannot fit it: {exc}")
+            continue
+        seconds = time.perf_counter() - started
+        for model, found in fits.items():
+            p, a = found.params, found.metrics["adequacy"]
+            se = (found.metrics.get("std_errors") or {}).get("alpha")
+            print(
+                f"  {method:13}{model:9}{p.alpha:9.4f}{_value(se, '8.4f'):>8}"
+                f"{p.theta_bar_deg:8.3f}{p.beta_bar_per_s:9.4f}{p.alpha_bar_per_deg_s:9.4f}"
+                f"{_value(a['rate_r2'], '9.3f'):>9}{_value(a['ahead_r2'], '7.3f'):>7}"
+                f"{_value(a['fin_share'], '8.2f'):>8}{_value(a['ud_range_fraction'], '10.2f'):>10}"
+                f"  {a['verdict']}"
+            )
+            if truth:
+                print(f"  {'':22}error: {_errors(p, model, truth)}")
+            for reason in a["reasons"]:
+                print(f"  {'':22}{reason}")
+        print(f"  {'':22}({seconds:.2f} s for both models)")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="benchmarks/real_data.py", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("recording", nargs="+", type=Path, help="recording files (format v1)")
+    parser.add_argument(
+        "--every",
+        type=int,
+        action="append",
+        help="keep every N-th reading (repeatable; default 1: as recorded)",
+    )
+    parser.add_argument(
+        "--methods",
+        default=",".join(tunnel_methods()),
+        help="comma-separated methods (default: %(default)s)",
+    )
+    parser.add_argument("--truth", type=parse_truth, help="alpha=..,a=..,theta_bar=..")
+    args = parser.parse_args(argv)
+    methods = [m for m in args.methods.split(",") if m]
+    unknown = [m for m in methods if m not in tunnel_methods()]
+    if unknown:
+        parser.error(
+            f"--methods: {unknown[0]!r} is not a tunnel method ({', '.join(tunnel_methods())})"
+        )
+    for every in args.every or [1]:
+        if every < 1:
+            parser.error(f"--every {every}: must be 1 or more")
+    for path in args.recording:
+        try:
+            rec = load_recording(path)
+        except (OSError, RecordingError) as exc:
+            print(f"benchmarks/real_data.py: {path}: {exc}", file=sys.stderr)
+            return 2
+        for every in args.every or [1]:
+            report(thinned(rec, every), methods, truth_of(rec, args.truth))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
