@@ -14,7 +14,8 @@ adequacy (:mod:`identification.adequacy`) judges, on one time axis:
    fins could not have made.
 
 ``report.md`` holds the parameter and adequacy tables ``rocketroll identify``
-prints, each fit's verdict with its reasons, and links the figures.
+prints, each fit's verdict with its reasons, the standard errors and correlations of
+its parameters where the method reports them, and links the figures.
 """
 
 from __future__ import annotations
@@ -96,6 +97,19 @@ def fit_section(context: Context, fits: Mapping[str, Mapping[str, ModelFit]]) ->
             a = found.metrics.get("adequacy") or {}
             reasons = "; ".join(a.get("reasons") or ()) or "no figure beyond its limits"
             lines.append(f"- **{method} {model}**: {a.get('verdict', 'not assessed')} — {reasons}")
+            se = found.metrics.get("std_errors") or {}
+            corr = found.metrics.get("correlations") or {}
+            if se:
+                lines.append(
+                    "  standard errors: "
+                    + ", ".join(f"{name} ±{value:.3g}" for name, value in se.items())
+                    + (
+                        "; correlations: "
+                        + ", ".join(f"{pair} {value:+.2f}" for pair, value in corr.items())
+                        if corr
+                        else ""
+                    )
+                )
         lines += ["", f"![{method}]({figure_name(method)})", ""]
     return "\n".join(lines)
 

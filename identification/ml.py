@@ -613,6 +613,9 @@ class MLFit:
     std_errors : dict
         Standard error of each natural parameter (NaN where the Hessian is
         not positive definite there).
+    correlations : dict
+        Correlation of each pair of the rocket's estimates, ``"alpha~theta_bar"``
+        (empty where the Hessian is not positive definite).
     orders : dict
         AIC of each AR order tried.
     converged : bool
@@ -640,6 +643,7 @@ class MLFit:
     aic: float
     n_params: int
     std_errors: dict[str, float]
+    correlations: dict[str, float]
     orders: dict[int, float]
     converged: bool
     nfev: int
@@ -775,6 +779,13 @@ def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
     return _Information(rocket, point, cov, trial)
 
 
+def _rocket_names(info: _Information, model: str) -> list[str]:
+    """The rocket's parameters as :class:`MLFit` names them (``a_per_s`` for the constant
+    damping, ``beta_bar_per_s`` for eq. 48's)."""
+    rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
+    return [rename.get(n, n) for n in info.rocket]
+
+
 def _std_errors(info: _Information, model: str) -> dict[str, float]:
     """Standard errors of the rocket's parameters (NaN where the information matrix is
     not positive definite)."""
@@ -784,8 +795,23 @@ def _std_errors(info: _Information, model: str) -> dict[str, float]:
     else:
         diag = np.diag(info.cov)[:k]
         se = np.sqrt(np.where(diag > 0, diag, np.nan))
-    rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
-    return {rename.get(n, n): float(v) for n, v in zip(info.rocket, se, strict=True)}
+    return {n: float(v) for n, v in zip(_rocket_names(info, model), se, strict=True)}
+
+
+def _correlations(info: _Information, model: str) -> dict[str, float]:
+    """Correlations of the rocket's parameter estimates, ``"alpha~theta_bar"``: how far
+    the data tell them apart (near ±1: one is bought with the other).  Empty where the
+    information matrix is not positive definite."""
+    k = len(info.rocket)
+    if info.cov is None:
+        return {}
+    block = info.cov[:k, :k]
+    sd = np.sqrt(np.diag(block))
+    if not np.all(np.isfinite(sd) & (sd > 0)):
+        return {}
+    corr = block / np.outer(sd, sd)
+    names = _rocket_names(info, model)
+    return {f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)}
 
 
 #: Step of the band's differences, in standard errors of each parameter.
@@ -967,6 +993,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         aic=float(orders[best]),
         n_params=_n_params(data, model, best, nat),
         std_errors=_std_errors(info, model),
+        correlations=_correlations(info, model),
         orders=orders,
         converged=converged,
         nfev=search.nfev,
@@ -988,6 +1015,7 @@ def _result(
     converged: bool,
     nfev: int,
     information: _Information | None = None,
+    correlations: dict[str, float] | None = None,
 ) -> MLFit:
     """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``; its band
     widened by the parameters' uncertainty where their ``information`` is given."""
@@ -1012,6 +1040,7 @@ def _result(
         aic=aic,
         n_params=n_params,
         std_errors=std_errors,
+        correlations=correlations or {},
         orders=orders,
         converged=converged,
         nfev=nfev,
@@ -1177,6 +1206,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "gyro_floor_dps": found.gyro_floor_dps,
             "angle_noise_deg": found.angle_noise_deg,
             "std_errors": found.std_errors,
+            "correlations": found.correlations,
             "aic_by_order": {str(k): v for k, v in found.orders.items()},
             "nfev": found.nfev,
             "converged": found.converged,

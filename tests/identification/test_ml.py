@@ -340,6 +340,8 @@ def test_the_band_carries_the_parameters_uncertainty_on_a_short_record() -> None
         assert np.all(found.u_d_sd_deg >= plug_in.u_d_sd_deg - 1e-9)
         assert np.mean(found.u_d_sd_deg) > 1.2 * np.mean(plug_in.u_d_sd_deg)
         assert np.array_equal(found.u_d_mean_deg, plug_in.u_d_mean_deg)  # the mean is kept
+        assert set(found.correlations) >= {"alpha~theta_bar", "alpha_bar~beta_bar_per_s"}
+        assert all(-1.0 <= r <= 1.0 for r in found.correlations.values())
         assert rec.ud_true_deg is not None
         u = np.asarray(found.u_d_mean_deg)
         inside += int(np.sum(np.abs(u - rec.ud_true_deg[: u.size]) <= 1.645 * found.u_d_sd_deg))
