@@ -15,8 +15,9 @@ velocity processing and fin-angle model as the pipeline.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -61,6 +62,11 @@ class OutputErrorFit:
         ``scipy.optimize.least_squares`` converged.
     message : str
         Its message.
+    std_errors, correlations : dict
+        Each parameter's standard error and each pair's correlation, from the
+        Jacobian at the optimum with a Newey-West covariance of the residuals
+        (:func:`_sandwich`; the rate's error holds the turbulence's response, far from
+        white).
     """
 
     model: str
@@ -69,6 +75,8 @@ class OutputErrorFit:
     nfev: int
     success: bool
     message: str
+    std_errors: dict[str, float] = field(default_factory=dict)
+    correlations: dict[str, float] = field(default_factory=dict)
 
 
 def output_error(
@@ -159,6 +167,12 @@ def _output_error(inputs: Measurements, model: str, x0: RollParams | None) -> Ou
     result = least_squares(
         residual, np.asarray(x_start), bounds=(lower, upper), x_scale="jac", method="trf"
     )
+    names = (
+        ("alpha", "theta_bar", "a_per_s")
+        if model == "constant"
+        else ("alpha", "theta_bar", "alpha_bar", "beta_bar_per_s")
+    )
+    se, corr = _sandwich(np.asarray(result.jac), np.asarray(result.fun), names)
     return OutputErrorFit(
         model=model,
         params=params_of(result.x),
@@ -166,7 +180,42 @@ def _output_error(inputs: Measurements, model: str, x0: RollParams | None) -> Ou
         nfev=int(result.nfev),
         success=bool(result.success),
         message=str(result.message),
+        std_errors=se,
+        correlations=corr,
     )
+
+
+def _sandwich(
+    jac: FloatArray, residuals: FloatArray, names: Sequence[str]
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Standard errors and correlations of a least-squares fit whose residuals are
+    correlated in time (the turbulence's response is in them): the Newey-West sandwich
+    ``(JᵀJ)⁻¹ S (JᵀJ)⁻¹`` with ``S`` over Bartlett-weighted lags up to four times the
+    residuals' correlation length (statsmodels' ``S_hac_simple``), with its small-sample
+    factor ``n / (n - k)``.  NaN / empty where ``JᵀJ`` is singular.
+
+    Approximate: over 12 seeds each of three tunnel truths the errors of α were 1.10-1.35
+    reported standard errors in SD (1.15-1.50 with lags up to twice the correlation
+    length), where 1 is exact."""
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+    from identification.statistics import decorrelation_stride
+
+    n, k = jac.shape
+    try:
+        bread = np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return {name: float("nan") for name in names}, {}
+    lags = min(4 * decorrelation_stride(residuals, math.exp(-1.0)), n // 4)
+    meat = S_hac_simple(jac * residuals[:, None], nlags=max(lags, 1))
+    cov = bread @ meat @ bread * n / (n - k)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    se = {name: float(v) if v > 0 else float("nan") for name, v in zip(names, sd, strict=True)}
+    if not np.all(sd > 0):
+        return se, {}
+    c = cov / np.outer(sd, sd)
+    corr = {f"{names[i]}~{names[j]}": float(c[i, j]) for i in range(k) for j in range(i + 1, k)}
+    return se, corr
 
 
 def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
@@ -213,6 +262,8 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
             "nfev": found.nfev,
             "converged": found.success,
             "optimizer_message": found.message,
+            "std_errors": found.std_errors,
+            "correlations": found.correlations,
             **extra,
         }
         fits.append(

@@ -76,6 +76,7 @@ def one_blas_thread() -> None:
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+
 #: Set to ``pinned`` in a process started under :func:`pinned_environment`.
 MARKER = "ROCKETROLL_NUMERICS"
 #: OpenBLAS's kernels for AVX2 and FMA, on any processor.

@@ -126,6 +126,10 @@ def test_output_error_smooths_a_fast_rocket_over_a_window_short_against_its_time
     assert spread <= SMOOTHING_PER_TIME_CONSTANT / found.params.beta_bar_per_s
     assert found.metrics["adequacy"]["verdict"] == "good", found.metrics["adequacy"]["reasons"]
     assert abs(found.params.alpha / 3.4 - 1) < 0.03
+    se = found.metrics["std_errors"]
+    assert set(se) == {"alpha", "theta_bar", "a_per_s"} and 0 < se["alpha"] < 0.1
+    assert abs(found.params.alpha - 3.4) < 4 * se["alpha"]  # the error within its bars
+    assert all(-1 <= r <= 1 for r in found.metrics["correlations"].values())
     # through the paper's smoothing the same rocket's fit is not good
     inputs = model_inputs(rec, "constant", options)
     smeared = output_error(rec, "constant", options=options).params
