@@ -23,11 +23,12 @@ import argparse
 import itertools
 import sys
 from dataclasses import replace
+from typing import Any
 
 from _truths import SHAPE_TRUTHS, SHAPES, shape_command
 
 from identification.adequacy import Adequacy, adequacy
-from identification.ml import maximum_likelihood, posterior_given
+from identification.ml import MLFit, innovation_checks, maximum_likelihood, posterior_given
 from identification.model import RollParams
 from identification.pipeline import model_inputs
 from identification.recording import Recording
@@ -35,11 +36,17 @@ from identification.steps import Disturbance
 from identification.tunnel import run_tunnel, spec_from_command
 
 
+def metrics_of(found: MLFit) -> dict[str, Any]:
+    """What ml's method puts in its metrics for the adequacy: its standard errors and the
+    innovations' checks."""
+    return {"std_errors": found.std_errors, "innovations": innovation_checks(found)}
+
+
 def _line(kind: str, label: str, a: Adequacy) -> str:
     return (
         f"{kind:6s} {label:42s} {a.verdict:10s} R² {a.rate_r2:6.3f} ahead {a.ahead_r2:6.3f} "
         f"fin {a.fin_share:5.3f} (p {a.fin_share_p:.2g}) |u_d|/range {a.ud_range_fraction:5.2f} "
-        f"α SE {a.alpha_rel_se:5.3f}  {'; '.join(a.reasons)}"
+        f"α SE {a.alpha_rel_se:5.3f} innov {a.innovation_acf:5.3f}  {'; '.join(a.reasons)}"
     )
 
 
@@ -66,22 +73,22 @@ def main(argv: list[str] | None = None) -> int:
         rec = run_tunnel(spec_from_command(command))
         found = maximum_likelihood(rec, model)
         label = f"{name} {shape} {length} s, seed {seed}"
-        record("right", label, rec, found.params, found.disturbance(),
-               {"std_errors": found.std_errors}, model)  # fmt: skip
+        record("right", label, rec, found.params, found.disturbance(), metrics_of(found), model)
         off = replace(found.params, alpha=1.3 * found.params.alpha)
         given = posterior_given(
             rec, off, found.ar.tolist(), found.sd_deg, gyro_noise=found.gyro_noise
         )
-        record("wrong", label + ", α +30 %", rec, off, given.disturbance(), {}, model)
+        record("wrong", label + ", α +30 %", rec, off, given.disturbance(),
+               {"innovations": innovation_checks(given)}, model)  # fmt: skip
         if seed == args.first_seed and name == "paper":
             steep = run_tunnel(spec_from_command(command + " --alpha-bar 0.06 --beta-bar 0.3"))
             f = maximum_likelihood(steep, "constant")
             record("wrong", label + ", constant a on a(θ)", steep, f.params, f.disturbance(),
-                   {"std_errors": f.std_errors}, "constant")  # fmt: skip
+                   metrics_of(f), "constant")  # fmt: skip
             slow = run_tunnel(spec_from_command(command + " --servo-rate 15"))
             f = maximum_likelihood(slow, model)
             record("wrong", label + ", servo 10x slower", slow, f.params, f.disturbance(),
-                   {"std_errors": f.std_errors}, model)  # fmt: skip
+                   metrics_of(f), model)  # fmt: skip
     (n_right, good), (n_wrong, caught) = counts["right"], counts["wrong"]
     print(f"\nright fits judged good: {good}/{n_right}; wrong ones not good: {caught}/{n_wrong}")
     return 0

@@ -22,6 +22,11 @@ These figures read the model without it, against the raw measurements:
   fraction of the servo's range: a "disturbance" the fins could not cancel is
   the model's error, not turbulence;
 * **the gain's relative standard error**, where the method reports one;
+* **the innovations' whiteness**, where the method has them (ml: its one-step
+  prediction errors of the first sensor): the largest ``|ACF|`` over lags 1-10, an
+  effect size counted where it is at least :data:`INNOVATION_ACF` and four times
+  white noise's ``1/√n`` and Ljung-Box rejects whiteness (p < :data:`FIN_SHARE_P`);
+  a model that is right leaves nothing predictable in them;
 * for the paper's method, its assumptions: a steady state in each dwell
   (steady-state R²) and a positive damping ``a_i`` from each step.
 
@@ -66,6 +71,9 @@ FIN_ERROR_MATERIAL = 0.02
 #: 99th percentile of ``|u_d|`` as a fraction of the fins' range above which a fit is
 #: weak / unreliable.
 UD_RANGE = (1.0, 1.5)
+#: Largest |autocorrelation| of the innovations (lags 1-10) from which they count as not
+#: white (with four times 1/√n and Ljung-Box p < FIN_SHARE_P): weak.
+INNOVATION_ACF = 0.05
 #: The gain's relative standard error above which a fit is weak / unreliable.
 ALPHA_REL_SE = (0.25, 0.5)
 #: The paper's steady-state R² below which its dwells did not settle (weak).
@@ -88,6 +96,7 @@ class Adequacy:
     ud_p99_deg: float
     ud_range_fraction: float
     alpha_rel_se: float
+    innovation_acf: float
     verdict: str
     reasons: tuple[str, ...]
 
@@ -285,6 +294,17 @@ def adequacy(
         True,
     )
     check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
+    innovations = metrics.get("innovations") or {}
+    innovation_acf = float(innovations.get("max_acf", math.nan))
+    if (
+        innovation_acf >= max(INNOVATION_ACF, 4.0 / math.sqrt(max(innovations.get("n", 1), 1)))
+        and innovations.get("ljung_box_p", 1.0) < FIN_SHARE_P
+    ):
+        weak.append(
+            f"its {innovations.get('sensor', 'sensor')}'s innovations are not white (|ACF| "
+            f"up to {innovation_acf:.2f}, Ljung-Box p = {innovations['ljung_box_p']:.2g}): "
+            "the model leaves something predictable"
+        )
     if method == "paper":
         steps = metrics.get("steps") or []
         negative = [s for s in steps if isinstance(s, dict) and not s.get("a_per_s", 1.0) > 0.0]
@@ -310,6 +330,7 @@ def adequacy(
         ud_p99_deg=p99,
         ud_range_fraction=p99 / fin_range,
         alpha_rel_se=rel_se,
+        innovation_acf=innovation_acf,
         verdict=verdict,
         reasons=tuple(bad + weak),
     )

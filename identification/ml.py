@@ -61,6 +61,7 @@ from identification.statespace import (
     Smoothed,
     simulation_smoother,
     smooth,
+    standardized_innovations,
     update,
 )
 from identification.steps import Disturbance, IdentificationError, resimulate
@@ -1164,6 +1165,37 @@ def posterior_traces(fit: MLFit, size: int, seed: int = 0) -> FloatArray:
     return np.asarray(draws[:, :-1, 2], dtype=float)
 
 
+#: Lags of the innovations' autocorrelation and Ljung-Box test.
+INNOVATION_LAGS = 10
+
+
+def innovation_checks(found: MLFit) -> dict[str, Any]:
+    """Whiteness and normality of the fit's one-step prediction errors of its first
+    sensor (the gyro where there is one): the largest ``|ACF|`` over lags 1 to
+    :data:`INNOVATION_LAGS` (an effect size: about ``2/√n`` for white noise), the Ljung-Box
+    p-value at that lag (on a long record it rejects any small structure), skewness and
+    excess kurtosis (0 and 0 for the normal the likelihood assumes)."""
+    from scipy import stats
+    from statsmodels.stats.diagnostic import acorr_ljungbox
+
+    e = standardized_innovations(found._state_space, 0)
+    centred = e - e.mean()
+    denom = float(centred @ centred)
+    acf = np.array(
+        [float(centred[:-k] @ centred[k:]) / denom for k in range(1, INNOVATION_LAGS + 1)]
+    )
+    lb = acorr_ljungbox(e, lags=[INNOVATION_LAGS])
+    sensor = "gyro" if int(found._state_space.observed[0]) == 0 else "angle"
+    return {
+        "sensor": sensor,
+        "n": int(e.size),
+        "max_acf": float(np.max(np.abs(acf))),
+        "ljung_box_p": float(lb["lb_pvalue"].iloc[0]),
+        "skewness": float(stats.skew(e)),
+        "excess_kurtosis": float(stats.kurtosis(e)),
+    }
+
+
 def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     """Maximum likelihood as an identification method (``method="ml"``).
 
@@ -1211,6 +1243,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "nfev": found.nfev,
             "converged": found.converged,
             "posterior_sd_mean_deg": float(np.mean(found.u_d_sd_deg)),
+            "innovations": innovation_checks(found),
         }
         settings = {"interval_s": found.interval_s, "estimate": "posterior mean (RTS smoother)"}
         fits.append(

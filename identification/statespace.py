@@ -42,6 +42,7 @@ __all__ = [
     "predict",
     "simulation_smoother",
     "smooth",
+    "standardized_innovations",
     "update",
 ]
 
@@ -326,6 +327,23 @@ def smooth(model: LinearGaussian) -> Smoothed:
     rts, p_smooth = _smoother_gains(transition, p_pred, p_filt)
     mean = _smoothed_means(y, observed, transition, intercept, a0, gains, rts)
     return Smoothed(float(ll), mean, p_smooth, gains, rts)
+
+
+def standardized_innovations(model: LinearGaussian, channel: int = 0) -> FloatArray:
+    """The one-step prediction errors of observation ``channel`` (the first one the filter
+    reads at each step, before any other of that step), each divided by its predicted SD;
+    missing readings left out.  White and of unit variance where the model is right."""
+    y, observed, obs_var, transition, intercept, state_cov, a0, p0 = model._args()
+    ll, a_pred, p_pred, _, _, _ = _filter(
+        y, observed, obs_var, transition, intercept, state_cov, a0, p0, True
+    )
+    if not np.isfinite(ll):
+        raise ValueError("the model's prediction variance is not positive")
+    o = int(observed[channel])
+    error = y[:, channel] - a_pred[:, o]
+    variance = p_pred[:, o, o] + obs_var[:, channel]
+    ok = np.isfinite(error) & (variance > 0)
+    return np.asarray(error[ok] / np.sqrt(variance[ok]), dtype=float)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -347,3 +347,26 @@ def test_the_band_carries_the_parameters_uncertainty_on_a_short_record() -> None
         inside += int(np.sum(np.abs(u - rec.ud_true_deg[: u.size]) <= 1.645 * found.u_d_sd_deg))
         total += u.size
     assert 0.8 < inside / total < 0.97
+
+
+def test_innovations_are_white_under_the_fit_and_not_under_a_gain_30_percent_off() -> None:
+    from identification.adequacy import adequacy
+    from identification.ml import innovation_checks
+
+    spec = spec_from_command(
+        "--seed 0 --log-dt 0.01 --gyro-noise 1 --schedule doublets --steps 12 --pulse 1 "
+        "--dwell-min 1 --dwell-max 3 --lead 2"
+    )
+    rec = run_tunnel(spec)
+    found = maximum_likelihood(rec, "theta")
+    right = innovation_checks(found)
+    assert right["sensor"] == "gyro" and right["n"] == rec.n_samples
+    assert right["max_acf"] < 0.04 and right["ljung_box_p"] > 0.01
+    assert abs(right["skewness"]) < 0.2 and abs(right["excess_kurtosis"]) < 0.5
+    off = replace(found.params, alpha=1.3 * found.params.alpha)
+    given = posterior_given(rec, off, found.ar.tolist(), found.sd_deg, gyro_noise=found.gyro_noise)
+    wrong = innovation_checks(given)
+    assert wrong["max_acf"] > 0.05 and wrong["ljung_box_p"] < 1e-3
+    judged = adequacy(measurements(rec, IdentifyOptions()), off, given.disturbance(),
+                      {"innovations": wrong})  # fmt: skip
+    assert any("innovations are not white" in r for r in judged.reasons)
