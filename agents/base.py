@@ -85,13 +85,27 @@ class Controller(Protocol):
         ...
 
 
-def design_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
-    """The train split's tunnel traces for ``config`` (in flight, the traces its flights fly:
-    :mod:`disturbances.flight`), from ``db``; all of its recordings, whichever one
-    ``config.recording`` replays."""
+def train_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
+    """The traces of the *train* split for ``config``, from ``db``: what a design may look
+    at (never the test split the protocol evaluates on).  Where one recording is replayed
+    and the train split holds a part of it (``rocketroll db add --holdout``: the run
+    before its held-out end) that part, so the design is of that rocket; else all of the
+    train split."""
+    from disturbances.bank import BankError
     from rollenv.bank import load_bank
 
-    return load_bank(replace(config, split="train", recording=None, flight=None), db)
+    if config.recording is not None:
+        try:
+            return load_bank(replace(config, split="train"), db)
+        except BankError:
+            pass  # no part of it to design on: the train split's rockets
+    return load_bank(replace(config, split="train", recording=None), db)
+
+
+def design_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank:
+    """The train split's tunnel traces for ``config`` (:func:`train_bank`; in flight, the
+    tunnel traces its flights fly: :mod:`disturbances.flight`), from ``db``."""
+    return train_bank(replace(config, flight=None), db)
 
 
 @dataclass
@@ -117,19 +131,8 @@ class Design:
 
     @cached_property
     def train_bank(self) -> TraceBank:
-        """The traces of the *train* split: what a design may look at (never the test split
-        the protocol evaluates on).  Where one recording is replayed and the train split
-        holds a part of it (``rocketroll db add --holdout``: the run before its held-out
-        end) that part, so the design is of that rocket; else all of the train split."""
-        from disturbances.bank import BankError
-        from rollenv.bank import load_bank
-
-        if self.config.recording is not None:
-            try:
-                return load_bank(replace(self.config, split="train"), self.db)
-            except BankError:
-                pass  # no part of it to design on: the train split's rockets
-        return load_bank(replace(self.config, split="train", recording=None), self.db)
+        """:func:`train_bank` of the environment's configuration."""
+        return train_bank(self.config, self.db)
 
     @cached_property
     def design_bank(self) -> TraceBank:

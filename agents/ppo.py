@@ -307,7 +307,8 @@ def _check_observer_design(learned: PPOController, config: RollConfig, where: st
     """Refuse (``ValueError``) to design a policy's observer on another method's or model's
     rockets and traces than training designed it on (another ``--set method=`` given to
     ``train`` than to this command): the policy reads that observer's estimate.  The
-    disturbance and recording replayed may differ (a design reads the whole train split)."""
+    disturbance and recording replayed may differ (a design reads the train split:
+    :func:`agents.base.train_bank`)."""
     trained = learned.settings.get("env_settings") or {}
     for name in ("method", "model"):
         if name in trained and trained[name] != getattr(config, name):

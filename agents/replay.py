@@ -14,6 +14,7 @@ This module imports nothing heavy: the commands' argument classes use it.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -116,8 +117,11 @@ def fitted_settings(
     env_id: str, settings: Mapping[str, Any], recording: str | None, db: str | None
 ) -> tuple[dict[str, Any], str | None]:
     """The ``--set`` options with ``--recording``, and ``episode_s`` fitted to the
-    recording's traces in both splits (a command that trains on one and checks on the
-    other: train, sweep run); with the line that says so (None: not fitted)."""
+    shortest of the traces a command that trains on one split and checks on the other
+    replays (train, sweep run): the recording's in the train split, the whole test split
+    (training's held-out check) and the recording's there (an evaluation of it); with
+    the line that says so (None: not fitted)."""
+    from disturbances.bank import BankError
     from rollenv.bank import load_bank
 
     options = replay_options(settings, recording)
@@ -125,6 +129,8 @@ def fitted_settings(
         return options, None
     config = options_config(env_id, options, "train")
     banks = [load_bank(config, db), load_bank(replace(config, split="test", recording=None), db)]
+    with contextlib.suppress(BankError):  # no held-out part: the whole test split is checked
+        banks.append(load_bank(replace(config, split="test"), db))
     config, note = fit_episode(config, banks, options)
     if note is None:
         return options, None
@@ -140,14 +146,17 @@ def replay_config(
 ) -> tuple[RollConfig, TraceBank, dict[str, Any], str | None]:
     """What a command replays: the configuration (:func:`options_config` of the ``--set``
     options with ``--recording``, its episode fitted to the recording's trace by
-    :func:`fit_episode`), the bank of ``split``, the options as given, and the line that
-    says the episode was fitted (None: it was not)."""
+    :func:`fit_episode`), the bank of ``split``, the options (with the fitted
+    ``episode_s``: what a rerun or a Minari dataset needs), and the line that says the
+    episode was fitted (None: it was not)."""
     from rollenv.bank import load_bank
 
     options = replay_options(settings, recording)
     config = options_config(env_id, options, split)
     bank = load_bank(config, db)
     config, note = fit_episode(config, [bank], options)
+    if note is not None:
+        options = {**options, "episode_s": config.episode_s}
     return config, bank, options, note
 
 

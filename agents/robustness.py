@@ -197,9 +197,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     design, _, settings, episode_note = replay_config(
         args.env_id, args.settings, args.recording, args.split, args.db
     )
-    # every condition on the replayed recording, over the episode fitted to it
-    fitted = {} if episode_note is None else {"episode_s": design.episode_s}
-    args = replace(args, settings={**settings, **fitted})
+    args = replace(args, settings=settings)  # every condition on the same recording, episode
     configs = {c: _condition_config(args, c) for c in args.condition}
     banks = {}
     for condition, config in configs.items():  # every condition's replay, before any work

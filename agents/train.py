@@ -655,8 +655,9 @@ def make_env(
             or adapter.config.flight_schedule is not None
             or adapter.config.recording is not None
         ):
-            # the observer is designed on the whole train split, always (as --policy designs
-            # it when the policy is evaluated); in flight on its tunnel traces
+            # the observer is designed on the train split (the replayed recording's part
+            # there, where it has one), as --policy designs it when the policy is
+            # evaluated; in flight on its tunnel traces
             train_bank = design_bank(adapter.config, db)
         features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs, hp.residual)
         env = VecObserver(env, features)

@@ -93,10 +93,22 @@ class TuneArgs:
 def tune(args: TuneArgs) -> int:
     """Re-tune the PID for a database and print the gains."""
     from agents.base import Design
+    from disturbances.bank import BankError
 
-    config, _, settings, note = replay_config(
-        args.env_id, args.settings, args.recording, "train", args.db
-    )
+    try:
+        config, _, settings, note = replay_config(
+            args.env_id, args.settings, args.recording, "train", args.db
+        )
+    except BankError:
+        if args.recording is None and "recording" not in args.settings:
+            raise
+        # no part of the recording in the train split: its rockets, as the designs read
+        others = {k: v for k, v in args.settings.items() if k != "recording"}
+        config, _, settings, note = replay_config(args.env_id, others, None, "train", args.db)
+        replayed = args.recording or args.settings["recording"]
+        print(f"  {replayed} has no part in the train split: tuned on the train split's rockets")
+    else:
+        replayed = config.recording
     if note:
         print(note)
     task = config.task
@@ -125,8 +137,8 @@ def tune(args: TuneArgs) -> int:
     )
     same = "".join(f" --set {k}={v}" for k, v in settings.items() if k != "recording")
     same += f" --db {args.db}" if args.db is not None else ""
-    if config.recording is not None and _in_test_split(config, args.db):
-        same += f" --recording {config.recording}"  # its held-out part, where eval replays
+    if replayed is not None and _in_test_split(replace(config, recording=replayed), args.db):
+        same += f" --recording {replayed}"  # its held-out part, where eval replays
     print(f"use it with: rocketroll eval --env-id {args.env_id} --policy pid:{best:g}{same}")
     return 0
 

@@ -499,6 +499,11 @@ def shapes_study(seeds: Sequence[int]) -> bool:
             f"{z:>12.2f}{c:>11.3f}{g:>6.2f}"
         )
     pooled = [v for values in rows.values() for v in values]
+    if len(pooled) < 2:
+        print(f"\n{len(pooled)} fits succeeded: no statistics")
+        for line in failures:
+            print(f"  failed: {line}")
+        return False
     m, b, se, z, c, g = summary(pooled)
     print(
         f"{'all':10}{'':10}{'':>4}{len(pooled):>4}{m:>15.2f}{b:>+10.2f}{se:>8.2f}{z:>12.2f}"
@@ -598,7 +603,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"--methods: unknown method {method!r}; known: {', '.join(METHODS.names())}"
             )
     seeds = list(range(ns.first_seed, ns.first_seed + ns.seeds))
-    if ns.shapes:
+    if ns.shapes:  # (--seeds >= 1 is checked above)
         ok = shapes_study(seeds)
         return 1 if ns.strict and not ok else 0
     for name in dict.fromkeys(truths):

@@ -102,7 +102,7 @@ def report(rec: Recording, methods: Sequence[str], truth: dict[str, float]) -> N
         started = time.perf_counter()
         try:
             fits = fit(context, method, MODEL_NAMES)
-        except IdentificationError as exc:
+        except (IdentificationError, ValueError) as exc:  # this method cannot: say why
             print(f"  {method:13}cannot fit it: {exc}")
             continue
         seconds = time.perf_counter() - started
@@ -157,7 +157,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"benchmarks/real_data.py: {path}: {exc}", file=sys.stderr)
             return 2
         for every in args.every or [1]:
-            report(thinned(rec, every), methods, truth_of(rec, args.truth))
+            try:
+                sampled = thinned(rec, every)
+            except RecordingError as exc:
+                print(f"benchmarks/real_data.py: {path} --every {every}: {exc}", file=sys.stderr)
+                return 2
+            report(sampled, methods, truth_of(rec, args.truth))
     return 0
 
 

@@ -249,58 +249,64 @@ def main(argv: Sequence[str] | None = None) -> int:
     spinners = [
         subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(ns.busy)
     ]
-    remote, commit = start_against(__file__, words, ns.against)
-    timings, before = time_interleaved(
-        [
-            ("identify(noise_runs=0)", common["identify(noise_runs=0)"], ns.repeats),
-            *(
-                (f'output_error("{model}")', common[f'output_error("{model}")'], ns.peer_repeats)
-                for model in ("constant", "theta")
-            ),
-            (mc_name, lambda: run_monte_carlo(result, MONTE_CARLO_RUNS), ns.mc_repeats),
-            (
-                'fit(method="ml", both models)',
-                functools.partial(fit, rec, "ml", ["constant", "theta"], options),
-                ns.peer_repeats,
-            ),
-            (
-                f"posterior_traces({POSTERIOR_DRAWS})",
-                functools.partial(posterior_traces, ml_theta, POSTERIOR_DRAWS, 0),
-                ns.peer_repeats,
-            ),
-            *(
+    try:
+        remote, commit = start_against(__file__, words, ns.against)
+        timings, before = time_interleaved(
+            [
+                ("identify(noise_runs=0)", common["identify(noise_runs=0)"], ns.repeats),
+                *(
+                    (
+                        f'output_error("{model}")',
+                        common[f'output_error("{model}")'],
+                        ns.peer_repeats,
+                    )
+                    for model in ("constant", "theta")
+                ),
+                (mc_name, lambda: run_monte_carlo(result, MONTE_CARLO_RUNS), ns.mc_repeats),
                 (
-                    f'fit(method="{method}", "{model}")',
-                    functools.partial(fit, rec, method, [model], options),
+                    'fit(method="ml", both models)',
+                    functools.partial(fit, rec, "ml", ["constant", "theta"], options),
                     ns.peer_repeats,
-                )
-                for method in others
-                for model in METHODS.entry(method).info["models"]
-            ),
-            *(
+                ),
                 (
-                    f'adequacy("{method}", "theta")',
-                    functools.partial(
-                        adequacy,
-                        context.measurements,
-                        found.params,
-                        found.disturbance,
-                        found.metrics,
-                        method=method,
-                    ),
-                    ns.repeats,
-                )
-                for method, found in judged.items()
-            ),
-        ],
-        remote,
-        [*common, mc_name],
-    )
-    if remote is not None:
-        remote.close()
-    for spinner in spinners:
-        spinner.kill()
-        spinner.wait()
+                    f"posterior_traces({POSTERIOR_DRAWS})",
+                    functools.partial(posterior_traces, ml_theta, POSTERIOR_DRAWS, 0),
+                    ns.peer_repeats,
+                ),
+                *(
+                    (
+                        f'fit(method="{method}", "{model}")',
+                        functools.partial(fit, rec, method, [model], options),
+                        ns.peer_repeats,
+                    )
+                    for method in others
+                    for model in METHODS.entry(method).info["models"]
+                ),
+                *(
+                    (
+                        f'adequacy("{method}", "theta")',
+                        functools.partial(
+                            adequacy,
+                            context.measurements,
+                            found.params,
+                            found.disturbance,
+                            found.metrics,
+                            method=method,
+                        ),
+                        ns.repeats,
+                    )
+                    for method, found in judged.items()
+                ),
+            ],
+            remote,
+            [*common, mc_name],
+        )
+        if remote is not None:
+            remote.close()
+    finally:
+        for spinner in spinners:
+            spinner.kill()
+            spinner.wait()
     pipeline, *peers = timings[:3]
     monte_carlo, ml_both, posterior = timings[3:6]
     registered = timings[6 : len(timings) - len(judged)]

@@ -738,7 +738,10 @@ def add(args: AddArgs) -> int:
             ]
             for row in parts:
                 verdicts = sorted(
-                    {str(i.verdict) for i in db.identifications(recording_hash=row.content_hash)}
+                    {
+                        i.verdict or "not assessed"
+                        for i in db.identifications(recording_hash=row.content_hash)
+                    }
                 )
                 span = (
                     f"to {row.metadata['part.to_s']} s"

@@ -207,13 +207,33 @@ def holdout_rows(
     return recordings, identifications, traces
 
 
+def _check_new_run(db: Store, recording: Recording) -> None:
+    """Refuse (:class:`DatabaseError`) to split a run whose samples or name the database
+    holds already: its stored traces (whole, in whichever split) would stay beside the
+    held-out ones and be replayed with them."""
+    whole = content_hash(recording.columns())
+    named = [r for r in db.recordings() if r.name == recording.name]
+    if db.has_recording(whole) or named:
+        what = "this run's samples" if db.has_recording(whole) else "a recording of that name"
+        raise DatabaseError(
+            f"{db.path}: holds {what} ({recording.name}) already; a run is split for a "
+            "held-out evaluation once, into a database without it (or give it another "
+            "name: rocketroll import-csv --name)"
+        )
+
+
 def _from(row: TraceRow, start_s: float) -> TraceRow:
     """``row``'s trace from the first interval that starts at or after ``start_s``."""
     assert row.u_d_deg is not None
     skip = max(0, math.ceil((start_s - row.t0_s) / row.dt_s - 1e-9))
     u = np.asarray(row.u_d_deg[skip:], dtype=np.float64)
     if u.size < 2:
-        raise ValueError(f"trace {row.uid}: nothing of it after {start_s:g} s")
+        from identification.steps import IdentificationError
+
+        raise IdentificationError(
+            f"{row.recording}: its {row.method} trace holds less than two intervals after "
+            f"{start_s:g} s; hold out a larger share"
+        )
     return dataclasses.replace(
         row,
         t0_s=row.t0_s + skip * row.dt_s,
@@ -374,6 +394,7 @@ def add_recording(
     if holdout:
         if surrogates:
             raise ValueError("a run split for a held-out evaluation gets no surrogates")
+        _check_new_run(db, recording)
         db.check_version(writing=True)
         return db.store(
             *holdout_rows(

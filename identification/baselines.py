@@ -14,7 +14,6 @@ velocity processing and fin-angle model as the pipeline.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -27,7 +26,6 @@ from identification.model import RollParams, damping, simulate
 from identification.pipeline import (
     IdentifyOptions,
     Measurements,
-    measurements,
     model_inputs,
     recover_disturbance,
     smoothing_for,
@@ -199,23 +197,16 @@ def _sandwich(
     length), where 1 is exact."""
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
-    from identification.statistics import decorrelation_stride
+    from identification.statistics import decorrelation_stride, standard_errors
 
     n, k = jac.shape
     try:
         bread = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
-        return {name: float("nan") for name in names}, {}
+        return standard_errors(None, names)
     lags = min(4 * decorrelation_stride(residuals, math.exp(-1.0)), n // 4)
     meat = S_hac_simple(jac * residuals[:, None], nlags=max(lags, 1))
-    cov = bread @ meat @ bread * n / (n - k)
-    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    se = {name: float(v) if v > 0 else float("nan") for name, v in zip(names, sd, strict=True)}
-    if not np.all(sd > 0):
-        return se, {}
-    c = cov / np.outer(sd, sd)
-    corr = {f"{names[i]}~{names[j]}": float(c[i, j]) for i in range(k) for j in range(i + 1, k)}
-    return se, corr
+    return standard_errors(bread @ meat @ bread * n / (n - k), names)
 
 
 def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
@@ -244,9 +235,7 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
             if shorter is None or shorter >= extra.get("smoothing_window_s", np.inf):
                 break
             extra = {"smoothing_window_s": shorter}
-            used = measurements(
-                context.recording, dataclasses.replace(options, smoothing_window_s=shorter)
-            )
+            used = context.smoothed_over(shorter)
             found = _output_error(used, model, found.params)
         dist, resim = recover_disturbance(used, found.params, model, options)
         metrics = {

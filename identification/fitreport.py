@@ -41,12 +41,13 @@ def figure_name(method: str) -> str:
 
 
 def _figure(context: Context, method: str, by_model: Mapping[str, ModelFit]) -> bytes:
-    rec, inputs = context.recording, context.measurements
+    rec = context.recording
     t = np.asarray(rec.time_s, dtype=float)
     fig = new_figure(figsize=(_WIDTH_IN, 6.5), layout="constrained")
     rate_ax, ud_ax = fig.subplots(2, 1, sharex=True)
     source = ""
     for model, found in by_model.items():
+        inputs = context.measurements_of(found)
         predicted = model_only(inputs, found.params)
         if not source:
             source = predicted.rate_source
@@ -58,6 +59,7 @@ def _figure(context: Context, method: str, by_model: Mapping[str, ModelFit]) -> 
         u = found.disturbance.at(t[:-1])
         ud_ax.step(t[:-1], u, where="post", color=_COLORS.get(model), lw=0.9,
                    label=f"u_d ({model})")  # fmt: skip
+    inputs = context.measurements
     fin = np.asarray(inputs.theta_fine[:: inputs.grid.per_sample], dtype=float)
     ud_ax.plot(t[: fin.size], fin, color="black", lw=1.0, label=f"fin θ ({inputs.theta_source})")
     rate_ax.set_ylabel("roll rate (°/s)")

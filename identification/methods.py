@@ -241,6 +241,25 @@ class Context:
 
         return measurements(self.recording, self.options)
 
+    def smoothed_over(self, window_s: float | None) -> Measurements:
+        """:attr:`measurements` with the velocity smoothed over ``window_s`` instead of the
+        options' window (None: the options'); made once per window."""
+        if window_s is None:
+            return self.measurements
+        made: dict[float, Measurements] = self.__dict__.setdefault("_smoothed_over", {})
+        if window_s not in made:
+            from identification.pipeline import measurements
+
+            made[window_s] = measurements(
+                self.recording, replace(self.options, smoothing_window_s=window_s)
+            )
+        return made[window_s]
+
+    def measurements_of(self, found: ModelFit) -> Measurements:
+        """The measurements ``found`` was fitted to (its own smoothing window, where its
+        method chose one: ``metrics["smoothing_window_s"]``)."""
+        return self.smoothed_over(found.metrics.get("smoothing_window_s"))
+
     def disturbance(self, params: RollParams, model: str) -> tuple[Disturbance, Resimulation]:
         """Steps 8-9 for any parameters: ``u_d`` by eq. 35-44, and its re-simulation (§3.5)."""
         from identification.pipeline import recover_disturbance
@@ -330,7 +349,7 @@ def with_adequacy(found: ModelFit, context: Context) -> ModelFit:
     from identification.adequacy import adequacy
 
     figures = adequacy(
-        context.measurements,
+        context.measurements_of(found),
         found.params,
         found.disturbance,
         found.metrics,

@@ -64,6 +64,7 @@ from identification.statespace import (
     standardized_innovations,
     update,
 )
+from identification.statistics import standard_errors
 from identification.steps import Disturbance, IdentificationError, resimulate
 from rocketroll_common.arrays import FloatArray, readonly_array
 
@@ -624,9 +625,10 @@ class MLFit:
     nfev : int
         Likelihood evaluations (all orders).
     u_d_mean_deg, u_d_sd_deg : ndarray, shape (n - 1,)
-        Posterior mean and SD of ``u_d`` over each sample interval; the SD holds the
-        parameters' own uncertainty too (delta method over the observed information),
-        which on a short record is most of it.  The posterior draws
+        Posterior mean and SD of ``u_d`` over each sample interval; the SD of a fit holds
+        the parameters' own uncertainty too (delta method over the observed information),
+        which on a short record is most of it (:func:`posterior_given`'s, under given
+        parameters, is the smoother's alone).  The posterior draws
         (:func:`posterior_traces`) are conditional on the fitted parameters.
     time_s : ndarray, shape (n,)
         Sample times.
@@ -780,39 +782,12 @@ def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
     return _Information(rocket, point, cov, trial)
 
 
-def _rocket_names(info: _Information, model: str) -> list[str]:
-    """The rocket's parameters as :class:`MLFit` names them (``a_per_s`` for the constant
-    damping, ``beta_bar_per_s`` for eq. 48's)."""
+def _rocket_estimates(info: _Information, model: str) -> tuple[dict[str, float], dict[str, float]]:
+    """Standard errors and correlations of the rocket's parameters
+    (:func:`identification.statistics.standard_errors`; ``a_per_s`` names the constant
+    damping, ``beta_bar_per_s`` eq. 48's)."""
     rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
-    return [rename.get(n, n) for n in info.rocket]
-
-
-def _std_errors(info: _Information, model: str) -> dict[str, float]:
-    """Standard errors of the rocket's parameters (NaN where the information matrix is
-    not positive definite)."""
-    k = len(info.rocket)
-    if info.cov is None:
-        se = np.full(k, np.nan)
-    else:
-        diag = np.diag(info.cov)[:k]
-        se = np.sqrt(np.where(diag > 0, diag, np.nan))
-    return {n: float(v) for n, v in zip(_rocket_names(info, model), se, strict=True)}
-
-
-def _correlations(info: _Information, model: str) -> dict[str, float]:
-    """Correlations of the rocket's parameter estimates, ``"alpha~theta_bar"``: how far
-    the data tell them apart (near ±1: one is bought with the other).  Empty where the
-    information matrix is not positive definite."""
-    k = len(info.rocket)
-    if info.cov is None:
-        return {}
-    block = info.cov[:k, :k]
-    sd = np.sqrt(np.diag(block))
-    if not np.all(np.isfinite(sd) & (sd > 0)):
-        return {}
-    corr = block / np.outer(sd, sd)
-    names = _rocket_names(info, model)
-    return {f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)}
+    return standard_errors(info.cov, [rename.get(n, n) for n in info.rocket])
 
 
 #: Step of the band's differences, in standard errors of each parameter.
@@ -832,8 +807,9 @@ def _parameter_variance(data: _Data, info: _Information, u: FloatArray) -> Float
     """The variance the parameters' own uncertainty adds to the posterior mean ``u_d``:
     ``J·C·Jᵀ`` per interval (delta method), ``J`` forward differences of the smoothed
     mean over each free parameter (steps of :data:`_BAND_STEP_SE` of its standard
-    error), ``C`` the parameters' covariance.  Zero where it cannot be had (an
-    information matrix not positive definite)."""
+    error), ``C`` the parameters' covariance.  Zero where there is no finite covariance
+    (a singular information matrix); a parameter whose variance is not positive adds
+    nothing."""
     if info.cov is None or not np.all(np.isfinite(info.cov)):
         return np.zeros_like(u)
     sd = np.sqrt(np.clip(np.diag(info.cov), 0.0, None))
@@ -985,6 +961,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
             f"{data.name}: maximum likelihood found no stable model ({message})"
         )
     info = _information(data, model, nat)
+    std_errors, correlations = _rocket_estimates(info, model)
     return _result(
         data,
         model,
@@ -993,8 +970,8 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         loglike=-fun,
         aic=float(orders[best]),
         n_params=_n_params(data, model, best, nat),
-        std_errors=_std_errors(info, model),
-        correlations=_correlations(info, model),
+        std_errors=std_errors,
+        correlations=correlations,
         orders=orders,
         converged=converged,
         nfev=search.nfev,

@@ -554,7 +554,7 @@ class Recording:
         source and sample times), with ``metadata`` added to its own.
 
         The split of one run into the part a controller is designed on and the part it is
-        evaluated on (:func:`disturbances.ingest.holdout_parts`) is made with it.
+        evaluated on (:func:`disturbances.ingest.holdout_rows`) is made with it.
         """
         keep = (self.time_s >= start_s) & (self.time_s < end_s)
         if int(np.count_nonzero(keep)) < 2:

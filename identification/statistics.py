@@ -16,6 +16,7 @@ the sample autocorrelation falls below :data:`DECORRELATION`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,12 +27,41 @@ from scipy import stats
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["DisturbanceStatistics", "TraceStatistics", "decorrelation_stride", "trace_statistics"]
+__all__ = [
+    "DisturbanceStatistics",
+    "TraceStatistics",
+    "decorrelation_stride",
+    "standard_errors",
+    "trace_statistics",
+]
 
 #: Autocorrelation below which two samples are treated as independent.
 DECORRELATION = 0.1
 #: Significance level of the tests.
 ALPHA = 0.05
+
+
+def standard_errors(
+    cov: FloatArray | None, names: Sequence[str]
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Standard errors and correlations of estimates ``names`` from their covariance
+    (the first ``len(names)`` rows and columns of ``cov``): each SE (NaN where its variance
+    is not positive, or ``cov`` is None) and each pair's correlation, ``"a~b"`` (empty
+    unless every variance is positive)."""
+    k = len(names)
+    if cov is None:
+        return {name: float("nan") for name in names}, {}
+    block = np.asarray(cov, dtype=float)[:k, :k]
+    var = np.diag(block)
+    ok = np.isfinite(var) & (var > 0)
+    sd = np.sqrt(np.where(ok, var, np.nan))
+    se = {name: float(v) for name, v in zip(names, sd, strict=True)}
+    if not np.all(ok):
+        return se, {}
+    corr = block / np.outer(sd, sd)
+    return se, {
+        f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)
+    }
 
 
 def decorrelation_stride(x: ArrayLike, threshold: float = DECORRELATION) -> int:

@@ -96,7 +96,7 @@ def test_eval_on_the_recording_fits_the_episode_and_labels_a_policy_trained_else
     assert "| PPO (trained on another database's rockets) |" in printed
     assert "| observer |" in printed and "| PID |" in printed
     results = json.loads((out / "results.json").read_text())
-    assert results["protocol"]["settings"] == {"recording": "mine"}
+    assert results["protocol"]["settings"] == {"recording": "mine", "episode_s": episode_s}
     assert "recording='mine'" in results["protocol"]["bank"]
     # the observer, designed on this rocket, holds the angle better than the trim floor
     rows = results["controllers"]
@@ -138,6 +138,11 @@ def test_db_add_holdout_refuses_what_it_cannot_honour(
     refused(capsys, [*base, "--holdout", "0.4", "--split", "test"], "--holdout", "--split")
     refused(capsys, [*base, "--holdout", "0.95"], "--holdout")
     assert not new.exists()
+    # a run the database holds already is not split beside its whole traces
+    ok(capsys, [*base, "--mc-runs", "0"])
+    refused(capsys, [*base, "--holdout", "0.4"], "holds this run's samples (mine) already")
+    with DisturbanceDB(new, create=False) as store:
+        assert len(store.recordings()) == 1
 
 
 def test_a_recording_split_by_hand_keeps_its_times() -> None:
