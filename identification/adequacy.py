@@ -123,8 +123,14 @@ def _fin_share(
     its change, the model's own lag behind its steady state ``lag`` and that times the
     size (what a wrong gain, damping law or servo leaves), and the p-value of that line
     (a Wald test with Newey-West covariance: turbulence correlated over many readings
-    meets the fin's few moves in a short record, and explains some of it by chance)."""
-    import statsmodels.api as sm
+    meets the fin's few moves in a short record, and explains some of it by chance).
+
+    The arithmetic of statsmodels' ``OLS(...).fit(cov_type="HAC")`` and its
+    ``wald_test(..., scalar=True)`` (Bartlett weights, no small-sample factor, χ²),
+    written out around statsmodels' own kernel ``S_hac_simple``: the results object's
+    machinery cost more than the regression (p-values equal to 1e-13 relative)."""
+    from scipy import stats
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
 
     size = np.abs(fin[:-1] + theta_bar)
     design = np.column_stack(
@@ -148,12 +154,23 @@ def _fin_share(
         if norm > 1e-8 * max(float(np.linalg.norm(column)), 1e-300):
             basis.append(rest / norm)
             keep[j] = True
-    fit = sm.OLS(u, design[:, keep]).fit(cov_type="HAC", cov_kwds={"maxlags": max(maxlags, 1)})
-    if keep.sum() < 2 or not np.isfinite(fit.rsquared):
+    x = design[:, keep]
+    if x.shape[1] < 2:
         return 0.0, 1.0
-    restriction = np.eye(int(keep.sum()))[1:]
-    p_value = float(fit.wald_test(restriction, scalar=True).pvalue)
-    return max(float(fit.rsquared), 0.0), p_value
+    pinv = np.linalg.pinv(x)
+    beta = pinv @ u
+    resid = u - x @ beta
+    centred = u - u.mean()
+    r2 = 1.0 - float(resid @ resid) / float(centred @ centred)
+    bread = pinv @ pinv.T
+    cov = bread @ S_hac_simple(x * resid[:, None], nlags=max(maxlags, 1)) @ bread
+    try:
+        wald = float(beta[1:] @ np.linalg.solve(cov[1:, 1:], beta[1:]))
+    except np.linalg.LinAlgError:
+        return max(r2, 0.0), 1.0
+    if not (np.isfinite(r2) and np.isfinite(wald)):
+        return 0.0, 1.0
+    return max(r2, 0.0), float(stats.chi2.sf(wald, x.shape[1] - 1))
 
 
 @dataclass(frozen=True, eq=False)
