@@ -144,3 +144,27 @@ def test_the_paper_rocket_keeps_the_paper_smoothing() -> None:
         for model, found in fit(rec, "output-error", options=options).items():
             assert "smoothing_window_s" not in found.metrics
             assert smoothing_for(found.params, model_inputs(rec, model, options), options) is None
+
+
+def test_the_fin_share_is_statsmodels_ols_with_newey_west_and_its_wald_test() -> None:
+    import math
+
+    import numpy as np
+    import statsmodels.api as sm
+
+    from identification.adequacy import _fin_share
+    from identification.statistics import decorrelation_stride
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    fin = np.repeat(rng.uniform(-20, 20, n // 100 + 1), 100)[: n + 1]
+    lag = np.convolve(rng.standard_normal(n + 30), np.ones(30) / 30, "valid")[: n + 1]
+    u = np.convolve(rng.standard_normal(n + 20), np.ones(20) / 20, "valid")[:n] + 0.01 * fin[:-1]
+    share, p = _fin_share(u, fin, 2.0, lag)
+    size = np.abs(fin[:-1] + 2.0)
+    x = np.column_stack([np.ones(n), fin[:-1], size, np.diff(fin), lag[:-1], lag[:-1] * size])
+    maxlags = min(2 * decorrelation_stride(u, math.exp(-1.0)), n // 4)
+    fitted = sm.OLS(u, x).fit(cov_type="HAC", cov_kwds={"maxlags": maxlags})
+    expected = float(fitted.wald_test(np.eye(6)[1:], scalar=True).pvalue)
+    assert share == pytest.approx(fitted.rsquared, rel=1e-9)
+    assert p == pytest.approx(expected, rel=1e-9)
