@@ -413,6 +413,14 @@ def add_recording(
         for m in chosen
         if not all(db.has_identification(recording_hash, m, model) for model in _models_of(m))
     ]
+    split = any(r.name == recording.name and "part" in r.metadata for r in db.recordings())
+    if split and (missing or not db.has_recording(recording_hash)):
+        raise DatabaseError(
+            f"{db.path}: {recording.name} is stored split for a held-out evaluation (db add "
+            "--holdout); a method or run added to it here would be replayed whole: split it "
+            f"again with --holdout and --method {' --method '.join(missing or chosen)} into a "
+            "new database (or give the run another name: rocketroll import-csv --name)"
+        )
     if db.has_recording(recording_hash) and not missing:
         stored_id = db.recording_row(recording_hash).id
         if surrogates == 0:

@@ -129,6 +129,21 @@ def test_tune_and_training_read_the_same_selection(
     )
 
 
+def test_a_method_is_not_added_to_a_split_run_as_a_whole_one(
+    mine: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path, db = mine
+    import sqlite3
+
+    copy = tmp_path / "copy.sqlite"
+    source, target = sqlite3.connect(db), sqlite3.connect(copy)  # with its write-ahead log
+    source.backup(target)
+    source.close()
+    target.close()
+    argv = ["db", "add", str(path), "--db", str(copy), "--method", "output-error"]
+    refused(capsys, argv, "stored split for a held-out evaluation", "--method output-error")
+
+
 def test_db_add_holdout_refuses_what_it_cannot_honour(
     mine: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
