@@ -207,6 +207,26 @@ def holdout_rows(
     return recordings, identifications, traces
 
 
+def _check_not_split(db: Store, recording: Recording, methods: Sequence[str]) -> None:
+    """Refuse (:class:`DatabaseError`) to add ``methods``' fits of ``recording`` where a run
+    of its name is stored split for a held-out evaluation (:func:`holdout_rows`), unless
+    it is that run with every one of those methods already: they would be whole traces,
+    replayed beside the held-out ones."""
+    if not any(r.name == recording.name and "part" in r.metadata for r in db.recordings()):
+        return
+    recording_hash = content_hash(recording.columns())
+    if db.has_recording(recording_hash) and all(
+        db.has_identification(recording_hash, m, model) for m in methods for model in _models_of(m)
+    ):
+        return  # nothing new: "already stored"
+    raise DatabaseError(
+        f"{db.path}: {recording.name} is stored split for a held-out evaluation (db add "
+        "--holdout); a method or run added to it here would be replayed whole: split it "
+        f"again with --holdout and --method {' --method '.join(methods)} into a new database "
+        "(or give the run another name: rocketroll import-csv --name)"
+    )
+
+
 def _check_new_run(db: Store, recording: Recording) -> None:
     """Refuse (:class:`DatabaseError`) to split a run whose samples or name the database
     holds already: its stored traces (whole, in whichever split) would stay beside the
@@ -413,14 +433,7 @@ def add_recording(
         for m in chosen
         if not all(db.has_identification(recording_hash, m, model) for model in _models_of(m))
     ]
-    split = any(r.name == recording.name and "part" in r.metadata for r in db.recordings())
-    if split and (missing or not db.has_recording(recording_hash)):
-        raise DatabaseError(
-            f"{db.path}: {recording.name} is stored split for a held-out evaluation (db add "
-            "--holdout); a method or run added to it here would be replayed whole: split it "
-            f"again with --holdout and --method {' --method '.join(missing or chosen)} into a "
-            "new database (or give the run another name: rocketroll import-csv --name)"
-        )
+    _check_not_split(db, recording, missing or chosen)
     if db.has_recording(recording_hash) and not missing:
         stored_id = db.recording_row(recording_hash).id
         if surrogates == 0:
@@ -477,6 +490,7 @@ def add_identification(
     on the same measurements.
     """
     chosen = _methods(methods)
+    _check_not_split(db, result.recording, chosen)
     return _store(
         db,
         Context(result.recording, result.options, paper=result),
