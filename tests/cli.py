@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from rocketroll.cli import main as rocketroll
@@ -24,3 +28,18 @@ def refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) 
     for needle in needles:
         assert needle in err, err
     return err
+
+
+def python(
+    argv: list[str], cwd: Path, env: dict[str, str], *, check: bool = False
+) -> subprocess.CompletedProcess[str]:
+    """``python ARGV`` in a new process from ``cwd`` with ``env``; its output as text."""
+    return subprocess.run(
+        [sys.executable, *argv],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=check,
+    )

@@ -14,8 +14,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import subprocess
-import sys
 import textwrap
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -43,6 +41,7 @@ from identification.pipeline import IdentifyOptions
 from rocketroll.cli import main as rocketroll
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs
+from tests.cli import python
 
 REPO = Path(__file__).resolve().parents[1]
 FAST = IdentifyOptions(noise_runs=0)
@@ -262,14 +261,6 @@ def test_a_plugin_module_registers_in_another_process(tmp_path: Path) -> None:
         (["eval", "--help"], "plug: from a plugin"),
         (["db", "add", "--help"], "plug-method"),
     ):
-        done = subprocess.run(
-            [sys.executable, "-m", "rocketroll", *argv],
-            capture_output=True,
-            text=True,
-            env=env,
-            cwd=tmp_path,
-            timeout=120,
-            check=False,
-        )
+        done = python(["-m", "rocketroll", *argv], tmp_path, env)
         assert done.returncode == 0, done.stderr
         assert wanted in " ".join(done.stdout.split()), done.stdout

@@ -24,6 +24,7 @@ import pytest
 
 from rocketroll_common import numerics
 from rocketroll_common.errors import RocketrollError, SettingError
+from tests.cli import python
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -68,21 +69,6 @@ def fails(message: str) -> None:
     raise SettingError("--size", message)
 
 
-def _python(
-    argv: list[str], cwd: Path, env: dict[str, str], *, check: bool
-) -> subprocess.CompletedProcess[str]:
-    """``python ARGV`` in a new process from ``cwd`` with ``env``; its output as text."""
-    return subprocess.run(
-        [sys.executable, *argv],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=check,
-    )
-
-
 def _in_a_process(setting: str) -> tuple[str, str]:
     """(pinned, unpinned) fingerprints computed by a new process under ``setting``."""
     env = numerics.with_settings(numerics.MACHINE_SETTINGS[setting])
@@ -91,7 +77,7 @@ def _in_a_process(setting: str) -> tuple[str, str]:
         "from tests.test_numerics import fingerprint\n"
         "print(call_pinned(fingerprint), fingerprint())\n"
     )
-    done = _python(["-c", code], REPO, env, check=True)
+    done = python(["-c", code], REPO, env, check=True)
     pinned, unpinned = done.stdout.split()
     return pinned, unpinned
 
@@ -254,7 +240,7 @@ def test_the_child_imports_what_the_caller_does_not_its_working_folder(tmp_path:
         "print(len(call_pinned(bundled_paths)))\n"
     )
     env = numerics.with_settings({"PYTHONPATH": str(REPO)})
-    done = _python([str(script)], work, env, check=False)
+    done = python([str(script)], work, env, check=False)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "9"
 
@@ -292,6 +278,6 @@ with warnings.catch_warnings(record=True) as caught:
 def test_a_function_of_the_callers_script_is_computed_there_with_a_warning() -> None:
     """A function of ``__main__`` pickles by name, but the child's ``__main__`` is another."""
     env = numerics.with_settings({"PYTHONPATH": str(REPO)})
-    done = _python(["-c", _SCRIPT], REPO, env, check=True)
+    done = python(["-c", _SCRIPT], REPO, env, check=True)
     assert done.stdout.startswith("True ["), done.stdout + done.stderr
     assert "mine runs in this process, its numerics not pinned" in done.stdout

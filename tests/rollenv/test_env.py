@@ -32,6 +32,7 @@ from disturbances.default import open_default
 from identification.model import Servo, servo_path, simulate
 from rollenv.bank import variant_config
 from rollenv.env import RESET_OPTIONS, RocketRollEnv
+from tests.cli import python
 from tests.rollenv.conftest import array_bank, wrap
 
 IDS = rollenv.VARIANTS.names()
@@ -579,15 +580,7 @@ REGISTRATION = textwrap.dedent(
 def test_registration_in_a_fresh_process(default_db):
     env = dict(os.environ)
     assert env["ROCKETROLL_DB"] == str(default_db)  # the session's database, already built
-    done = subprocess.run(
-        [sys.executable, "-W", "error", "-c", REGISTRATION],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        env=env,
-        timeout=120,
-        check=False,
-    )
+    done = python(["-W", "error", "-c", REGISTRATION], REPO, env)
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""  # in particular, no database was built
     lines = done.stdout.splitlines()
