@@ -91,14 +91,13 @@ def train_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBa
     and the train split holds a part of it (``rocketroll db add --holdout``: the run
     before its held-out end) that part, so the design is of that rocket; else all of the
     train split."""
-    from disturbances.bank import BankError
-    from rollenv.bank import load_bank
+    from rollenv.bank import find_bank, load_bank
 
     if config.recording is not None:
-        try:
-            return load_bank(replace(config, split="train"), db)
-        except BankError:
-            pass  # no part of it to design on: the train split's rockets
+        part = find_bank(replace(config, split="train"), db)
+        if part is not None:
+            return part
+    # no part of it to design on: the train split's rockets
     return load_bank(replace(config, split="train", recording=None), db)
 
 

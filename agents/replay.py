@@ -14,7 +14,6 @@ This module imports nothing heavy: the commands' argument classes use it.
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -121,16 +120,16 @@ def fitted_settings(
     replays (train, sweep run): the recording's in the train split, the whole test split
     (training's held-out check) and the recording's there (an evaluation of it); with
     the line that says so (None: not fitted)."""
-    from disturbances.bank import BankError
-    from rollenv.bank import load_bank
+    from rollenv.bank import find_bank, load_bank
 
     options = replay_options(settings, recording)
     if options.get("recording") is None or "episode_s" in options:
         return options, None
     config = options_config(env_id, options, "train")
     banks = [load_bank(config, db), load_bank(replace(config, split="test", recording=None), db)]
-    with contextlib.suppress(BankError):  # no held-out part: the whole test split is checked
-        banks.append(load_bank(replace(config, split="test"), db))
+    held = find_bank(replace(config, split="test"), db)  # None: the whole test split checked
+    if held is not None:
+        banks.append(held)
     config, note = fit_episode(config, banks, options)
     if note is None:
         return options, None

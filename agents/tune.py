@@ -31,6 +31,7 @@ from agents.replay import (
 )
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv import VARIANTS
+from rollenv.bank import find_bank
 from rollenv.core import RollConfig
 
 __all__ = ["COMMAND", "TuneArgs", "tune", "tune_bandwidth"]
@@ -96,7 +97,7 @@ def tune(args: TuneArgs) -> int:
     from disturbances.bank import BankError
 
     try:
-        config, _, settings, note = replay_config(
+        config, _, _, note = replay_config(
             args.env_id, args.settings, args.recording, "train", args.db
         )
     except BankError:
@@ -104,7 +105,7 @@ def tune(args: TuneArgs) -> int:
             raise
         # no part of the recording in the train split: its rockets, as the designs read
         others = {k: v for k, v in args.settings.items() if k != "recording"}
-        config, _, settings, note = replay_config(args.env_id, others, None, "train", args.db)
+        config, _, _, note = replay_config(args.env_id, others, None, "train", args.db)
         replayed = args.recording or args.settings["recording"]
         print(f"  {replayed} has no part in the train split: tuned on the train split's rockets")
     else:
@@ -135,24 +136,18 @@ def tune(args: TuneArgs) -> int:
         f"best ω by {args.metric} = {best:g} rad/s: kp = {gains.kp:.4g}, ki = {gains.ki:.4g}, "
         f"kd = {gains.kd:.4g}, k_ff = {gains.k_ff:.4g}, trim = {gains.trim_deg:.4g}°{where}"
     )
-    same = "".join(f" --set {k}={v}" for k, v in settings.items() if k != "recording")
+    # the user's own --set options: eval fits its episode to the held-out trace itself
+    same = "".join(f" --set {k}={v}" for k, v in args.settings.items() if k != "recording")
     same += f" --db {args.db}" if args.db is not None else ""
-    if replayed is not None and _in_test_split(replace(config, recording=replayed), args.db):
+    held = (
+        None
+        if replayed is None
+        else find_bank(replace(config, recording=replayed, split="test"), args.db)
+    )
+    if held is not None:
         same += f" --recording {replayed}"  # its held-out part, where eval replays
     print(f"use it with: rocketroll eval --env-id {args.env_id} --policy pid:{best:g}{same}")
     return 0
-
-
-def _in_test_split(config: RollConfig, db: str | None) -> bool:
-    """Whether the test split, which eval replays, holds the recording ``config`` replays."""
-    from disturbances.bank import BankError
-    from rollenv.bank import load_bank
-
-    try:
-        load_bank(replace(config, split="test"), db)
-    except BankError:
-        return False
-    return True
 
 
 #: ``rocketroll tune pid``.

@@ -733,10 +733,9 @@ def add(args: AddArgs) -> int:
             f"{result.traces} traces (ids {', '.join(map(str, result.trace_ids))})"
         )
         if args.holdout:
-            parts = [
-                r for r in db.recordings() if r.name == recording.name and "part" in r.metadata
-            ]
-            for row in parts:
+            from disturbances.ingest import split_parts
+
+            for row in split_parts(db, recording.name):
                 verdicts = sorted(
                     {
                         i.verdict or "not assessed"

@@ -77,6 +77,7 @@ __all__ = [
     "holdout_rows",
     "identification_rows",
     "posterior_rows",
+    "split_parts",
     "surrogate_rows",
     "trace_summary",
 ]
@@ -185,11 +186,8 @@ def holdout_rows(
     t = np.asarray(rec.time_s, dtype=float)
     cut = float(t[int(np.searchsorted(t, t[-1] - fraction * (t[-1] - t[0])))])
     design = rec.part(float(t[0]), cut, split="train", part="design", **{"part.to_s": f"{cut:g}"})
-    judged = Recording(
-        name=rec.name,
-        source=rec.source,
-        metadata={**rec.metadata, "split": "test", "part": "held-out", "part.from_s": f"{cut:g}"},
-        **rec.columns(),
+    judged = rec.part(
+        float(t[0]), math.inf, split="test", part="held-out", **{"part.from_s": f"{cut:g}"}
     )
     recordings, identifications, traces = [], [], []
     for part in (design, judged):
@@ -207,12 +205,18 @@ def holdout_rows(
     return recordings, identifications, traces
 
 
+def split_parts(db: Store, name: str) -> list[RecordingRow]:
+    """The parts of the run ``name`` stored split for a held-out evaluation
+    (:func:`holdout_rows`; none where it is not)."""
+    return [r for r in db.recordings() if r.name == name and "part" in r.metadata]
+
+
 def _check_not_split(db: Store, recording: Recording, methods: Sequence[str]) -> None:
     """Refuse (:class:`DatabaseError`) to add ``methods``' fits of ``recording`` where a run
     of its name is stored split for a held-out evaluation (:func:`holdout_rows`), unless
     it is that run with every one of those methods already: they would be whole traces,
     replayed beside the held-out ones."""
-    if not any(r.name == recording.name and "part" in r.metadata for r in db.recordings()):
+    if not split_parts(db, recording.name):
         return
     recording_hash = content_hash(recording.columns())
     if db.has_recording(recording_hash) and all(

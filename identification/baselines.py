@@ -228,14 +228,12 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
     fits = []
     for model in models:
         found = _output_error(inputs, model, None)
-        used = inputs
-        extra: dict[str, float] = {}
+        used, window = inputs, math.inf  # the window used, where shorter than the options'
         for _ in range(MAX_RESMOOTHING):
             shorter = smoothing_for(found.params, used, options)
-            if shorter is None or shorter >= extra.get("smoothing_window_s", np.inf):
+            if shorter is None or shorter >= window:
                 break
-            extra = {"smoothing_window_s": shorter}
-            used = context.smoothed_over(shorter)
+            window, used = shorter, context.smoothed_over(shorter)
             found = _output_error(used, model, found.params)
         dist, resim = recover_disturbance(used, found.params, model, options)
         metrics = {
@@ -253,7 +251,7 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
             "optimizer_message": found.message,
             "std_errors": found.std_errors,
             "correlations": found.correlations,
-            **extra,
+            **({"smoothing_window_s": window} if math.isfinite(window) else {}),
         }
         fits.append(
             ModelFit("output-error", model, found.params, dist, metrics, trace_settings(dist))

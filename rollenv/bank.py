@@ -13,7 +13,7 @@ from disturbances.bank import TraceBank
 from disturbances.default import open_database
 from rollenv.core import RollConfig, config_fields
 
-__all__ = ["load_bank", "make_config", "variant_config"]
+__all__ = ["find_bank", "load_bank", "make_config", "variant_config"]
 
 _CACHE: dict[tuple[Any, ...], TraceBank] = {}
 _LOCK = threading.Lock()
@@ -104,3 +104,15 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     finally:
         database.close()
     return bank
+
+
+def find_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank | None:
+    """:func:`load_bank`, or None where the database holds no traces of that selection (a
+    :class:`~disturbances.bank.BankError`: a recording the split lacks, a method it does
+    not hold, ...)."""
+    from disturbances.bank import BankError
+
+    try:
+        return load_bank(config, db)
+    except BankError:
+        return None

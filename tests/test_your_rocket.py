@@ -114,6 +114,8 @@ def test_tune_and_training_read_the_same_selection(
          "--omegas", "2,4"],
     )  # fmt: skip
     assert "recording='mine'" in printed and "--recording mine" in printed
+    hint = printed.splitlines()[-1]  # eval fits its own episode to the held-out trace
+    assert hint.startswith("use it with:") and "episode_s" not in hint
     settings, note = fitted_settings("RocketRoll-v0", {}, "mine", str(db))
     assert note is not None and settings["recording"] == "mine"
     with DisturbanceDB(db, create=False) as store:
