@@ -189,15 +189,14 @@ def _sandwich(
     """Standard errors and correlations of a least-squares fit whose residuals are
     correlated in time (the turbulence's response is in them): the Newey-West sandwich
     ``(JᵀJ)⁻¹ S (JᵀJ)⁻¹`` with ``S`` over Bartlett-weighted lags up to four times the
-    residuals' correlation length (statsmodels' ``S_hac_simple``), with its small-sample
+    residuals' correlation length (:func:`identification.statistics.newey_west_meat`,
+    statsmodels' ``S_hac_simple``), with its small-sample
     factor ``n / (n - k)``.  NaN / empty where ``JᵀJ`` is singular.
 
     Approximate: over 12 seeds each of three tunnel truths the errors of α were 1.10-1.35
     reported standard errors in SD (1.15-1.50 with lags up to twice the correlation
     length), where 1 is exact."""
-    from statsmodels.stats.sandwich_covariance import S_hac_simple
-
-    from identification.statistics import decorrelation_stride, standard_errors
+    from identification.statistics import decorrelation_stride, newey_west_meat, standard_errors
 
     n, k = jac.shape
     try:
@@ -205,7 +204,7 @@ def _sandwich(
     except np.linalg.LinAlgError:
         return standard_errors(None, names)
     lags = min(4 * decorrelation_stride(residuals, math.exp(-1.0)), n // 4)
-    meat = S_hac_simple(jac * residuals[:, None], nlags=max(lags, 1))
+    meat = newey_west_meat(jac * residuals[:, None], max(lags, 1))
     return standard_errors(bread @ meat @ bread * n / (n - k), names)
 
 

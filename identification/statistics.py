@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats
+from scipy.fft import next_fast_len
 
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
@@ -31,6 +32,7 @@ __all__ = [
     "DisturbanceStatistics",
     "TraceStatistics",
     "decorrelation_stride",
+    "newey_west_meat",
     "standard_errors",
     "trace_statistics",
 ]
@@ -39,6 +41,26 @@ __all__ = [
 DECORRELATION = 0.1
 #: Significance level of the tests.
 ALPHA = 0.05
+
+
+def newey_west_meat(scores: FloatArray, lags: int) -> FloatArray:
+    """The Newey-West sandwich's inner matrix ``Σ_{|j|<=L} (1 - |j|/(L+1)) Γ_j`` of the
+    score rows ``scores`` (n × k, consecutive in time), ``Γ_j = Σ_t z_{t+j} z_tᵀ``:
+    statsmodels' ``S_hac_simple(scores, nlags=lags)`` (Bartlett weights) in ``O(n k)``
+    rather than one product per lag.
+
+    The Bartlett weights times ``L + 1`` are the overlap of two boxcars of ``L + 1``
+    readings, so the weighted sum of lags is ``YᵀY / (L + 1)`` with ``Y`` the running sums
+    of ``L + 1`` consecutive scores (positive semi-definite, as Bartlett's always is)."""
+    z = np.atleast_2d(np.asarray(scores, dtype=float).T)  # k × n: sums along rows
+    n = z.shape[1]
+    lags = max(0, min(int(lags), n - 1))
+    zero = np.zeros((z.shape[0], 1))
+    total = np.concatenate([zero, np.cumsum(z, axis=1)], axis=1)  # total[:, t] = Σ_{s<t} z_s
+    end = np.concatenate([total[:, 1:], np.repeat(total[:, -1:], lags, axis=1)], axis=1)
+    start = np.concatenate([np.repeat(zero, lags, axis=1), total[:, :n]], axis=1)
+    running = end - start  # column t < n + L: Σ_{s=t-L..t} z_s (zero outside the record)
+    return np.asarray(running @ running.T / (lags + 1))
 
 
 def standard_errors(
@@ -71,8 +93,11 @@ def decorrelation_stride(x: ArrayLike, threshold: float = DECORRELATION) -> int:
     n = y.size
     if n < 3 or not np.any(y):
         return 1
-    spectrum = np.fft.rfft(y, 2 * n)
-    acf = np.fft.irfft(spectrum * np.conj(spectrum))[: n // 2]
+    # Zero-padded to at least 2n - 1 (a linear, not circular, correlation), at a length the
+    # FFT factors well.
+    size = next_fast_len(2 * n, real=True)
+    spectrum = np.fft.rfft(y, size)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum), size)[: n // 2]
     acf = acf / acf[0]
     below = np.flatnonzero(acf < threshold)
     return int(below[0]) if below.size else max(1, n // 2)

@@ -33,6 +33,7 @@ from identification.recording import Recording
 from identification.statistics import (
     decorrelation_stride,
     disturbance_statistics,
+    newey_west_meat,
     trace_statistics,
 )
 from identification.steps import (
@@ -737,6 +738,19 @@ def test_decorrelation_stride_of_an_ar1() -> None:
     assert decorrelation_stride(np.full(100, 3.0)) == 1
     # With threshold 0.35: ρ² = 0.433, ρ³ = 0.285.
     assert decorrelation_stride(ar1(200_000, rho, 3), threshold=0.35) == 3
+
+
+@pytest.mark.parametrize(("n", "k", "lags"), [(10, 1, 0), (10, 2, 3), (9, 3, 8), (4000, 6, 150)])
+def test_newey_west_meat_is_statsmodels_kernel(n: int, k: int, lags: int) -> None:
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+    rng = np.random.default_rng(n + k + lags)
+    z = np.cumsum(rng.standard_normal((n, k)), axis=0) * 0.1 + rng.standard_normal((n, k))
+    expected = S_hac_simple(z, nlags=lags)
+    assert newey_west_meat(z, lags) == pytest.approx(
+        expected, rel=1e-12, abs=1e-12 * np.abs(expected).max()
+    )
+    assert np.all(np.linalg.eigvalsh(newey_west_meat(z, lags)) > -1e-9 * np.abs(expected).max())
 
 
 def test_lilliefors_flags_student_t_and_not_gaussian() -> None:
