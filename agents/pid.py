@@ -32,7 +32,7 @@ __all__ = [
 ]
 
 #: Closed-loop bandwidth ω (rad/s) per task, chosen by :func:`agents.tune.tune_bandwidth`
-#: on the default database's train split (see the README's baselines section).
+#: on the default database's train split (docs: results/evaluation.md, the PID's gains).
 DEFAULT_BANDWIDTH = {"angle": 2.5, "rate": 8.0}
 #: The same for the scheduled PID in flight (``rocketroll tune pid --env-id
 #: RocketRollFlight-v0`` and ``RocketRollFlightRate-v0``, 20 train episodes: 1.24° at ω = 6,
@@ -327,7 +327,7 @@ def make_pid(design: Design) -> PIDController:
 
 def make_tunnel_pid(design: Design) -> PIDController:
     """``--policy pid-tunnel[:OMEGA]``: the tunnel's fixed gains, in flight too (the
-    controller tuned in the tunnel and flown unchanged: issue 17's cautionary row)."""
+    controller tuned in the tunnel and flown unchanged: the flight table's cautionary row)."""
     omega = _omega(design, "pid-tunnel")
     pid = PIDController.for_env(design.config, NominalModel.from_bank(design.train_bank), omega)
     pid.name = "PID, tunnel gains" + (f" ω={omega:g}" if design.arg else "")

@@ -50,7 +50,7 @@ COMMITTED = Path(__file__).resolve().parent / "policies"
 
 def shipped_path(given: str) -> Path:
     """``given`` as a path; a relative one that is not there but names a folder shipped with
-    the package (``agents/policies/seeds/...``, as the README writes it from the repository)
+    the package (``agents/policies/seeds/...``, as the docs write it from the repository)
     is the installed package's."""
     path = Path(given)
     if not path.exists() and not path.is_absolute():

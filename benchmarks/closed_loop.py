@@ -19,7 +19,7 @@ The controllers are the shipped ones, designed on the default database's
 train split, the same in both runs.  Per recording the score of a metric is
 the mean over its windows; the table gives, per method, task, controller and
 metric, the ratio replay / true averaged over recordings, its SD over them
-and its range, and a verdict per method against issue 14's floor: every
+and its range, and a verdict per method against the replay's floor: every
 averaged RMS, settled-RMS and headline (regulation RMS) ratio of the
 deployable controllers within [0.90, 1.10] and the oracle's within [0.80,
 1.25], on every task and every truth.

@@ -13,7 +13,7 @@ update), this measures:
   **target: >= 10 M env-steps/s**; the CartPole row shows what this machine
   does with a numpy-batched classic-control env;
 * ``RocketRollFlight-v0``, single and at 4096 envs, against the tunnel's rows:
-  **target: at least 0.8 x** (issue 17: the rocket changes every step, the
+  **target: at least 0.8 x** (the rocket changes every step, the
   traces are flown, the angle is the integrated gyro).
 
 With ``--against REF`` the RocketRoll rows are also timed in a worktree of
@@ -229,7 +229,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ok_flight = min(flight_single_ratio, flight_vector_ratio) >= FLIGHT_TARGET
     print(
         f"flight: {FLIGHT_ID} / RocketRoll-v0 = {flight_single_ratio:.2f} single, "
-        f"{flight_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}, issue 17): "
+        f"{flight_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}): "
         f"{'PASS' if ok_flight else 'FAIL'}"
     )
     ok_against = True

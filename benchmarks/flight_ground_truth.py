@@ -10,7 +10,7 @@ identifies it.  Per flight: the relative error of ``α₀`` and ``β̄₀`` (the
 scaled coefficients at the reference airspeed: ``C_δ``- and ``C_P``-like),
 the error of θ̄ (°) and ᾱ₀, the RMS error of the damping ``a(θ)`` over the
 flown fin angles (%), the re-simulation's rate MAE as a percentage of the
-mean measured ``|rate|``, and the fit's time.  Below the table: issue 17's
+mean measured ``|rate|``, and the fit's time.  Below the table: the flight
 targets (coefficients within 5 %, re-simulation under 2 %), PASS or FAIL
 over every fit.
 
@@ -132,7 +132,7 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def verdicts(rows: list[dict[str, Any]]) -> list[str]:
-    """Issue 17's targets over every flight run."""
+    """The flight targets over every flight run."""
     n = len(rows)
     coefficient = [r for r in rows if abs(r["alpha_pct"]) < 5 and abs(r["beta_bar_pct"]) < 5]
     resim = [r for r in rows if r["resim_pct"] < 2.0]

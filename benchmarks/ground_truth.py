@@ -29,7 +29,7 @@ with the truth the tunnel recorded:
 Per metric and method the table gives, over seeds, the mean absolute error,
 the SD of the signed error, the bias (signed mean) and the worst error (the
 signed value with the largest magnitude).  Below it: each method's biases,
-and the targets of issue 14 for the methods with a posterior, each PASS or
+and the targets set for the methods with a posterior, each PASS or
 FAIL as measured.
 
 Run from the repository root::
@@ -345,7 +345,7 @@ def describe_bias(metric: Metric, s: Stats) -> str:
     return f"{what} {verdict} ({value}{ref}, t = {t:+.1f})"
 
 
-#: Issue 14's floor for a method with a posterior: (metric, statistic, low, high, text).
+#: The floor for a method with a posterior: (metric, statistic, low, high, text).
 TARGETS: tuple[tuple[str, str, float, float, str], ...] = (
     ("alpha_theta_pct", "mean_abs", 0.0, 1.5, "α mean |error| ≤ 1.5 %"),
     ("theta_bar_theta_deg", "mean_abs", 0.0, 0.3, "θ̄ mean |error| ≤ 0.3°"),
@@ -396,7 +396,7 @@ def print_summary(
     for method in methods:
         if (method, "coverage90") not in table:
             continue
-        print(f"Targets (issue 14), {method}:")
+        print(f"Targets, {method}:")
         a_mean = table.get((method, "a_mean_theta"))
         for key, stat, low, high, text in TARGETS:
             s = table.get((method, key))
@@ -571,9 +571,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--csv", type=Path, default=None, help="write per-recording rows to this CSV"
     )
-    parser.add_argument(
-        "--strict", action="store_true", help="exit 1 when a target of issue 14 is missed"
-    )
+    parser.add_argument("--strict", action="store_true", help="exit 1 when a target is missed")
     parser.add_argument(
         "--shapes",
         action="store_true",

@@ -1,4 +1,4 @@
-"""Which figures move between machines, and why: the default database and the README's
+"""Which figures move between machines, and why: the default database and the site's
 tables under the numerical settings that differ between x86-64 machines of one kind.
 
 Machines differ in OpenBLAS's kernel (chosen by processor, or by
@@ -10,7 +10,7 @@ process as it is (``ROCKETROLL_NUMERICS=pinned`` keeps the build in it: how
 every build ran before the numerics were pinned) and pinned, as
 ``rocketroll db build`` does (:mod:`rocketroll_common.numerics`) -- and
 compares every identification's parameters and every trace's checksum with the
-first setting's; then evaluates the README's three tables on each database,
+first setting's; then evaluates the site's three tables on each database,
 under the setting, and compares them with the first setting's pinned ones.
 
 Run from the repository root (about 2 minutes per setting)::
@@ -33,7 +33,7 @@ from rocketroll_common.numerics import MACHINE_SETTINGS, MARKER, with_settings
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: The README's tables: ``rocketroll eval`` arguments.
+#: The site's evaluation tables: ``rocketroll eval`` arguments.
 TABLES: dict[str, list[str]] = {
     "angle": ["--env-id", "RocketRoll-v0"],
     "rate": ["--env-id", "RocketRollRate-v0"],

@@ -63,7 +63,7 @@ RECORDING = "tunnel-paper-seed0"
 PIPELINE_TARGET_MS = 50.0
 MONTE_CARLO_TARGET_MS = 5000.0
 MONTE_CARLO_RUNS = 100
-#: Issue 14: maximum likelihood on the 573-s recording (both models), and 100 posterior traces.
+#: Targets: maximum likelihood on the 573-s recording (both models), and 100 posterior traces.
 ML_TARGET_MS = 1000.0
 POSTERIOR_TARGET_MS = 500.0
 POSTERIOR_DRAWS = 100

@@ -3,7 +3,7 @@
 The database's traces were identified in the wind tunnel at one airspeed
 ``V_ref`` (about 50 km/h, paper §4).  ``u_d`` is an equivalent fin angle: a
 flow-angle disturbance, roughly gust velocity / airspeed.  Flown at airspeed
-``V(t)``, a trace becomes (issue 17, item 3a)::
+``V(t)``, a trace becomes::
 
     u_flight(t) = (V_ref / max(V(t), V_ref)) · u_tunnel(s + τ(t)),   τ(t) = ∫₀ᵗ V/V_ref dt'
 

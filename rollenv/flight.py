@@ -1,4 +1,4 @@
-"""The rocket in flight: the identified roll model carried along an ascent (issue 17, §4).
+"""The rocket in flight: the identified roll model carried along an ascent (the paper's §4).
 
 A flight environment (``flight=`` of :class:`rollenv.core.RollConfig`) is the
 tunnel's environment with three things changed, all decided here once per

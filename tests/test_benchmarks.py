@@ -33,7 +33,7 @@ def test_ground_truth_reports_every_method_and_the_targets(default_db: Path) -> 
     for method in ("paper:", "output-error:", "ml:"):
         assert method in out
     assert "u_d MAE / true-parameter bound" in out
-    assert "Targets (issue 14), ml:" in out
+    assert "Targets, ml:" in out
     assert out.count("PASS") + out.count("FAIL") == 7
 
 

@@ -205,7 +205,7 @@ def test_default_bandwidths_are_the_design_default():
         assert PIDGains.place(NOMINAL, task).omega == DEFAULT_BANDWIDTH[task]
 
 
-# ---------------------------------------------------------------- flight (issue 17)
+# ---------------------------------------------------------------- flight
 def test_the_scheduled_pid_places_each_steps_gains_on_the_flying_rocket(train_model):
     from agents.pid import FLIGHT_BANDWIDTH
 
@@ -244,7 +244,7 @@ def test_the_scheduled_pid_places_each_steps_gains_on_the_flying_rocket(train_mo
 
 
 def test_in_flight_the_scheduled_pid_holds_and_the_tunnels_gains_do_not(default_db):
-    # issue 17's target on held-out flights: the scheduled PID within 2° RMS over boost and
+    # the flight target on held-out flights: the scheduled PID within 2° RMS over boost and
     # coast; the PID tuned in the tunnel and flown unchanged is the cautionary row.
     from agents.registry import make_controller
 

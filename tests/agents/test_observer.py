@@ -142,7 +142,7 @@ PPO_OFFSET = pytest.param(
     marks=pytest.mark.xfail(
         strict=True,
         reason="the committed angle PPO policy holds a ~4° offset between slews "
-        "(README, Baselines: its reward is dominated by the slews)",
+        "(docs, results: its reward is dominated by the slews)",
     ),
 )
 
@@ -282,7 +282,7 @@ def test_the_observer_controller_pickles_and_restarts(default_db):
     np.testing.assert_array_equal(controller.act(obs, None), clone.act(obs, None))
 
 
-# ------------------------------------------------------------------ flight (issue 17)
+# ------------------------------------------------------------------ flight
 def test_in_flight_the_observer_is_scheduled_on_the_flying_rocket_and_turbulence(default_db):
     from agents.observer import FLIGHT_WEIGHTS
 

@@ -274,7 +274,7 @@ def test_the_report_summarises_seeds_against_the_pid(tmp_path, default_db):
 
 
 def test_the_shipped_sweep_spec_loads():
-    """agents/sweeps/pid-ppo-seeds.yml (the README's, by name): PID, observer, five PPO
+    """agents/sweeps/pid-ppo-seeds.yml (the docs' sweep, by name): PID, observer, five PPO
     seeds, both tasks."""
     from agents.sweep import expand
 

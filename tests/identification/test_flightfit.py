@@ -1,4 +1,4 @@
-"""Flight logs in (issue 17, item 5): format 1.1, the scaled model, the recorder, the ``flight``
+"""Flight logs in: format 1.1, the scaled model, the recorder, the ``flight``
 method and its ground truth."""
 
 from __future__ import annotations

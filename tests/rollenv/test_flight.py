@@ -1,4 +1,4 @@
-"""RocketRollFlight-v0: the identified rocket carried along an ascent (issue 17).
+"""RocketRollFlight-v0: the identified rocket carried along an ascent.
 
 The schedule starts where the airspeed reaches the tunnel's and ends at
 apogee; the kernel with the flight's per-step gain and damping follows the
