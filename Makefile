@@ -1,13 +1,13 @@
-# Two commands do everything on a fresh machine (see README.md):
+# Two commands do everything on a fresh machine (README.md; the docs site: make docs):
 #   make demo   -- virtual environment, install, run the main job end to end
-#   make test   -- virtual environment with dev extras, lint, type check, tests
+#   make test   -- virtual environment with dev extras, lint, type check, tests, the docs site
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip
 DEMO   ?= build/demo
 
-.PHONY: demo test lint typecheck pytest pytest-varied venv clean recordings help
+.PHONY: demo test lint typecheck pytest pytest-varied docs venv clean recordings help
 
 $(BIN)/python:
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required, found " + sys.version'
@@ -82,9 +82,9 @@ typecheck: $(VENV)/.installed-dev
 pytest: $(VENV)/.installed-dev
 	$(BIN)/pytest
 
-# Another machine's numerics (README, Reproducibility): OpenBLAS's AVX kernel, numpy
+# Another machine's numerics (docs/results/reproducibility.md): OpenBLAS's AVX kernel, numpy
 # without its SIMD loops, numba compiling for a generic x86-64, torch's unvectorised
-# kernels and MKL's compatible path, one thread each.  The README's tables must come out
+# kernels and MKL's compatible path, one thread each.  The site's tables must come out
 # digit for digit, from a default database built anew under these settings.
 VARIED := OPENBLAS_CORETYPE=Sandybridge \
 	NPY_DISABLE_CPU_FEATURES="X86_V3 X86_V4 AVX512_ICL AVX512_SPR" \
@@ -92,9 +92,14 @@ VARIED := OPENBLAS_CORETYPE=Sandybridge \
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 
 pytest-varied: $(VENV)/.installed-dev
-	env $(VARIED) $(BIN)/pytest -p no:cacheprovider tests/test_readme.py
+	env $(VARIED) $(BIN)/pytest -p no:cacheprovider tests/test_figures.py
 
-test: lint typecheck pytest pytest-varied
+# The documentation site into build/site, strict: a broken link or anchor, a page outside the
+# navigation or a docstring the API reference cannot read fails the build. No network.
+docs: $(VENV)/.installed-dev
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+
+test: lint typecheck pytest pytest-varied docs
 
 # Write rocketroll/help.json again (every command's --help, read without importing the
 # command's module); a test fails while it is not current.

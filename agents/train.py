@@ -798,6 +798,8 @@ def observation_names(
     """The names of the policy's observation: the env's, the observer's estimate, the
     flight's phase, then the history (``name@t-k``, and ``action@t-k``).
 
+    Examples
+    --------
     >>> observation_names(1)[4:]
     ['tracking_error@t-1', 'roll_rate_dps@t-1', 'fin_deg@t-1', 'fin_cmd_deg@t-1', 'action@t-1']
     >>> len(observation_names(2, observer=True))  # (4 + 3) x 3 + 2

@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["CACHE", "PACKAGES", "cached_help", "source_digest", "write"]
+__all__ = ["CACHE", "PACKAGES", "cached_help", "markdown_reference", "source_digest", "write"]
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The packages whose sources the commands' help is made from.
@@ -131,3 +131,28 @@ def write(trees: dict[str, dict[str, Any]], path: Path = CACHE) -> None:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
+
+
+def markdown_reference(trees: dict[str, dict[str, Any]], summaries: dict[str, str]) -> str:
+    """The command-line reference as Markdown: each command's ``--help`` (and each
+    subcommand's), as the terminal prints it at 96 columns, from the help trees the settings
+    dataclasses make (:meth:`rocketroll_common.settings.Command.help_tree`); ``summaries``
+    are the commands' one-line summaries (``rocketroll --help``).  The documentation site's
+    command-line page."""
+    before = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "96"  # argparse wraps at the terminal's width
+    try:
+        out: list[str] = []
+        for name, tree in trees.items():
+            parser, children = _parser(tree, f"rocketroll {name}")
+            out += [f"## rocketroll {name}", "", summaries[name] + ".", ""]
+            out += ["```text", parser.format_help().rstrip(), "```", ""]
+            for sub, child in children.items():
+                out += [f"### rocketroll {name} {sub}", ""]
+                out += ["```text", child.format_help().rstrip(), "```", ""]
+        return "\n".join(out)
+    finally:
+        if before is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = before

@@ -1,7 +1,7 @@
-"""What a new user hit (issue 13, point 8), one test (or a few) per case.
+"""What a new user hit, one test (or a few) per case.
 
 Each case was found by installing the wheel into a fresh environment and
-running every README command from another folder; each test here fails on the
+running every documented command from another folder; each test here fails on the
 code before the fix.
 """
 
@@ -499,7 +499,7 @@ def test_the_sdist_carries_tests_docs_and_license(tmp_path: Path) -> None:
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     for wanted in (
         "LICENSE",
-        "docs/tunnel-paper-seed0.png",
+        "docs/images/tunnel-paper-seed0.png",
         "tests/test_new_user.py",
         "tests/disturbances/data/schema-v1.sqlite",
         "identification/py.typed",

@@ -1,7 +1,8 @@
-"""The README's figures are what the code computes: its tables, reproduced digit for digit.
+"""The documentation's figures are what the code computes: the tables of the README and
+of the documentation site (``docs/``), reproduced digit for digit.
 
-A change that moves a number the README shows fails here until the README says
-so.  The figures are the same on every x86-64 machine (README, Reproducibility):
+A change that moves a number they show fails here until the page says so.  The
+figures are the same on every x86-64 machine (docs/results/reproducibility.md):
 the default database is built under pinned numerics and the evaluation's
 arithmetic does not depend on the processor, so the comparison is exact; `make
 test` runs these tests a second time under another machine's numerics.  The
@@ -25,12 +26,24 @@ from identification.pipeline import identify
 from rocketroll.cli import main as rocketroll
 
 REPO = Path(__file__).resolve().parents[1]
-README = (REPO / "README.md").read_text(encoding="utf-8")
+DOCS = REPO / "docs"
 
 
-def readme_rows(first: str, count: int) -> list[str]:
-    """``count`` table rows of the README starting with the row that starts with ``first``."""
-    lines = README.splitlines()
+def page(name: str) -> str:
+    """The text of the site's page ``name`` (``docs/NAME``), or ``README.md``."""
+    path = REPO / name if name == "README.md" else DOCS / name
+    return path.read_text(encoding="utf-8")
+
+
+#: Every page of the site, one text (each table starts with a unique row).
+SITE = "\n".join(page(p.relative_to(DOCS).as_posix()) for p in sorted(DOCS.rglob("*.md")))
+#: The page with the evaluation tables: the angle, rate and flight tasks, in that order.
+RESULTS = page("results/evaluation.md")
+
+
+def site_rows(first: str, count: int) -> list[str]:
+    """``count`` table rows of the site starting with the row that starts with ``first``."""
+    lines = SITE.splitlines()
     start = next(k for k, line in enumerate(lines) if line.startswith(first))
     return lines[start : start + count]
 
@@ -43,7 +56,7 @@ def test_the_identification_table_of_the_bundled_reconstruction() -> None:
     noise = result.noise
     assert noise is not None
     i10 = list(noise.levels_pct).index(10.0)
-    rows = readme_rows("| α (°/s)/° |", 7)
+    rows = site_rows("| α (°/s)/° |", 7)
     truth = result.truth()
     assert truth is not None
     alpha_error = 100 * (p["alpha"] / truth["alpha"] - 1)
@@ -58,7 +71,7 @@ def test_the_identification_table_of_the_bundled_reconstruction() -> None:
     assert f"| {noise.mae_deg[i10]:.2f} / {noise.p90_deg[i10]:.2f} ° |" in rows[6]
 
 
-#: The flight table's controllers (README, In flight).
+#: The flight table's controllers (results/evaluation.md, In flight).
 FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "mpc", "oracle")
 
 
@@ -77,10 +90,10 @@ def test_the_evaluation_tables(
     words = ["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0", *policies]
     assert rocketroll(words) == 0
     printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
-    starts = [k for k, line in enumerate(README.splitlines()) if line.startswith("| trim |")]
-    shown = README.splitlines()[starts[table] : starts[table] + len(printed) - 1]
-    for row, readme_row in zip(printed[1:], shown, strict=True):
-        assert row == readme_row, f"computed:\n{row}\nREADME:\n{readme_row}"
+    starts = [k for k, line in enumerate(RESULTS.splitlines()) if line.startswith("| trim |")]
+    shown = RESULTS.splitlines()[starts[table] : starts[table] + len(printed) - 1]
+    for row, shown_row in zip(printed[1:], shown, strict=True):
+        assert row == shown_row, f"computed:\n{row}\nresults/evaluation.md:\n{shown_row}"
 
 
 def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -88,7 +101,7 @@ def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[st
     out = capsys.readouterr().out
     assert "9 recordings, 54 traces, 36 surrogates, 144 posterior draws; 18 shown" in out
     assert re.search(r"2d68d98ae09b-paper-theta .* 7\.91 \[-12\.48,  13\.58\]", out)
-    words = " ".join(README.split())
+    words = " ".join(SITE.split())
     assert (
         "54 identified traces, 36 surrogates and 144 posterior draws, 6 train and 3 test "
         "recordings" in words
@@ -121,7 +134,7 @@ def _retrain(env_id: str, out: Path) -> dict[str, Any]:
 
 @pytest.mark.slow
 def test_the_angle_recipe_trains_the_same_bits_twice(default_db: Path, tmp_path: Path) -> None:
-    """README, Training PPO: the committed angle policy's command, run twice on one machine,
+    """Train and evaluate (guides), Training PPO: the committed angle policy's command, run twice,
     trains the same weights and statistics bit for bit (2 x about 70 s, one torch thread).
     Across machines it does not: torch's kernels differ between processors."""
     from stable_baselines3 import PPO
@@ -145,8 +158,8 @@ def test_the_angle_recipe_trains_the_same_bits_twice(default_db: Path, tmp_path:
 def test_the_committed_rate_policy_is_reproduced_by_its_recorded_command(
     default_db: Path, tmp_path: Path
 ) -> None:
-    """README, Training PPO: the rate policy's 10 M steps (about 5 min) come out another
-    draw on another database or processor; its held-out score within 1 % of the committed
+    """Train and evaluate (guides), Training PPO: the rate policy's 10 M steps (5 min) come out
+    another draw on another database or processor; its held-out score within 1 % of the committed
     policy's (on this version's database: 0.03 % and 0.2 %)."""
     from agents.ppo import COMMITTED
 
@@ -158,8 +171,8 @@ def test_the_committed_rate_policy_is_reproduced_by_its_recorded_command(
     assert ours["mean_reward"] == pytest.approx(theirs["mean_reward"], rel=0.01)
 
 
-def _readme_table_after(header: str, rows: int) -> list[str]:
-    lines = README.splitlines()
+def _table_after(header: str, rows: int) -> list[str]:
+    lines = SITE.splitlines()
     start = lines.index(header)
     return lines[start : start + rows]
 
@@ -171,7 +184,7 @@ def test_the_seed_statistics_and_robustness_tables(
 ) -> None:
     """`make demo`'s seed statistics (five committed runs each of PPO and of PPO trained at
     a zero setpoint and as a residual on the observer / SAC) and robustness tables, as the
-    README prints them (about a minute per task)."""
+    results page prints them (about a minute per task)."""
     seeds = f"agents/policies/seeds/{env_id}"
     runs = ["--run", f"ppo:agents/policies/{env_id}"]
     for seed in range(1, 5):
@@ -184,14 +197,14 @@ def test_the_seed_statistics_and_robustness_tables(
     for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
         assert rocketroll(argv) == 0
         printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
-        assert printed == _readme_table_after(printed[0], len(printed)), argv[0]
+        assert printed == _table_after(printed[0], len(printed)), argv[0]
 
 
 def guide_commands() -> list[list[str]]:
-    """The "Bring your own rocket" guide's commands, as the README writes them."""
+    """The "Bring your own rocket" guide's commands, as its page writes them."""
     import shlex
 
-    section = README.split("### Bring your own rocket", 1)[1]
+    section = page("guides/own-rocket.md")
     block = section.split("```bash\n", 1)[1].split("```", 1)[0]
     return [shlex.split(line)[1:] for line in block.splitlines() if line.startswith("rocketroll")]
 
@@ -229,3 +242,56 @@ def test_the_bring_your_own_rocket_guide_runs_as_written(
     assert "recording mine" in printed[3] and "episode:" in printed[3]
     table = (tmp_path / "mine-eval" / "table.md").read_text()
     assert "| observer |" in table and "(trained on another database's rockets)" in table
+
+
+# ------------------------------------------------------------------ the README, a front page
+def test_the_front_page_is_short_and_its_headline_table_is_the_results_tables() -> None:
+    """The README stays a front page (at most 200 lines), and its headline table is the
+    regulation-RMS column of the results page's tables (which the tests above compute)."""
+    readme = page("README.md")
+    assert len(readme.splitlines()) <= 200
+    headline = {
+        line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+        for line in readme.splitlines()
+        if line.startswith("| angle, ")
+        or line.startswith("| rate, ")
+        or line.startswith("| flight angle")
+    }
+    columns = ("trim", "PID", "observer", "MPC", "PPO", "oracle")
+    lines = RESULTS.splitlines()
+    starts = [k for k, line in enumerate(lines) if line.startswith("| trim |")]
+    for task, start in zip(headline, starts, strict=True):
+        shown = {}
+        for line in lines[start:]:
+            if not line.startswith("| "):
+                break
+            cells = [c.strip() for c in line.split("|")[1:-1]]
+            shown[cells[0]] = cells[1].split(" ± ")[0]
+        for name, value in zip(columns, headline[task], strict=True):
+            assert value == shown.get(name, "–"), (task, name)
+
+
+def test_the_front_page_quickstart_runs(
+    tmp_path: Path, default_db: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The README's quickstart commands and its Gymnasium example, as written."""
+    import shlex
+
+    readme = page("README.md")
+    quick = readme.split("## Quickstart", 1)[1].split("```bash\n", 1)[1].split("```", 1)[0]
+    commands = [shlex.split(line.split("#", 1)[0]) for line in quick.splitlines() if line]
+    assert [c[:2] for c in commands] == [
+        ["rocketroll", "tunnel"],
+        ["rocketroll", "identify"],
+        ["rocketroll", "eval"],
+    ]
+    monkeypatch.chdir(tmp_path)
+    for argv in commands:
+        assert rocketroll(argv[1:]) == 0, argv
+    assert (tmp_path / "build" / "eval" / "table.md").is_file()
+    example = readme.split("## Gymnasium", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    namespace: dict[str, Any] = {}
+    exec(compile(example, "README.md (Gymnasium)", "exec"), namespace)
+    assert namespace["envs"].num_envs == 4096
+    namespace["envs"].close()
+    namespace["env"].close()
