@@ -53,7 +53,7 @@ from identification.ml import MAX_ORDER, interval_maps, roll_transition, station
 from identification.model import RollParams
 from identification.statespace import predict, update
 from rocketroll_common.arrays import FloatArray
-from rollenv.core import RollConfig
+from rollenv.core import RollConfig, wrap_deg
 from rollenv.layout import Obs
 
 __all__ = [
@@ -360,7 +360,7 @@ class RollObserver:
         """
         q = self.count
         m, var = self.mean[1], self.cov[1, 1]
-        lo = m + _wrap(reading - m)
+        lo = m + float(wrap_deg(reading - m))
         if q <= 0.0:  # no quantisation: an (almost) exact reading
             self._update_angle(lo, 0.0)
             return
@@ -387,7 +387,7 @@ class RollObserver:
         self.mean += gain * (mean - self.mean[1])
         self.cov -= np.outer(gain, gain) * (p11 - max(var, _VAR_FLOOR))
         self.cov = 0.5 * (self.cov + self.cov.T)
-        self.mean[1] = _wrap(self.mean[1])
+        self.mean[1] = wrap_deg(self.mean[1])
 
     @property
     def u_d(self) -> float:
@@ -407,11 +407,6 @@ def _normal_cdf(x: float) -> float:
 
 def _normal_pdf(x: float) -> float:
     return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
-
-
-def _wrap(angle: float) -> float:
-    """``angle`` in [-180, 180)."""
-    return (angle + 180.0) % 360.0 - 180.0
 
 
 # ----------------------------------------------------------------------------- control

@@ -72,6 +72,7 @@ __all__ = [
     "RollBatch",
     "RollConfig",
     "observation_bounds",
+    "wrap_deg",
 ]
 
 TASKS = ("angle", "rate")
@@ -449,10 +450,29 @@ def config_fields() -> tuple[str, ...]:
 _piece = piece  # the one closed form, compiled (identification.compiled)
 
 
-@numba.njit(cache=True, nogil=True)
-def _wrap(angle_deg: float) -> float:
-    """An angle difference in [-180°, 180°)."""
-    return angle_deg - 360.0 * math.floor((angle_deg + 180.0) / 360.0)
+def wrap_deg(angle_deg: Any) -> Any:
+    """An angle or angle difference wrapped to [-180°, 180°): the one wrap of the kernel
+    (compiled), the observer and the renderer.
+
+    Parameters
+    ----------
+    angle_deg : float or numpy.ndarray
+        Angle, °.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The same angle in [-180°, 180°), °.
+
+    Examples
+    --------
+    >>> float(wrap_deg(370.0)), float(wrap_deg(-190.0))
+    (10.0, 170.0)
+    """
+    return angle_deg - 360.0 * np.floor((angle_deg + 180.0) / 360.0)
+
+
+_wrap = numba.njit(cache=True, nogil=True)(wrap_deg)
 
 
 @numba.njit(cache=True, nogil=True)

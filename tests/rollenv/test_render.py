@@ -167,5 +167,5 @@ def test_fin_geometry() -> None:
 
 
 def test_wrap_deg() -> None:
-    wrapped = wrap_deg([0.0, 180.0, -180.0, 190.0, 725.0])
+    wrapped = wrap_deg(np.array([0.0, 180.0, -180.0, 190.0, 725.0]))
     np.testing.assert_allclose(wrapped, [0.0, -180.0, -180.0, -170.0, 5.0])
