@@ -61,7 +61,7 @@ from identification.tunnel import (
     rocket_setting,
 )
 from rocketroll_common.arrays import FloatArray
-from rocketroll_common.errors import SettingError
+from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv
 
 __all__ = ["AscentError", "FlightLogSpec", "run_flight"]
@@ -173,8 +173,9 @@ class FlightLogSpec:
         return shlex.join(["rocketroll", "flight", *to_argv(self)])
 
 
-class AscentError(ValueError):
-    """The ascent of a virtual flight cannot be read or is too short to log."""
+class AscentError(RocketrollError, ValueError):
+    """The ascent of a virtual flight cannot be read or is too short to log (the command
+    line names its ``--ascent`` before the message)."""
 
 
 def _turbulence(

@@ -43,6 +43,7 @@ from identification.adequacy import VERDICTS
 from identification.model import RollParams, check_model
 from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_common.errors import RocketrollError
 
 __all__ = [
     "KINDS",
@@ -77,7 +78,7 @@ TEST_FRACTION = 0.25
 _SPLIT_SALT = b"rocketroll-split/1:"
 
 
-class ChecksumError(ValueError):
+class ChecksumError(RocketrollError, ValueError):
     """A trace's samples do not match its checksum."""
 
 

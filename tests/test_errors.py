@@ -1,0 +1,41 @@
+"""One error hierarchy: every exception a layer defines is a
+:class:`rocketroll_common.errors.RocketrollError` (the command lines turn those into one
+line and exit code 2), except :class:`~rocketroll_common.errors.Interrupted` (Ctrl-C) and a
+module's private ones (``_Name``: control flow inside the module, never raised to a caller)."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
+
+import pytest
+
+from rocketroll_common.errors import Interrupted, RocketrollError
+
+PACKAGES = ("rocketroll_common", "identification", "disturbances", "rollenv", "agents")
+
+
+def _modules() -> list[str]:
+    names = []
+    for package in PACKAGES:
+        found = importlib.import_module(package)
+        names += [m.name for m in pkgutil.walk_packages(found.__path__, package + ".")]
+    return names
+
+
+@pytest.mark.parametrize("name", _modules())
+def test_every_exception_is_in_the_hierarchy(name: str) -> None:
+    try:
+        module = importlib.import_module(name)
+    except ImportError as exc:  # an optional extra's module without the extra
+        pytest.skip(f"{name}: {exc}")
+    defined = [
+        cls
+        for _, cls in inspect.getmembers(module, inspect.isclass)
+        if cls.__module__ == name
+        and issubclass(cls, BaseException)
+        and not cls.__name__.startswith("_")
+    ]
+    for cls in defined:
+        assert issubclass(cls, RocketrollError) or cls is Interrupted, cls
