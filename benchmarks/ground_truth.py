@@ -311,7 +311,7 @@ def print_table(per_seed: dict[str, list[dict[str, float]]]) -> dict[tuple[str, 
     header = f"{'metric':36s} {'unit':>6s} | " + " ".join(f"{c:>{width}s}" for c in cols)
     table: dict[tuple[str, str], Stats] = {}
     for method, rows in per_seed.items():
-        print(f"{method}: {METHODS.entry(method).info.get('summary', '')}")
+        print(f"{method}: {METHODS.entry(method).summary}")
         print(header)
         print("-" * len(header))
         for metric in METRICS:

@@ -231,14 +231,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = time.perf_counter()
     result = identify(rec, options)
     first_call_ms = (time.perf_counter() - start) * 1e3
-    from identification.methods import METHODS, fit  # this checkout's (not in older ones)
+    from identification.methods import METHODS, fit, traits  # this checkout's (not in older ones)
 
     n_levels = len(result.options.noise_levels_pct)
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
     from identification.ml import maximum_likelihood, posterior_traces
 
     others = [  # the tunnel's methods (a flight method identifies flights only)
-        m for m in METHODS.names() if m != "paper" and not METHODS.entry(m).info.get("flight")
+        m for m in METHODS.names() if m != "paper" and not traits(m).flight
     ]
     ml_theta = maximum_likelihood(rec, "theta", options=options)
     from identification.adequacy import adequacy
@@ -280,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         ns.peer_repeats,
                     )
                     for method in others
-                    for model in METHODS.entry(method).info["models"]
+                    for model in traits(method).models
                 ),
                 *(
                     (

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from disturbances.flightlog import FlightLogSpec
 from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
-from identification.methods import METHODS, default_methods, has_posterior
+from identification.methods import METHODS, default_methods, has_posterior, traits
 from identification.model import MODEL_NAMES
 from identification.pipeline import IdentifyOptions
 from identification.recording import SOURCES
@@ -197,7 +197,7 @@ def _fit_each(context: Any, methods: Sequence[str]) -> tuple[dict[str, Any], dic
     first: IdentificationError | None = None
     for method in methods:
         try:
-            fits[method] = fit(context, method, _models_of(method))
+            fits[method] = fit(context, method, traits(method).models)
         except IdentificationError as exc:
             refused[method] = str(exc)
             first = first or exc
@@ -306,11 +306,6 @@ def identify(args: IdentifyArgs) -> int:
         figures = sum(str(path).endswith(".png") for path in outputs)
         print(f"wrote {args.report / 'report.md'} and {figures} figures")
     return 0
-
-
-def _models_of(method: str) -> tuple[str, ...]:
-    models: tuple[str, ...] = METHODS.entry(method).info["models"]
-    return models
 
 
 def _flight_table(fits: dict[str, dict[str, Any]]) -> str:

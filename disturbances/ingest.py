@@ -62,6 +62,7 @@ from identification.methods import (
     default_methods,
     fit,
     has_posterior,
+    traits,
 )
 from identification.pipeline import Identification, IdentifyOptions
 from identification.recording import Recording
@@ -220,7 +221,9 @@ def _check_not_split(db: Store, recording: Recording, methods: Sequence[str]) ->
         return
     recording_hash = content_hash(recording.columns())
     if db.has_recording(recording_hash) and all(
-        db.has_identification(recording_hash, m, model) for m in methods for model in _models_of(m)
+        db.has_identification(recording_hash, m, model)
+        for m in methods
+        for model in traits(m).models
     ):
         return  # nothing new: "already stored"
     raise DatabaseError(
@@ -289,11 +292,6 @@ def _methods(methods: Sequence[str] | None) -> tuple[str, ...]:
     return chosen
 
 
-def _models_of(method: str) -> tuple[str, ...]:
-    models: tuple[str, ...] = METHODS.entry(method).info["models"]
-    return models
-
-
 def identification_rows(
     context: Context,
     methods: Sequence[str] | None = None,
@@ -324,7 +322,7 @@ def identification_rows(
     identifications: list[IdentificationRow] = []
     traces: list[TraceRow] = []
     for method in chosen:
-        for model, fitted in fit(context, method, _models_of(method)).items():
+        for model, fitted in fit(context, method, traits(method).models).items():
             identifications.append(
                 IdentificationRow(
                     recording.content_hash,
@@ -435,7 +433,7 @@ def add_recording(
     missing = [
         m
         for m in chosen
-        if not all(db.has_identification(recording_hash, m, model) for model in _models_of(m))
+        if not all(db.has_identification(recording_hash, m, model) for model in traits(m).models)
     ]
     _check_not_split(db, recording, missing or chosen)
     if db.has_recording(recording_hash) and not missing:
@@ -445,7 +443,7 @@ def add_recording(
         # Everything identified already: only the surrogates asked for are new.
         db.check_version(writing=True)
         made: list[TraceRow] = []
-        for model in _models_of(source_method):
+        for model in traits(source_method).models:
             source = db.trace(identified_uid(recording_hash, source_method, model))
             made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
         stored = db.store(traces=made)
@@ -538,7 +536,7 @@ def _store(
     if surrogates:
         sources = [t for t in traces if t.method == surrogate_method and t.kind == "identified"]
         if not sources:
-            for model in _models_of(surrogate_method):
+            for model in traits(surrogate_method).models:
                 uid = identified_uid(recording.content_hash, surrogate_method, model)
                 if db.has_trace(uid):
                     sources.append(db.trace(uid))

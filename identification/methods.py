@@ -45,6 +45,7 @@ __all__ = [
     "METHODS",
     "Context",
     "MethodFunction",
+    "MethodTraits",
     "ModelFit",
     "database_methods",
     "default_methods",
@@ -55,6 +56,7 @@ __all__ = [
     "register_method",
     "resimulation_metrics",
     "trace_settings",
+    "traits",
     "tunnel_methods",
 ]
 
@@ -99,6 +101,38 @@ MethodFunction = Callable[["Context", Sequence[str]], Sequence[ModelFit]]
 
 #: Every identification method, by name.
 METHODS: Registry[MethodFunction] = Registry("identification method")
+
+
+@dataclass(frozen=True)
+class MethodTraits:
+    """What a registered identification method is (:func:`register_method`'s arguments).
+
+    Attributes
+    ----------
+    models : tuple of str
+        The damping models it can fit.
+    default : bool
+        Run without ``--method``.
+    posterior : bool
+        Its fits carry posterior draws of ``u_d``.
+    database : bool
+        Part of the default database's recipe.
+    flight : bool
+        It identifies flights, and only those.
+    """
+
+    models: tuple[str, ...] = MODEL_NAMES
+    default: bool = False
+    posterior: bool = False
+    database: bool = False
+    flight: bool = False
+
+
+def traits(method: str) -> MethodTraits:
+    """The traits of the method registered as ``method`` (``ValueError`` naming the known
+    ones for another name)."""
+    found: MethodTraits = METHODS.entry(method).info["traits"]
+    return found
 
 
 def register_method(
@@ -149,11 +183,13 @@ def register_method(
         method,
         summary=summary,
         replace=replace,
-        default=default,
-        models=tuple(models),
-        posterior=posterior,
-        database=(default and not flight) if database is None else database,
-        flight=flight,
+        traits=MethodTraits(
+            models=tuple(models),
+            default=default,
+            posterior=posterior,
+            database=(default and not flight) if database is None else database,
+            flight=flight,
+        ),
     )
 
 
@@ -165,29 +201,29 @@ def default_methods(recording: Recording | None = None) -> tuple[str, ...]:
     return tuple(
         e.name
         for e in METHODS.entries()
-        if e.info.get("default") and bool(e.info.get("flight")) == flight
+        if e.info["traits"].default and e.info["traits"].flight == flight
     )
 
 
 def tunnel_methods() -> tuple[str, ...]:
     """Every registered method that identifies the tunnel's recordings (not flights)."""
-    return tuple(e.name for e in METHODS.entries() if not e.info.get("flight"))
+    return tuple(e.name for e in METHODS.entries() if not e.info["traits"].flight)
 
 
 def is_flight_method(method: str) -> bool:
     """Whether the method registered as ``method`` identifies flights."""
-    return bool(METHODS.entry(method).info.get("flight"))
+    return traits(method).flight
 
 
 def has_posterior(method: str) -> bool:
     """Whether the method registered as ``method`` has a posterior to draw ``u_d`` from
     (False for a name that is not registered)."""
-    return any(e.name == method and e.info.get("posterior") for e in METHODS.entries())
+    return any(e.name == method and e.info["traits"].posterior for e in METHODS.entries())
 
 
 def database_methods() -> tuple[str, ...]:
     """The methods of the default database's recipe, in registration order."""
-    return tuple(e.name for e in METHODS.entries() if e.info.get("database"))
+    return tuple(e.name for e in METHODS.entries() if e.info["traits"].database)
 
 
 class Context:
@@ -303,7 +339,7 @@ def fit(
     context = recording if isinstance(recording, Context) else Context(recording, options)
     entry = METHODS.entry(method)
     rec = context.recording
-    flight_method = bool(entry.info.get("flight"))
+    flight_method = traits(method).flight
     if rec.is_flight and not flight_method:
         from identification.steps import IdentificationError
 
@@ -330,7 +366,7 @@ def fit(
             f"method {method!r} identifies one recording; other flights fitted together "
             f"({', '.join(repr(r.name) for r in context.together)}) are for the flight methods"
         )
-    supported = entry.info.get("models", MODEL_NAMES)
+    supported = traits(method).models
     for model in models:
         check_model(model)
         if model not in supported:
