@@ -43,7 +43,7 @@ from disturbances.bank import TraceBank
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting, to_argv
-from rollenv import VARIANTS
+from rollenv import variant_ids
 from rollenv.bank import load_bank
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
@@ -407,7 +407,7 @@ def to_json(
 
 # ---------------------------------------------------------------------------- CLI
 def _variant_ids() -> tuple[str, ...]:
-    return VARIANTS.names()
+    return variant_ids()
 
 
 def env_id_setting() -> Any:

@@ -194,7 +194,7 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
     import yaml
 
     from agents.registry import CONTROLLERS
-    from rollenv.variants import VARIANTS
+    from rollenv.variants import variant_ids
 
     path = Path(path)
     if not path.is_file() and path.parent == Path() and (SHIPPED / f"{path}.yml").is_file():
@@ -224,9 +224,9 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
         )
     env_ids = [str(e) for e in _values(document["env_ids"], f"{path}: env_ids")]
     for env_id in env_ids:
-        if env_id not in VARIANTS.names():
+        if env_id not in variant_ids():
             raise UsageError(
-                f"{path}: env_ids: unknown {env_id!r}; one of {', '.join(VARIANTS.names())}"
+                f"{path}: env_ids: unknown {env_id!r}; one of {', '.join(variant_ids())}"
             )
     seeds = [_whole(s, f"{path}: seeds") for s in _values(document.get("seeds", [0]), "seeds")]
     episodes = _whole(document.get("episodes", 20), f"{path}: episodes", low=2)

@@ -161,9 +161,9 @@ ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
 def _variant_ids() -> tuple[str, ...]:
-    from rollenv import VARIANTS
+    from rollenv import variant_ids
 
-    return VARIANTS.names()
+    return variant_ids()
 
 
 #: Most environments stepped side by side (training and its evaluation): ppo-fast.yml

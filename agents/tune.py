@@ -30,7 +30,7 @@ from agents.replay import (
     replay_config,
 )
 from rocketroll_common.settings import Command, check, run_command, setting
-from rollenv import VARIANTS
+from rollenv import variant_ids
 from rollenv.bank import find_bank
 from rollenv.core import RollConfig
 
@@ -67,7 +67,7 @@ def tune_bandwidth(
 class TuneArgs:
     """``rocketroll tune pid`` / ``python -m agents.tune``."""
 
-    env_id: str = setting("RocketRoll-v0", "environment id", choices=VARIANTS.names, always=True)
+    env_id: str = setting("RocketRoll-v0", "environment id", choices=variant_ids, always=True)
     db: str | None = db_setting()
     episodes: int = setting(30, "train episodes per ω", ge=1, le=100_000)
     seed: int = setting(0, "seed of the train episodes", ge=0, le=2**63 - 1)

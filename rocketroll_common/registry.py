@@ -29,7 +29,7 @@ from typing import Any, Generic, TypeVar
 from rocketroll_common.errors import UsageError
 from rocketroll_common.plugins import PLUGIN_GROUP, PLUGIN_VARIABLE, plugin_modules
 
-__all__ = ["PLUGIN_GROUP", "PLUGIN_VARIABLE", "Entry", "Registry", "load_plugins"]
+__all__ = ["PLUGIN_GROUP", "PLUGIN_VARIABLE", "Entry", "Registry", "load_plugins", "unknown"]
 
 T = TypeVar("T")
 
@@ -88,6 +88,14 @@ class Entry(Generic[T]):
             loaded: T = _load(self.target)
             object.__setattr__(self, "target", loaded)
         return self.target  # type: ignore[return-value]
+
+
+def unknown(kind: str, name: object, known: Sequence[str]) -> ValueError:
+    """The error for ``name``, not among ``known`` names of ``kind``: the nearest known
+    name, if one is near, and all of them."""
+    close = difflib.get_close_matches(str(name), list(known), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return ValueError(f"unknown {kind} {name!r}{hint}; known: {', '.join(known) or 'none'}")
 
 
 class Registry(Generic[T]):
@@ -175,10 +183,7 @@ class Registry(Generic[T]):
         """``name`` if it is registered; otherwise a ``ValueError`` with suggestions."""
         if name in self:
             return name
-        close = difflib.get_close_matches(str(name), list(self._entries), n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        known = ", ".join(self._entries) or "none"
-        raise ValueError(f"unknown {self.kind} {name!r}{hint}; known: {known}")
+        raise unknown(self.kind, name, list(self._entries))
 
     def entry(self, name: str) -> Entry[T]:
         """The entry of ``name`` (``ValueError`` if unknown)."""

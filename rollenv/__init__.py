@@ -14,21 +14,28 @@ Gymnasium 1.x has no plugin entry points, so without the import use the
 ``gym.make("rollenv:RocketRoll-v0")``.
 
 A variant is an id with the options it fixes (its ``task`` at least):
-:func:`register_variant` registers it with Gymnasium and in
-:data:`VARIANTS`, where the command line (``--env-id``), training, tuning and
-the evaluation find it, with its options (:func:`rollenv.bank.variant_config`).
+:func:`register_variant` registers it with Gymnasium, whose registry the command
+line (``--env-id``), training, tuning and the evaluation read it from
+(:func:`variant_ids`, :func:`variant_options`, :func:`rollenv.bank.variant_config`).
 """
 
 from __future__ import annotations
 
-from rollenv.variants import VARIANTS, register_variant, task_of, variant_options
+from rollenv.variants import (
+    register_variant,
+    task_of,
+    unregister_variant,
+    variant_ids,
+    variant_options,
+)
 
 __all__ = [
-    "VARIANTS",
     "RocketRollEnv",
     "RocketRollVectorEnv",
     "register_variant",
     "task_of",
+    "unregister_variant",
+    "variant_ids",
     "variant_options",
 ]
 

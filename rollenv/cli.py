@@ -121,9 +121,9 @@ def _save_strip(frames: list[np.ndarray], path: Path) -> None:
 
 
 def _variant_ids() -> tuple[str, ...]:
-    from rollenv import VARIANTS
+    from rollenv import variant_ids
 
-    return VARIANTS.names()
+    return variant_ids()
 
 
 @dataclass(frozen=True)

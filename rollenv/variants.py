@@ -1,27 +1,32 @@
-"""Environment variants: an id and the options it fixes, registered once.
+"""Environment variants: an id and the options it fixes, registered once, with Gymnasium.
 
-:func:`register_variant` registers a variant with Gymnasium and in
-:data:`VARIANTS`; the command line (``--env-id``), training, tuning and the
-evaluation read it from there (:func:`rollenv.bank.variant_config`).
+:func:`register_variant` registers a variant in Gymnasium's registry, which holds
+its options (the spec's ``kwargs``) and entry points; the command line
+(``--env-id``), training, tuning and the evaluation read them from there
+(:func:`variant_ids`, :func:`variant_options`, :func:`rollenv.bank.variant_config`).
 Importing this module registers ``RocketRoll-v0`` and ``RocketRollRate-v0`` (the
 tunnel) and ``RocketRollFlight-v0`` and ``RocketRollFlightRate-v0`` (the flight).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from types import MappingProxyType
 from typing import Any
 
 from gymnasium.envs.registration import register, registry
 
-from rocketroll_common.registry import Registry
+from rocketroll_common.registry import load_plugins, unknown
 
-__all__ = ["VARIANTS", "register_variant", "task_of", "variant_options"]
+__all__ = [
+    "register_variant",
+    "task_of",
+    "unregister_variant",
+    "variant_ids",
+    "variant_options",
+]
 
-#: Environment variants by id: the options each one fixes (``task`` and any field
-#: of :class:`rollenv.core.RollConfig`).
-VARIANTS: Registry[Mapping[str, Any]] = Registry("environment id")
+#: The ids :func:`register_variant` registered, in order, with their one-line summaries
+#: (which Gymnasium's specs have no field for); everything else is in Gymnasium's registry.
+_SUMMARIES: dict[str, str] = {}
 
 
 def register_variant(
@@ -32,14 +37,14 @@ def register_variant(
     vector_entry_point: str = "rollenv.vector:RocketRollVectorEnv",
     **options: Any,
 ) -> None:
-    """Register an environment variant with Gymnasium and in :data:`VARIANTS`.
+    """Register an environment variant with Gymnasium.
 
     Parameters
     ----------
     env_id : str
         ``Name-vN``, as for ``gym.make``.
     summary : str
-        One line for ``--help``.
+        One line for listings.
     entry_point, vector_entry_point : str
         The single and the vector environment (``"module:Class"``).
     **options
@@ -56,8 +61,8 @@ def register_variant(
     """
     if options.get("task") not in ("angle", "rate"):
         raise ValueError(f"{env_id}: a variant needs task='angle' or task='rate'")
-    fixed = MappingProxyType(dict(options))
-    VARIANTS.register(env_id, fixed, summary=summary, entry_point=entry_point)
+    if env_id in _SUMMARIES:
+        raise ValueError(f"environment id {env_id!r} is registered already")
     if env_id not in registry:
         register(
             id=env_id,
@@ -65,17 +70,33 @@ def register_variant(
             vector_entry_point=vector_entry_point,
             kwargs=dict(options),
         )
+    _SUMMARIES[env_id] = summary
+
+
+def unregister_variant(env_id: str) -> None:
+    """Remove a variant :func:`register_variant` registered (from Gymnasium's registry too)."""
+    _SUMMARIES.pop(env_id, None)
+    registry.pop(env_id, None)
+
+
+def variant_ids() -> tuple[str, ...]:
+    """The registered variants' ids, in registration order (plugins' included)."""
+    load_plugins()
+    return tuple(env_id for env_id in _SUMMARIES if env_id in registry)
 
 
 def variant_options(env_id: str) -> dict[str, Any]:
-    """The options a registered variant fixes, ``task`` included (``ValueError`` if
-    unknown)."""
-    return dict(VARIANTS.get(env_id))
+    """The options a registered variant fixes, ``task`` included: its Gymnasium spec's
+    ``kwargs`` (``ValueError`` naming the known ids for another)."""
+    known = variant_ids()
+    if env_id not in known:
+        raise unknown("environment id", env_id, known)
+    return dict(registry[env_id].kwargs)
 
 
 def task_of(env_id: str) -> str:
     """The task (``angle`` or ``rate``) of a registered variant (``ValueError`` if unknown)."""
-    task: str = VARIANTS.get(env_id)["task"]
+    task: str = variant_options(env_id)["task"]
     return task
 
 

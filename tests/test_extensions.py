@@ -186,14 +186,12 @@ def test_an_unregistered_method_is_refused_by_name(toy_db: Path, tmp_path: Path)
 @pytest.fixture
 def toy_variant(registered: None) -> Iterator[str]:
     """A variant that replays the toy method's traces."""
-    from gymnasium.envs.registration import registry
 
     rollenv.register_variant("RocketRollToy-v0", task="angle", method="toy", summary="toy traces")
     try:
         yield "RocketRollToy-v0"
     finally:
-        rollenv.VARIANTS.unregister("RocketRollToy-v0")
-        registry.pop("RocketRollToy-v0", None)
+        rollenv.unregister_variant("RocketRollToy-v0")
 
 
 def test_a_variants_options_reach_training_tuning_and_evaluation(

@@ -35,7 +35,7 @@ from rollenv.env import RESET_OPTIONS, RocketRollEnv
 from tests.cli import python
 from tests.rollenv.conftest import array_bank, wrap
 
-IDS = rollenv.VARIANTS.names()
+IDS = rollenv.variant_ids()
 RENDER_MODES = (None, "rgb_array", "human")
 REPO = Path(__file__).resolve().parents[2]
 
