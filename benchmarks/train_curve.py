@@ -4,7 +4,7 @@ the PID's score on the evaluation protocol's headline, over training seeds.
 For each recipe (``--recipe LABEL=YAML[@THREADS]``: a hyperparameter file's
 entry for ``--env-id`` and its torch threads) and each ``--seeds`` value this
 trains PPO exactly as ``agents/train.py`` builds it (``make_env``,
-``ppo_arguments``) and every ``--eval-every`` env-steps stops the clock and
+``algorithm_arguments``) and every ``--eval-every`` env-steps stops the clock and
 scores the deterministic policy on the protocol (test split, ``--episodes``
 episodes, seed 0; the headline of :mod:`agents.evaluate`).  The references are
 measured in the same run: the committed policy of the env id and the PID.  The
@@ -46,7 +46,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.ppo import ObservationNormalizer, PPOController
 from agents.registry import make_controller
-from agents.train import load_hyperparameters, make_env, normalization_record, ppo_arguments
+from agents.train import algorithm_arguments, load_hyperparameters, make_env, normalization_record
 from rollenv.bank import load_bank, variant_config
 
 
@@ -137,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             steps = int(args.timesteps or hp.n_timesteps or 1_000_000)
             torch.set_num_threads(recipe.threads)
             _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
-            model = PPO(hp.policy, venv, seed=seed, device="cpu", **ppo_arguments(hp))
+            model = PPO(hp.policy, venv, seed=seed, device="cpu", **algorithm_arguments(hp))
             scorer = Scorer(args.eval_every, score, normalize, config.task)
             began = time.perf_counter()
             model.learn(total_timesteps=steps, callback=scorer)

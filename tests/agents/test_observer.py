@@ -45,7 +45,8 @@ def tiny_runs(default_db, tmp_path_factory) -> dict[str, str]:
     import contextlib
     import io
 
-    from agents.train import COMMAND, SAC_COMMAND, TD3_COMMAND
+    from agents.cli import SAC_COMMAND, TD3_COMMAND
+    from agents.cli import TRAIN_COMMAND as COMMAND
     from rocketroll_common.settings import run_command
 
     folder = tmp_path_factory.mktemp("tiny-runs")

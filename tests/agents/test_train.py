@@ -21,9 +21,9 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from agents.actor import ActorChain
 from agents.base import FlightView
+from agents.cli import TRAIN_COMMAND as COMMAND
 from agents.ppo import ObservationNormalizer, PPOController
 from agents.train import (
-    COMMAND,
     DEFAULT_HYPERPARAMS,
     VECNORMALIZE_FILE,
     Args,
@@ -333,7 +333,7 @@ def test_the_shipped_hyperparameters_load_for_both_tasks():
         hp = load_hyperparameters(DEFAULT_HYPERPARAMS, env_id)
         assert hp.n_timesteps is not None, env_id
         assert hp.policy == "MlpPolicy" and hp.n_envs >= 1 and hp.n_timesteps >= 100_000
-        assert (hp.ppo["n_steps"] * hp.n_envs) % hp.ppo["batch_size"] == 0
+        assert (hp.algo_kwargs["n_steps"] * hp.n_envs) % hp.algo_kwargs["batch_size"] == 0
 
 
 # ------------------------------------------------------------------ SAC, TD3, memory
@@ -357,13 +357,8 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
     estimate): settings.json records them, and the controller, which keeps its own history
     and observer, acts on an episode exactly as the model's predict() on the training
     stack's observation (VecObserver, VecHistory, VecNormalize)."""
-    from agents.train import (
-        COMMAND,
-        SAC_COMMAND,
-        TD3_COMMAND,
-        load_hyperparameters,
-        make_env,
-    )
+    from agents.cli import SAC_COMMAND, TD3_COMMAND
+    from agents.train import load_hyperparameters, make_env
     from rollenv.bank import load_bank, variant_config
 
     text = {
@@ -459,7 +454,11 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
     zero = load_hyperparameters(HYPERPARAMS_DIR / "ppo-zero.yml", "RocketRoll-v0")
     assert zero.env_kwargs == {"setpoint": "zero"}
     plain = load_hyperparameters(DEFAULT_HYPERPARAMS, "RocketRoll-v0")
-    assert (zero.ppo, zero.n_envs, zero.n_timesteps) == (plain.ppo, plain.n_envs, plain.n_timesteps)
+    assert (zero.algo_kwargs, zero.n_envs, zero.n_timesteps) == (
+        plain.algo_kwargs,
+        plain.n_envs,
+        plain.n_timesteps,
+    )
     residual = load_hyperparameters(HYPERPARAMS_DIR / "ppo-residual.yml", "RocketRoll-v0")
     assert residual.residual == 0.25 and residual.observer
     assert residual.env_kwargs == {"setpoint": "zero"}

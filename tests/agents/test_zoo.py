@@ -37,14 +37,14 @@ def test_the_project_reads_the_zoo_format_files_as_the_zoo_does(algo: str) -> No
     hp = load_hyperparameters(HYPERPARAMS / f"{algo}.yml", "RocketRoll-v0", algo)
     assert not hp.history and not hp.observer  # the project's own keys live elsewhere
     if algo == "ppo":
-        assert hp.ppo["policy_kwargs"] == {
+        assert hp.algo_kwargs["policy_kwargs"] == {
             "net_arch": [64, 64],
             "log_std_init": -1.0,
             "activation_fn": "tanh",
         }
     mine = load_hyperparameters(HYPERPARAMS / f"{algo}-history.yml", "RocketRoll-v0", algo)
     if algo != "ppo":
-        assert mine.history == 4 and mine.ppo == hp.ppo
+        assert mine.history == 4 and mine.algo_kwargs == hp.algo_kwargs
 
 
 def test_a_zoo_string_is_read_without_eval() -> None:

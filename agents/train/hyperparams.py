@@ -1,0 +1,418 @@
+"""The hyperparameter file of a training run: one entry per environment id, rl-baselines3-zoo's
+layout, checked key by key into :class:`Hyperparameters`, and the algorithm's keywords made
+from it."""
+
+from __future__ import annotations
+
+import inspect
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rocketroll_common.errors import UsageError
+
+#: The hyperparameter files shipped with the package, one per algorithm.
+HYPERPARAMS_DIR = Path(__file__).resolve().parents[1] / "hyperparams"
+#: PPO's (``rocketroll train ppo``'s default).
+DEFAULT_HYPERPARAMS = HYPERPARAMS_DIR / "ppo.yml"
+
+#: ``rocketroll train ALGO`` → the Stable-Baselines3 class.
+ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
+
+#: Keys of a YAML entry that are not keywords of the algorithm: ``history`` (steps of
+#: past observations and actions in the observation, :mod:`agents.memory`), ``observer``
+#: (true: the observer's estimate ``[v̂, ψ̂, û_d]`` in the observation,
+#: :class:`agents.observer.ObserverFeatures`, designed on the train split), ``residual``
+#: (a scale in (0, 1]: the action is a residual added to the observer controller's command,
+#: × the scale; implies ``observer``), ``flight_clock`` (true, on a flight variant: the
+#: flight's gain and damping multipliers at the coming control step in the observation,
+#: :class:`agents.memory.FlightClock`), and for the off-policy algorithms the exploration
+#: noise (``noise_type: normal``, ``noise_std``) as
+#: rl-baselines3-zoo writes it.
+SCRIPT_KEYS = (
+    "n_envs",
+    "n_timesteps",
+    "policy",
+    "normalize",
+    "env_kwargs",
+    "history",
+    "observer",
+    "residual",
+    "flight_clock",
+    "noise_type",
+    "noise_std",
+)
+#: Environment settings the observer's design depends on (its bank, sensors, servo): an
+#: entry with ``observer: true`` may not change them in ``env_kwargs``, since the acting
+#: controller designs its observer on the evaluated environment's train split.
+OBSERVER_DESIGN = (
+    "method",
+    "disturbance",
+    "model",
+    "recording",
+    "dt_s",
+    "substep_s",
+    "rate_limit_dps",
+    "fin_range_deg",
+    "sensors",
+    "encoder_counts",
+    "gyro_noise_pct",
+    "gyro_range_dps",
+    "episode_s",
+)
+#: Keywords the script sets itself (from the command line), not the YAML file.
+SCRIPT_SET = ("seed", "verbose")
+
+
+def algorithm_class(algo: str) -> Any:
+    """The Stable-Baselines3 class of ``algo`` (``"ppo"``, ``"sac"``, ``"td3"``)."""
+    import stable_baselines3
+
+    return getattr(stable_baselines3, ALGORITHMS[algo])
+
+
+def algorithm_keywords(algo: str = "ppo") -> tuple[str, ...]:
+    """Every keyword of the SB3 class of ``algo`` a YAML entry may set (its signature,
+    less what the script sets: ``seed``, ``verbose``, ``env``)."""
+    names = inspect.signature(algorithm_class(algo).__init__).parameters
+    given = ("self", "policy", "env", "_init_setup_model", *SCRIPT_SET)  # policy: a script key
+    return tuple(n for n in names if n not in given)
+
+
+#: ``VecNormalize`` arguments a YAML ``normalize`` mapping may set.
+NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
+#: ``policy_kwargs.activation_fn`` names.
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
+
+
+@dataclass(frozen=True)
+class Hyperparameters:
+    """One entry of the hyperparameter file, checked.
+
+    Attributes
+    ----------
+    env_id : str
+        The key it was read under.
+    n_envs : int
+        Environments stepped side by side (1 when the file does not say, as
+        in rl-baselines3-zoo).
+    n_timesteps : int or None
+        Environment steps to train for (None: the file does not say;
+        ``--timesteps`` must).
+    policy : str
+        SB3 policy name (default ``"MlpPolicy"``).
+    normalize : dict or None
+        ``VecNormalize`` arguments, None for no normalisation.
+    env_kwargs : dict
+        RocketRoll settings for the training and evaluation envs.
+    algo_kwargs : dict
+        The algorithm's keywords as written in the file (schedules as
+        ``"lin_<x>"``, the activation as a name).
+    source : str
+        The file.
+    algo : str
+        The algorithm the entry is for.
+    history : int
+        Steps of past observations and actions beside the observation (0: none).
+    noise : tuple or None
+        ``("normal", sd)``: Gaussian exploration noise on the action (SAC, TD3).
+    observer : bool
+        The observer's estimate in the observation.
+    residual : float
+        0, or the scale of the action as a residual on the observer controller's
+        command (:class:`agents.observer.ObserverFeatures`).
+    flight_clock : bool
+        The flight's phase in the observation (:class:`agents.memory.FlightClock`).
+    """
+
+    env_id: str
+    n_envs: int
+    n_timesteps: int | None
+    policy: str
+    normalize: dict[str, Any] | None
+    env_kwargs: dict[str, Any]
+    algo_kwargs: dict[str, Any]
+    source: str
+    algo: str = "ppo"
+    history: int = 0
+    noise: tuple[str, float] | None = None
+    observer: bool = False
+    residual: float = 0.0
+    flight_clock: bool = False
+
+
+# ------------------------------------------------------------------------ hyperparameters
+def load_hyperparameters(
+    path: str | os.PathLike[str], env_id: str, algo: str = "ppo"
+) -> Hyperparameters:
+    """The entry ``env_id`` of the YAML file ``path`` for ``algo``, checked key by key.
+
+    Raises
+    ------
+    UsageError
+        The file is missing or not a mapping, has no entry for ``env_id``,
+        lacks a required key, or has an unknown one (named, with the file).
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"--hyperparams {path}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise UsageError(
+            f"--hyperparams {path}: not UTF-8 text (byte {exc.start} is "
+            f"0x{exc.object[exc.start]:02x})"
+        ) from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise UsageError(
+            f"--hyperparams {path}: not valid YAML ({exc})".replace("\n", " ")
+        ) from None
+    if not isinstance(document, dict):
+        raise UsageError(f"--hyperparams {path}: expected a mapping keyed by environment id")
+    if env_id not in document:
+        raise UsageError(
+            f"--hyperparams {path} has no entry for {env_id!r} (it has: "
+            f"{', '.join(map(str, document)) or 'none'})"
+        )
+    entry = document[env_id]
+    where = f"{path}, {env_id}"
+    if not isinstance(entry, dict):
+        raise UsageError(f"{where}: expected a mapping of hyperparameters")
+    set_here = sorted(set(entry) & set(SCRIPT_SET))
+    if set_here:
+        raise UsageError(
+            f"{where}: {set_here[0]!r} is set by the command line (--{set_here[0]}), not the "
+            "hyperparameter file"
+        )
+    keywords = algorithm_keywords(algo)
+    unknown = sorted(set(entry) - set(SCRIPT_KEYS) - set(keywords))
+    if unknown:
+        raise UsageError(
+            f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; known: "
+            f"{', '.join(SCRIPT_KEYS + keywords)}"
+        )
+    counts: dict[str, int | None] = {"n_envs": 1, "n_timesteps": None, "history": 0}
+    for key in ("n_envs", "n_timesteps", "history"):
+        if key not in entry:
+            continue
+        value = entry[key]
+        if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
+            raise UsageError(f"{where}: {key} must be a whole number, got {value!r}")
+        if value < (0 if key == "history" else 1):
+            raise UsageError(f"{where}: {key} must be positive, got {value!r}")
+        counts[key] = int(value)
+    noise = None
+    if "noise_type" in entry or "noise_std" in entry:
+        kind, sd = entry.get("noise_type"), entry.get("noise_std")
+        if algo == "ppo":
+            raise UsageError(f"{where}: noise_type/noise_std are for SAC and TD3, not PPO")
+        if kind != "normal":
+            raise UsageError(f"{where}: noise_type must be 'normal', got {kind!r}")
+        if isinstance(sd, bool) or not isinstance(sd, int | float) or not 0 < sd < 10:
+            raise UsageError(f"{where}: noise_std must be a number in (0, 10), got {sd!r}")
+        noise = ("normal", float(sd))
+    normalize = entry.get("normalize", False)
+    if isinstance(normalize, str):  # rl-baselines3-zoo's "dict(norm_obs=True, ...)"
+        normalize = zoo_mapping(normalize, f"{where}: normalize")
+    if normalize is True:
+        normalize = {}
+    if normalize is False or normalize is None:
+        normalize = None
+    elif not isinstance(normalize, dict):
+        raise UsageError(f"{where}: normalize must be true, false or a mapping, got {normalize!r}")
+    else:
+        bad = sorted(set(normalize) - set(NORMALIZE_KEYS))
+        if bad:
+            raise UsageError(
+                f"{where}: unknown normalize key(s) {', '.join(map(repr, bad))}; known: "
+                f"{', '.join(NORMALIZE_KEYS)}"
+            )
+    observer = entry.get("observer", False)
+    if not isinstance(observer, bool):
+        raise UsageError(f"{where}: observer must be true or false, got {observer!r}")
+    residual = entry.get("residual", 0.0)
+    if isinstance(residual, bool) or not isinstance(residual, int | float):
+        raise UsageError(f"{where}: residual must be a number in (0, 1], got {residual!r}")
+    if residual:
+        if not 0 < residual <= 1:
+            raise UsageError(f"{where}: residual must be a number in (0, 1], got {residual!r}")
+        if "observer" in entry and not observer:
+            raise UsageError(
+                f"{where}: residual acts on the observer controller, whose estimate the policy "
+                "reads: observer: false contradicts it"
+            )
+        observer = True
+    redesign = sorted(set(entry.get("env_kwargs") or {}) & set(OBSERVER_DESIGN))
+    if observer and redesign:
+        raise UsageError(
+            f"{where}: observer: true with env_kwargs {redesign[0]!r}: the observer is designed "
+            "on the train split of the environment evaluated, which that setting changes"
+        )
+    env_kwargs = entry.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    flight_clock = entry.get("flight_clock", False)
+    if not isinstance(flight_clock, bool):
+        raise UsageError(f"{where}: flight_clock must be true or false, got {flight_clock!r}")
+    if flight_clock:
+        from rollenv.variants import variant_options
+
+        if variant_options(env_id).get("flight") is None and "flight" not in env_kwargs:
+            raise UsageError(
+                f"{where}: flight_clock is the phase of a flight; {env_id} is not a flight variant"
+            )
+    algo_kwargs = {key: entry[key] for key in keywords if key in entry}
+    if isinstance(algo_kwargs.get("policy_kwargs"), str):  # rl-baselines3-zoo's "dict(...)"
+        algo_kwargs["policy_kwargs"] = zoo_mapping(
+            algo_kwargs["policy_kwargs"], f"{where}: policy_kwargs"
+        )
+    _algorithm_arguments(algo_kwargs, where)  # fail now on a bad schedule or activation
+    return Hyperparameters(
+        env_id=env_id,
+        n_envs=counts["n_envs"] or 1,
+        n_timesteps=counts["n_timesteps"],
+        policy=str(entry.get("policy", "MlpPolicy")),
+        normalize=normalize,
+        env_kwargs=dict(env_kwargs),
+        algo_kwargs=algo_kwargs,
+        source=str(path),
+        algo=algo,
+        history=counts["history"] or 0,
+        noise=noise,
+        observer=observer,
+        residual=float(residual),
+        flight_clock=flight_clock,
+    )
+
+
+def _schedule(value: Any, key: str, where: str) -> float | Callable[[float], float]:
+    """A float, or ``"lin_<x>"``: x at the start, decaying linearly to 0 at the end."""
+    if isinstance(value, str):
+        if value.startswith("lin_"):
+            try:
+                initial = float(value[4:])
+            except ValueError:
+                initial = math.nan
+            if math.isfinite(initial) and initial > 0:
+                return _LinearSchedule(initial)
+        raise UsageError(f"{where}: {key} must be a number or 'lin_<number>', got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise UsageError(f"{where}: {key} must be a number or 'lin_<number>', got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class _LinearSchedule:
+    """SB3 schedule: ``initial`` times the fraction of training remaining."""
+
+    initial: float
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.initial * progress_remaining
+
+
+#: ``torch.nn`` activations as rl-baselines3-zoo's files name them -> :data:`ACTIVATIONS`.
+ZOO_ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu", "ELU": "elu", "LeakyReLU": "leaky_relu"}
+
+
+def zoo_mapping(text: str, where: str) -> dict[str, Any]:
+    """A mapping written as rl-baselines3-zoo writes one in a YAML string, read without
+    ``eval``: ``dict(net_arch=[64, 64], activation_fn=nn.Tanh)`` or ``{'norm_obs': True}``
+    -- literals, nested ``dict(...)``, and the ``nn.X`` activations of
+    :data:`ZOO_ACTIVATIONS` (as their names: ``nn.Tanh`` is ``tanh``)."""
+    import ast
+
+    def value(node: ast.expr) -> Any:
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id == "dict"
+            and not node.args
+        ):
+            if any(k.arg is None for k in node.keywords):
+                raise ValueError("dict(**...) is not read")
+            return unique([(str(k.arg), value(k.value)) for k in node.keywords])
+        if isinstance(node, ast.Dict):
+            pairs = []
+            for k, v in zip(node.keys, node.values, strict=True):
+                if k is None:
+                    raise ValueError("{**...} is not read")
+                pairs.append((ast.literal_eval(k), value(v)))
+            return unique(pairs)
+        if isinstance(node, ast.List | ast.Tuple):
+            return [value(item) for item in node.elts]
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            if node.value.id == "nn" and node.attr in ZOO_ACTIVATIONS:
+                return ZOO_ACTIVATIONS[node.attr]
+            raise ValueError(
+                f"{node.value.id}.{node.attr}: the activations read are "
+                f"{', '.join('nn.' + a for a in ZOO_ACTIVATIONS)}"
+            )
+        literal = ast.literal_eval(node)
+        if literal is not None and not isinstance(literal, bool | int | float | str):
+            raise ValueError(f"{type(literal).__name__} values are not read")
+        return literal
+
+    def unique(pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
+        keys = [k for k, _ in pairs]
+        repeated = sorted({str(k) for k in keys if keys.count(k) > 1})
+        if repeated:
+            raise ValueError(f"{repeated[0]!r} is given twice")
+        return dict(pairs)
+
+    try:
+        read = value(ast.parse(text.strip(), mode="eval").body)
+    except (SyntaxError, ValueError, TypeError, RecursionError, MemoryError) as exc:
+        raise UsageError(f"{where}: {text!r} is not a dict(...) of literals: {exc}") from None
+    if not isinstance(read, dict):
+        raise UsageError(f"{where}: {text!r} is not a mapping")
+    return read
+
+
+def _algorithm_arguments(algo_kwargs: dict[str, Any], where: str) -> dict[str, Any]:
+    """The algorithm's keywords from a YAML entry: schedules and the activation resolved."""
+    import torch
+
+    out = dict(algo_kwargs)
+    for key in ("learning_rate", "clip_range"):
+        if key in out:
+            out[key] = _schedule(out[key], key, where)
+    policy_kwargs = dict(out.get("policy_kwargs") or {})
+    activation = policy_kwargs.get("activation_fn")
+    if activation is not None:
+        table = {
+            "tanh": torch.nn.Tanh,
+            "relu": torch.nn.ReLU,
+            "elu": torch.nn.ELU,
+            "leaky_relu": torch.nn.LeakyReLU,
+        }
+        if activation not in table:
+            raise UsageError(
+                f"{where}: policy_kwargs.activation_fn must be one of {', '.join(ACTIVATIONS)}, "
+                f"got {activation!r}"
+            )
+        policy_kwargs["activation_fn"] = table[activation]
+    if "policy_kwargs" in out:
+        out["policy_kwargs"] = policy_kwargs
+    if out.get("tensorboard_log") is not None:
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise UsageError(
+                f"{where}: tensorboard_log needs the tensorboard package (pip install tensorboard)"
+            )
+        out["tensorboard_log"] = str(out["tensorboard_log"])
+    return out
+
+
+def algorithm_arguments(hp: Hyperparameters) -> dict[str, Any]:
+    """The algorithm's keywords of ``hp``: ``"lin_<x>"`` schedules and the activation name
+    resolved (SB3's ``PPO``, ``SAC`` or ``TD3`` takes them)."""
+    return _algorithm_arguments(hp.algo_kwargs, f"{hp.source}, {hp.env_id}")
