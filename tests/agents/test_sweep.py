@@ -329,7 +329,7 @@ def test_bad_settings_are_named_before_any_trial(settings, message, tmp_path):
 def test_a_trial_whose_worker_died_is_stored_as_failed(tmp_path, monkeypatch, default_db):
     """No record from a worker (killed, out of memory): the trial is stored as failed, so
     the next run retries it."""
-    import agents.sweep as sweep
+    import agents.sweep.runner as sweep
 
     spec = load_spec(
         _spec(
@@ -351,10 +351,10 @@ def test_ray_without_the_extra_is_refused_before_anything_is_made(
 ):
     """`sweep run ... --ray auto` without Ray started its progress bar and left
     results.sqlite before it refused."""
-    import agents
+    import agents.sweep
 
-    monkeypatch.setitem(sys.modules, "agents.sweep_ray", None)  # as if Ray were not installed
-    monkeypatch.delattr(agents, "sweep_ray", raising=False)
+    monkeypatch.setitem(sys.modules, "agents.sweep.on_ray", None)  # as if Ray were not installed
+    monkeypatch.delattr(agents.sweep, "on_ray", raising=False)
     out = tmp_path / "out"
     argv = ["run", str(_spec(tmp_path, TWO_TRIALS)), "--out", str(out), "--ray", "auto"]
     with contextlib.redirect_stderr(io.StringIO()) as errors:
