@@ -44,7 +44,7 @@ from scipy import sparse
 
 from agents.base import Design, FlightView
 from agents.nominal import NominalModel
-from agents.observer import ObserverController, Turbulence, designed_on, scheduling
+from agents.observer import ObserverController, TurbulenceModel, designed_on, scheduling
 from rollenv.core import RollConfig
 
 __all__ = ["DEFAULT_HORIZON", "MAX_HORIZON", "MPCController", "make_mpc"]
@@ -81,7 +81,7 @@ class MPCController(ObserverController):
         self,
         config: RollConfig,
         rocket: NominalModel,
-        turbulence: Turbulence,
+        turbulence: TurbulenceModel,
         weights: dict[str, float] | None = None,
         horizon: int = DEFAULT_HORIZON,
         *,

@@ -1,6 +1,6 @@
 """Training recipes named on a benchmark's command line: ``LABEL=YAML[@THREADS]``.
 
-A recipe is a hyperparameter file's entry for the env id (``agents/train.py``'s
+A recipe is a hyperparameter file's entry for the env id (``agents/train/``'s
 layout) and the number of torch threads it trains with: the threads are part of
 a recipe's speed (big batches gain from a second core, small ones lose), so the
 old and the new settings are compared each with its own.

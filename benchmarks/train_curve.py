@@ -3,7 +3,7 @@ the PID's score on the evaluation protocol's headline, over training seeds.
 
 For each recipe (``--recipe LABEL=YAML[@THREADS]``: a hyperparameter file's
 entry for ``--env-id`` and its torch threads) and each ``--seeds`` value this
-trains PPO exactly as ``agents/train.py`` builds it (``make_env``,
+trains PPO exactly as ``agents/train/`` builds it (``make_env``,
 ``algorithm_arguments``) and every ``--eval-every`` env-steps stops the clock and
 scores the deterministic policy on the protocol (test split, ``--episodes``
 episodes, seed 0; the headline of :mod:`agents.evaluate`).  The references are

@@ -6,7 +6,7 @@ committed policy's ``ppo.yml`` with 1 torch thread, *before*, and the throughput
 recipe ``ppo-fast.yml`` with 2, *after*) this measures, in one run:
 
 * **PPO training**: ``PPO.learn`` on ``VecNormalize(VecMonitor(RollVecEnv))``
-  exactly as ``agents/train.py`` builds it (no evaluation, no checkpoints,
+  exactly as ``agents/train/`` builds it (no evaluation, no checkpoints,
   no progress bar), split into rollout collection (env steps plus the
   policy's forward passes, timed by a callback) and the gradient updates.
   The recipes train in alternating blocks (``--blocks``; ``learn`` continued

@@ -10,7 +10,7 @@ import pytest
 from agents.base import FlightView
 from agents.evaluate import EpisodeSpec, env_on, run_episode
 from agents.nominal import NominalModel
-from agents.observer import ObserverController, RollObserver, Turbulence
+from agents.observer import ObserverController, RollObserver, TurbulenceModel
 from agents.registry import CONTROLLERS, make_controller
 from disturbances.bank import TraceBank
 from identification.ml import stationary_cov
@@ -223,7 +223,7 @@ def test_the_observer_is_a_kalman_filter_of_the_ml_model():
     """With a white encoder model and no offset, one observer step is the ML's state-space
     step: the transition of identification.ml.roll_transition with the bias column."""
     cfg = config(split="test")
-    turbulence = Turbulence(np.array([0.8]), 5.0, 0.3, 0.01, 0.1)
+    turbulence = TurbulenceModel(np.array([0.8]), 5.0, 0.3, 0.01, 0.1)
     observer = RollObserver(RollParams(0.66, 4.5, 2.3, -0.027), turbulence, cfg)
     assert observer.m == 5  # v, ψ, u_d[k], u_d[k-1] (AR(1) padded), offset
     t, c = observer.step_model(-4.5, 3.0)
@@ -259,15 +259,15 @@ def test_turbulence_fit_and_its_checks(default_db):
     cfg = config(split="train")
     bank = load_bank(cfg, None)
     nominal = NominalModel.from_bank(bank)
-    turbulence = Turbulence.from_bank(bank, 0.1, nominal)
+    turbulence = TurbulenceModel.from_bank(bank, 0.1, nominal)
     assert 1 <= turbulence.order <= 3 and "train" in turbulence.source
     assert 0.0 < turbulence.innovation_sd < np.mean([t.sd_deg for t in bank.traces])
     with pytest.raises(ValueError, match="does not divide"):
-        Turbulence.from_bank(bank, 0.15, nominal)
+        TurbulenceModel.from_bank(bank, 0.15, nominal)
     with pytest.raises(ValueError, match="not stationary"):
-        Turbulence(np.array([1.2]), 1.0, 0.1, 0.01, 0.1)
+        TurbulenceModel(np.array([1.2]), 1.0, 0.1, 0.01, 0.1)
     with pytest.raises(ValueError, match="grid"):
-        RollObserver(nominal.params, Turbulence(np.array([0.5]), 1.0, 0.1, 0.01, 0.2), cfg)
+        RollObserver(nominal.params, TurbulenceModel(np.array([0.5]), 1.0, 0.1, 0.01, 0.2), cfg)
     with pytest.raises(ValueError, match="takes no argument"):
         make_controller("observer:3", cfg, "RocketRoll-v0")
 

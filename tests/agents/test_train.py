@@ -516,13 +516,13 @@ def residual_run(small_db: Path, tmp_path_factory: pytest.TempPathFactory) -> tu
 
 def _observer_on_train(small_db: Path) -> tuple[Any, Any]:
     from agents.nominal import NominalModel
-    from agents.observer import ObserverController, Turbulence
+    from agents.observer import ObserverController, TurbulenceModel
     from rollenv.bank import load_bank, variant_config
 
     train_config = variant_config("RocketRoll-v0", {"split": "train"})
     bank = load_bank(train_config, small_db)
     nominal = NominalModel.from_bank(bank)
-    turbulence = Turbulence.from_bank(bank, train_config.dt_s, nominal)
+    turbulence = TurbulenceModel.from_bank(bank, train_config.dt_s, nominal)
     return ObserverController(train_config, nominal, turbulence), (train_config, bank)
 
 
