@@ -8,7 +8,7 @@ policy gets the same chance from a window of its own past:
 episode's start).  :class:`History` keeps that window for a batch of
 environments; :class:`agents.vecenv.VecHistory` wraps an SB3 ``VecEnv`` with it for
 training,
-and :class:`agents.ppo.PPOController` keeps one of its own when acting, so the
+and :class:`agents.learned.LearnedController` keeps one of its own when acting, so the
 policy sees the same vector in training and in the evaluation.
 """
 

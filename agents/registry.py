@@ -182,7 +182,7 @@ register_controller(
 )
 register_controller(
     "ppo",
-    "agents.ppo:make_ppo",
+    "agents.learned:make_ppo",
     usage="ppo[:DIR]",
     summary="a trained PPO policy (DIR: a `rocketroll train ppo` output; default: the "
     "committed policy agents/policies/ENV_ID)",
@@ -191,13 +191,13 @@ register_controller(
 )
 register_controller(
     "sac",
-    "agents.ppo:make_sac",
+    "agents.learned:make_sac",
     usage="sac:DIR",
     summary="a trained SAC policy (DIR: a `rocketroll train sac` output)",
 )
 register_controller(
     "td3",
-    "agents.ppo:make_td3",
+    "agents.learned:make_td3",
     usage="td3:DIR",
     summary="a trained TD3 policy (DIR: a `rocketroll train td3` output)",
 )

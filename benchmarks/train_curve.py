@@ -44,7 +44,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
-from agents.ppo import ObservationNormalizer, PPOController
+from agents.learned import LearnedController, ObservationNormalizer
 from agents.registry import make_controller
 from agents.train import algorithm_arguments, load_hyperparameters, make_env, normalization_record
 from rollenv.bank import load_bank, variant_config
@@ -72,7 +72,7 @@ class Scorer(BaseCallback):
         wall = stopped - self.began - self.paused
         settings = {"algorithm": "ppo", "env_settings": {"task": self.task}}
         record = normalization_record(self.normalize)
-        controller = PPOController(self.model, ObservationNormalizer(record), settings)
+        controller = LearnedController(self.model, ObservationNormalizer(record), settings)
         self.curve.append((wall, self.num_timesteps, self.score(controller)))
         self.model.policy.set_training_mode(True)
         self.paused += time.perf_counter() - stopped

@@ -111,7 +111,7 @@ def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[st
 # ------------------------------------------------------------------ slow: the committed policies
 def _retrain(env_id: str, out: Path) -> dict[str, Any]:
     """The committed policy's recorded training command, run again into ``out``."""
-    from agents.ppo import COMMITTED
+    from agents.learned import COMMITTED
     from agents.train import DEFAULT_HYPERPARAMS, Args, train
 
     recorded = json.loads((COMMITTED / env_id / "settings.json").read_text(encoding="utf-8"))
@@ -161,7 +161,7 @@ def test_the_committed_rate_policy_is_reproduced_by_its_recorded_command(
     """Train and evaluate (guides), Training PPO: the rate policy's 10 M steps (5 min) come out
     another draw on another database or processor; its held-out score within 1 % of the committed
     policy's (on this version's database: 0.03 % and 0.2 %)."""
-    from agents.ppo import COMMITTED
+    from agents.learned import COMMITTED
 
     settings = _retrain("RocketRollRate-v0", tmp_path / "run")
     committed = json.loads((COMMITTED / "RocketRollRate-v0" / "settings.json").read_text())

@@ -15,7 +15,7 @@ import torch
 from stable_baselines3 import A2C, PPO, SAC, TD3
 
 from agents.actor import ActorChain
-from agents.ppo import PPOController
+from agents.learned import LearnedController
 from agents.registry import COMMITTED
 
 REPO = Path(__file__).resolve().parents[2]
@@ -73,16 +73,16 @@ def test_an_observation_of_another_size_is_refused() -> None:
 
 
 def test_the_committed_policy_acts_through_the_chain() -> None:
-    controller = PPOController.load(COMMITTED / "RocketRoll-v0")
+    controller = LearnedController.load(COMMITTED / "RocketRoll-v0")
     assert controller.chain is not None
 
 
 #: The committed angle policy's actions on fixed observations, hashed: the chain's, torch's.
 _ACTIONS = """
 import hashlib, numpy as np
-from agents.ppo import PPOController
+from agents.learned import LearnedController
 from agents.registry import COMMITTED
-c = PPOController.load(COMMITTED / "RocketRoll-v0")
+c = LearnedController.load(COMMITTED / "RocketRoll-v0")
 obs = np.random.default_rng(0).normal(0.0, 30.0, size=(500, 4)).astype(np.float32)
 chain = np.concatenate([c.chain(c.normalizer(o[None])) for o in obs])
 torch = np.concatenate([c.predict(o) for o in obs])

@@ -1,4 +1,5 @@
-"""``agents.train`` (a tiny PPO run end to end) and ``agents.ppo.PPOController`` on its output."""
+"""``agents.train`` (a tiny PPO run end to end) and ``agents.learned.LearnedController`` on
+its output."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from agents.actor import ActorChain
 from agents.base import FlightView
 from agents.cli import TRAIN_COMMAND as COMMAND
-from agents.ppo import ObservationNormalizer, PPOController
+from agents.learned import LearnedController, ObservationNormalizer
 from agents.train import (
     DEFAULT_HYPERPARAMS,
     VECNORMALIZE_FILE,
@@ -214,7 +215,7 @@ def test_a_finished_run_resumes_from_its_model_and_vecnormalize(run, small_db, t
 
 def test_controller_acts_like_predict_within_the_action_space(run):
     out, _ = run
-    controller = PPOController.load(out)
+    controller = LearnedController.load(out)
     assert controller.name == "PPO" and controller.task == "angle"
     env = RocketRollEnv(bank=array_bank())
     obs, _ = env.reset(seed=0)
@@ -240,7 +241,7 @@ def test_controller_acts_like_predict_within_the_action_space(run):
 
 def test_load_refuses_a_folder_without_a_model(tmp_path):
     with pytest.raises(FileNotFoundError, match=r"model\.zip"):
-        PPOController.load(tmp_path)
+        LearnedController.load(tmp_path)
 
 
 # ------------------------------------------------------------------------- arguments
@@ -385,7 +386,7 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
         assert settings["hyperparameters"]["noise_std"] == 0.2
     observer = algo == "ppo"
     assert settings["hyperparameters"].get("observer", False) is observer
-    controller = PPOController.load(out)
+    controller = LearnedController.load(out)
     assert controller.name == algo.upper() and controller.history is not None
     assert controller.needs_observer is observer
     if observer:
@@ -535,7 +536,7 @@ def test_a_residual_policy_adds_its_action_to_the_observer_controllers(residual_
     out, hyperparams = residual_run
     settings = json.loads((out / "settings.json").read_text())
     assert settings["hyperparameters"]["residual"] == 0.25
-    controller = PPOController.load(out)
+    controller = LearnedController.load(out)
     assert controller.residual == 0.25 and controller.needs_observer
     reference, (train_config, bank) = _observer_on_train(small_db)
     controller.attach_observer(train_config, bank)
@@ -574,7 +575,7 @@ def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, smal
     import torch
 
     out, _ = residual_run
-    controller = PPOController.load(out)
+    controller = LearnedController.load(out)
     with torch.no_grad():
         controller.model.policy.action_net.weight.zero_()
         controller.model.policy.action_net.bias.zero_()
@@ -632,7 +633,7 @@ def test_a_flight_policy_reads_the_flights_phase_as_in_training(tmp_path, defaul
     assert settings["hyperparameters"]["flight_clock"] is True
     names = json.loads((out / "normalize.json").read_text())["observation_names"]
     assert names[-2:] == ["flight_gain", "flight_damping"]
-    controller = PPOController.load(out)
+    controller = LearnedController.load(out)
     assert controller.needs_clock
     hp = load_hyperparameters(hyperparams, "RocketRollFlight-v0", "ppo")
     adapter, stack, normalize = make_env(hp, 1, 5, split="test", db=default_db, training=False)

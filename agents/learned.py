@@ -1,4 +1,4 @@
-"""``PPOController``: a policy trained by :mod:`agents.train` (PPO, SAC or TD3), as a
+"""``LearnedController``: a policy trained by :mod:`agents.train` (PPO, SAC or TD3), as a
 :class:`Controller`; with the observation history it was trained with (:mod:`agents.memory`)."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from disturbances.bank import TraceBank
 from rollenv.core import RollConfig
 from rollenv.layout import Obs
 
-__all__ = ["COMMITTED", "ObservationNormalizer", "PPOController", "make_learned", "make_ppo"]
+__all__ = ["COMMITTED", "LearnedController", "ObservationNormalizer", "make_learned", "make_ppo"]
 
 
 class ObservationNormalizer:
@@ -69,7 +69,7 @@ class ObservationNormalizer:
         return normalized.astype(np.float32)
 
 
-class PPOController:
+class LearnedController:
     """A trained PPO policy (deterministic: the Gaussian's mean) for the evaluation protocol.
 
     Load it with :meth:`load` from a training output directory
@@ -128,7 +128,7 @@ class PPOController:
         self.chain = ActorChain.from_policy(model.policy)
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> PPOController:
+    def load(cls, path: str | os.PathLike[str]) -> LearnedController:
         """The controller of the training output directory ``path``.
 
         Raises
@@ -247,12 +247,12 @@ def _zero(_: float) -> float:
     return 0.0
 
 
-def make_ppo(design: Design) -> PPOController:
+def make_ppo(design: Design) -> LearnedController:
     """``--policy ppo[:DIR]``: a training output, or the committed policy of the env id."""
     return make_learned(design, "ppo")
 
 
-def make_learned(design: Design, algorithm: str) -> PPOController:
+def make_learned(design: Design, algorithm: str) -> LearnedController:
     """``--policy ALGO[:DIR]``: a ``rocketroll train ALGO`` output (PPO: by default the
     committed policy of the env id)."""
     if design.arg:
@@ -262,7 +262,7 @@ def make_learned(design: Design, algorithm: str) -> PPOController:
     else:
         raise ValueError(f"--policy {algorithm}:DIR needs the folder of a training run")
     try:
-        learned = PPOController.load(path)
+        learned = LearnedController.load(path)
     except FileNotFoundError as exc:
         raise ValueError(str(exc)) from None
     if learned.algorithm != algorithm:
@@ -303,7 +303,7 @@ def trained_elsewhere(settings: Mapping[str, Any], design: Design) -> str | None
     return None
 
 
-def _check_observer_design(learned: PPOController, config: RollConfig, where: str) -> None:
+def _check_observer_design(learned: LearnedController, config: RollConfig, where: str) -> None:
     """Refuse (``ValueError``) to design a policy's observer on another method's or model's
     rockets and traces than training designed it on (another ``--set method=`` given to
     ``train`` than to this command): the policy reads that observer's estimate.  The
@@ -319,11 +319,11 @@ def _check_observer_design(learned: PPOController, config: RollConfig, where: st
             )
 
 
-def make_sac(design: Design) -> PPOController:
+def make_sac(design: Design) -> LearnedController:
     """``--policy sac:DIR``."""
     return make_learned(design, "sac")
 
 
-def make_td3(design: Design) -> PPOController:
+def make_td3(design: Design) -> LearnedController:
     """``--policy td3:DIR``."""
     return make_learned(design, "td3")
