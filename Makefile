@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip
 DEMO   ?= build/demo
 
-.PHONY: demo test lint typecheck pytest pytest-varied docs venv clean recordings help
+.PHONY: demo test lint typecheck pytest pytest-varied docs venv clean recordings help schemas
 
 $(BIN)/python:
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required, found " + sys.version'
@@ -105,6 +105,11 @@ test: lint typecheck pytest pytest-varied docs
 # command's module); a test fails while it is not current.
 help: $(VENV)/.installed
 	$(BIN)/python -c 'from rocketroll.cli import write_help; write_help()'
+
+# Write docs/schemas/*.schema.json again (the JSON Schema of each spec model, for editors);
+# a test fails while one is not current.
+schemas: $(VENV)/.installed
+	$(BIN)/python -c 'from rocketroll.cli import write_schemas; write_schemas()'
 
 # Regenerate the bundled synthetic recordings from their recorded commands.
 recordings: $(VENV)/.installed

@@ -93,6 +93,23 @@ def write_help() -> None:
     print(f"wrote {CACHE}: the help of {len(COMMANDS)} commands")
 
 
+#: The spec models whose JSON Schemas are kept in ``docs/schemas/`` (``STEM.schema.json``).
+SCHEMAS: dict[str, str] = {"sweep": "agents.sweep.spec:SweepDocument"}
+
+
+def write_schemas() -> None:
+    """Write ``docs/schemas/STEM.schema.json`` for every model of :data:`SCHEMAS` (``make
+    schemas``; a test checks that they are current)."""
+    from rocketroll_common.specs import SCHEMAS_DIR, schema_text
+
+    SCHEMAS_DIR.mkdir(parents=True, exist_ok=True)
+    for stem, target in SCHEMAS.items():
+        module, _, name = target.partition(":")
+        path = SCHEMAS_DIR / f"{stem}.schema.json"
+        path.write_text(schema_text(getattr(importlib.import_module(module), name)), "utf-8")
+        print(f"wrote {path}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     from rocketroll.help import cached_help

@@ -1,5 +1,6 @@
 """A sweep's spec (YAML): tasks, controllers with the settings to search, disturbance sets and
-training seeds, checked key by key into :class:`SweepSpec`."""
+training seeds; its structure a pydantic model (:class:`SweepDocument`, whose JSON Schema is
+``docs/schemas/sweep.schema.json``), checked into :class:`SweepSpec`."""
 
 from __future__ import annotations
 
@@ -10,7 +11,9 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from agents.replay import (
     FIXED_OPTIONS,
@@ -18,6 +21,7 @@ from agents.replay import (
     options_config,
 )
 from rocketroll_common.errors import UsageError
+from rocketroll_common.specs import load_yaml, validated
 
 #: Algorithms a controller of a spec may train.
 TRAINABLE = ("ppo", "sac", "td3")
@@ -60,26 +64,113 @@ class SweepSpec:
 
 #: The sweep specs shipped with the package: ``rocketroll sweep run NAME`` finds them.
 SHIPPED = Path(__file__).resolve().parents[1] / "sweeps"
-#: What a sweep's name may be: it names its folder under runs/sweeps/.
-_SWEEP_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
-_TOP_KEYS = ("name", "env_ids", "controllers", "seeds", "episodes", "eval_seed", "settings")
-_CONTROLLER_KEYS = ("name", "policy", "train", "hyperparams", "timesteps", "grid")
 
 
-def _values(value: Any, where: str) -> list[Any]:
+def _axis(value: Any) -> list[Any]:
     """A search axis: a list of one or more values (a scalar is a list of one)."""
     values = value if isinstance(value, list) else [value]
     if not values:
-        raise UsageError(f"{where}: an empty list; give at least one value")
+        raise ValueError("an empty list; give at least one value")
     return values
 
 
-def _whole(value: Any, where: str, low: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
-        raise UsageError(f"{where}: must be a whole number, got {value!r}")
-    if value < low:
-        raise UsageError(f"{where}: must be >= {low}, got {value!r}")
-    return int(value)
+#: What a sweep's name may be: it names its folder under runs/sweeps/.
+SWEEP_NAME = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9._-]*$")
+
+
+def _sweep_name(name: str) -> str:
+    if not SWEEP_NAME.fullmatch(name):
+        raise ValueError(
+            "must be one word of letters, digits, '.', '_' and '-' (it names the sweep's "
+            f"folder, which it must not leave), got {name!r}"
+        )
+    return name
+
+
+#: One or more values searched over (a scalar is a list of one).
+Axis = Annotated[list[Any], BeforeValidator(_axis, json_schema_input_type=list[Any] | Any)]
+#: A whole number, not a float or a boolean.
+Whole = Annotated[int, Field(strict=True, ge=0)]
+
+
+class _Document(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SearchDocument(_Document):
+    """How the points are chosen: every one (``grid``) or a seeded random sample."""
+
+    kind: Literal["grid", "random"] = Field("grid", description="every point, or a sample")
+    trials: Annotated[int, Field(strict=True, ge=1)] | None = Field(
+        None, description="points drawn without replacement (kind: random)"
+    )
+    seed: Whole = Field(0, description="the sample's seed")
+
+    @model_validator(mode="after")
+    def _trials_for_random(self) -> SearchDocument:
+        if self.kind == "random" and self.trials is None:
+            raise ValueError("kind random needs trials: N")
+        return self
+
+
+class ControllerDocument(_Document):
+    """One controller: a ``--policy`` of ``rocketroll eval`` (``policy``), or a recipe trained
+    per trial (``train`` and ``hyperparams``, optional ``timesteps``, a ``grid`` of its
+    hyperparameters searched over)."""
+
+    name: str = Field(min_length=1, description="the controller's name in the tables")
+    policy: str | None = Field(None, description="a --policy of rocketroll eval (NAME[:ARG])")
+    train: Literal["ppo", "sac", "td3"] | None = Field(None, description="algorithm to train")
+    hyperparams: str | None = Field(
+        None, description="the recipe's YAML file, relative to the spec (or the cwd)"
+    )
+    timesteps: Annotated[int, Field(strict=True, ge=1)] | None = Field(
+        None, description="environment steps (default: the entry's n_timesteps)"
+    )
+    grid: dict[str, Axis] = Field(
+        default_factory=dict, description="hyperparameters searched over (dotted keys reach in)"
+    )
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> ControllerDocument:
+        if (self.policy is None) == (self.train is None):
+            raise ValueError("give exactly one of policy (evaluate) or train (learn)")
+        if self.policy is not None:
+            for key in ("hyperparams", "timesteps"):
+                if getattr(self, key) is not None:
+                    raise ValueError(f"{key} is for a trained controller (train: ALGO)")
+            if self.grid:
+                raise ValueError("grid is for a trained controller's hyperparameters")
+        elif self.hyperparams is None:
+            raise ValueError("hyperparams (the YAML file of the recipe) is missing")
+        return self
+
+
+class SweepDocument(_Document):
+    """A sweep spec as written (the package's docstring): the structure pydantic checks;
+    :func:`load_spec` then checks what needs the toolkit (registered env ids and policies,
+    the recipes' files and entries) and makes the :class:`SweepSpec`."""
+
+    name: Annotated[str, AfterValidator(_sweep_name)] = Field(
+        json_schema_extra={"pattern": SWEEP_NAME.pattern},
+        description="one word of letters, digits, '.', '_' and '-': it names the sweep's "
+        "folder, which it must not leave",
+    )
+    env_ids: Annotated[
+        list[str], BeforeValidator(_axis, json_schema_input_type=list[str] | str)
+    ] = Field(description="the tasks (registered environment ids)")
+    controllers: list[ControllerDocument] = Field(min_length=1)
+    seeds: Annotated[
+        list[Whole], BeforeValidator(_axis, json_schema_input_type=list[int] | int)
+    ] = Field(default_factory=lambda: [0], description="training seeds of the learned controllers")
+    episodes: Annotated[int, Field(strict=True, ge=2)] = Field(
+        20, description="test-split episodes of the evaluation protocol"
+    )
+    eval_seed: Whole = Field(0, description="the evaluation episodes' seed")
+    settings: dict[str, Axis] = Field(
+        default_factory=dict, description="environment settings searched over"
+    )
+    search: SearchDocument = SearchDocument()
 
 
 def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = None) -> SweepSpec:
@@ -89,12 +180,10 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
     Raises
     ------
     UsageError
-        Naming the file and the key: a missing file, bad YAML, an unknown or
-        missing key, a value of the wrong kind, an unknown env id, algorithm
+        Naming the file, the line and the key: a missing file, bad YAML, an unknown or
+        missing key, a value of the wrong kind (:class:`SweepDocument`), an unknown env id
         or policy, a hyperparameter file without the env id's entry.
     """
-    import yaml
-
     from agents.registry import CONTROLLERS
     from rollenv.variants import variant_ids
 
@@ -104,86 +193,36 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
     if not path.is_file():
         shipped = ", ".join(sorted(p.stem for p in SHIPPED.glob("*.yml")))
         raise UsageError(f"{path}: no such sweep spec (shipped, by name: {shipped})")
-    try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise UsageError(f"{path}: not a YAML file ({exc})".replace("\n", " ")) from None
-    if not isinstance(document, dict):
-        raise UsageError(f"{path}: expected a mapping (name, env_ids, controllers, ...)")
-    unknown = sorted(set(document) - {*_TOP_KEYS, "search"})
-    if unknown:
-        raise UsageError(
-            f"{path}: unknown key {unknown[0]!r}; known: {', '.join((*_TOP_KEYS, 'search'))}"
-        )
-    for key in ("name", "env_ids", "controllers"):
-        if key not in document:
-            raise UsageError(f"{path}: {key!r} is missing")
-    name = document["name"]
-    if not isinstance(name, str) or not _SWEEP_NAME.fullmatch(name):
-        raise UsageError(
-            f"{path}: name must be one word of letters, digits, '.', '_' and '-' (it names the "
-            f"sweep's folder, which it must not leave), got {name!r}"
-        )
-    env_ids = [str(e) for e in _values(document["env_ids"], f"{path}: env_ids")]
-    for env_id in env_ids:
+    document, lines = load_yaml(path)
+    doc = validated(SweepDocument, document, str(path), lines)
+
+    def at(*key: str | int) -> str:
+        return f"{path}:{lines[key]}" if key in lines else str(path)
+
+    for i, env_id in enumerate(doc.env_ids):
         if env_id not in variant_ids():
             raise UsageError(
-                f"{path}: env_ids: unknown {env_id!r}; one of {', '.join(variant_ids())}"
+                f"{at('env_ids', i) if isinstance(document['env_ids'], list) else at('env_ids')}"
+                f": env_ids: unknown {env_id!r}; one of {', '.join(variant_ids())}"
             )
-    seeds = [_whole(s, f"{path}: seeds") for s in _values(document.get("seeds", [0]), "seeds")]
-    episodes = _whole(document.get("episodes", 20), f"{path}: episodes", low=2)
-    eval_seed = _whole(document.get("eval_seed", 0), f"{path}: eval_seed")
-    settings_in = document.get("settings") or {}
-    if not isinstance(settings_in, dict):
-        raise UsageError(f"{path}: settings must be a mapping of setting -> values")
-    settings = {str(k): _values(v, f"{path}: settings.{k}") for k, v in settings_in.items()}
+    settings = {str(k): list(v) for k, v in doc.settings.items()}
     fixed = sorted(set(FIXED_OPTIONS) & set(settings))
     if fixed:
         raise UsageError(
-            f"{path}: settings.{fixed[0]}: not a setting to search (the task follows env_ids, "
-            "the evaluation's split is the test split)"
+            f"{at('settings', fixed[0])}: settings.{fixed[0]}: not a setting to search (the "
+            "task follows env_ids, the evaluation's split is the test split)"
         )
     check_options(options or {})
     settings.update({k: [v] for k, v in (options or {}).items()})
-    for env_id in env_ids:
+    for env_id in doc.env_ids:
         for point in points(settings):
             options_config(env_id, point, "test", flag=f"{path}: settings {point} on {env_id}")
-    search = document.get("search") or {"kind": "grid"}
-    if not isinstance(search, dict) or search.get("kind") not in ("grid", "random"):
-        raise UsageError(f"{path}: search must be {{kind: grid}} or {{kind: random, trials: N}}")
-    bad = sorted(set(search) - {"kind", "trials", "seed"})
-    if bad:
-        raise UsageError(f"{path}: search: unknown key {bad[0]!r}; known: kind, trials, seed")
-    trials = None
-    if search["kind"] == "random":
-        if "trials" not in search:
-            raise UsageError(f"{path}: search: kind random needs trials: N")
-        trials = _whole(search["trials"], f"{path}: search.trials", low=1)
-    controllers_in = document["controllers"]
-    if not isinstance(controllers_in, list) or not controllers_in:
-        raise UsageError(f"{path}: controllers must be a list of one or more controllers")
     controllers = []
-    for i, entry in enumerate(controllers_in):
-        where = f"{path}: controllers[{i}]"
-        if not isinstance(entry, dict):
-            raise UsageError(f"{where}: expected a mapping (name, policy or train, ...)")
-        bad = sorted(set(entry) - set(_CONTROLLER_KEYS))
-        if bad:
-            raise UsageError(
-                f"{where}: unknown key {bad[0]!r}; known: {', '.join(_CONTROLLER_KEYS)}"
-            )
-        cname = entry.get("name")
-        if not isinstance(cname, str) or not cname:
-            raise UsageError(f"{where}: name must be a non-empty text")
-        where = f"{path}: controller {cname!r}"
-        if ("policy" in entry) == ("train" in entry):
-            raise UsageError(f"{where}: give exactly one of policy (evaluate) or train (learn)")
-        grid_in = entry.get("grid") or {}
-        if not isinstance(grid_in, dict):
-            raise UsageError(f"{where}: grid must be a mapping of hyperparameter -> values")
-        grid = {str(k): _values(v, f"{where}: grid.{k}") for k, v in grid_in.items()}
-        if "policy" in entry:
-            policy = str(entry["policy"])
+    for i, entry in enumerate(doc.controllers):
+        where = f"{at('controllers', i)}: controller {entry.name!r}"
+        grid = {str(k): list(v) for k, v in entry.grid.items()}
+        if entry.policy is not None:
+            policy = entry.policy
             kind, sep, arg = policy.partition(":")
             if sep and arg and not Path(arg).is_absolute():  # a run's folder: made absolute,
                 for base in (path.parent, Path.cwd()):  # so workers anywhere find it
@@ -194,38 +233,26 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
                 raise UsageError(
                     f"{where}: unknown policy {policy!r}; one of {', '.join(CONTROLLERS.names())}"
                 )
-            for key in ("hyperparams", "timesteps"):
-                if key in entry:
-                    raise UsageError(f"{where}: {key} is for a trained controller (train: ALGO)")
-            if grid:
-                raise UsageError(f"{where}: grid is for a trained controller's hyperparameters")
-            controllers.append(ControllerSpec(cname, policy=policy))
+            controllers.append(ControllerSpec(entry.name, policy=policy))
             continue
-        algo = entry["train"]
-        if algo not in TRAINABLE:
-            raise UsageError(f"{where}: train must be one of {', '.join(TRAINABLE)}, got {algo!r}")
-        if "hyperparams" not in entry:
-            raise UsageError(f"{where}: hyperparams (the YAML file of the recipe) is missing")
-        hyperparams = Path(str(entry["hyperparams"]))
+        assert entry.train is not None and entry.hyperparams is not None  # the document's check
+        hyperparams = Path(entry.hyperparams)
         if not hyperparams.is_absolute() and (path.parent / hyperparams).is_file():
             hyperparams = path.parent / hyperparams  # relative to the spec, else to the cwd
         if not hyperparams.is_file():
-            raise UsageError(f"{where}: hyperparams {entry['hyperparams']}: no such file")
-        timesteps = entry.get("timesteps")
-        if timesteps is not None:
-            timesteps = _whole(timesteps, f"{where}: timesteps", low=1)
-        for env_id in env_ids:  # fail now, not in the middle of the sweep
+            raise UsageError(f"{where}: hyperparams {entry.hyperparams}: no such file")
+        for env_id in doc.env_ids:  # fail now, not in the middle of the sweep
             for point in points(grid):
                 try:
-                    _entry_with(hyperparams, env_id, str(algo), point)
+                    _entry_with(hyperparams, env_id, entry.train, point)
                 except UsageError as exc:
                     raise UsageError(f"{where}: {exc}") from None
         controllers.append(
             ControllerSpec(
-                cname,
-                train=str(algo),
+                entry.name,
+                train=entry.train,
                 hyperparams=str(hyperparams.resolve()),
-                timesteps=timesteps,
+                timesteps=entry.timesteps,
                 grid=grid,
             )
         )
@@ -234,16 +261,16 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
     if repeated:
         raise UsageError(f"{path}: controller name {repeated[0]!r} is given twice")
     return SweepSpec(
-        name=name,
-        env_ids=env_ids,
+        name=doc.name,
+        env_ids=list(doc.env_ids),
         controllers=controllers,
-        seeds=seeds,
-        episodes=episodes,
-        eval_seed=eval_seed,
+        seeds=list(doc.seeds),
+        episodes=doc.episodes,
+        eval_seed=doc.eval_seed,
         settings=settings,
-        kind=str(search["kind"]),
-        trials=trials,
-        search_seed=_whole(search.get("seed", 0), f"{path}: search.seed"),
+        kind=doc.search.kind,
+        trials=doc.search.trials,
+        search_seed=doc.search.seed,
         source=str(path),
     )
 

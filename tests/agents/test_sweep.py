@@ -106,7 +106,7 @@ def test_a_spec_expands_to_its_grid_and_a_random_sample_of_it(tmp_path):
         (
             "name: x\nenv_ids: [RocketRoll-v0]\ncontrollers:\n  - {name: q, train: a2c, "
             "hyperparams: tiny-ppo.yml}\n",
-            "train must be one of ppo, sac, td3",
+            "controllers[0].train: Input should be 'ppo', 'sac' or 'td3', got 'a2c'",
         ),
         (
             "name: x\nenv_ids: [RocketRoll-v0]\ncontrollers: [{name: p, policy: pid}]\n"
@@ -115,7 +115,7 @@ def test_a_spec_expands_to_its_grid_and_a_random_sample_of_it(tmp_path):
         ),
         (  # it names the sweep's folder, which it must not leave
             "name: ../../etc\nenv_ids: [RocketRoll-v0]\ncontrollers: [{name: p, policy: pid}]\n",
-            "name must be one word of letters, digits",
+            "name: must be one word of letters, digits",
         ),
         (
             "name: .hidden\nenv_ids: [RocketRoll-v0]\ncontrollers: [{name: p, policy: pid}]\n",

@@ -1,0 +1,120 @@
+"""Declarative specs read from YAML files: a pydantic model checks the document.
+
+A spec's structure (its keys, their types and ranges, which keys go together) is a
+pydantic model; :func:`load_yaml` reads the file and :func:`validated` checks it, and a
+bad key or value is one :class:`~rocketroll_common.errors.UsageError` line naming the file,
+the line, the key and the problem (``sweep.yml:7: controllers[1].timesteps: Input should be
+greater than or equal to 1``).  What needs the rest of the toolkit (an environment id that
+is registered, a file that exists) the loader checks after.  Each model's JSON Schema
+(:func:`json_schema`, written under ``docs/schemas/`` by ``make schemas``:
+:func:`rocketroll.cli.write_schemas`) lets an
+editor check a spec as it is typed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+from pydantic import BaseModel, ValidationError
+
+from rocketroll_common.errors import UsageError
+
+__all__ = ["SCHEMAS_DIR", "json_schema", "load_yaml", "schema_text", "validated"]
+
+Model = TypeVar("Model", bound=BaseModel)
+
+#: Where the JSON Schemas of the shipped spec models are kept (``make schemas``).
+SCHEMAS_DIR = Path(__file__).resolve().parents[1] / "docs" / "schemas"
+
+#: A key path in a document: mapping keys and list indices.
+Location = tuple[str | int, ...]
+
+
+def load_yaml(path: str | os.PathLike[str]) -> tuple[Any, dict[Location, int]]:
+    """The YAML document of ``path`` and the line (1-based) of every key and list item in
+    it, by its path (``("controllers", 1, "timesteps")``); ``UsageError`` naming the file
+    where it cannot be read or is not YAML."""
+    import yaml
+
+    where = os.fspath(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"{where}: cannot read: {exc}") from None
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise UsageError(f"{where}: not a YAML file ({exc})".replace("\n", " ")) from None
+    lines: dict[Location, int] = {}
+
+    def walk(found: Any, at: Location) -> None:
+        if isinstance(found, yaml.MappingNode):
+            for key, value in found.value:
+                if isinstance(key, yaml.ScalarNode):
+                    lines[(*at, str(key.value))] = int(key.start_mark.line) + 1
+                    walk(value, (*at, str(key.value)))
+        elif isinstance(found, yaml.SequenceNode):
+            for index, item in enumerate(found.value):
+                lines[(*at, index)] = int(item.start_mark.line) + 1
+                walk(item, (*at, index))
+
+    walk(node, ())
+    return document, lines
+
+
+def _dotted(loc: Location) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def validated(
+    model: type[Model],
+    document: Any,
+    where: str,
+    lines: Mapping[Location, int] | None = None,
+) -> Model:
+    """``document`` checked as ``model``; the first problem as one ``UsageError`` line,
+    ``WHERE:LINE: KEY: PROBLEM`` (the line of the key, or of the nearest key above it)."""
+    if not isinstance(document, dict):
+        keys = ", ".join(model.model_fields)
+        raise UsageError(f"{where}: expected a mapping ({keys})")
+    try:
+        return model.model_validate(document)
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        loc: Location = tuple(p for p in error["loc"] if isinstance(p, str | int))
+        known = lines or {}
+        line = next((known[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in known), None)
+        at = f"{where}:{line}" if line is not None else where
+        problem = str(error["msg"])
+        if error["type"] == "extra_forbidden":
+            parent: Any = model
+            problem = f"unknown key {loc[-1]!r}" if loc else "unknown key"
+            if len(loc) == 1:
+                problem += f"; known: {', '.join(parent.model_fields)}"
+        elif error["type"] == "missing":
+            problem = "is missing"
+        elif error["type"].endswith("_type") or error["type"] in ("literal_error", "enum"):
+            shown = repr(error.get("input"))
+            problem += f", got {shown}" if len(shown) <= 60 else ""
+        problem = problem.removeprefix("Value error, ")
+        key = _dotted(loc)
+        raise UsageError(f"{at}: {key}: {problem}" if key else f"{at}: {problem}") from None
+
+
+def json_schema(model: type[BaseModel]) -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of ``model``, as an editor reads it."""
+    schema = model.model_json_schema()
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
+
+
+def schema_text(model: type[BaseModel]) -> str:
+    """:func:`json_schema` as the text kept in :data:`SCHEMAS_DIR`."""
+    return json.dumps(json_schema(model), indent=2, ensure_ascii=False, sort_keys=True) + "\n"
