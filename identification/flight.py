@@ -52,13 +52,14 @@ import functools
 import itertools
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+from pydantic import BaseModel, ConfigDict, Field
 
 from identification.recording import parse_number
 from rocketroll_common.arrays import FloatArray, readonly_array
@@ -875,16 +876,22 @@ def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> Fl
 
 # --------------------------------------------------------------------------- user files
 #: YAML keys of :func:`load_ascent_yaml` -> AscentSpec field (the thrust curve is one key).
-_YAML_FIELDS = (
-    "dry_mass_kg",
-    "propellant_mass_kg",
-    "thrust_curve",
-    "drag_coefficient",
-    "diameter_m",
-    "length_m",
-    "launch_altitude_m",
-)
-_YAML_REQUIRED = _YAML_FIELDS[:5]
+class AscentDocument(BaseModel):
+    """An ascent YAML file as written (:func:`load_ascent_yaml`): its keys and their types;
+    the ranges are :class:`AscentSpec`'s.  Its JSON Schema is
+    ``docs/schemas/ascent.schema.json``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    dry_mass_kg: float = Field(description="mass without propellant, kg (> 0)")
+    propellant_mass_kg: float = Field(description="propellant at lift-off, kg (> 0)")
+    thrust_curve: list[tuple[float, float]] = Field(
+        description="[t_s, thrust_n] pairs from 0 s, ending at 0 N"
+    )
+    drag_coefficient: float = Field(description="axial drag coefficient (>= 0)")
+    diameter_m: float = Field(description="body diameter, m (> 0)")
+    length_m: float = Field(1.3, description="body length, m (> 0)")
+    launch_altitude_m: float = Field(0.0, description="launch site above sea level, m")
 
 
 def load_ascent_yaml(path: str | os.PathLike[str]) -> AscentSpec:
@@ -916,54 +923,27 @@ def load_ascent_yaml(path: str | os.PathLike[str]) -> AscentSpec:
     ------
     UsageError
         Naming the file, the line where known, and the key: unreadable or
-        invalid YAML, a missing or unknown key, a value of the wrong type or
-        out of range.
+        invalid YAML, a missing or unknown key, a value of the wrong type
+        (:class:`AscentDocument`) or out of range (:class:`AscentSpec`).
 
     Examples
     --------
     ``identification/data/ascent-default.yml`` is :data:`DEFAULT_ASCENT`.
     """
-    import yaml
+    from rocketroll_common.specs import load_yaml, validated
 
     where = os.fspath(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"{where}: cannot read: {exc}") from exc
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise UsageError(f"{where}: not valid YAML: {exc}") from None
-    if not isinstance(data, Mapping) or not isinstance(node, yaml.MappingNode):
-        raise UsageError(f"{where}: must be a mapping of AscentSpec fields (key: value)")
-    lines = {
-        str(key.value): int(key.start_mark.line) + 1
-        for key, _ in node.value
-        if isinstance(key, yaml.ScalarNode)
-    }
+    document, lines = load_yaml(path)
+    doc = validated(AscentDocument, document, where, lines)
 
     def at(key: str) -> str:
-        return f"{where}:{lines[key]}" if key in lines else where
+        return f"{where}:{lines[(key,)]}" if (key,) in lines else where
 
-    for key in data:
-        if key not in _YAML_FIELDS:
-            raise UsageError(
-                f"{at(str(key))}: unknown key {key!r} (known: {', '.join(_YAML_FIELDS)})"
-            )
-    for key in _YAML_REQUIRED:
-        if key not in data:
-            raise UsageError(f"{where}: missing key {key!r}")
-    curve = data["thrust_curve"]
-    if not isinstance(curve, list) or not all(
-        isinstance(pair, list) and len(pair) == 2 for pair in curve
-    ):
-        raise UsageError(f"{at('thrust_curve')}: thrust_curve must be a list of [t_s, thrust_n]")
-    values = {key: data[key] for key in _YAML_FIELDS if key in data and key != "thrust_curve"}
+    values = doc.model_dump(exclude={"thrust_curve"})
     try:
         return AscentSpec(
-            thrust_time_s=tuple(pair[0] for pair in curve),
-            thrust_n=tuple(pair[1] for pair in curve),
+            thrust_time_s=tuple(pair[0] for pair in doc.thrust_curve),
+            thrust_n=tuple(pair[1] for pair in doc.thrust_curve),
             **values,
         )
     except SettingError as exc:

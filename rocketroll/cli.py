@@ -94,7 +94,11 @@ def write_help() -> None:
 
 
 #: The spec models whose JSON Schemas are kept in ``docs/schemas/`` (``STEM.schema.json``).
-SCHEMAS: dict[str, str] = {"sweep": "agents.sweep.spec:SweepDocument"}
+SCHEMAS: dict[str, str] = {
+    "sweep": "agents.sweep.spec:SweepDocument",
+    "hyperparams": "agents.train.hyperparams:HyperparameterFile",
+    "ascent": "identification.flight:AscentDocument",
+}
 
 
 def write_schemas() -> None:

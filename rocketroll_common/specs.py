@@ -17,18 +17,43 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, BeforeValidator, Field, ValidationError
 
 from rocketroll_common.errors import UsageError
 
-__all__ = ["SCHEMAS_DIR", "json_schema", "load_yaml", "schema_text", "validated"]
+__all__ = [
+    "SCHEMAS_DIR",
+    "Count",
+    "Whole",
+    "as_whole",
+    "json_schema",
+    "load_yaml",
+    "schema_text",
+    "validated",
+]
 
 Model = TypeVar("Model", bound=BaseModel)
 
 #: Where the JSON Schemas of the shipped spec models are kept (``make schemas``).
 SCHEMAS_DIR = Path(__file__).resolve().parents[1] / "docs" / "schemas"
+
+
+def as_whole(value: Any) -> Any:
+    """``1e6`` is the whole number YAML reads as a float: take it as one (not a bool, not
+    ``2.5``, which a strict integer then refuses)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+# Whole numbers: an integer, or a float with no fraction (``1e6``); not a bool.  (The
+# bound before the validator, so that the JSON Schema carries it as ``minimum``.)
+#: A whole number from 0.
+Whole = Annotated[int, Field(strict=True, ge=0), BeforeValidator(as_whole)]
+#: A whole number from 1.
+Count = Annotated[int, Field(strict=True, ge=1), BeforeValidator(as_whole)]
 
 #: A key path in a document: mapping keys and list indices.
 Location = tuple[str | int, ...]
@@ -43,7 +68,11 @@ def load_yaml(path: str | os.PathLike[str]) -> tuple[Any, dict[Location, int]]:
     where = os.fspath(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        raise UsageError(
+            f"{where}: not UTF-8 text (byte {exc.start} is 0x{exc.object[exc.start]:02x})"
+        ) from None
+    except OSError as exc:
         raise UsageError(f"{where}: cannot read: {exc}") from None
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
@@ -79,25 +108,30 @@ def validated(
     document: Any,
     where: str,
     lines: Mapping[Location, int] | None = None,
+    at: Location = (),
 ) -> Model:
     """``document`` checked as ``model``; the first problem as one ``UsageError`` line,
-    ``WHERE:LINE: KEY: PROBLEM`` (the line of the key, or of the nearest key above it)."""
+    ``WHERE:LINE: KEY: PROBLEM`` (the line of the key, or of the nearest key above it).
+    ``at`` is where ``document`` sits in its file (``("RocketRoll-v0",)``: an entry)."""
     if not isinstance(document, dict):
         keys = ", ".join(model.model_fields)
-        raise UsageError(f"{where}: expected a mapping ({keys})")
+        line = (lines or {}).get(at)
+        key = f" {_dotted(at)}:" if at else ""
+        raise UsageError(f"{where}{f':{line}' if line else ''}:{key} expected a mapping ({keys})")
     try:
         return model.model_validate(document)
     except ValidationError as exc:
         error = exc.errors()[0]
-        loc: Location = tuple(p for p in error["loc"] if isinstance(p, str | int))
+        inner: Location = tuple(p for p in error["loc"] if isinstance(p, str | int))
+        loc: Location = (*at, *inner)
         known = lines or {}
         line = next((known[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in known), None)
-        at = f"{where}:{line}" if line is not None else where
+        place = f"{where}:{line}" if line is not None else where
         problem = str(error["msg"])
         if error["type"] == "extra_forbidden":
             parent: Any = model
             problem = f"unknown key {loc[-1]!r}" if loc else "unknown key"
-            if len(loc) == 1:
+            if len(inner) == 1:
                 problem += f"; known: {', '.join(parent.model_fields)}"
         elif error["type"] == "missing":
             problem = "is missing"
@@ -106,7 +140,7 @@ def validated(
             problem += f", got {shown}" if len(shown) <= 60 else ""
         problem = problem.removeprefix("Value error, ")
         key = _dotted(loc)
-        raise UsageError(f"{at}: {key}: {problem}" if key else f"{at}: {problem}") from None
+        raise UsageError(f"{place}: {key}: {problem}" if key else f"{place}: {problem}") from None
 
 
 def json_schema(model: type[BaseModel]) -> dict[str, Any]:

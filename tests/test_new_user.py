@@ -164,7 +164,7 @@ def test_a_hyperparameter_file_that_is_not_utf8_is_one_line(
     bad.write_bytes("RocketRoll-v0:\n  n_envs: 2  # réglage\n".encode("latin-1"))
     code, _, err = cli(capsys, "train", "ppo", "--hyperparams", bad, "--out", tmp_path / "run")
     assert code == 2 and one_line(err), err
-    assert f"--hyperparams {bad}: not UTF-8 text" in err
+    assert f"{bad}: not UTF-8 text (byte" in err
     assert not (tmp_path / "run").exists()
 
 

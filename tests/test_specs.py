@@ -64,17 +64,25 @@ def test_a_bad_spec_is_one_line_naming_file_line_and_key(
     assert str(info.value).startswith(message) and "\n" not in str(info.value)
 
 
-def test_the_shipped_sweep_specs_pass_their_schema() -> None:
-    """What an editor would check: every shipped spec against the kept JSON Schema."""
+@pytest.mark.parametrize(
+    ("stem", "folder", "bad"),
+    [
+        ("sweep", "agents/sweeps", {"name": "x", "env_ids": "RocketRoll-v0", "controllers": []}),
+        ("hyperparams", "agents/hyperparams", {"RocketRoll-v0": {"n_envs": 0}}),
+        ("ascent", "identification/data", {"dry_mass_kg": 1.0}),
+    ],
+)
+def test_the_shipped_specs_pass_their_schema(stem: str, folder: str, bad: object) -> None:
+    """What an editor would check: every shipped file against the kept JSON Schema, which
+    refuses a bad one."""
     import jsonschema
     import yaml
 
-    from agents.sweep.spec import SHIPPED
-
-    schema = json.loads((SCHEMAS_DIR / "sweep.schema.json").read_text(encoding="utf-8"))
-    specs = sorted(SHIPPED.glob("*.yml"))
-    assert specs
-    for spec in specs:
-        jsonschema.validate(yaml.safe_load(spec.read_text(encoding="utf-8")), schema)
+    schema = json.loads((SCHEMAS_DIR / f"{stem}.schema.json").read_text(encoding="utf-8"))
+    shipped = sorted((Path(__file__).resolve().parents[1] / folder).glob("*.yml"))
+    assert shipped
+    for path in shipped:
+        jsonschema.validate(yaml.safe_load(path.read_text(encoding="utf-8")), schema)
+        assert f"$schema=../../docs/schemas/{stem}.schema.json" in path.read_text().split("\n")[0]
     with pytest.raises(jsonschema.ValidationError):
-        jsonschema.validate({"name": "x", "env_ids": "RocketRoll-v0", "controllers": []}, schema)
+        jsonschema.validate(bad, schema)

@@ -21,7 +21,7 @@ from agents.replay import (
     options_config,
 )
 from rocketroll_common.errors import UsageError
-from rocketroll_common.specs import load_yaml, validated
+from rocketroll_common.specs import Count, Whole, as_whole, load_yaml, validated
 
 #: Algorithms a controller of a spec may train.
 TRAINABLE = ("ppo", "sac", "td3")
@@ -89,8 +89,6 @@ def _sweep_name(name: str) -> str:
 
 #: One or more values searched over (a scalar is a list of one).
 Axis = Annotated[list[Any], BeforeValidator(_axis, json_schema_input_type=list[Any] | Any)]
-#: A whole number, not a float or a boolean.
-Whole = Annotated[int, Field(strict=True, ge=0)]
 
 
 class _Document(BaseModel):
@@ -101,7 +99,7 @@ class SearchDocument(_Document):
     """How the points are chosen: every one (``grid``) or a seeded random sample."""
 
     kind: Literal["grid", "random"] = Field("grid", description="every point, or a sample")
-    trials: Annotated[int, Field(strict=True, ge=1)] | None = Field(
+    trials: Count | None = Field(
         None, description="points drawn without replacement (kind: random)"
     )
     seed: Whole = Field(0, description="the sample's seed")
@@ -124,7 +122,7 @@ class ControllerDocument(_Document):
     hyperparams: str | None = Field(
         None, description="the recipe's YAML file, relative to the spec (or the cwd)"
     )
-    timesteps: Annotated[int, Field(strict=True, ge=1)] | None = Field(
+    timesteps: Count | None = Field(
         None, description="environment steps (default: the entry's n_timesteps)"
     )
     grid: dict[str, Axis] = Field(
@@ -163,7 +161,7 @@ class SweepDocument(_Document):
     seeds: Annotated[
         list[Whole], BeforeValidator(_axis, json_schema_input_type=list[int] | int)
     ] = Field(default_factory=lambda: [0], description="training seeds of the learned controllers")
-    episodes: Annotated[int, Field(strict=True, ge=2)] = Field(
+    episodes: Annotated[int, Field(strict=True, ge=2), BeforeValidator(as_whole)] = Field(
         20, description="test-split episodes of the evaluation protocol"
     )
     eval_seed: Whole = Field(0, description="the evaluation episodes' seed")

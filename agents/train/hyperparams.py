@@ -10,9 +10,12 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, RootModel, field_validator, model_validator
 
 from rocketroll_common.errors import UsageError
+from rocketroll_common.specs import Count, Whole, load_yaml, validated
 
 #: The hyperparameter files shipped with the package, one per algorithm.
 HYPERPARAMS_DIR = Path(__file__).resolve().parents[1] / "hyperparams"
@@ -145,35 +148,81 @@ class Hyperparameters:
 
 
 # ------------------------------------------------------------------------ hyperparameters
+class HyperparameterEntry(BaseModel):
+    """One entry of a hyperparameter file as written (rl-baselines3-zoo's layout): the keys
+    the script reads, typed; any other key is a keyword of the algorithm's Stable-Baselines3
+    class, which :func:`load_hyperparameters` checks against its signature.  The JSON Schema
+    of a whole file (entries keyed by environment id) is
+    ``docs/schemas/hyperparams.schema.json``."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+    n_envs: Count = Field(1, description="environments stepped side by side")
+    n_timesteps: Count | None = Field(
+        None, description="environment steps to train for (else --timesteps)"
+    )
+    policy: str = Field("MlpPolicy", description="SB3 policy name")
+    normalize: bool | dict[str, Any] | str | None = Field(
+        False,
+        description="VecNormalize: true, false, a mapping of its arguments, or the zoo's "
+        '"dict(...)" string',
+    )
+    env_kwargs: dict[str, Any] = Field(
+        default_factory=dict, description="RocketRoll settings of the training and evaluation envs"
+    )
+    history: Whole = Field(
+        0, description="steps of past observations and actions beside the observation"
+    )
+    observer: Annotated[bool, Field(strict=True)] | None = Field(
+        None, description="the observer's estimate in the observation"
+    )
+    residual: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = Field(
+        0.0, description="0, or the scale of the action as a residual on the observer controller"
+    )
+    flight_clock: Annotated[bool, Field(strict=True)] = Field(
+        False, description="the flight's phase in the observation (a flight variant)"
+    )
+    noise_type: Literal["normal"] | None = Field(
+        None, description="exploration noise of SAC and TD3"
+    )
+    noise_std: Annotated[float, Field(strict=True, gt=0.0, lt=10.0)] | None = Field(
+        None, description="its standard deviation (a fraction of the action range)"
+    )
+
+    @field_validator("residual", "noise_std", mode="before")
+    @classmethod
+    def _a_number(cls, value: Any) -> Any:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return float(value)  # a whole number is a number (strict floats refuse it)
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> HyperparameterEntry:
+        if self.residual and self.observer is False:
+            raise ValueError(
+                "residual acts on the observer controller, whose estimate the policy reads: "
+                "observer: false contradicts it"
+            )
+        return self
+
+
 def load_hyperparameters(
     path: str | os.PathLike[str], env_id: str, algo: str = "ppo"
 ) -> Hyperparameters:
-    """The entry ``env_id`` of the YAML file ``path`` for ``algo``, checked key by key.
+    """The entry ``env_id`` of the YAML file ``path`` for ``algo``, checked key by key
+    (:class:`HyperparameterEntry`, then the algorithm's keywords and what needs the
+    toolkit).
 
     Raises
     ------
     UsageError
-        The file is missing or not a mapping, has no entry for ``env_id``,
-        lacks a required key, or has an unknown one (named, with the file).
+        The file is missing or not a mapping, has no entry for ``env_id``, or a key that is
+        unknown, missing or of the wrong kind (named, with the file and its line).
     """
-    import yaml
-
     path = Path(path)
     if not path.is_file():
         raise UsageError(f"--hyperparams {path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise UsageError(
-            f"--hyperparams {path}: not UTF-8 text (byte {exc.start} is "
-            f"0x{exc.object[exc.start]:02x})"
-        ) from None
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise UsageError(
-            f"--hyperparams {path}: not valid YAML ({exc})".replace("\n", " ")
-        ) from None
+    document, lines = load_yaml(path)
     if not isinstance(document, dict):
         raise UsageError(f"--hyperparams {path}: expected a mapping keyed by environment id")
     if env_id not in document:
@@ -181,52 +230,37 @@ def load_hyperparameters(
             f"--hyperparams {path} has no entry for {env_id!r} (it has: "
             f"{', '.join(map(str, document)) or 'none'})"
         )
-    entry = document[env_id]
-    where = f"{path}, {env_id}"
-    if not isinstance(entry, dict):
-        raise UsageError(f"{where}: expected a mapping of hyperparameters")
-    set_here = sorted(set(entry) & set(SCRIPT_SET))
+    raw = document[env_id]
+    line = lines.get((env_id,))
+    where = f"{path}{f':{line}' if line else ''}: {env_id}"
+    set_here = sorted(set(raw) & set(SCRIPT_SET)) if isinstance(raw, dict) else []
     if set_here:
         raise UsageError(
             f"{where}: {set_here[0]!r} is set by the command line (--{set_here[0]}), not the "
             "hyperparameter file"
         )
     keywords = algorithm_keywords(algo)
-    unknown = sorted(set(entry) - set(SCRIPT_KEYS) - set(keywords))
+    unknown = sorted(set(raw) - set(SCRIPT_KEYS) - set(keywords)) if isinstance(raw, dict) else []
     if unknown:
         raise UsageError(
             f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; known: "
             f"{', '.join(SCRIPT_KEYS + keywords)}"
         )
-    counts: dict[str, int | None] = {"n_envs": 1, "n_timesteps": None, "history": 0}
-    for key in ("n_envs", "n_timesteps", "history"):
-        if key not in entry:
-            continue
-        value = entry[key]
-        if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
-            raise UsageError(f"{where}: {key} must be a whole number, got {value!r}")
-        if value < (0 if key == "history" else 1):
-            raise UsageError(f"{where}: {key} must be positive, got {value!r}")
-        counts[key] = int(value)
+    entry = validated(HyperparameterEntry, raw, str(path), lines, at=(env_id,))
     noise = None
-    if "noise_type" in entry or "noise_std" in entry:
-        kind, sd = entry.get("noise_type"), entry.get("noise_std")
+    if entry.noise_type is not None or entry.noise_std is not None:
         if algo == "ppo":
             raise UsageError(f"{where}: noise_type/noise_std are for SAC and TD3, not PPO")
-        if kind != "normal":
-            raise UsageError(f"{where}: noise_type must be 'normal', got {kind!r}")
-        if isinstance(sd, bool) or not isinstance(sd, int | float) or not 0 < sd < 10:
-            raise UsageError(f"{where}: noise_std must be a number in (0, 10), got {sd!r}")
-        noise = ("normal", float(sd))
-    normalize = entry.get("normalize", False)
+        if entry.noise_type is None or entry.noise_std is None:
+            raise UsageError(f"{where}: give both noise_type: normal and noise_std")
+        noise = ("normal", float(entry.noise_std))
+    normalize = entry.normalize
     if isinstance(normalize, str):  # rl-baselines3-zoo's "dict(norm_obs=True, ...)"
         normalize = zoo_mapping(normalize, f"{where}: normalize")
     if normalize is True:
         normalize = {}
     if normalize is False or normalize is None:
         normalize = None
-    elif not isinstance(normalize, dict):
-        raise UsageError(f"{where}: normalize must be true, false or a mapping, got {normalize!r}")
     else:
         bad = sorted(set(normalize) - set(NORMALIZE_KEYS))
         if bad:
@@ -234,41 +268,21 @@ def load_hyperparameters(
                 f"{where}: unknown normalize key(s) {', '.join(map(repr, bad))}; known: "
                 f"{', '.join(NORMALIZE_KEYS)}"
             )
-    observer = entry.get("observer", False)
-    if not isinstance(observer, bool):
-        raise UsageError(f"{where}: observer must be true or false, got {observer!r}")
-    residual = entry.get("residual", 0.0)
-    if isinstance(residual, bool) or not isinstance(residual, int | float):
-        raise UsageError(f"{where}: residual must be a number in (0, 1], got {residual!r}")
-    if residual:
-        if not 0 < residual <= 1:
-            raise UsageError(f"{where}: residual must be a number in (0, 1], got {residual!r}")
-        if "observer" in entry and not observer:
-            raise UsageError(
-                f"{where}: residual acts on the observer controller, whose estimate the policy "
-                "reads: observer: false contradicts it"
-            )
-        observer = True
-    redesign = sorted(set(entry.get("env_kwargs") or {}) & set(OBSERVER_DESIGN))
+    observer = bool(entry.observer) or entry.residual > 0
+    redesign = sorted(set(entry.env_kwargs) & set(OBSERVER_DESIGN))
     if observer and redesign:
         raise UsageError(
             f"{where}: observer: true with env_kwargs {redesign[0]!r}: the observer is designed "
             "on the train split of the environment evaluated, which that setting changes"
         )
-    env_kwargs = entry.get("env_kwargs") or {}
-    if not isinstance(env_kwargs, dict):
-        raise UsageError(f"{where}: env_kwargs must be a mapping, got {env_kwargs!r}")
-    flight_clock = entry.get("flight_clock", False)
-    if not isinstance(flight_clock, bool):
-        raise UsageError(f"{where}: flight_clock must be true or false, got {flight_clock!r}")
-    if flight_clock:
+    if entry.flight_clock:
         from rollenv.variants import variant_options
 
-        if variant_options(env_id).get("flight") is None and "flight" not in env_kwargs:
+        if variant_options(env_id).get("flight") is None and "flight" not in entry.env_kwargs:
             raise UsageError(
                 f"{where}: flight_clock is the phase of a flight; {env_id} is not a flight variant"
             )
-    algo_kwargs = {key: entry[key] for key in keywords if key in entry}
+    algo_kwargs = {key: raw[key] for key in keywords if key in raw}
     if isinstance(algo_kwargs.get("policy_kwargs"), str):  # rl-baselines3-zoo's "dict(...)"
         algo_kwargs["policy_kwargs"] = zoo_mapping(
             algo_kwargs["policy_kwargs"], f"{where}: policy_kwargs"
@@ -276,20 +290,24 @@ def load_hyperparameters(
     _algorithm_arguments(algo_kwargs, where)  # fail now on a bad schedule or activation
     return Hyperparameters(
         env_id=env_id,
-        n_envs=counts["n_envs"] or 1,
-        n_timesteps=counts["n_timesteps"],
-        policy=str(entry.get("policy", "MlpPolicy")),
+        n_envs=entry.n_envs,
+        n_timesteps=entry.n_timesteps,
+        policy=entry.policy,
         normalize=normalize,
-        env_kwargs=dict(env_kwargs),
+        env_kwargs=dict(entry.env_kwargs),
         algo_kwargs=algo_kwargs,
         source=str(path),
         algo=algo,
-        history=counts["history"] or 0,
+        history=entry.history,
         noise=noise,
         observer=observer,
-        residual=float(residual),
-        flight_clock=flight_clock,
+        residual=float(entry.residual),
+        flight_clock=entry.flight_clock,
     )
+
+
+#: A hyperparameter file as an editor checks it: entries keyed by environment id.
+HyperparameterFile = RootModel[dict[str, HyperparameterEntry]]
 
 
 def _schedule(value: Any, key: str, where: str) -> float | Callable[[float], float]:

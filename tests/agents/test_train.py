@@ -295,7 +295,10 @@ def test_bad_arguments_are_named_and_exit_2(argv, message, capsys):
     [
         ("RocketRollRate-v0: {n_envs: 2}\n", "no entry for 'RocketRoll-v0'"),
         (TINY.replace("n_steps:", "nsteps:"), "unknown key(s) 'nsteps'"),
-        (TINY.replace("n_envs: 2", "n_envs: 0"), "n_envs must be positive"),
+        (
+            TINY.replace("n_envs: 2", "n_envs: 0"),
+            "n_envs: Input should be greater than or equal to 1",
+        ),
         (TINY.replace("lin_3e-4", "cosine"), "learning_rate must be a number or 'lin_<number>'"),
         (TINY.replace("activation_fn: tanh", "activation_fn: swish"), "activation_fn must be"),
         (TINY.replace("norm_reward: true", "norm_rewards: true"), "'norm_rewards'"),
@@ -427,8 +430,12 @@ def test_a_policy_is_loaded_only_under_its_own_algorithm(run, tmp_path, default_
     ("extra", "algo", "message"),
     [
         ("  noise_type: normal\n  noise_std: 0.1\n", "ppo", "are for SAC and TD3, not PPO"),
-        ("  noise_type: ou\n  noise_std: 0.1\n", "sac", "noise_type must be 'normal'"),
-        ("  history: -1\n", "ppo", "history must be positive"),
+        (
+            "  noise_type: ou\n  noise_std: 0.1\n",
+            "sac",
+            "noise_type: Input should be 'normal', got 'ou'",
+        ),
+        ("  history: -1\n", "ppo", "history: Input should be greater than or equal to 0"),
         ("  n_epochs: 3\n", "sac", "unknown key(s) 'n_epochs'"),
     ],
 )
@@ -600,8 +607,8 @@ def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, smal
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
-        ("  residual: 1.5\n", "residual must be a number in (0, 1], got 1.5"),
-        ("  residual: yes\n", "residual must be a number in (0, 1], got True"),
+        ("  residual: 1.5\n", "residual: Input should be less than or equal to 1"),
+        ("  residual: yes\n", "residual: Input should be a valid number, got True"),
         ("  residual: 0.2\n  observer: false\n", "observer: false contradicts it"),
     ],
 )

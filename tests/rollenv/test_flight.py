@@ -201,6 +201,6 @@ def test_rocketroll_env_flight_summarises_and_plots(tmp_path, capsys) -> None:
     bad.write_text("dry_mass_kg: -1\n")
     assert main(["env", "flight", "--flight", str(bad)]) == 2
     err = capsys.readouterr().err
-    assert str(bad) in err and "missing key 'propellant_mass_kg'" in err
+    assert str(bad) in err and "propellant_mass_kg: is missing" in err
     assert main(["env", "flight", "--flight", str(tmp_path / "none.yml")]) == 2
     assert "No such file" in capsys.readouterr().err
