@@ -3,7 +3,8 @@
 * The command-line reference page, generated at build time from the settings dataclasses
   that make every command's ``--help`` (nothing of it is written by hand).
 * The docstrings' Sphinx roles (``:func:`x` ``, ``:class:`x` ``, ...), which
-  mkdocstrings renders as they are written, shown as the code they name.
+  mkdocstrings renders as they are written, shown as the code they name (``~`` too:
+  Sphinx's "last part only" mark).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import re
 from typing import Any
 
 #: A Sphinx role before the code it names, as mkdocstrings renders it.
-ROLE = re.compile(r":(?:func|class|data|mod|meth|attr|exc|obj|const):(?=<code>)")
+ROLE = re.compile(r":(?:func|class|data|mod|meth|attr|exc|obj|const):<code>~?")
 
 #: Where the generated reference goes in ``reference/cli.md``.
 MARKER = "<!-- the commands -->"
@@ -32,4 +33,4 @@ def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
 
 
 def on_page_content(html: str, page: Any, **kwargs: Any) -> str:
-    return ROLE.sub("", html)
+    return ROLE.sub("<code>", html)
