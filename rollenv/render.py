@@ -655,8 +655,7 @@ class Renderer:
         --------
         >>> import numpy as np
         >>> t = np.arange(0.0, 10.0, 0.1)
-        >>> from rollenv.core import wrap_deg
-    from rollenv.history import EpisodeHistory
+        >>> from rollenv.history import EpisodeHistory
         >>> zero = np.zeros_like(t)
         >>> snap = EpisodeHistory(t, 30 + 5 * np.sin(t), 5 * np.cos(t), 10 * np.sin(t),
         ...                       10 * np.sin(t), zero, np.full_like(t, 30.0), zero, zero, "angle")
