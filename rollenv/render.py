@@ -619,50 +619,50 @@ def _interactive_backends() -> set[str]:
 class Renderer:
     """Draws :class:`EpisodeHistory` frames of RocketRoll-v0 for ``rgb_array`` or a window.
 
-        Parameters
-        ----------
-        render_mode : str
-            ``"rgb_array"`` (:meth:`frame` returns pixels) or ``"human"``
-            (:meth:`show` draws into a window).
-        fps : float
-            Frames per second a window is paced to, 1/s (the environment's
-            ``metadata["render_fps"]``).
-        size : tuple of int, optional
-            Frame (width, height) in pixels; (720, 480) by default, multiples of 16
-            so video encoders take it unchanged.
-        window_s : float, optional
-            Shortest time span of the strip charts, s (10 s by default); a longer
-            history widens them.
-        title : str, optional
-            What the frame is of (the environment's id), before "seen from the tail".
+    Parameters
+    ----------
+    render_mode : str
+        ``"rgb_array"`` (:meth:`frame` returns pixels) or ``"human"``
+        (:meth:`show` draws into a window).
+    fps : float
+        Frames per second a window is paced to, 1/s (the environment's
+        ``metadata["render_fps"]``).
+    size : tuple of int, optional
+        Frame (width, height) in pixels; (720, 480) by default, multiples of 16
+        so video encoders take it unchanged.
+    window_s : float, optional
+        Shortest time span of the strip charts, s (10 s by default); a longer
+        history widens them.
+    title : str, optional
+        What the frame is of (the environment's id), before "seen from the tail".
 
-        Raises
-        ------
-        ValueError
-            If ``render_mode`` is not one of :data:`RENDER_MODES`, ``fps`` is not
-            positive or ``size`` is not two integers, at least (480, 320).
+    Raises
+    ------
+    ValueError
+        If ``render_mode`` is not one of :data:`RENDER_MODES`, ``fps`` is not
+        positive or ``size`` is not two integers, at least (480, 320).
 
-        Notes
-        -----
-        The figure and its artists are made on the first frame and only their
-        data change afterwards (a task change rebuilds them).  ``rgb_array``
-        never touches pyplot; ``human`` imports pyplot on the first :meth:`show`
-        and uses whatever backend matplotlib resolves: without a display or with
-        a non-interactive backend it warns once (``UserWarning``) and draws
-        offscreen only.
+    Notes
+    -----
+    The figure and its artists are made on the first frame and only their
+    data change afterwards (a task change rebuilds them).  ``rgb_array``
+    never touches pyplot; ``human`` imports pyplot on the first :meth:`show`
+    and uses whatever backend matplotlib resolves: without a display or with
+    a non-interactive backend it warns once (``UserWarning``) and draws
+    offscreen only.
 
-        Examples
-        --------
-        >>> import numpy as np
-        >>> t = np.arange(0.0, 10.0, 0.1)
-        >>> from rollenv.history import EpisodeHistory
-        >>> zero = np.zeros_like(t)
-        >>> snap = EpisodeHistory(t, 30 + 5 * np.sin(t), 5 * np.cos(t), 10 * np.sin(t),
-        ...                       10 * np.sin(t), zero, np.full_like(t, 30.0), zero, zero, "angle")
-        >>> renderer = Renderer("rgb_array", fps=10)
-        >>> renderer.frame(snap).shape
-        (480, 720, 3)
-        >>> renderer.close()
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.arange(0.0, 10.0, 0.1)
+    >>> from rollenv.history import EpisodeHistory
+    >>> zero = np.zeros_like(t)
+    >>> snap = EpisodeHistory(t, 30 + 5 * np.sin(t), 5 * np.cos(t), 10 * np.sin(t),
+    ...                       10 * np.sin(t), zero, np.full_like(t, 30.0), zero, zero, "angle")
+    >>> renderer = Renderer("rgb_array", fps=10)
+    >>> renderer.frame(snap).shape
+    (480, 720, 3)
+    >>> renderer.close()
     """
 
     def __init__(
