@@ -295,9 +295,9 @@ def identify(args: IdentifyArgs) -> int:
     if any(method != "paper" for method in tunnel):
         print("\nidentification methods (parameters; re-simulation of each one's u_d, §3.5)")
         print(methods_table(tunnel))
-    if tunnel:
+    if tunnel or flown:
         print("\nfit adequacy (the model without u_d against the raw rate, the fin in u_d)")
-        print(adequacy_table(tunnel))
+        print(adequacy_table({**tunnel, **flown}))
     if stored:
         print(stored)
     if args.json is not None:
@@ -317,8 +317,10 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
         for model, f in by_model.items():
             m = f.metrics
             errors = m.get("std_errors", {})
+            verdict = (m.get("adequacy") or {}).get("verdict")
+            judged = f" [{verdict}]" if verdict else ""
             lines.append(
-                f"{f.method} {model}: at V_ref {m['v_ref_mps']:.2f} m/s, ρ_ref "
+                f"{f.method} {model}{judged}: at V_ref {m['v_ref_mps']:.2f} m/s, ρ_ref "
                 f"{m['rho_ref_kgm3']:.4f} kg/m³ ({m['density']}): "
                 f"α₀ {f.params.alpha:.4f} ± {errors.get('alpha', float('nan')):.4f}, "
                 f"β̄₀ {f.params.beta_bar_per_s:.4f} ± "
@@ -332,13 +334,6 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                     f"  fitted together with {len(m['fitted_with'])} other flight(s): "
                     + ", ".join(m["fitted_with"])
                 )
-            if not errors:
-                lines.append(
-                    "  warning: no standard errors (the likelihood's Hessian is not positive "
-                    "definite at the fit): the recording may not determine these parameters"
-                )
-            if not m.get("converged", True):
-                lines.append("  warning: the optimiser did not report convergence")
     return (
         "flight identification (eq. 4-8: a ∝ ρV, α ∝ V)\n"
         + "\n".join(lines)

@@ -834,6 +834,115 @@ def rescale(
     return params.scaled(v2 / v1, (rho2 * v2) / (rho1 * v1))
 
 
+#: A fitted damping within this factor of :data:`MIN_DAMPING` (at its smallest over the
+#: flown fin angles) sits on the bound the fit keeps it above.
+ON_BOUND_FACTOR = 2.0
+
+
+def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, Any]:
+    """How far a flight fit can be trusted, with the tunnel's figures and limits
+    (:mod:`identification.adequacy`) where they apply, and the flight's own failures.
+
+    * **a parameter on a bound** -- the damping at its floor (:data:`MIN_DAMPING`: the
+      fit makes the rocket an integrator) or a log-parameter at the optimiser's bound:
+      unreliable, the flight does not determine it;
+    * **no standard errors** (the likelihood's Hessian not positive definite at the fit):
+      unreliable;
+    * the model **without** ``u_d`` against the measured rate (R², along the flight's
+      scales), ``u_d`` against the fins' range and α's relative standard error, with the
+      tunnel's weak and unreliable limits (:data:`~identification.adequacy.RATE_R2`,
+      :data:`~identification.adequacy.UD_RANGE`, :data:`~identification.adequacy.ALPHA_REL_SE`);
+    * the optimiser not reporting convergence: weak.
+
+    Returns the figures the adequacy table prints (``rate_r2``, ``ud_range_fraction``,
+    ``alpha_rel_se``; the tunnel's ``ahead_r2`` and ``fin_share`` are None), ``on_bound``,
+    ``verdict`` and ``reasons``, JSON-safe.
+    """
+    from identification.adequacy import ALPHA_REL_SE, RATE_R2, UD_RANGE
+
+    params, inputs = result.params, result.inputs
+    bad: list[str] = []
+    weak: list[str] = []
+    flown = np.abs(inputs.theta + params.theta_bar_deg)
+    slope = params.alpha_bar_per_deg_s
+    lowest = params.beta_bar_per_s + (slope * float(np.max(flown)) if slope < 0 else 0.0)
+    on_bound = []
+    if lowest <= ON_BOUND_FACTOR * MIN_DAMPING:
+        on_bound.append("damping")
+        bad.append(
+            f"the damping sits on its lower bound (a(θ) {lowest:.2g} 1/s, the fit keeps it "
+            f"above {MIN_DAMPING:g}): the flight does not determine it (an integrator)"
+        )
+    for name, value in result.estimates.items():
+        if (
+            value > 0
+            and abs(abs(math.log(value)) - _LOG_BOUND) < 1e-6
+            and name
+            not in (
+                "gyro_rel",
+                "gyro_abs",
+                "angle_sd",
+            )
+        ):
+            on_bound.append(name)
+            bad.append(f"{name} sits on the optimiser's bound: the flight does not determine it")
+    errors = result.std_errors
+    if not errors or not all(math.isfinite(v) for v in errors.values()):
+        bad.append(
+            "no standard errors (the likelihood's Hessian is not positive definite at the fit): "
+            "the flight does not determine the parameters"
+        )
+    alpha_se = errors.get("alpha", math.nan)
+    rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) and params.alpha else math.nan
+    model_only = resimulated(inputs, params, np.zeros_like(result.u_d_deg), result.rate_dps[0])
+    measured = measured_rate(inputs)
+    spread = float(np.sum((measured - measured.mean()) ** 2))
+    rate_r2 = (
+        1.0 - float(np.sum((model_only.rate_dps - measured) ** 2)) / spread
+        if spread > 0
+        else math.nan
+    )
+    p99 = float(np.percentile(np.abs(result.u_d_deg), 99.0))
+    fin_range = (servo or Servo()).range_deg
+
+    def check(value: float, limits: tuple[float, float], text: str, above: bool) -> None:
+        sign = 1.0 if above else -1.0
+        if sign * value > sign * limits[1]:
+            bad.append(text)
+        elif sign * value > sign * limits[0]:
+            weak.append(text)
+
+    check(rate_r2, RATE_R2, f"the model without u_d explains {rate_r2:.2f} of the rate (R²)", False)
+    check(
+        p99 / fin_range,
+        UD_RANGE,
+        f"u_d reaches {p99:.3g}° (99th percentile), {p99 / fin_range:.2g} of the fins' "
+        f"±{fin_range:g}°: model error, not turbulence",
+        True,
+    )
+    if math.isfinite(rel_se):
+        check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
+    if not result.converged:
+        weak.append("the optimiser did not report convergence")
+    verdict = "unreliable" if bad else "weak" if weak else "good"
+
+    def safe(value: float) -> float | None:
+        return value if math.isfinite(value) else None
+
+    return {
+        "rate_source": "gyro" if inputs.rate is not None else "velocity from the angle",
+        "rate_r2": safe(rate_r2),
+        "ahead_r2": None,
+        "fin_share": None,
+        "ud_p99_deg": p99,
+        "ud_range_fraction": p99 / fin_range,
+        "alpha_rel_se": safe(rel_se),
+        "on_bound": on_bound,
+        "verdict": verdict,
+        "reasons": bad + weak,
+    }
+
+
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     """The ``flight`` identification method: :func:`identify_flights` per model on the
     recording and the flights fitted with it (``--together``), at the options' reference
@@ -865,6 +974,7 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "std_errors": result.std_errors,
             "flights": len(flights),
             "fitted_with": [f.recording.name for f in flights[1:]],
+            "adequacy": flight_adequacy(result),
         }
         if result.gyro_noise_pct is not None:
             metrics["gyro_noise_pct"] = result.gyro_noise_pct

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -13,10 +14,12 @@ import pytest
 from disturbances.flightlog import FlightLogSpec, run_flight
 from identification.flight import ISA_SEA_LEVEL_DENSITY_KGM3, TUNNEL_AIRSPEED_MPS
 from identification.flightfit import (
+    MIN_DAMPING,
     FlightFit,
     _Layout,
     _negloglike,
     c_coefficients,
+    flight_adequacy,
     flight_inputs,
     identify_flight,
     identify_flights,
@@ -347,6 +350,7 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     out, err = capsys.readouterr()
     assert err == ""
     assert "flight identification" in out and "C_P-like" in out
+    assert "flight constant [good]" in out and "fit adequacy" in out
     # The flight's report: one figure (airspeed, fin, rate re-simulated, u_d) and report.md.
     assert sorted(p.name for p in report.iterdir()) == ["flight_identification.png", "report.md"]
     assert (report / "flight_identification.png").read_bytes().startswith(b"\x89PNG")
@@ -360,6 +364,7 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert constant["params"]["alpha"] == pytest.approx(PAPER_THETA.alpha, rel=0.05)
     assert constant["params"]["beta_bar_per_s"] == pytest.approx(1.314, rel=0.05)
     assert constant["metrics"]["resim_rate_mae_pct"] < 2.0
+    assert constant["metrics"]["adequacy"]["verdict"] == "good"
     # The database holds the tunnel's turbulence: a flight is refused, nothing written.
     db = tmp_path / "db.sqlite"
     assert main(["identify", str(path), "--db", str(db)]) == 2
@@ -367,6 +372,41 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert main(["db", "add", str(path), "--db", str(db)]) == 2
     assert "is a flight" in capsys.readouterr().err
     assert not db.exists()
+
+
+def test_a_right_flight_fit_is_judged_good(paper_fit: FlightFit) -> None:
+    judged = flight_adequacy(paper_fit)
+    assert judged["verdict"] == "good", judged["reasons"]
+    assert judged["rate_r2"] > 0.9 and judged["on_bound"] == []
+
+
+def test_a_damping_on_its_bound_is_unreliable_not_a_result(paper_fit: FlightFit) -> None:
+    """The fit that collapses to an integrator (the damping at its floor) is unreliable
+    with the reason, whatever else it explains."""
+    floor = dataclasses.replace(
+        paper_fit.params, beta_bar_per_s=MIN_DAMPING, alpha_bar_per_deg_s=0.0
+    )
+    judged = flight_adequacy(dataclasses.replace(paper_fit, params=floor))
+    assert judged["verdict"] == "unreliable" and judged["on_bound"] == ["damping"]
+    assert any("sits on its lower bound" in r for r in judged["reasons"])
+
+
+@pytest.mark.parametrize("errors", [{}, {"alpha": math.nan, "theta_bar_deg": 0.1}])
+def test_a_fit_without_standard_errors_is_unreliable(
+    paper_fit: FlightFit, errors: dict[str, float]
+) -> None:
+    judged = flight_adequacy(dataclasses.replace(paper_fit, std_errors=errors))
+    assert judged["verdict"] == "unreliable"
+    assert any("no standard errors" in r for r in judged["reasons"])
+
+
+def test_u_d_beyond_twice_the_fins_range_is_unreliable(paper_fit: FlightFit) -> None:
+    """A 'disturbance' of 100° of fin (2.5 times the ±40° the fins have) is the model's
+    error: unreliable, with how far it reaches."""
+    wild = dataclasses.replace(paper_fit, u_d_deg=np.full_like(paper_fit.u_d_deg, 100.0))
+    judged = flight_adequacy(wild)
+    assert judged["verdict"] == "unreliable" and judged["ud_range_fraction"] == 2.5
+    assert any("u_d reaches 100°" in r for r in judged["reasons"])
 
 
 def test_a_measured_fin_angle_is_used_without_the_servo():
