@@ -121,6 +121,12 @@ class ImportSettings:
     time_to: float | None = setting(
         None, "keep the rows up to this time", flag="--to", ge=-1e9, le=1e9, unit="s"
     )
+    site_elevation: float = setting(
+        0.0,
+        "the site's elevation above sea level, added to an altitude column logged above the "
+        "ground (the ISA density needs the altitude above sea level)",
+        ge=-500.0, le=9000.0, unit="m",
+    )  # fmt: skip
     unwrap: bool = setting(False, "unwrap a roll angle that wraps at 360°")
     name: str | None = setting(None, "recording name (default: the input file's stem)")
     source: Literal["wind-tunnel", "flight"] = setting(
@@ -152,6 +158,8 @@ class ImportSettings:
             raise SettingError(
                 "time_from", f"{self.time_from:g} s must come before --to {self.time_to:g} s"
             )
+        if self.site_elevation and "altitude" not in self.columns:
+            raise SettingError("site_elevation", "is added to an altitude column; give one")
 
     def column_unit(self, role: str) -> float:
         """The factor that takes column ``role`` to the recording's unit: ``--unit ROLE=``,
@@ -394,6 +402,8 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
             out[target] = out[target] * settings.scale.get(role, 1.0) + settings.offset.get(
                 role, 0.0
             )
+    if settings.site_elevation and "altitude_m" in out:
+        out["altitude_m"] = out["altitude_m"] + settings.site_elevation
     if settings.unwrap and "roll_deg" in out:
         out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
     kept = np.asarray(lines, dtype=np.int64)
@@ -412,6 +422,7 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         header_line=header_line,
         time_read=time_read,
     )
+    _check_rate_unit(where, out, settings)
     meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
     meta["import.units"] = units
     for field in ("unit", "scale", "offset"):
@@ -426,6 +437,8 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         meta["import.speed_unit"] = str(settings.unit.get("airspeed", settings.speed_unit))
     if "altitude_m" in out:
         meta["import.altitude_unit"] = str(settings.unit.get("altitude", settings.altitude_unit))
+    if settings.site_elevation:
+        meta["import.site_elevation_m"] = repr(settings.site_elevation)
     if settings.notes:
         meta["notes"] = settings.notes
     if settings.split is not None:
@@ -433,6 +446,49 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
     return Recording(
         name=settings.name or Path(where).stem, source=settings.source, metadata=meta, **out
     )
+
+
+#: Degrees per radian: a rate column in the wrong angular unit is off by this factor.
+_RAD = 180.0 / math.pi
+#: The angle's rate against the rate column (a least-squares slope) within this factor of
+#: 1/``_RAD`` or ``_RAD`` is a rate in the other unit; only where the fit is tight (R²).
+_UNIT_BAND, _UNIT_R2 = 1.5, 0.5
+
+
+def _check_rate_unit(where: str, out: dict[str, FloatArray], settings: ImportSettings) -> None:
+    """Refuse a roll rate in another angular unit than the roll angle beside it (rad/s read
+    as °/s looks plausible on its own: 2.6 °/s): the angle's rate of change against the
+    rate column, a least-squares slope, is 1 when they agree and 57.3 or 1/57.3 when one
+    is in radians."""
+    if "roll_deg" not in out or "roll_rate_dps" not in out:
+        return
+    time, angle, rate = out["time_s"], out["roll_deg"], out["roll_rate_dps"]
+    if time.size < 3 or not np.all(np.diff(time) > 0):
+        return  # the recording's own validation names it
+    change = np.gradient(angle, time)
+    spread = float(rate @ rate)
+    if not spread > 0.0:
+        return
+    slope = float(change @ rate) / spread
+    residual = change - slope * rate
+    total = float(np.sum((change - change.mean()) ** 2))
+    if not total > 0.0 or 1.0 - float(residual @ residual) / total < _UNIT_R2:
+        return  # the angle does not follow the rate closely enough to say
+    given = settings.unit.get("roll_rate", settings.units)
+    if _RAD / _UNIT_BAND <= slope <= _RAD * _UNIT_BAND:
+        raise RecordingError(
+            where,
+            None,
+            f"the roll angle changes {slope:.3g} times as fast as the roll_rate column says "
+            f"(read in {given}/s): the rate looks like rad/s; give --unit roll_rate=rad",
+        )
+    if 1.0 / (_RAD * _UNIT_BAND) <= slope <= _UNIT_BAND / _RAD:
+        raise RecordingError(
+            where,
+            None,
+            f"the roll_rate column (read in {given}/s) is {1.0 / slope:.3g} times the roll "
+            "angle's rate of change: the rate looks like °/s; give --unit roll_rate=deg",
+        )
 
 
 def _window(

@@ -517,3 +517,57 @@ def test_the_time_column_by_name_takes_its_own_unit_and_offset_and_nan_times_are
     argv = ["import-csv", str(nan), "--out", str(tmp_path / "n.csv"), "--columns"]
     assert main([*argv, "time,fin,roll", "--no-header", "--from", "-100"]) == 2
     assert "nan.csv:1: time_s is nan (not finite)" in capsys.readouterr().err
+
+
+def _spinning_log(path: Path, rate_scale: float) -> None:
+    """A roll log of angle (°) and rate (the rate column times ``rate_scale``: 1 for °/s,
+    π/180 for a rate logged in rad/s) at 100 Hz, the fin stepping."""
+    t = np.arange(1000) * 0.01
+    rate = 30.0 * np.sin(0.7 * t) + 10.0
+    angle = np.cumsum(rate) * 0.01
+    fin = np.where(t > 2.0, 10.0, 0.0)
+    rows = [f"{a:.6f},{r * rate_scale:.6f},{f:g}" for a, r, f in zip(angle, rate, fin, strict=True)]
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+
+
+def test_a_rate_column_in_another_unit_than_the_angle_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """rad/s read as °/s is plausible on its own (a few °/s): beside the angle it is not."""
+    src, out = tmp_path / "log.txt", tmp_path / "rec.csv"
+    words = ["import-csv", str(src), "--out", str(out), "--columns", "roll,roll_rate,fin"]
+    _spinning_log(src, np.pi / 180.0)
+    assert main([*words, "--no-header", "--rate", "100"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the rate looks like rad/s; give --unit roll_rate=rad" in err
+    assert str(src) in err and not out.exists()
+    assert main([*words, "--no-header", "--rate", "100", "--unit", "roll_rate=rad"]) == 0
+    _spinning_log(src, 1.0)
+    assert main([*words, "--no-header", "--rate", "100", "--unit", "roll_rate=rad"]) == 2
+    assert "the rate looks like °/s; give --unit roll_rate=deg" in capsys.readouterr().err
+    assert main([*words, "--no-header", "--rate", "100"]) == 0
+
+
+def test_a_site_elevation_makes_altitude_above_ground_above_sea_level(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t = np.arange(600) * 0.01
+    rows = [
+        f"{ti:.2f},{10.0 if i > 50 else 0.0},{i * 0.5},{50.0 + i},{20.0 + i}"
+        for i, ti in enumerate(t)
+    ]
+    src, out = tmp_path / "log.txt", tmp_path / "rec.csv"
+    src.write_text("t,fin,rate,v,h\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    words = ["import-csv", str(src), "--out", str(out), "--source", "flight"]
+    columns = ["--columns", "time,fin_cmd,roll_rate,airspeed,altitude"]
+    assert main([*words, *columns, "--site-elevation", "1200"]) == 0
+    rec = load_recording(out)
+    assert rec.altitude_m is not None and float(rec.altitude_m[0]) == pytest.approx(1220.0)
+    assert rec.metadata["import.site_elevation_m"] == "1200.0"
+    capsys.readouterr()
+    assert (
+        main([*words, "--columns", "time,fin_cmd,roll_rate,airspeed,skip", "--site-elevation", "5"])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert "--site-elevation" in err and "altitude column" in err and err.count("\n") == 1
