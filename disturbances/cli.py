@@ -329,6 +329,13 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                 f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
                 f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
             )
+            if m.get("supersonic_excluded_s"):
+                first, last = m["fitted_s"]
+                lines.append(
+                    f"  left out {m['supersonic_excluded_s']:.2f} s above Mach 0.8 (the roll "
+                    f"model is subsonic): fitted {first:.2f}-{last:.2f} s "
+                    "(--include-supersonic fits them too)"
+                )
             if m.get("fitted_with"):
                 lines.append(
                     f"  fitted together with {len(m['fitted_with'])} other flight(s): "

@@ -72,7 +72,7 @@ from identification.model import (
     servo_path,
     simulate,
 )
-from identification.recording import Recording
+from identification.recording import Recording, RecordingError
 from identification.steps import Disturbance, IdentificationError
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.ou import interval_coefficients
@@ -943,14 +943,78 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
     }
 
 
+#: Mach number above which the roll model (eq. 4-8, subsonic aerodynamics) is not fitted
+#: unless asked (``--include-supersonic``).
+MACH_LIMIT = 0.8
+
+
+def mach_numbers(recording: Recording) -> FloatArray:
+    """A flight's Mach number at each sample: its airspeed over the ISA speed of sound at
+    its altitude (at sea level without an altitude column)."""
+    assert recording.airspeed_mps is not None
+    altitude = (
+        recording.altitude_m if recording.altitude_m is not None else np.zeros(recording.n_samples)
+    )
+    return np.asarray(recording.airspeed_mps) / np.asarray(isa(altitude).speed_of_sound_mps)
+
+
+def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Recording, float]:
+    """The longest stretch of ``recording`` whose Mach number (its airspeed over the ISA
+    speed of sound at its altitude, or at sea level without one) stays at or below
+    ``limit``, and how many seconds of the log it leaves out; the recording itself and 0
+    where it never goes above."""
+    time = np.asarray(recording.time_s)
+    mach = mach_numbers(recording)
+    below = mach <= limit
+    if bool(np.all(below)):
+        return recording, 0.0
+    best, start, best_span = (0, 0), None, -1.0
+    for k, ok in enumerate([*below.tolist(), False]):
+        if ok and start is None:
+            start = k
+        elif not ok and start is not None:
+            span = float(time[k - 1] - time[start])
+            if span > best_span:
+                best, best_span = (start, k), span
+            start = None
+    if best_span <= 0.0:
+        raise IdentificationError(
+            f"recording {recording.name!r}: above Mach {limit:g} all along (peak "
+            f"{float(mach.max()):.2f}): the roll model is subsonic (--include-supersonic "
+            "fits it anyway)"
+        )
+    first, stop = best
+    end = float(time[stop]) if stop < time.size else float(time[-1]) + 1.0
+    try:
+        part = recording.part(float(time[first]), end)
+    except RecordingError:
+        part = None
+    if part is None or part.n_samples < MIN_MOVING_INTERVALS:
+        raise IdentificationError(
+            f"recording {recording.name!r}: its longest stretch below Mach {limit:g} lasts "
+            f"{best_span:.3g} s ({stop - first} samples), too short to fit; the roll model is "
+            "subsonic (--include-supersonic fits the rest anyway)"
+        )
+    return part, float(time[-1] - time[0]) - float(part.time_s[-1] - part.time_s[0])
+
+
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     """The ``flight`` identification method: :func:`identify_flights` per model on the
     recording and the flights fitted with it (``--together``), at the options' reference
     airspeed (``--v-ref``); the recording's fit."""
     options = context.options
+    recordings, excluded = [], []
+    for recording in (context.recording, *context.together):
+        if options.include_supersonic:
+            recordings.append(recording)
+            excluded.append(0.0)
+        else:
+            part, left_out = subsonic_part(recording)
+            recordings.append(part)
+            excluded.append(left_out)
     flights = [
         flight_inputs(recording, v_ref_mps=options.v_ref_mps, servo_rate_dps=options.servo_rate_dps)
-        for recording in (context.recording, *context.together)
+        for recording in recordings
     ]
     inputs = flights[0]
     fits: dict[str, ModelFit] = {}
@@ -975,7 +1039,19 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "flights": len(flights),
             "fitted_with": [f.recording.name for f in flights[1:]],
             "adequacy": flight_adequacy(result),
+            "fitted_s": [float(inputs.recording.time_s[0]), float(inputs.recording.time_s[-1])],
+            "supersonic_excluded_s": excluded[0],
         }
+        peak = float(np.max(mach_numbers(inputs.recording)))
+        if options.include_supersonic and peak > MACH_LIMIT:
+            adequacy = metrics["adequacy"]
+            adequacy["reasons"] = [
+                *adequacy["reasons"],
+                f"it fits samples up to Mach {peak:.2f}: the roll model is subsonic "
+                f"(eq. 4-8; above Mach {MACH_LIMIT:g} it is not)",
+            ]
+            if adequacy["verdict"] == "good":
+                adequacy["verdict"] = "weak"
         if result.gyro_noise_pct is not None:
             metrics["gyro_noise_pct"] = result.gyro_noise_pct
             metrics["gyro_floor_dps"] = result.gyro_floor_dps

@@ -163,6 +163,11 @@ class IdentifyOptions:
         le=2_000.0,
         unit="m/s",
     )
+    include_supersonic: bool = setting(
+        False,
+        "a flight's identification fits the samples above Mach 0.8 too (by default it fits "
+        "the longest stretch below: the roll model is subsonic); its fit is then weak",
+    )
 
     def __post_init__(self) -> None:
         check(self)

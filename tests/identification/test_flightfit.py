@@ -14,6 +14,7 @@ import pytest
 from disturbances.flightlog import FlightLogSpec, run_flight
 from identification.flight import ISA_SEA_LEVEL_DENSITY_KGM3, TUNNEL_AIRSPEED_MPS
 from identification.flightfit import (
+    MACH_LIMIT,
     MIN_DAMPING,
     FlightFit,
     _Layout,
@@ -23,11 +24,14 @@ from identification.flightfit import (
     flight_inputs,
     identify_flight,
     identify_flights,
+    mach_numbers,
     rescale,
+    subsonic_part,
 )
 from identification.importer import import_csv
 from identification.methods import default_methods, fit
 from identification.model import PAPER_THETA, RollParams, Servo, simulate
+from identification.pipeline import IdentifyOptions
 from identification.recording import (
     FORMAT,
     FORMAT_V1,
@@ -531,3 +535,45 @@ def test_rocketroll_identify_fits_flights_together(tmp_path: Path, capsys):
     assert "identifies one recording" in capsys.readouterr().err
     assert main(["identify", str(paths[0]), "--together", str(tmp_path / "none.csv")]) == 2
     assert "none.csv" in capsys.readouterr().err
+
+
+def _faster(recording: Recording, factor: float) -> Recording:
+    """The same log with its airspeed ``factor`` times higher (a supersonic stretch)."""
+    columns = recording.columns()
+    assert recording.airspeed_mps is not None
+    columns["airspeed_mps"] = np.asarray(recording.airspeed_mps) * factor
+    return Recording(
+        name=recording.name, source=recording.source, metadata=recording.metadata, **columns
+    )
+
+
+def test_the_samples_above_mach_0_8_are_left_out_and_said(paper_flight: Recording) -> None:
+    assert subsonic_part(paper_flight) == (paper_flight, 0.0)  # peak Mach 0.5
+    fast = _faster(paper_flight, 2.2)  # peak about Mach 1.1 at burnout
+    mach = mach_numbers(fast)
+    part, left_out = subsonic_part(fast)
+    time = np.asarray(fast.time_s)
+    assert np.all(mach_numbers(part) <= MACH_LIMIT) and left_out > 0.5
+    # The longest stretch below: the coast after the supersonic peak (the boost's is shorter).
+    assert part.time_s[0] > time[int(np.argmax(mach))]
+    assert left_out == pytest.approx(
+        float(time[-1] - time[0]) - float(part.time_s[-1] - part.time_s[0])
+    )
+    with pytest.raises(IdentificationError, match=r"longest stretch below Mach 0\.01 lasts"):
+        subsonic_part(fast, limit=0.01)
+
+
+def test_a_supersonic_flight_is_fitted_below_mach_0_8_unless_asked(
+    paper_flight: Recording,
+) -> None:
+    fast = _faster(paper_flight, 2.2)
+    found = fit(fast, "flight", ["constant"], IdentifyOptions(noise_runs=0))["constant"]
+    _, left_out = subsonic_part(fast)
+    assert found.metrics["supersonic_excluded_s"] == pytest.approx(left_out)
+    first, last = found.metrics["fitted_s"]
+    assert first > 0.0 and last == pytest.approx(float(fast.time_s[-1]))
+    both = fit(fast, "flight", ["constant"], IdentifyOptions(noise_runs=0, include_supersonic=True))
+    judged = both["constant"].metrics["adequacy"]
+    assert both["constant"].metrics["supersonic_excluded_s"] == 0.0
+    assert judged["verdict"] != "good"
+    assert any("the roll model is subsonic" in r for r in judged["reasons"])
