@@ -656,11 +656,27 @@ def _maximise(
         if best is None or result.fun < best.fun:
             best = result
     assert best is not None
-    if _params(layout.natural(best.x)) is None or best.fun >= 1e12:
+    nat = layout.natural(best.x)
+    if _params(nat) is None or best.fun >= 1e12:
+        if not all(math.isfinite(v) for v in nat.values()):
+            what = "the parameters left the real numbers"
+        elif _params(nat) is None:
+            what = "the gain α went to 0"
+        elif any(_system(inputs, nat) is None for inputs in flights):
+            what = f"the damping a(θ) fell below {MIN_DAMPING:g} 1/s on the flown fin angles"
+        else:
+            what = "the likelihood is not finite there (the Kalman filter diverged)"
+        shown = ", ".join(f"{k} {v:.3g}" for k, v in nat.items() if k in _SHOWN)
         raise IdentificationError(
-            f"recording {_names(flights)}: the flight fit failed ({best.message})"
+            f"recording {_names(flights)}: the flight fit failed from {len(starts)} start(s): "
+            f"{what} (at {shown}; L-BFGS-B after {best.nit} iterations: "
+            f"{best.message or 'no message'})"
         )
     return best
+
+
+#: The parameters a failed fit's message shows.
+_SHOWN = ("alpha", "theta_bar", "beta_bar", "alpha_bar", "sigma_w", "tau")
 
 
 def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, FloatArray, FloatArray]:

@@ -577,3 +577,19 @@ def test_a_supersonic_flight_is_fitted_below_mach_0_8_unless_asked(
     assert both["constant"].metrics["supersonic_excluded_s"] == 0.0
     assert judged["verdict"] != "good"
     assert any("the roll model is subsonic" in r for r in judged["reasons"])
+
+
+def test_a_failed_flight_fit_names_what_failed(
+    paper_flight: Recording, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where no start gives a finite likelihood, the error says that, where the optimiser
+    stopped and after how many iterations (not a bare 'ABNORMAL')."""
+    import identification.flightfit as flightfit
+
+    monkeypatch.setattr(flightfit, "_negloglike", lambda x, flights, layout: 1e12)
+    with pytest.raises(IdentificationError) as caught:
+        identify_flight(flight_inputs(paper_flight), "constant")
+    message = str(caught.value)
+    assert "the flight fit failed from" in message and "start(s)" in message
+    assert "the likelihood is not finite there" in message
+    assert "alpha " in message and "L-BFGS-B after" in message and "\n" not in message
