@@ -329,6 +329,16 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                 f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
                 f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
             )
+            held = (m.get("adequacy") or {}).get("held_out") or {}
+            if "rate_r2" in held:
+                full = held.get("full_fit_rate_r2")
+                lines.append(
+                    f"  held out: fitted to {held['from_s']:.2f} s, the model without u_d "
+                    f"predicts the rest to rate R² {held['rate_r2']:.3f}"
+                    + (f" (the whole flight's fit: {full:.3f})" if full is not None else "")
+                )
+            elif "skipped" in held:
+                lines.append(f"  held out: not checked: {held['skipped']}")
             if m.get("supersonic_excluded_s"):
                 first, last = m["fitted_s"]
                 lines.append(

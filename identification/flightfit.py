@@ -1014,6 +1014,87 @@ def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Reco
     return part, float(time[-1] - time[0]) - float(part.time_s[-1] - part.time_s[0])
 
 
+#: The share of a flight's fitted window the held-out check fits; it predicts the rest.
+HELD_OUT_SPLIT = 0.7
+
+
+def _model_only_r2(inputs: FlightInputs, params: RollParams) -> float:
+    """R² of the measured rate by ``params``' model without ``u_d`` over ``inputs``, from
+    the first measured rate."""
+    measured = measured_rate(inputs)
+    sim = resimulated(inputs, params, np.zeros(inputs.n), float(measured[0]))
+    spread = float(np.sum((measured - measured.mean()) ** 2))
+    if not spread > 0.0:
+        return math.nan
+    return 1.0 - float(np.sum((sim.rate_dps - measured) ** 2)) / spread
+
+
+def held_out_prediction(
+    inputs: FlightInputs, models: Sequence[str], servo_rate_dps: float
+) -> tuple[dict[str, dict[str, Any]], FlightInputs | None]:
+    """Each model fitted to the first :data:`HELD_OUT_SPLIT` of the flight's window and
+    judged on the rest, which it did not see: the model without ``u_d`` over the later part
+    (its rate R², from the measured rate where the part starts), beside the full fit's on
+    the same samples.  Per model ``{"from_s", "rate_r2", "full_fit_rate_r2"}``, or
+    ``{"skipped": reason}`` where a part is too short or the fit fails."""
+    rec = inputs.recording
+    t0, t1 = float(rec.time_s[0]), float(rec.time_s[-1])
+    split = t0 + HELD_OUT_SPLIT * (t1 - t0)
+    try:
+        early = flight_inputs(
+            rec.part(t0, split), v_ref_mps=inputs.v_ref_mps, servo_rate_dps=servo_rate_dps
+        )
+        late = flight_inputs(
+            rec.part(split, t1 + 1.0), v_ref_mps=inputs.v_ref_mps, servo_rate_dps=servo_rate_dps
+        )
+    except (IdentificationError, RecordingError) as exc:
+        skipped = {"skipped": f"a part is too short to fit ({exc})"}
+        return {model: dict(skipped) for model in models}, None
+    out: dict[str, dict[str, Any]] = {}
+    constant: list[FlightFit] | None = None
+    for model in sorted(models, key=lambda m: m != "constant"):
+        try:
+            fitted = identify_flights([early], model, constant=constant)
+        except IdentificationError as exc:
+            out[model] = {"skipped": f"the first part's fit failed ({exc})"}
+            continue
+        if model == "constant":
+            constant = fitted
+        out[model] = {"from_s": split, "rate_r2": _model_only_r2(late, fitted[0].params)}
+    return out, late
+
+
+def _judge_held_out(
+    adequacy: dict[str, Any],
+    held_out: dict[str, Any] | None,
+    params: RollParams,
+    late: FlightInputs | None,
+) -> None:
+    """Add the held-out prediction to a flight fit's adequacy: its figures, and a reason
+    where the model without ``u_d`` predicts the unseen part worse than the adequacy's
+    rate limits (:data:`~identification.adequacy.RATE_R2`)."""
+    from identification.adequacy import RATE_R2
+
+    if held_out is None:
+        return
+    adequacy["held_out"] = dict(held_out)
+    r2 = held_out.get("rate_r2")
+    if r2 is None or late is None or not math.isfinite(r2):
+        return
+    adequacy["held_out"]["full_fit_rate_r2"] = _model_only_r2(late, params)
+    text = (
+        f"fitted on the flight to {held_out['from_s']:.3g} s, the model without u_d predicts "
+        f"the rest to R² {r2:.2f}"
+    )
+    if r2 < RATE_R2[1]:
+        adequacy["reasons"] = [*adequacy["reasons"], text]
+        adequacy["verdict"] = "unreliable"
+    elif r2 < RATE_R2[0]:
+        adequacy["reasons"] = [*adequacy["reasons"], text]
+        if adequacy["verdict"] == "good":
+            adequacy["verdict"] = "weak"
+
+
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     """The ``flight`` identification method: :func:`identify_flights` per model on the
     recording and the flights fitted with it (``--together``), at the options' reference
@@ -1035,6 +1116,11 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     inputs = flights[0]
     fits: dict[str, ModelFit] = {}
     constant: list[FlightFit] | None = None
+    held_out, late = (
+        held_out_prediction(inputs, models, options.servo_rate_dps)
+        if len(flights) == 1
+        else ({}, None)
+    )
     # The constant model first: the θ-dependent one starts from its fit.
     for model in sorted(models, key=lambda m: m != "constant"):
         joint = identify_flights(flights, model, constant=constant)
@@ -1058,6 +1144,7 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "fitted_s": [float(inputs.recording.time_s[0]), float(inputs.recording.time_s[-1])],
             "supersonic_excluded_s": excluded[0],
         }
+        _judge_held_out(metrics["adequacy"], held_out.get(model), result.params, late)
         peak = float(np.max(mach_numbers(inputs.recording)))
         if options.include_supersonic and peak > MACH_LIMIT:
             adequacy = metrics["adequacy"]

@@ -355,6 +355,7 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert err == ""
     assert "flight identification" in out and "C_P-like" in out
     assert "flight constant [good]" in out and "fit adequacy" in out
+    assert "held out: fitted to" in out
     # The flight's report: one figure (airspeed, fin, rate re-simulated, u_d) and report.md.
     assert sorted(p.name for p in report.iterdir()) == ["flight_identification.png", "report.md"]
     assert (report / "flight_identification.png").read_bytes().startswith(b"\x89PNG")
@@ -593,3 +594,18 @@ def test_a_failed_flight_fit_names_what_failed(
     assert "the flight fit failed from" in message and "start(s)" in message
     assert "the likelihood is not finite there" in message
     assert "alpha " in message and "L-BFGS-B after" in message and "\n" not in message
+
+
+def test_the_held_out_part_of_a_flight_is_predicted_as_well_as_by_the_whole_fit(
+    paper_flight: Recording,
+) -> None:
+    """Fitted on the first 70 % of the virtual flight, the model without u_d predicts the
+    rest within 10 % of the R² the fit of the whole flight reaches on the same samples."""
+    found = fit(paper_flight, "flight", ["constant"], IdentifyOptions(noise_runs=0))["constant"]
+    held = found.metrics["adequacy"]["held_out"]
+    assert held["from_s"] == pytest.approx(
+        float(paper_flight.time_s[0])
+        + 0.7 * float(paper_flight.time_s[-1] - paper_flight.time_s[0])
+    )
+    assert held["rate_r2"] >= 0.9 * held["full_fit_rate_r2"] and held["rate_r2"] > 0.8
+    assert found.metrics["adequacy"]["verdict"] == "good"
