@@ -52,7 +52,7 @@ from identification.statistics import decorrelation_stride, newey_west_meat
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["VERDICTS", "Adequacy", "ModelOnly", "adequacy", "model_only"]
+__all__ = ["VERDICTS", "Adequacy", "Findings", "ModelOnly", "adequacy", "beyond", "model_only"]
 
 #: The verdicts, best first.
 VERDICTS = ("good", "weak", "unreliable")
@@ -78,6 +78,42 @@ INNOVATION_ACF = 0.05
 ALPHA_REL_SE = (0.25, 0.5)
 #: The paper's steady-state R² below which its dwells did not settle (weak).
 STEADY_STATE_R2 = 0.95
+
+
+def beyond(value: float, limits: tuple[float, float], above: bool) -> int:
+    """Which of a figure's ``(weak, unreliable)`` limits ``value`` passes: 0 none, 1 the
+    weak one, 2 the unreliable one; ``above``: larger is worse (else smaller is)."""
+    sign = 1.0 if above else -1.0
+    if sign * value > sign * limits[1]:
+        return 2
+    return 1 if sign * value > sign * limits[0] else 0
+
+
+class Findings:
+    """The reasons a fit is weak or unreliable, collected figure by figure."""
+
+    def __init__(self) -> None:
+        self.weak: list[str] = []
+        self.bad: list[str] = []
+
+    def check(self, value: float, limits: tuple[float, float], text: str, above: bool) -> None:
+        """``text`` as a reason where ``value`` passes a limit (:func:`beyond`)."""
+        severity = beyond(value, limits, above)
+        if severity:
+            (self.weak if severity == 1 else self.bad).append(text)
+
+    def rate_r2(self, r2: float) -> None:
+        """The model without ``u_d`` against the measured rate (:data:`RATE_R2`)."""
+        self.check(r2, RATE_R2, f"the model without u_d explains {r2:.2f} of the rate (R²)", False)
+
+    @property
+    def verdict(self) -> str:
+        return "unreliable" if self.bad else "weak" if self.weak else "good"
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """The unreliable reasons first."""
+        return (*self.bad, *self.weak)
 
 
 @dataclass(frozen=True)
@@ -277,17 +313,9 @@ def adequacy(
     else:  # NaN where the information matrix is not positive definite: no precision at all
         rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) else math.inf
 
-    weak: list[str] = []
-    bad: list[str] = []
-
-    def check(value: float, limits: tuple[float, float], text: str, above: bool) -> None:
-        sign = 1.0 if above else -1.0  # which side of the limits is worse
-        if sign * value > sign * limits[1]:
-            bad.append(text)
-        elif sign * value > sign * limits[0]:
-            weak.append(text)
-
-    check(rate_r2, RATE_R2, f"the model without u_d explains {rate_r2:.2f} of the rate (R²)", False)
+    found = Findings()
+    weak, bad, check = found.weak, found.bad, found.check
+    found.rate_r2(rate_r2)
     check(
         ahead_r2, AHEAD_R2, f"{k * dt:.2g} s ahead it predicts the rate to R² {ahead_r2:.2f}", False
     )
@@ -330,7 +358,7 @@ def adequacy(
         ss = metrics.get("steady_state_r2")
         if ss is not None and ss < STEADY_STATE_R2:
             weak.append(f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate")
-    verdict = "unreliable" if bad else "weak" if weak else "good"
+    verdict = found.verdict
     return Adequacy(
         rate_source=source,
         rate_r2=rate_r2,
@@ -346,5 +374,5 @@ def adequacy(
         alpha_rel_se=rel_se,
         innovation_acf=innovation_acf,
         verdict=verdict,
-        reasons=tuple(bad + weak),
+        reasons=found.reasons,
     )

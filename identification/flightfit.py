@@ -874,11 +874,11 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
     ``alpha_rel_se``; the tunnel's ``ahead_r2`` and ``fin_share`` are None), ``on_bound``,
     ``verdict`` and ``reasons``, JSON-safe.
     """
-    from identification.adequacy import ALPHA_REL_SE, RATE_R2, UD_RANGE
+    from identification.adequacy import ALPHA_REL_SE, UD_RANGE, Findings
 
     params, inputs = result.params, result.inputs
-    bad: list[str] = []
-    weak: list[str] = []
+    found = Findings()
+    bad, weak = found.bad, found.weak
     flown = np.abs(inputs.theta + params.theta_bar_deg)
     slope = params.alpha_bar_per_deg_s
     lowest = params.beta_bar_per_s + (slope * float(np.max(flown)) if slope < 0 else 0.0)
@@ -910,26 +910,12 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         )
     alpha_se = errors.get("alpha", math.nan)
     rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) and params.alpha else math.nan
-    model_only = resimulated(inputs, params, np.zeros_like(result.u_d_deg), result.rate_dps[0])
-    measured = measured_rate(inputs)
-    spread = float(np.sum((measured - measured.mean()) ** 2))
-    rate_r2 = (
-        1.0 - float(np.sum((model_only.rate_dps - measured) ** 2)) / spread
-        if spread > 0
-        else math.nan
-    )
+    rate_r2 = _model_only_r2(inputs, params)
     p99 = float(np.percentile(np.abs(result.u_d_deg), 99.0))
     fin_range = (servo or Servo()).range_deg
 
-    def check(value: float, limits: tuple[float, float], text: str, above: bool) -> None:
-        sign = 1.0 if above else -1.0
-        if sign * value > sign * limits[1]:
-            bad.append(text)
-        elif sign * value > sign * limits[0]:
-            weak.append(text)
-
-    check(rate_r2, RATE_R2, f"the model without u_d explains {rate_r2:.2f} of the rate (R²)", False)
-    check(
+    found.rate_r2(rate_r2)
+    found.check(
         p99 / fin_range,
         UD_RANGE,
         f"u_d reaches {p99:.3g}° (99th percentile), {p99 / fin_range:.2g} of the fins' "
@@ -937,10 +923,9 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         True,
     )
     if math.isfinite(rel_se):
-        check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
+        found.check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
     if not result.converged:
         weak.append("the optimiser did not report convergence")
-    verdict = "unreliable" if bad else "weak" if weak else "good"
 
     def safe(value: float) -> float | None:
         return value if math.isfinite(value) else None
@@ -954,8 +939,8 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         "ud_range_fraction": p99 / fin_range,
         "alpha_rel_se": safe(rel_se),
         "on_bound": on_bound,
-        "verdict": verdict,
-        "reasons": bad + weak,
+        "verdict": found.verdict,
+        "reasons": list(found.reasons),
     }
 
 
@@ -1073,7 +1058,7 @@ def _judge_held_out(
     """Add the held-out prediction to a flight fit's adequacy: its figures, and a reason
     where the model without ``u_d`` predicts the unseen part worse than the adequacy's
     rate limits (:data:`~identification.adequacy.RATE_R2`)."""
-    from identification.adequacy import RATE_R2
+    from identification.adequacy import RATE_R2, VERDICTS, beyond
 
     if held_out is None:
         return
@@ -1086,13 +1071,11 @@ def _judge_held_out(
         f"fitted on the flight to {held_out['from_s']:.3g} s, the model without u_d predicts "
         f"the rest to R² {r2:.2f}"
     )
-    if r2 < RATE_R2[1]:
+    severity = beyond(r2, RATE_R2, above=False)
+    if severity:
         adequacy["reasons"] = [*adequacy["reasons"], text]
-        adequacy["verdict"] = "unreliable"
-    elif r2 < RATE_R2[0]:
-        adequacy["reasons"] = [*adequacy["reasons"], text]
-        if adequacy["verdict"] == "good":
-            adequacy["verdict"] = "weak"
+        worst = max(VERDICTS.index(adequacy["verdict"]), severity)
+        adequacy["verdict"] = VERDICTS[worst]
 
 
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
