@@ -52,7 +52,16 @@ from identification.statistics import decorrelation_stride, newey_west_meat
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["VERDICTS", "Adequacy", "Findings", "ModelOnly", "adequacy", "beyond", "model_only"]
+__all__ = [
+    "VERDICTS",
+    "Adequacy",
+    "Findings",
+    "ModelOnly",
+    "adequacy",
+    "beyond",
+    "model_only",
+    "r_squared",
+]
 
 #: The verdicts, best first.
 VERDICTS = ("good", "weak", "unreliable")
@@ -145,7 +154,8 @@ class Adequacy:
         }
 
 
-def _r2(predicted: FloatArray, measured: FloatArray) -> float:
+def r_squared(predicted: FloatArray, measured: FloatArray) -> float:
+    """1 - SSE / SST of ``predicted`` against ``measured`` (NaN where it does not vary)."""
     spread = float(np.sum((measured - measured.mean()) ** 2))
     if spread <= 0.0:
         return float("nan")
@@ -283,7 +293,7 @@ def adequacy(
     rate, source = model.measured_rate_dps, model.rate_source
     v, phi = model.rate_dps, model.angle_deg
     n = rate.size
-    rate_r2 = _r2(v, rate)
+    rate_r2 = r_squared(v, rate)
     rate_mae = float(np.mean(np.abs(v - rate)))
     angle_mae = (
         float(np.mean(np.abs(phi - np.asarray(rec.roll_deg, dtype=float))))
@@ -299,7 +309,7 @@ def adequacy(
     ahead = smoothed[: n - k].copy()
     for j in range(k):
         ahead = e[j : n - k + j] * ahead + f[j : n - k + j]
-    ahead_r2 = _r2(ahead, rate[k:])
+    ahead_r2 = r_squared(ahead, rate[k:])
     # u_d against the fin and the fins' range.
     u = disturbance.at(np.asarray(rec.time_s)[:-1])
     # The model's own distance from its steady state, in fin degrees: input-driven only.

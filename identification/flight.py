@@ -930,14 +930,14 @@ def load_ascent_yaml(path: str | os.PathLike[str]) -> AscentSpec:
     --------
     ``identification/data/ascent-default.yml`` is :data:`DEFAULT_ASCENT`.
     """
-    from rocketroll_common.specs import load_yaml, validated
+    from rocketroll_common.specs import load_yaml, place, validated
 
     where = os.fspath(path)
     document, lines = load_yaml(path)
     doc = validated(AscentDocument, document, where, lines)
 
     def at(key: str) -> str:
-        return f"{where}:{lines[(key,)]}" if (key,) in lines else where
+        return place(where, lines, (key,))
 
     values = doc.model_dump(exclude={"thrust_curve"})
     try:

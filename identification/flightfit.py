@@ -853,6 +853,9 @@ def rescale(
 #: A fitted damping within this factor of :data:`MIN_DAMPING` (at its smallest over the
 #: flown fin angles) sits on the bound the fit keeps it above.
 ON_BOUND_FACTOR = 2.0
+#: Sensor noises the fit may drive to its bound: a sensor without that noise, not a
+#: parameter the flight fails to determine.
+_SENSOR_NOISE = ("gyro_rel", "gyro_abs", "angle_sd")
 
 
 def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, Any]:
@@ -890,16 +893,8 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
             f"above {MIN_DAMPING:g}): the flight does not determine it (an integrator)"
         )
     for name, value in result.estimates.items():
-        if (
-            value > 0
-            and abs(abs(math.log(value)) - _LOG_BOUND) < 1e-6
-            and name
-            not in (
-                "gyro_rel",
-                "gyro_abs",
-                "angle_sd",
-            )
-        ):
+        at_bound = value > 0 and abs(abs(math.log(value)) - _LOG_BOUND) < 1e-6
+        if at_bound and name not in _SENSOR_NOISE:
             on_bound.append(name)
             bad.append(f"{name} sits on the optimiser's bound: the flight does not determine it")
     errors = result.std_errors
@@ -1006,12 +1001,11 @@ HELD_OUT_SPLIT = 0.7
 def _model_only_r2(inputs: FlightInputs, params: RollParams) -> float:
     """R² of the measured rate by ``params``' model without ``u_d`` over ``inputs``, from
     the first measured rate."""
+    from identification.adequacy import r_squared
+
     measured = measured_rate(inputs)
     sim = resimulated(inputs, params, np.zeros(inputs.n), float(measured[0]))
-    spread = float(np.sum((measured - measured.mean()) ** 2))
-    if not spread > 0.0:
-        return math.nan
-    return 1.0 - float(np.sum((sim.rate_dps - measured) ** 2)) / spread
+    return r_squared(np.asarray(sim.rate_dps), measured)
 
 
 def held_out_prediction(
@@ -1020,8 +1014,9 @@ def held_out_prediction(
     """Each model fitted to the first :data:`HELD_OUT_SPLIT` of the flight's window and
     judged on the rest, which it did not see: the model without ``u_d`` over the later part
     (its rate R², from the measured rate where the part starts), beside the full fit's on
-    the same samples.  Per model ``{"from_s", "rate_r2", "full_fit_rate_r2"}``, or
-    ``{"skipped": reason}`` where a part is too short or the fit fails."""
+    the same samples (:func:`flight_method` adds it).  Per model ``{"from_s",
+    "rate_r2"}``, or ``{"skipped": reason}`` where a part is too short or the fit fails;
+    and the later part's inputs (None where it could not be cut)."""
     rec = inputs.recording
     t0, t1 = float(rec.time_s[0]), float(rec.time_s[-1])
     split = t0 + HELD_OUT_SPLIT * (t1 - t0)
@@ -1058,7 +1053,7 @@ def _judge_held_out(
     """Add the held-out prediction to a flight fit's adequacy: its figures, and a reason
     where the model without ``u_d`` predicts the unseen part worse than the adequacy's
     rate limits (:data:`~identification.adequacy.RATE_R2`)."""
-    from identification.adequacy import RATE_R2, VERDICTS, beyond
+    from identification.adequacy import RATE_R2, beyond
 
     if held_out is None:
         return
@@ -1071,7 +1066,14 @@ def _judge_held_out(
         f"fitted on the flight to {held_out['from_s']:.3g} s, the model without u_d predicts "
         f"the rest to R² {r2:.2f}"
     )
-    severity = beyond(r2, RATE_R2, above=False)
+    _add_reason(adequacy, text, beyond(r2, RATE_R2, above=False))
+
+
+def _add_reason(adequacy: dict[str, Any], text: str, severity: int) -> None:
+    """``text`` among a judged fit's reasons, its verdict at least as bad as ``severity``
+    (1 weak, 2 unreliable; 0 adds nothing)."""
+    from identification.adequacy import VERDICTS
+
     if severity:
         adequacy["reasons"] = [*adequacy["reasons"], text]
         worst = max(VERDICTS.index(adequacy["verdict"]), severity)
@@ -1083,15 +1085,12 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     recording and the flights fitted with it (``--together``), at the options' reference
     airspeed (``--v-ref``); the recording's fit."""
     options = context.options
-    recordings, excluded = [], []
-    for recording in (context.recording, *context.together):
-        if options.include_supersonic:
-            recordings.append(recording)
-            excluded.append(0.0)
-        else:
-            part, left_out = subsonic_part(recording)
-            recordings.append(part)
-            excluded.append(left_out)
+    recordings = [context.recording, *context.together]
+    excluded = 0.0  # the recording's seconds above the Mach limit, left out
+    if not options.include_supersonic:
+        cut = [subsonic_part(recording) for recording in recordings]
+        recordings = [part for part, _ in cut]
+        excluded = cut[0][1]
     flights = [
         flight_inputs(recording, v_ref_mps=options.v_ref_mps, servo_rate_dps=options.servo_rate_dps)
         for recording in recordings
@@ -1104,6 +1103,7 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
         if len(flights) == 1
         else ({}, None)
     )
+    peak = float(np.max(mach_numbers(inputs.recording)))
     # The constant model first: the θ-dependent one starts from its fit.
     for model in sorted(models, key=lambda m: m != "constant"):
         joint = identify_flights(flights, model, constant=constant)
@@ -1125,19 +1125,15 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "fitted_with": [f.recording.name for f in flights[1:]],
             "adequacy": flight_adequacy(result),
             "fitted_s": [float(inputs.recording.time_s[0]), float(inputs.recording.time_s[-1])],
-            "supersonic_excluded_s": excluded[0],
+            "supersonic_excluded_s": excluded,
         }
         _judge_held_out(metrics["adequacy"], held_out.get(model), result.params, late)
-        peak = float(np.max(mach_numbers(inputs.recording)))
-        if options.include_supersonic and peak > MACH_LIMIT:
-            adequacy = metrics["adequacy"]
-            adequacy["reasons"] = [
-                *adequacy["reasons"],
-                f"it fits samples up to Mach {peak:.2f}: the roll model is subsonic "
-                f"(eq. 4-8; above Mach {MACH_LIMIT:g} it is not)",
-            ]
-            if adequacy["verdict"] == "good":
-                adequacy["verdict"] = "weak"
+        _add_reason(
+            metrics["adequacy"],
+            f"it fits samples up to Mach {peak:.2f}: the roll model is subsonic "
+            f"(eq. 4-8; above Mach {MACH_LIMIT:g} it is not)",
+            1 if peak > MACH_LIMIT else 0,
+        )
         if result.gyro_noise_pct is not None:
             metrics["gyro_noise_pct"] = result.gyro_noise_pct
             metrics["gyro_floor_dps"] = result.gyro_floor_dps

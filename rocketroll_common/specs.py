@@ -30,6 +30,7 @@ __all__ = [
     "as_whole",
     "json_schema",
     "load_yaml",
+    "place",
     "schema_text",
     "validated",
 ]
@@ -96,6 +97,14 @@ def load_yaml(path: str | os.PathLike[str]) -> tuple[Any, dict[Location, int]]:
     return document, lines
 
 
+def place(where: str, lines: Mapping[Location, int] | None, loc: Location) -> str:
+    """``WHERE:LINE`` of the key at ``loc`` in a document :func:`load_yaml` read (of the
+    nearest key above it where ``loc`` has no line of its own), or ``WHERE`` alone."""
+    known = lines or {}
+    line = next((known[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in known), None)
+    return f"{where}:{line}" if line is not None else where
+
+
 def _dotted(loc: Location) -> str:
     out = ""
     for part in loc:
@@ -115,24 +124,19 @@ def validated(
     ``at`` is where ``document`` sits in its file (``("RocketRoll-v0",)``: an entry)."""
     if not isinstance(document, dict):
         keys = ", ".join(model.model_fields)
-        line = (lines or {}).get(at)
         key = f" {_dotted(at)}:" if at else ""
-        raise UsageError(f"{where}{f':{line}' if line else ''}:{key} expected a mapping ({keys})")
+        raise UsageError(f"{place(where, lines, at)}:{key} expected a mapping ({keys})")
     try:
         return model.model_validate(document)
     except ValidationError as exc:
         error = exc.errors()[0]
         inner: Location = tuple(p for p in error["loc"] if isinstance(p, str | int))
         loc: Location = (*at, *inner)
-        known = lines or {}
-        line = next((known[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in known), None)
-        place = f"{where}:{line}" if line is not None else where
         problem = str(error["msg"])
         if error["type"] == "extra_forbidden":
-            parent: Any = model
             problem = f"unknown key {loc[-1]!r}" if loc else "unknown key"
             if len(inner) == 1:
-                problem += f"; known: {', '.join(parent.model_fields)}"
+                problem += f"; known: {', '.join(model.model_fields)}"
         elif error["type"] == "missing":
             problem = "is missing"
         elif error["type"].endswith("_type") or error["type"] in ("literal_error", "enum"):
@@ -140,7 +144,8 @@ def validated(
             problem += f", got {shown}" if len(shown) <= 60 else ""
         problem = problem.removeprefix("Value error, ")
         key = _dotted(loc)
-        raise UsageError(f"{place}: {key}: {problem}" if key else f"{place}: {problem}") from None
+        found = place(where, lines, loc)
+        raise UsageError(f"{found}: {key}: {problem}" if key else f"{found}: {problem}") from None
 
 
 def json_schema(model: type[BaseModel]) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from agents.replay import (
     options_config,
 )
 from rocketroll_common.errors import UsageError
-from rocketroll_common.specs import Count, Whole, as_whole, load_yaml, validated
+from rocketroll_common.specs import Count, Whole, as_whole, load_yaml, place, validated
 
 #: Algorithms a controller of a spec may train.
 TRAINABLE = ("ppo", "sac", "td3")
@@ -195,13 +195,13 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
     doc = validated(SweepDocument, document, str(path), lines)
 
     def at(*key: str | int) -> str:
-        return f"{path}:{lines[key]}" if key in lines else str(path)
+        return place(str(path), lines, key)
 
     for i, env_id in enumerate(doc.env_ids):
         if env_id not in variant_ids():
             raise UsageError(
-                f"{at('env_ids', i) if isinstance(document['env_ids'], list) else at('env_ids')}"
-                f": env_ids: unknown {env_id!r}; one of {', '.join(variant_ids())}"
+                f"{at('env_ids', i)}: env_ids: unknown {env_id!r}; "
+                f"one of {', '.join(variant_ids())}"
             )
     settings = {str(k): list(v) for k, v in doc.settings.items()}
     fixed = sorted(set(FIXED_OPTIONS) & set(settings))

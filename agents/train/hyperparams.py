@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, RootModel, field_validator, model_validator
 
 from rocketroll_common.errors import UsageError
-from rocketroll_common.specs import Count, Whole, load_yaml, validated
+from rocketroll_common.specs import Count, Whole, load_yaml, place, validated
 
 #: The hyperparameter files shipped with the package, one per algorithm.
 HYPERPARAMS_DIR = Path(__file__).resolve().parents[1] / "hyperparams"
@@ -231,8 +231,7 @@ def load_hyperparameters(
             f"{', '.join(map(str, document)) or 'none'})"
         )
     raw = document[env_id]
-    line = lines.get((env_id,))
-    where = f"{path}{f':{line}' if line else ''}: {env_id}"
+    where = f"{place(str(path), lines, (env_id,))}: {env_id}"
     set_here = sorted(set(raw) & set(SCRIPT_SET)) if isinstance(raw, dict) else []
     if set_here:
         raise UsageError(
