@@ -14,6 +14,20 @@ mean measured ``|rate|``, and the fit's time.  Below the table: the flight
 targets (coefficients within 5 %, re-simulation under 2 %), PASS or FAIL
 over every fit.
 
+Since the flight method measures the airspeed scaling (fin torque ``∝ ρV^n``,
+damping ``∝ ρV^m``), the coefficients are compared at the fit's reference
+airspeed (the flight's mean), with the truth carried there by its own scaling
+(:func:`disturbances.flightlog.truth_at`).
+
+``--scaling`` flies the truth of ``--truth`` (default the paper's rocket, flown
+tunnel turbulence, the recorder's default staircase and ascent) with every
+``n`` in ``--n`` and ``m`` in ``--m`` at every logging rate in ``--hz``, and
+prints per cell: the share of flights whose measured ``n`` and ``m`` lie within
+two standard errors of the truth, the mean SE of ``n``, the share with α₀ and
+β̄₀ within 5 %, the share where the likelihood-ratio test rejects eq. 4-8, and
+(``--held-out``) the model-only rate R² on the last 30 % of the flight, fitted on
+the first 70 %, as a share of the true model's own R² there.
+
 ``--joint K`` fits K flights of the rocket together
 (:func:`identification.flightfit.identify_flights`: one rocket, one
 turbulence's statistics, one gyro; each flight its own filter), ``--seeds``
@@ -24,6 +38,7 @@ Run from the repository root::
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 10
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 10 --joint 3 --truth dryden
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 3 --truth paper-theta --jobs 1
+    .venv/bin/python benchmarks/flight_ground_truth.py --scaling --seeds 10 --held-out
 """
 
 from __future__ import annotations
@@ -37,8 +52,13 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from disturbances.flightlog import FlightLogSpec, run_flight
-from identification.flightfit import flight_inputs, identify_flights
+from disturbances.flightlog import FlightLogSpec, run_flight, truth_at
+from identification.flightfit import (
+    _model_only_r2,
+    flight_inputs,
+    held_out_prediction,
+    identify_flights,
+)
 
 #: Name -> (FlightLogSpec settings, what it tests).
 TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
@@ -68,23 +88,36 @@ TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
 }
 
 
-def one(truth: str, seed: int, joint: int = 1) -> dict[str, Any]:
+def one(
+    truth: str,
+    seed: int,
+    joint: int = 1,
+    extra: dict[str, Any] | None = None,
+    held_out: bool = False,
+) -> dict[str, Any]:
     """Fly, identify, compare: flights ``seed·joint`` to ``seed·joint + joint - 1``, fitted
-    together (:func:`identification.flightfit.identify_flights`), the first one's fit."""
+    together (:func:`identification.flightfit.identify_flights`), the first one's fit;
+    ``extra`` recorder settings on top of the truth's."""
     settings, _ = TRUTHS[truth]
+    settings = {**settings, **(extra or {})}
     specs = [FlightLogSpec(seed=seed * joint + k, **settings) for k in range(joint)]
-    flights = [flight_inputs(run_flight(spec)) for spec in specs]
+    recordings = [run_flight(spec) for spec in specs]
+    flights = [flight_inputs(rec) for rec in recordings]
+    if joint > 1:  # one reference for all
+        flights = [flight_inputs(rec, v_ref_mps=flights[0].v_ref_mps) for rec in recordings]
     spec = specs[0]
-    params = spec.params()
     start = time.perf_counter()
     fit = identify_flights(flights, spec.model)[0]
     seconds = time.perf_counter() - start
+    params = truth_at(recordings[0], fit.inputs.v_ref_mps, fit.inputs.rho_ref_kgm3)
     p = fit.params
     theta = fit.inputs.theta
     a_true = params.damping(theta)
     a_fit = p.damping(theta)
     resim = fit.resimulate()
-    return {
+    errors = fit.std_errors
+    test = fit.eq_4_8_test or {}
+    row = {
         "truth": truth,
         "seed": seed,
         "alpha_pct": 100.0 * (p.alpha / params.alpha - 1.0),
@@ -93,12 +126,27 @@ def one(truth: str, seed: int, joint: int = 1) -> dict[str, Any]:
         "alpha_bar": p.alpha_bar_per_deg_s - params.alpha_bar_per_deg_s,
         "damping_rms_pct": 100.0 * float(np.sqrt(np.mean((a_fit / a_true - 1.0) ** 2))),
         "resim_pct": resim["resim_rate_mae_pct"],
+        "n_err": fit.scaling.torque_exponent - spec.torque_exponent,
+        "m_err": fit.scaling.damping_exponent - spec.damping_exponent,
+        "n_se": errors.get("torque_exponent", math.nan),
+        "m_se": errors.get("damping_exponent", math.nan),
+        "rejected": bool(test.get("rejected", False)),
         "seconds": seconds,
     }
+    if held_out:
+        out, late = held_out_prediction(fit.inputs, [spec.model], spec.servo_rate)
+        r2 = out[spec.model].get("rate_r2", math.nan)
+        if late is not None:
+            true_here = truth_at(recordings[0], late.v_ref_mps, late.rho_ref_kgm3)
+            own = _model_only_r2(late, true_here, spec.scaling())
+            row["held_out_ratio"] = r2 / own if own > 0 else math.nan
+        else:
+            row["held_out_ratio"] = math.nan
+    return row
 
 
-def _run(job: tuple[str, int, int]) -> dict[str, Any]:
-    return one(*job)
+def _run(job: tuple[str, int, int, dict[str, Any], bool]) -> dict[str, Any]:
+    return {**one(*job), "cell": tuple(sorted(job[3].items()))}
 
 
 COLUMNS = (
@@ -148,6 +196,84 @@ def verdicts(rows: list[dict[str, Any]]) -> list[str]:
     ]
 
 
+def within_two_se(rows: list[dict[str, Any]], key: str) -> float:
+    """The share of rows whose ``key`` error lies within two of its standard errors."""
+    return float(np.mean([abs(r[f"{key}_err"]) <= 2.0 * r[f"{key}_se"] for r in rows]))
+
+
+def scaling_table(rows: list[dict[str, Any]]) -> str:
+    """Per (n, m, logging rate): the scaling's recovery, the coefficients, the test."""
+    cells: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for row in rows:
+        cells.setdefault(row["cell"], []).append(row)
+    held = "held_out_ratio" in rows[0]
+    head = (
+        f"{'n':>4}{'m':>5}{'Hz':>5}{'flights':>8}{'n in 2SE':>10}{'m in 2SE':>10}"
+        f"{'SE(n)':>8}{'SE(m)':>8}{'α₀ 5%':>8}{'β̄₀ 5%':>8}{'eq4-8 rej':>10}"
+        + (f"{'held-out R² / true':>24}" if held else "")
+    )
+    lines = [head]
+    for cell, mine in sorted(cells.items()):
+        c = dict(cell)
+        coefficient = np.mean([abs(r["alpha_pct"]) < 5 for r in mine])
+        beta = np.mean([abs(r["beta_bar_pct"]) < 5 for r in mine])
+        line = (
+            f"{c['torque_exponent']:>4.1f}{c['damping_exponent']:>5.1f}"
+            f"{1.0 / c['log_dt']:>5.0f}{len(mine):>8}"
+            f"{within_two_se(mine, 'n'):>10.2f}{within_two_se(mine, 'm'):>10.2f}"
+            f"{np.nanmean([r['n_se'] for r in mine]):>8.3f}"
+            f"{np.nanmean([r['m_se'] for r in mine]):>8.3f}"
+            f"{coefficient:>8.2f}{beta:>8.2f}{np.mean([r['rejected'] for r in mine]):>10.2f}"
+        )
+        if held:
+            ratios = np.array([r["held_out_ratio"] for r in mine])
+            line += f"{np.nanmin(ratios):>7.3f} min, {np.mean(ratios >= 0.9):.2f} ≥0.9"
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def scaling_verdicts(rows: list[dict[str, Any]]) -> list[str]:
+    """The scaling targets over every flight of ``--scaling``."""
+    n_ok = within_two_se(rows, "n")
+    m_ok = within_two_se(rows, "m")
+    fast = [r for r in rows if dict(r["cell"])["log_dt"] <= 0.002]
+    se_n = max((r["n_se"] for r in fast), default=math.nan)
+    coef = np.mean([abs(r["alpha_pct"]) < 5 and abs(r["beta_bar_pct"]) < 5 for r in rows])
+    low = [r["rejected"] for r in rows if dict(r["cell"])["torque_exponent"] <= 1.3]
+    eq = [
+        not r["rejected"]
+        for r in rows
+        if (dict(r["cell"])["torque_exponent"], dict(r["cell"])["damping_exponent"]) == (2.0, 1.0)
+    ]
+
+    def verdict(ok: bool) -> str:
+        return "PASS" if ok else "FAIL"
+
+    lines = [
+        f"n within 2 SE: {n_ok:.2f}, m within 2 SE: {m_ok:.2f} of flights (≥ 0.90) -- "
+        f"{verdict(n_ok >= 0.9 and m_ok >= 0.9)}",
+        f"α₀ and β̄₀ within 5 %: {coef:.2f} of flights (≥ 0.90) -- {verdict(coef >= 0.9)}",
+    ]
+    if fast:
+        lines.append(f"SE(n) at 500 Hz: at most {se_n:.3f} (≤ 0.15) -- {verdict(se_n <= 0.15)}")
+    if low:
+        share = float(np.mean(low))
+        lines.append(f"eq. 4-8 rejected at n 1.3: {share:.2f} (≥ 0.90) -- {verdict(share >= 0.9)}")
+    if eq:
+        share = float(np.mean(eq))
+        lines.append(
+            f"eq. 4-8 accepted where it holds (n 2, m 1): {share:.2f} (≥ 0.90) -- "
+            f"{verdict(share >= 0.9)}"
+        )
+    if "held_out_ratio" in rows[0]:
+        share = float(np.mean([r["held_out_ratio"] >= 0.9 for r in rows]))
+        lines.append(
+            f"held-out R² ≥ 0.9 × the true model's: {share:.2f} of flights -- "
+            f"{verdict(share == 1.0)}"
+        )
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=10, help="fits per truth (seeds 0..N-1)")
@@ -161,11 +287,24 @@ def main(argv: list[str] | None = None) -> int:
         default=1,
         help="flights of one rocket fitted together per fit (--seeds fits of this many)",
     )
+    parser.add_argument(
+        "--scaling", action="store_true", help="the grid of true scalings (--n, --m, --hz)"
+    )
+    parser.add_argument("--n", type=float, nargs="+", default=[1.3, 1.6, 2.0], help="true n")
+    parser.add_argument("--m", type=float, nargs="+", default=[0.7, 1.0], help="true m")
+    parser.add_argument("--hz", type=float, nargs="+", default=[100.0, 500.0], help="log rates")
+    parser.add_argument(
+        "--held-out", action="store_true", help="with --scaling: the held-out prediction too"
+    )
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.jobs < 1 or args.joint < 1:
         parser.error("--seeds, --jobs and --joint must be at least 1")
+    if args.scaling:
+        return scaling_main(args)
     truths = args.truth or list(TRUTHS)
-    jobs = [(truth, seed, args.joint) for truth in truths for seed in range(args.seeds)]
+    jobs: list[tuple[str, int, int, dict[str, Any], bool]] = [
+        (truth, seed, args.joint, {}, False) for truth in truths for seed in range(args.seeds)
+    ]
     print("truths:")
     for truth in truths:
         print(f"  {truth:<16}{TRUTHS[truth][1]}")
@@ -181,6 +320,27 @@ def main(argv: list[str] | None = None) -> int:
     for line in verdicts(rows):
         print(line)
     return 0 if all(math.isfinite(r["alpha_pct"]) for r in rows) else 1
+
+
+def scaling_main(args: argparse.Namespace) -> int:
+    """``--scaling``: the grid of true scalings and logging rates."""
+    truth = (args.truth or ["paper-theta"])[0]
+    cells = [
+        {"torque_exponent": n, "damping_exponent": m, "log_dt": round(1.0 / hz, 6)}
+        for hz in args.hz
+        for n in args.n
+        for m in args.m
+    ]
+    jobs = [(truth, seed, 1, cell, args.held_out) for cell in cells for seed in range(args.seeds)]
+    print(f"truth {truth}: {TRUTHS[truth][1]}; {len(cells)} scalings x {args.seeds} seeds")
+    start = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        rows = list(tqdm(pool.map(_run, jobs), total=len(jobs), desc="flights"))
+    print(scaling_table(rows))
+    print(f"{len(rows)} flights in {time.perf_counter() - start:.0f} s ({args.jobs} processes)")
+    for line in scaling_verdicts(rows):
+        print(line)
+    return 0 if all(math.isfinite(r["n_err"]) for r in rows) else 1
 
 
 if __name__ == "__main__":

@@ -308,6 +308,34 @@ def identify(args: IdentifyArgs) -> int:
     return 0
 
 
+def _scaling_line(metrics: dict[str, Any], errors: dict[str, float]) -> str:
+    """A flight fit's airspeed scaling: the exponents (measured, with their standard errors
+    and eq. 4-8's test, or held) and the rocket carried to the tunnel's airspeed."""
+    n, m = metrics.get("torque_exponent", 2.0), metrics.get("damping_exponent", 1.0)
+    if not metrics.get("scaling_measured"):
+        return f"scaling held: fin torque ∝ ρV^{n:g}, damping ∝ ρV^{m:g}"
+    nan = float("nan")
+    n_se, m_se = errors.get("torque_exponent", nan), errors.get("damping_exponent", nan)
+    text = (
+        f"scaling measured: fin torque ∝ ρV^n, n {n:.3f} ± {n_se:.3f}; "
+        f"damping ∝ ρV^m, m {m:.3f} ± {m_se:.3f}"
+    )
+    test = metrics.get("eq_4_8_test")
+    if test:
+        said = "rejected" if test["rejected"] else "not rejected"
+        text += (
+            f"; eq. 4-8 (n 2, m 1) {said} (likelihood ratio {test['statistic']:.3g}, "
+            f"p {test['p_value']:.3g})"
+        )
+    tunnel = metrics.get("at_tunnel_airspeed")
+    if tunnel:
+        text += (
+            f"; carried to {tunnel['v_ref_mps']:.2f} m/s by it: α {tunnel['alpha']:.4f}, "
+            f"β̄ {tunnel['beta_bar_per_s']:.4f} 1/s"
+        )
+    return text
+
+
 def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
     """A flight's identification: the coefficients at the reference airspeed, per model."""
     from identification.tables import methods_table
@@ -329,6 +357,7 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                 f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
                 f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
             )
+            lines.append(f"  {_scaling_line(m, errors)}")
             held = (m.get("adequacy") or {}).get("held_out") or {}
             if "rate_r2" in held:
                 full = held.get("full_fit_rate_r2")

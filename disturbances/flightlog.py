@@ -11,8 +11,9 @@ the fins lose their authority while the rolling gust does not, so its
 equivalent fin angle grows without bound) -- with
 
 * the roll model of eq. 36/49 at the reference airspeed ``V_ref`` (the
-  truth), its gain and damping scaled along the flight by eq. 4-8
-  (:func:`identification.flight.roll_scales`), integrated exactly
+  truth), its gain and damping scaled along the flight by eq. 4-8 or by
+  other exponents (torque ``∝ ρV^n``, damping ``∝ ρV^m``:
+  :class:`identification.flight.AirspeedScaling`), integrated exactly
   (:func:`identification.model.simulate`, scales per substep);
 * an excitation: a random staircase of fin commands, short dwells (the rocket
   settles in tens of milliseconds at speed), through the servo of eq. 23;
@@ -22,9 +23,10 @@ equivalent fin angle grows without bound) -- with
   :mod:`disturbances.flight` (Taylor's frozen field, amplitude
   ``V_ref/max(V, V_ref)``) -- or ``dryden`` -- the MIL-F-8785C roll gust
   ``p_g`` (:mod:`disturbances.dryden`) as ``α·u_d = p_g``;
-* flight sensors: a rate gyro with the multiplicative noise of eq. 52 and an
-  additive floor, optionally an encoder-like quantised angle; the airspeed
-  and altitude of the profile (format 1.1).
+* flight sensors: a rate gyro with the multiplicative noise of eq. 52, an
+  additive floor and a constant bias, optionally an encoder-like quantised
+  angle; the airspeed and altitude of the profile (format 1.1), the altitude
+  above sea level or, as flight computers log it, above the pad.
 
 The recording's metadata holds the truth (``truth.*`` at ``truth.v_ref_mps``,
 ``truth.rho_ref_kgm3``) and the exact command; ``ud_true_deg`` is the
@@ -45,10 +47,12 @@ from disturbances.flight import fly_trace, tunnel_time
 from identification.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
+    AirspeedScaling,
     FlightProfile,
     flight_profile,
     roll_scales,
 )
+from identification.flightfit import SITE_ELEVATION_KEY
 from identification.model import MODEL_NAMES, RollParams, Servo
 from identification.model import simulate as simulate_roll
 from identification.recording import Recording, metadata_items
@@ -64,7 +68,7 @@ from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv
 
-__all__ = ["AscentError", "FlightLogSpec", "run_flight"]
+__all__ = ["AscentError", "FlightLogSpec", "run_flight", "truth_at"]
 
 #: The tunnel trace's hold interval that the ``tunnel`` turbulence is drawn at, s (the tunnel's Δt).
 TUNNEL_DT_S = 0.1
@@ -105,6 +109,16 @@ class FlightLogSpec:
         le=1000.0,
         unit="m/s",
     )
+    torque_exponent: float = setting(
+        2.0,
+        "n: the fins' torque per degree grows as ρ·V^n (eq. 4-8: 2; canards losing "
+        "effectiveness with speed: less)",
+        ge=0.0,
+        le=4.0,
+    )
+    damping_exponent: float = setting(
+        1.0, "m: the roll damping grows as ρ·V^m (eq. 4-8: 1)", ge=0.0, le=4.0
+    )
     servo_rate: float = setting(
         Servo().rate_limit_dps, "servo rate limit (eq. 23)", gt=0.0, le=10_000.0, unit="°/s"
     )
@@ -141,6 +155,9 @@ class FlightLogSpec:
         1.0, "rate gyro's multiplicative noise (eq. 52)", ge=0.0, le=100.0, unit="%"
     )
     gyro_floor: float = setting(0.1, "rate gyro's additive noise SD", ge=0.0, le=1000.0, unit="°/s")
+    gyro_bias: float = setting(
+        0.0, "rate gyro's constant bias (added to every reading)", ge=-100.0, le=100.0, unit="°/s"
+    )
     no_gyro: bool = setting(False, "omit the gyro (needs --encoder-counts)")
     encoder_counts: int = setting(
         0,
@@ -149,6 +166,11 @@ class FlightLogSpec:
         le=2**24,
     )
     no_altitude: bool = setting(False, "omit the altitude column")
+    altitude_above_ground: bool = setting(
+        False,
+        "log the altitude above the pad, as most flight computers do (the site's elevation "
+        "is then only in the metadata: import with --site-elevation)",
+    )
     measured_fin: bool = setting(False, "add the actual (measured) fin angle column fin_deg")
     name: str | None = setting(None, "recording name (default flight-<turbulence>-seed<N>)")
     split: Literal["train", "test"] | None = setting(None, "evaluation split in the metadata")
@@ -159,6 +181,10 @@ class FlightLogSpec:
         if self.no_gyro and self.encoder_counts == 0:
             raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
+
+    def scaling(self) -> AirspeedScaling:
+        """The truth's airspeed scaling (``n``, ``m``)."""
+        return AirspeedScaling(self.torque_exponent, self.damping_exponent)
 
     def params(self) -> RollParams:
         """The truth at ``v_ref`` and ISA sea-level density."""
@@ -255,11 +281,12 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     h = spec.log_dt / spec.substeps
     fine_middle = start + h * (np.arange(n * spec.substeps) + 0.5)
     state = profile.at(fine_middle)
+    scaling = spec.scaling()
     gain, damping = roll_scales(
-        state.airspeed_mps, state.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3
+        state.airspeed_mps, state.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3, scaling
     )
     gain_mid, _ = roll_scales(
-        profile.at(time[:-1] + 0.5 * spec.log_dt).airspeed_mps, 1.0, spec.v_ref, 1.0
+        profile.at(time[:-1] + 0.5 * spec.log_dt).airspeed_mps, 1.0, spec.v_ref, 1.0, scaling
     )
     u_d = _turbulence(spec, profile, time, np.asarray(gain_mid), rng_turbulence)
     params = spec.params()
@@ -284,12 +311,15 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     if not spec.no_gyro:
         eps = rng_sensor.standard_normal((2, sim.rate_dps.size))
         columns["roll_rate_dps"] = (
-            1.0 + spec.gyro_noise / 100.0 * eps[0]
-        ) * sim.rate_dps + spec.gyro_floor * eps[1]
+            (1.0 + spec.gyro_noise / 100.0 * eps[0]) * sim.rate_dps
+            + spec.gyro_floor * eps[1]
+            + spec.gyro_bias
+        )
     at = profile.at(time)
     columns["airspeed_mps"] = np.asarray(at.airspeed_mps)
     if not spec.no_altitude:
-        columns["altitude_m"] = np.asarray(at.altitude_m)
+        pad = float(profile.altitude_m[0]) if spec.altitude_above_ground else 0.0
+        columns["altitude_m"] = np.asarray(at.altitude_m) - pad
     columns["ud_true_deg"] = np.append(u_d, u_d[-1])
 
     meta: list[tuple[str, object]] = [
@@ -306,6 +336,8 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         ("truth.beta_bar_per_s", params.beta_bar_per_s),
         ("truth.v_ref_mps", spec.v_ref),
         ("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3),
+        ("truth.torque_exponent", scaling.torque_exponent),
+        ("truth.damping_exponent", scaling.damping_exponent),
         ("truth.servo_rate_dps", servo.rate_limit_dps),
         ("truth.turbulence", "tunnel-flown" if spec.turbulence == "tunnel" else "dryden"),
     ]
@@ -321,9 +353,12 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         meta += [
             ("sensor.gyro_noise_pct", spec.gyro_noise),
             ("sensor.gyro_floor_dps", spec.gyro_floor),
+            ("sensor.gyro_bias_dps", spec.gyro_bias),
         ]
     if spec.encoder_counts:
         meta.append(("sensor.encoder_counts", spec.encoder_counts))
+    if spec.altitude_above_ground and not spec.no_altitude:
+        meta.append((SITE_ELEVATION_KEY, float(profile.altitude_m[0])))
     if spec.split is not None:
         meta.append(("split", spec.split))
     return Recording(
@@ -333,3 +368,33 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         metadata=metadata_items(meta),
         **columns,
     )
+
+
+def truth_at(
+    recording: Recording, v_ref_mps: float, rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3
+) -> RollParams:
+    """A virtual flight's true rocket at the reference ``(v_ref_mps, rho_ref_kgm3)``: its
+    ``truth.*`` carried there by its true scaling (``truth.torque_exponent``,
+    ``truth.damping_exponent``; eq. 4-8's where a log predates them).
+
+    Raises
+    ------
+    ValueError
+        If the recording holds no truth (not a virtual flight).
+    """
+    truth = recording.truth()
+    meta = recording.metadata
+    if truth is None or "truth.v_ref_mps" not in meta:
+        raise ValueError(f"recording {recording.name!r} holds no flight truth")
+    scaling = AirspeedScaling(
+        float(meta.get("truth.torque_exponent", 2.0)),
+        float(meta.get("truth.damping_exponent", 1.0)),
+    )
+    gain, damping = roll_scales(
+        v_ref_mps,
+        rho_ref_kgm3,
+        float(meta["truth.v_ref_mps"]),
+        float(meta.get("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3)),
+        scaling,
+    )
+    return truth.scaled(float(gain), float(damping))

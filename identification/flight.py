@@ -70,12 +70,14 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEFAULT_ASCENT",
+    "EQ_4_8",
     "G0_MPS2",
     "ISA_MAX_ALTITUDE_M",
     "ISA_MIN_ALTITUDE_M",
     "ISA_SEA_LEVEL_DENSITY_KGM3",
     "PROFILE_COLUMNS",
     "TUNNEL_AIRSPEED_MPS",
+    "AirspeedScaling",
     "AscentSpec",
     "Atmosphere",
     "FlightProfile",
@@ -120,6 +122,52 @@ ISA_SEA_LEVEL_DENSITY_KGM3 = P0_PA / (R_AIR_JPKGK * T0_K)
 #: The wind tunnel's airspeed, m/s: "roughly 50 km/h" (paper §4).  The
 #: identified ``a`` and ``α`` hold at this airspeed and sea-level density.
 TUNNEL_AIRSPEED_MPS = 50.0 / 3.6
+
+
+@dataclass(frozen=True)
+class AirspeedScaling:
+    """How the fins' torque and the roll damping grow with the airspeed: ``∝ ρ·V^n`` and
+    ``∝ ρ·V^m``.
+
+    Eq. 4-8 at constant coefficients give ``n = 2`` (the dynamic pressure) and
+    ``m = 1`` (the damping's ``q/v_M``): :data:`EQ_4_8`.  A real airframe need
+    not follow them -- canards whose effectiveness falls with the airspeed
+    (flow separation, aeroelastic twist, the body's interference) give a smaller
+    ``n`` -- and the flight method measures both
+    (:mod:`identification.flightfit`).  The identified model's gain ``α``
+    (torque per damping) then scales as ``V^(n−m)`` and its damping ``a`` as
+    ``ρ·V^m``.
+
+    Attributes
+    ----------
+    torque_exponent : float
+        ``n``: the fins' torque per degree ``∝ ρ·V^n``.
+    damping_exponent : float
+        ``m``: the damping ``a ∝ ρ·V^m``.
+    """
+
+    torque_exponent: float = 2.0
+    damping_exponent: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("torque_exponent", "damping_exponent"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 4.0):
+                raise UsageError(f"{name}: must be in [0, 4], not {value!r}")
+
+    @property
+    def is_eq_4_8(self) -> bool:
+        """Whether these are the exponents of eq. 4-8 (``n = 2``, ``m = 1``)."""
+        return self == EQ_4_8
+
+    def label(self) -> str:
+        """``n 2, m 1`` (with eq. 4-8 named when it is that)."""
+        text = f"n {self.torque_exponent:.3g}, m {self.damping_exponent:.3g}"
+        return text + (" (eq. 4-8)" if self.is_eq_4_8 else "")
+
+
+#: The scaling of eq. 4-8 at constant ``C_P``, ``C_δ``: torque ``∝ ρV²``, damping ``∝ ρV``.
+EQ_4_8 = AirspeedScaling()
 
 
 # --------------------------------------------------------------------------- atmosphere
@@ -624,6 +672,7 @@ class FlightProfile:
         self,
         v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
         rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+        scaling: AirspeedScaling = EQ_4_8,
     ) -> tuple[FloatArray, FloatArray]:
         """Gain and damping factors of the roll model at each sample (:func:`roll_scales`).
 
@@ -634,11 +683,13 @@ class FlightProfile:
             tunnel's 50 km/h, paper §4).
         rho_ref_kgm3 : float
             Density there, kg/m³ (default: ISA sea level).
+        scaling : AirspeedScaling
+            The exponents (default eq. 4-8's).
 
         Returns
         -------
         gain, damping : ndarray, shape (n,)
-            ``α(t)/α0 = V/V_ref`` and ``a(t)/a0 = ρV/(ρ_ref·V_ref)``.
+            ``α(t)/α0 = V/V_ref`` and ``a(t)/a0 = ρV/(ρ_ref·V_ref)`` (eq. 4-8).
 
         Notes
         -----
@@ -647,7 +698,7 @@ class FlightProfile:
         ``b = q·S·d·C_δ ∝ ρ·V²`` with ``q = ½·ρ·V²`` (eq. 5), so
         ``a = c/I ∝ ρ·V`` and ``α = b/c ∝ V``.
         """
-        return roll_scales(self.airspeed_mps, self.density_kgm3, v_ref_mps, rho_ref_kgm3)
+        return roll_scales(self.airspeed_mps, self.density_kgm3, v_ref_mps, rho_ref_kgm3, scaling)
 
 
 def roll_scales(
@@ -655,6 +706,7 @@ def roll_scales(
     density_kgm3: ArrayLike,
     v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
     rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+    scaling: AirspeedScaling = EQ_4_8,
 ) -> tuple[FloatArray, FloatArray]:
     """How the identified roll model's gain ``α`` and damping ``a`` scale with ``V`` and ``ρ``.
 
@@ -668,13 +720,15 @@ def roll_scales(
         Airspeed of the identification, m/s (the tunnel's 50 km/h).
     rho_ref_kgm3 : float
         Density of the identification, kg/m³ (ISA sea level).
+    scaling : AirspeedScaling
+        The exponents (default eq. 4-8's).
 
     Returns
     -------
     gain : ndarray
-        ``α/α0 = V/V_ref``.
+        ``α/α0 = (V/V_ref)^(n−m)`` (eq. 4-8: ``V/V_ref``).
     damping : ndarray
-        ``a/a0 = ρ·V/(ρ_ref·V_ref)``.
+        ``a/a0 = (ρ/ρ_ref)·(V/V_ref)^m`` (eq. 4-8: ``ρ·V/(ρ_ref·V_ref)``).
 
     Notes
     -----
@@ -713,8 +767,14 @@ def roll_scales(
         raise UsageError("airspeed_mps: must be finite and >= 0")
     if not (np.all(np.isfinite(density)) and np.all(density > 0)):
         raise UsageError("density_kgm3: must be finite and > 0")
-    gain = speed / v_ref_mps
-    return np.asarray(gain), np.asarray(gain * density / rho_ref_kgm3)
+    ratio = speed / v_ref_mps
+    if scaling.is_eq_4_8:  # exact, and no power of 0
+        return np.asarray(ratio), np.asarray(ratio * density / rho_ref_kgm3)
+    n, m = scaling.torque_exponent, scaling.damping_exponent
+    # a gain exponent below 0 would make the fins' gain unbounded at rest: held at 1e-6 V_ref
+    held = np.maximum(ratio, 1e-6) if n < m else ratio
+    gain = np.power(held, n - m)
+    return np.asarray(gain), np.asarray(np.power(ratio, m) * density / rho_ref_kgm3)
 
 
 # --------------------------------------------------------------------------- simulation

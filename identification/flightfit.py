@@ -48,6 +48,7 @@ the tunnel).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -58,8 +59,10 @@ import numpy as np
 from scipy import optimize
 
 from identification.flight import (
+    EQ_4_8,
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
+    AirspeedScaling,
     isa,
     roll_scales,
 )
@@ -81,14 +84,18 @@ if TYPE_CHECKING:
     from identification.methods import Context
 
 __all__ = [
+    "EQ_4_8_TEST_SIZE",
     "FlightFit",
     "FlightInputs",
     "c_coefficients",
+    "eq_4_8_test",
     "flight_inputs",
     "flight_method",
     "identify_flight",
     "identify_flights",
+    "model_only_r2",
     "rescale",
+    "scaling_of",
 ]
 
 #: Exact-update substeps per sample interval (the servo ramp is resolved exactly within each).
@@ -99,10 +106,17 @@ MIN_DAMPING = 1e-3
 _STILL = 1e-9
 #: Bound on the optimiser's log-parameters (exp(±50) is beyond any physical value).
 _LOG_BOUND = 50.0
-#: Airspeed, as a fraction of V_ref, below which the fins have next to no authority.
+#: Airspeed, as a fraction of the tunnel's, below which the fins have next to no authority.
 MIN_AIRSPEED_FRACTION = 0.1
 #: Intervals at or above that airspeed a flight needs before it is identified.
 MIN_MOVING_INTERVALS = 100
+#: The airspeed the turbulence's prior is stated at, m/s: its flow angle holds the tunnel's
+#: scale below it and shrinks like ``V_TURB/V`` above, in tunnel time ``∫V/V_TURB dt``.
+TURBULENCE_FRAME_MPS = TUNNEL_AIRSPEED_MPS
+#: The range the measured exponents ``n`` and ``m`` are searched in.
+EXPONENT_BOUNDS = (0.0, 4.0)
+#: Size of the likelihood-ratio test of eq. 4-8's exponents (``n = 2``, ``m = 1``).
+EQ_4_8_TEST_SIZE = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,12 +134,13 @@ class FlightInputs:
         or the measured fin angle, linear between samples).
     rate_limit_dps : float or None
         The servo's rate (None with a measured fin angle).
-    gain, damping : ndarray, shape (n·SUBSTEPS,)
-        ``V/V_ref`` and ``ρV/(ρ_ref·V_ref)`` at each substep's midpoint.
+    speed_ratio, density_ratio : ndarray, shape (n·SUBSTEPS,)
+        ``V/V_ref`` and ``ρ/ρ_ref`` at each substep's midpoint (:meth:`scales`).
     u_per_w : ndarray, shape (n,)
-        ``V_ref/max(V, V_ref)`` at each interval's midpoint: ``u_d`` per unit ``w̄``.
+        ``V_T/max(V, V_T)`` at each interval's midpoint: ``u_d`` per unit ``w̄``
+        (``V_T`` the turbulence's frame, :data:`TURBULENCE_FRAME_MPS`).
     tunnel_dt_s : ndarray, shape (n,)
-        Tunnel time that passes in each interval, ∫V/V_ref dt, s.
+        Tunnel time that passes in each interval, ∫V/V_T dt, s.
     rate : ndarray or None
         Gyro roll rate at the samples, °/s.
     angle : ndarray or None
@@ -135,15 +150,17 @@ class FlightInputs:
     density : str
         Where the density came from.
     v_ref_mps, rho_ref_kgm3 : float
-        The reference the coefficients are given at.
+        The reference the coefficients are given at (by default the airspeed's mean over
+        the flight: the coefficients there and the measured exponents are then as little
+        correlated as the flight allows).
     """
 
     recording: Recording
     dt_s: float
     theta: FloatArray
     rate_limit_dps: float | None
-    gain: FloatArray
-    damping: FloatArray
+    speed_ratio: FloatArray
+    density_ratio: FloatArray
     u_per_w: FloatArray
     tunnel_dt_s: FloatArray
     rate: FloatArray | None
@@ -158,11 +175,16 @@ class FlightInputs:
         """Number of sample intervals."""
         return int(self.u_per_w.size)
 
+    def scales(self, scaling: AirspeedScaling = EQ_4_8) -> tuple[FloatArray, FloatArray]:
+        """The gain's and the damping's factors at each substep's midpoint for
+        ``scaling`` (:func:`~identification.flight.roll_scales`)."""
+        return roll_scales(self.speed_ratio, self.density_ratio, 1.0, 1.0, scaling)
+
 
 def flight_inputs(
     recording: Recording,
     *,
-    v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
+    v_ref_mps: float | None = None,
     rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
     servo_rate_dps: float = Servo().rate_limit_dps,
 ) -> FlightInputs:
@@ -170,13 +192,15 @@ def flight_inputs(
 
     The substep grid follows the recorded timestamps (each sample interval cut
     into :data:`SUBSTEPS` equal parts), so a logger's jitter does not slide the
-    fin angle and the airspeed against the roll measurements.
+    fin angle and the airspeed against the roll measurements.  ``v_ref_mps``: the
+    reference airspeed of the coefficients (default: the airspeed's mean over the
+    recording, rounded to 0.1 m/s).
 
     Raises
     ------
     IdentificationError
         If the recording has no airspeed (not a flight), or flies slower than
-        :data:`MIN_AIRSPEED_FRACTION` of ``v_ref_mps`` on all but fewer than
+        :data:`MIN_AIRSPEED_FRACTION` of the tunnel's on all but fewer than
         :data:`MIN_MOVING_INTERVALS` intervals (the fins move nothing there).
     """
     from identification.ml import _quantum
@@ -186,9 +210,11 @@ def flight_inputs(
             f"recording {recording.name!r} has no airspeed_mps column: not a flight "
             "(identify it with the tunnel's methods: paper, output-error, ml)"
         )
+    time = np.asarray(recording.time_s)
+    if v_ref_mps is None:
+        v_ref_mps = mean_airspeed([recording])
     if not (math.isfinite(v_ref_mps) and v_ref_mps > 0):
         raise IdentificationError(f"v_ref_mps must be > 0, not {v_ref_mps!r}")
-    time = np.asarray(recording.time_s)
     n = time.size - 1
     dt = recording.dt_s
     h = dt / SUBSTEPS
@@ -196,24 +222,25 @@ def flight_inputs(
     middle = 0.5 * (fine[1:] + fine[:-1])
     speed = np.asarray(recording.airspeed_mps)
     speed_mid = 0.5 * (speed[1:] + speed[:-1])
-    moving = int(np.count_nonzero(speed_mid >= MIN_AIRSPEED_FRACTION * v_ref_mps))
+    slow = MIN_AIRSPEED_FRACTION * TURBULENCE_FRAME_MPS
+    moving = int(np.count_nonzero(speed_mid >= slow))
     if moving < MIN_MOVING_INTERVALS:
         raise IdentificationError(
             f"recording {recording.name!r}: the airspeed reaches "
-            f"{MIN_AIRSPEED_FRACTION:.0%} of v_ref ({MIN_AIRSPEED_FRACTION * v_ref_mps:.3g} m/s) "
+            f"{MIN_AIRSPEED_FRACTION:.0%} of the tunnel's ({slow:.3g} m/s) "
             f"on only {moving} of {n} intervals (at least {MIN_MOVING_INTERVALS} needed): "
             "the fins move the rocket too little there to identify it "
             f"(max airspeed {float(speed.max()):.3g} m/s)"
         )
     if recording.altitude_m is not None:
+        site = site_elevation(recording)
         density = np.asarray(
-            isa(np.interp(middle, time, recording.altitude_m)).density_kgm3, dtype=float
+            isa(np.interp(middle, time, recording.altitude_m) + site).density_kgm3, dtype=float
         )
-        source = "ISA at altitude_m"
+        source = "ISA at altitude_m" + (f" + the site's {site:g} m" if site else "")
     else:
         density = np.full(middle.size, rho_ref_kgm3)
         source = f"no altitude_m: ρ_ref = {rho_ref_kgm3:.4f} kg/m³ throughout"
-    gain, damping = roll_scales(np.interp(middle, time, speed), density, v_ref_mps, rho_ref_kgm3)
     if recording.fin_deg is not None:
         theta = np.interp(fine, time, recording.fin_deg)
         rate_limit = None
@@ -230,10 +257,10 @@ def flight_inputs(
         dt_s=dt,
         theta=theta,
         rate_limit_dps=rate_limit,
-        gain=gain,
-        damping=damping,
-        u_per_w=v_ref_mps / np.maximum(speed_mid, v_ref_mps),
-        tunnel_dt_s=speed_mid / v_ref_mps * np.diff(time),
+        speed_ratio=np.interp(middle, time, speed) / v_ref_mps,
+        density_ratio=density / rho_ref_kgm3,
+        u_per_w=TURBULENCE_FRAME_MPS / np.maximum(speed_mid, TURBULENCE_FRAME_MPS),
+        tunnel_dt_s=speed_mid / TURBULENCE_FRAME_MPS * np.diff(time),
         rate=rate,
         angle=angle,
         quantum_deg=0.0 if angle is None else _quantum(angle),
@@ -243,8 +270,30 @@ def flight_inputs(
     )
 
 
+#: The metadata key of a recording whose altitude is above the pad: the pad's elevation, m.
+SITE_ELEVATION_KEY = "flight.site_elevation_m"
+
+
+def site_elevation(recording: Recording) -> float:
+    """The elevation to add to a recording's ``altitude_m`` for the height above sea level:
+    the pad's, where the log says its altitude is above the ground
+    (:data:`SITE_ELEVATION_KEY`), 0 otherwise."""
+    return float(recording.metadata.get(SITE_ELEVATION_KEY, 0.0))
+
+
+def mean_airspeed(recordings: Sequence[Recording]) -> float:
+    """The airspeed's mean over the flights' time, rounded to 0.1 m/s (at least 0.1): the
+    default reference airspeed of a flight fit."""
+    total = 0.0
+    for recording in recordings:
+        assert recording.airspeed_mps is not None
+        total += float(np.trapezoid(recording.airspeed_mps, recording.time_s))
+    duration = sum(float(r.time_s[-1] - r.time_s[0]) for r in recordings)
+    return max(round(total / duration, 1), 0.1)
+
+
 def interval_maps(
-    inputs: FlightInputs, params: RollParams
+    inputs: FlightInputs, params: RollParams, scaling: AirspeedScaling = EQ_4_8
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """The exact update over each sample interval with ``u_d = u_per_w·w̄`` held::
 
@@ -256,7 +305,8 @@ def interval_maps(
     th0, th1 = inputs.theta[:-1], inputs.theta[1:]
     h = inputs.dt_s / SUBSTEPS
     unit = np.repeat(inputs.u_per_w, SUBSTEPS)
-    kw = {"gain": inputs.gain, "damping": inputs.damping}
+    gain, damping = inputs.scales(scaling)
+    kw = {"gain": gain, "damping": damping}
     e, c0, a, b0 = roll_coefficients(params, th0, th1, 0.0, h, inputs.rate_limit_dps, **kw)
     _, c1, _, b1 = roll_coefficients(params, th0, th1, unit, h, inputs.rate_limit_dps, **kw)
     parts = [x.reshape(n, SUBSTEPS) for x in (e, c0, c1 - c0, a, b0, b1 - b0)]
@@ -334,47 +384,72 @@ def _kalman(  # pragma: no cover - compiled
 
 @dataclass(frozen=True)
 class _Layout:
-    """Which parameters are free, in the optimiser's coordinates."""
+    """Which parameters are free, in the optimiser's coordinates: a log for those that
+    are positive; those not free are held at :data:`_FIXED` (or ``scaling``'s exponents)."""
 
     theta_model: bool
     gyro: bool
+    #: The exponents held, or None where they are measured.
+    scaling: AirspeedScaling | None = EQ_4_8
+    #: Whether the gyro's constant bias is estimated (held at 0 otherwise).
+    gyro_bias: bool = False
 
     @property
     def names(self) -> tuple[str, ...]:
         core = ("log_beta_bar", "alpha", "theta_bar") + (("alpha_bar",) if self.theta_model else ())
-        noise = ("log_gyro_rel", "log_gyro_abs") if self.gyro else ("log_angle_sd",)
-        return (*core, "log_sigma_w", "log_tau", *noise)
+        exponents = ("torque_exponent", "damping_exponent") if self.scaling is None else ()
+        noise: tuple[str, ...] = (
+            ("log_gyro_rel", "log_gyro_abs") if self.gyro else ("log_angle_sd",)
+        )
+        noise += ("gyro_bias",) if self.gyro and self.gyro_bias else ()
+        return (*core, *exponents, "log_sigma_w", "log_tau", *noise)
+
+    @property
+    def bounds(self) -> list[tuple[float | None, float | None]]:
+        """L-BFGS-B's bounds: the exponents' range, the logs' :data:`_LOG_BOUND`."""
+        return [
+            EXPONENT_BOUNDS
+            if name.endswith("_exponent")
+            else (-_LOG_BOUND, _LOG_BOUND)
+            if name.startswith("log_")
+            else (None, None)
+            for name in self.names
+        ]
 
     def natural(self, x: FloatArray) -> dict[str, float]:
         values = dict(zip(self.names, (float(v) for v in x), strict=True))
-        for name in values:
-            if name.startswith("log_"):
-                values[name] = min(max(values[name], -_LOG_BOUND), _LOG_BOUND)
-        return {
-            "beta_bar": math.exp(values["log_beta_bar"]),
-            "alpha": values["alpha"],
-            "theta_bar": values["theta_bar"],
-            "alpha_bar": values.get("alpha_bar", 0.0),
-            "sigma_w": math.exp(values["log_sigma_w"]),
-            "tau": math.exp(values["log_tau"]),
-            "gyro_rel": math.exp(values.get("log_gyro_rel", -99.0)),
-            "gyro_abs": math.exp(values.get("log_gyro_abs", -99.0)),
-            "angle_sd": math.exp(values.get("log_angle_sd", -99.0)),
+        held = self.scaling or EQ_4_8
+        nat = {
+            **_FIXED,
+            "torque_exponent": held.torque_exponent,
+            "damping_exponent": held.damping_exponent,
         }
+        for name, value in values.items():
+            if name.startswith("log_"):
+                nat[name[4:]] = math.exp(min(max(value, -_LOG_BOUND), _LOG_BOUND))
+            else:
+                nat[name] = value
+        return nat
 
     def vector(self, nat: dict[str, float]) -> FloatArray:
-        values = {
-            "log_beta_bar": math.log(nat["beta_bar"]),
-            "alpha": nat["alpha"],
-            "theta_bar": nat["theta_bar"],
-            "alpha_bar": nat.get("alpha_bar", 0.0),
-            "log_sigma_w": math.log(nat["sigma_w"]),
-            "log_tau": math.log(nat["tau"]),
-            "log_gyro_rel": math.log(nat.get("gyro_rel", 0.01)),
-            "log_gyro_abs": math.log(nat.get("gyro_abs", 0.1)),
-            "log_angle_sd": math.log(nat.get("angle_sd", 0.01)),
-        }
-        return np.array([values[name] for name in self.names])
+        values = {**_FIXED, **_NOISE_STARTS, **nat}
+        return np.array(
+            [
+                math.log(values[name[4:]]) if name.startswith("log_") else values[name]
+                for name in self.names
+            ]
+        )
+
+
+#: The parameters' values where a layout does not free them (the sensor a recording lacks
+#: has no noise).
+_FIXED = {"alpha_bar": 0.0, "gyro_rel": 0.0, "gyro_abs": 0.0, "gyro_bias": 0.0, "angle_sd": 0.0}
+#: The sensor noises' starts.
+_NOISE_STARTS = {"gyro_rel": 0.01, "gyro_abs": 0.1, "angle_sd": 0.01}
+
+
+def _scaling(nat: dict[str, float]) -> AirspeedScaling:
+    return AirspeedScaling(nat["torque_exponent"], nat["damping_exponent"])
 
 
 def _params(nat: dict[str, float]) -> RollParams | None:
@@ -396,7 +471,7 @@ def _system(
         )
         if low < MIN_DAMPING:
             return None
-    e, c0, c1, a, b0, b1 = interval_maps(inputs, params)
+    e, c0, c1, a, b0, b1 = interval_maps(inputs, params, _scaling(nat))
     tau = nat["tau"]
     sigma = nat["sigma_w"]
     moving = inputs.tunnel_dt_s > _STILL
@@ -427,9 +502,9 @@ def _system(
     x0 = np.zeros(3)
     p0 = np.diag([1e4, 1e4, sigma**2])
     if inputs.rate is not None:
-        y[:, 0] = inputs.rate
+        y[:, 0] = inputs.rate - nat["gyro_bias"]
         r[:, 0] = nat["gyro_abs"] ** 2 + (nat["gyro_rel"] * inputs.rate) ** 2
-        x0[0] = inputs.rate[0]
+        x0[0] = y[0, 0]
         p0[1, 1] = 1.0  # the angle is not measured: its start does not matter
     else:
         assert inputs.angle is not None
@@ -443,6 +518,9 @@ def _negloglike(x: FloatArray, flights: Sequence[FlightInputs], layout: _Layout)
     """Minus the log-likelihood of ``x`` over the flights (each its own Kalman filter)."""
     nat = layout.natural(x)
     if not all(math.isfinite(v) for v in nat.values()):
+        return 1e12
+    low, high = EXPONENT_BOUNDS
+    if not all(low <= nat[k] <= high for k in ("torque_exponent", "damping_exponent")):
         return 1e12
     total = 0.0
     for inputs in flights:
@@ -479,8 +557,9 @@ def _equation_error_start(flights: Sequence[FlightInputs]) -> dict[str, float]:
         slopes.append(np.gradient(smooth, inputs.dt_s))
         at = slice(0, None, SUBSTEPS)
         theta = inputs.theta[at]
-        gain = np.append(inputs.gain[at], inputs.gain[-1])
-        damping = np.append(inputs.damping[at], inputs.damping[-1])
+        gains, dampings = inputs.scales()
+        gain = np.append(gains[at], gains[-1])
+        damping = np.append(dampings[at], dampings[-1])
         designs.append(np.column_stack([-damping * smooth, damping * gain * theta, damping * gain]))
         steps.append(np.full(smooth.size, inputs.dt_s))
     design, slope, dt = np.concatenate(designs), np.concatenate(slopes), np.concatenate(steps)
@@ -554,12 +633,22 @@ class FlightFit:
     converged : bool
         Whether the optimiser said so.
     estimates : dict
-        Every maximised parameter in natural units (the model's, ``sigma_w``,
-        ``tau`` and the sensor noise), as a start for a richer model.
+        Every maximised parameter in natural units (the model's, the exponents,
+        ``sigma_w``, ``tau`` and the sensor's noise and bias), as a start for a richer model.
     inputs : FlightInputs
         What was fitted.
     flights : int
         How many flights were fitted together (:func:`identify_flights`).
+    scaling : AirspeedScaling
+        The airspeed scaling of the model: measured, or held (eq. 4-8 unless another was given).
+    scaling_measured : bool
+        Whether ``scaling`` was estimated (its standard errors are then in
+        ``std_errors`` as ``torque_exponent`` and ``damping_exponent``).
+    eq_4_8_test : dict or None
+        The likelihood-ratio test of eq. 4-8's exponents against the measured ones
+        (:func:`eq_4_8_test`), where they were measured.
+    gyro_bias_dps : float or None
+        The gyro's estimated constant bias, °/s.
     """
 
     model: str
@@ -576,6 +665,10 @@ class FlightFit:
     estimates: dict[str, float]
     inputs: FlightInputs
     flights: int = 1
+    scaling: AirspeedScaling = EQ_4_8
+    scaling_measured: bool = False
+    eq_4_8_test: dict[str, Any] | None = None
+    gyro_bias_dps: float | None = None
 
     def disturbance(self) -> Disturbance:
         """``u_d`` as the tunnel methods give theirs (held over each sample interval)."""
@@ -596,8 +689,8 @@ class FlightFit:
         as a percentage of the mean measured ``|rate|``.
         """
         inp = self.inputs
-        sim = resimulated(inp, self.params, self.u_d_deg, float(self.rate_dps[0]))
-        measured = measured_rate(inp)
+        sim = resimulated(inp, self.params, self.u_d_deg, float(self.rate_dps[0]), self.scaling)
+        measured = measured_rate(inp) - (self.gyro_bias_dps or 0.0)
         error = np.abs(sim.rate_dps - measured)
         out = {
             "resim_rate_mae_dps": float(error.mean()),
@@ -616,15 +709,20 @@ def _names(flights: Sequence[FlightInputs]) -> str:
 
 
 def resimulated(
-    inputs: FlightInputs, params: RollParams, u_d_deg: FloatArray, rate0_dps: float
+    inputs: FlightInputs,
+    params: RollParams,
+    u_d_deg: FloatArray,
+    rate0_dps: float,
+    scaling: AirspeedScaling = EQ_4_8,
 ) -> SimResult:
     """§3.5 in flight: the model of ``params`` driven by ``u_d_deg`` (per sample interval)
-    open loop from the first sample, along the flight's scales; a
+    open loop from the first sample, along the flight's scales for ``scaling``; a
     :class:`~identification.model.SimResult`."""
     rec = inputs.recording
     limit = inputs.rate_limit_dps
     servo = None if limit is None else Servo(rate_limit_dps=limit)
     fin = rec.fin_deg if servo is None else np.asarray(rec.fin_cmd_deg)[:-1]
+    gain, damping = inputs.scales(scaling)
     return simulate(
         params,
         inputs.dt_s,
@@ -635,8 +733,8 @@ def resimulated(
         servo=servo,
         theta0_deg=float(inputs.theta[0]),
         substeps=SUBSTEPS,
-        gain=inputs.gain,
-        damping=inputs.damping,
+        gain=gain,
+        damping=damping,
     )
 
 
@@ -646,11 +744,17 @@ def _maximise(
     """L-BFGS-B from each start; the best."""
     best: optimize.OptimizeResult | None = None
     for start in starts:
+        x0 = np.clip(
+            layout.vector(start),
+            [-np.inf if low is None else low for low, _ in layout.bounds],
+            [np.inf if high is None else high for _, high in layout.bounds],
+        )
         result = optimize.minimize(
             _negloglike,
-            layout.vector(start),
+            x0,
             args=(flights, layout),
             method="L-BFGS-B",
+            bounds=layout.bounds,
             options={"maxiter": 500},
         )
         if best is None or result.fun < best.fun:
@@ -676,7 +780,16 @@ def _maximise(
 
 
 #: The parameters a failed fit's message shows.
-_SHOWN = ("alpha", "theta_bar", "beta_bar", "alpha_bar", "sigma_w", "tau")
+_SHOWN = (
+    "alpha",
+    "theta_bar",
+    "beta_bar",
+    "alpha_bar",
+    "torque_exponent",
+    "damping_exponent",
+    "sigma_w",
+    "tau",
+)
 
 
 def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, FloatArray, FloatArray]:
@@ -686,7 +799,7 @@ def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, Float
     assert params is not None and system is not None
     trans, offset, noise, y, r, start = system
     loglike, smoothed = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), True)
-    e, c0, c1, _, _, _ = interval_maps(inputs, params)
+    e, c0, c1, _, _, _ = interval_maps(inputs, params, _scaling(nat))
     rate = smoothed[:, 0]
     # v1 = E·v0 + C0 + C1·w̄ holds exactly in the model, so it holds for the smoothed means.
     mean_w = np.where(
@@ -698,14 +811,20 @@ def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, Float
 
 
 def identify_flight(
-    inputs: FlightInputs, model: str = "constant", *, constant: FlightFit | None = None
+    inputs: FlightInputs,
+    model: str = "constant",
+    *,
+    constant: FlightFit | None = None,
+    scaling: AirspeedScaling | None = None,
+    gyro_bias: bool = False,
 ) -> FlightFit:
     """Maximum likelihood of one damping model on a flight (module docstring).
 
     The constant-damping model starts from an equation-error least-squares fit
     with the turbulence of :func:`_turbulence_starts`; the θ-dependent model starts from the
     constant model's fit with ᾱ₀ = 0 (pass it as ``constant`` if it is at
-    hand; otherwise it is fitted first).
+    hand; otherwise it is fitted first).  ``scaling``: the airspeed exponents held
+    (None: measured, with eq. 4-8's tested, :func:`identify_flights`).
 
     The turbulence's intensity is taken as stationary along the flight.  A second
     pass weighting each second of the flight by the intensity the first pass's
@@ -717,7 +836,48 @@ def identify_flight(
     coefficients better.  Several flights of the rocket, fitted together
     (:func:`identify_flights`), do.
     """
-    return identify_flights([inputs], model, constant=None if constant is None else [constant])[0]
+    return identify_flights(
+        [inputs],
+        model,
+        constant=None if constant is None else [constant],
+        scaling=scaling,
+        gyro_bias=gyro_bias,
+    )[0]
+
+
+def eq_4_8_test(loglike_held: float, loglike_measured: float) -> dict[str, Any]:
+    """The likelihood-ratio test of eq. 4-8's exponents (``n = 2``, ``m = 1``) against
+    exponents measured on the same flights: ``2·(ℓ_measured − ℓ_eq4-8)``, χ² with 2
+    degrees of freedom under eq. 4-8, rejected below :data:`EQ_4_8_TEST_SIZE`.
+
+    The χ² holds for a turbulence of the prior's kind; a turbulence that is not
+    (a gust whose intensity changes with height) makes it reject too often, which
+    ``benchmarks/flight_ground_truth.py --scaling`` measures.
+    """
+    from scipy import stats
+
+    statistic = max(2.0 * (loglike_measured - loglike_held), 0.0)
+    p_value = float(stats.chi2.sf(statistic, 2))
+    return {
+        "statistic": statistic,
+        "dof": 2,
+        "p_value": p_value,
+        "size": EQ_4_8_TEST_SIZE,
+        "rejected": p_value < EQ_4_8_TEST_SIZE,
+    }
+
+
+def _fit_exponents_and_test(
+    flights: Sequence[FlightInputs],
+    held_layout: _Layout,
+    held: optimize.OptimizeResult,
+    extra_starts: Sequence[dict[str, float]],
+) -> tuple[_Layout, optimize.OptimizeResult, dict[str, Any]]:
+    """The exponents freed, from eq. 4-8's optimum (and ``extra_starts``); the test."""
+    layout = dataclasses.replace(held_layout, scaling=None)
+    starts = [held_layout.natural(held.x), *extra_starts]
+    best = _maximise(flights, layout, starts)
+    return layout, best, eq_4_8_test(-float(held.fun), -float(best.fun))
 
 
 def identify_flights(
@@ -725,6 +885,8 @@ def identify_flights(
     model: str = "constant",
     *,
     constant: Sequence[FlightFit] | None = None,
+    scaling: AirspeedScaling | None = None,
+    gyro_bias: bool = False,
 ) -> list[FlightFit]:
     """One rocket from several flights: the joint maximum likelihood (the sum of each
     flight's Kalman-filter likelihood) of its parameters at the common reference, and of
@@ -733,8 +895,18 @@ def identify_flights(
     back, all with the same parameters, standard errors (from the joint likelihood)
     and ``estimates``; each ``loglike`` is its own flight's.
 
-    ``constant``: the constant model's fits to these flights, as the θ-dependent
-    model's start (otherwise fitted first).
+    ``scaling``: the airspeed exponents ``n``, ``m`` held at these; None (the default)
+    measures them: the model is fitted with eq. 4-8's first, then with both exponents
+    free from there, and the likelihood-ratio test of eq. 4-8 (:func:`eq_4_8_test`)
+    comes with the fit, whose model is the measured one.
+
+    ``constant``: the constant model's fits to these flights (with the same
+    ``scaling``), as the θ-dependent model's start (otherwise fitted first).
+
+    ``gyro_bias``: estimate a constant bias of the gyro (otherwise it is taken as 0).
+    In flight alone it is weakly determined -- it trades against θ̄ where the airspeed
+    is low and the rocket slow to respond -- so a bias measured on the pad, subtracted
+    before, is better where the log has one.
 
     Raises
     ------
@@ -764,40 +936,40 @@ def identify_flights(
             f"recordings {_names(flights)}: prepared at different reference airspeeds or "
             "densities; a joint fit needs one reference"
         )
-    layout = _Layout(theta_model=model == "theta", gyro=gyro)
+    held_layout = _Layout(
+        theta_model=model == "theta",
+        gyro=gyro,
+        scaling=scaling or EQ_4_8,
+        gyro_bias=gyro and gyro_bias,
+    )
+    extra: list[dict[str, float]] = []
     if model == "theta":
         if constant is None:
-            constant = identify_flights(flights, "constant")
+            constant = identify_flights(flights, "constant", scaling=scaling, gyro_bias=gyro_bias)
         elif len(constant) != len(flights) or any(
             c.model != "constant" or c.inputs is not f
             for c, f in zip(constant, flights, strict=False)
         ):
             raise ValueError("constant must be the constant model's fits to the same inputs")
-        best = _maximise(flights, layout, [{**constant[0].estimates, "alpha_bar": 0.0}])
+        start = {**constant[0].estimates, "alpha_bar": 0.0}
+        held = _maximise(flights, held_layout, [start])
+        extra = [start]
     elif model == "constant":
         rough = {**_equation_error_start(flights), "alpha_bar": 0.0}
-        best = _maximise(flights, layout, _turbulence_starts(flights, layout, rough))
+        held = _maximise(flights, held_layout, _turbulence_starts(flights, held_layout, rough))
     else:
         raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
+    test: dict[str, Any] | None = None
+    if scaling is None:
+        layout, best, test = _fit_exponents_and_test(flights, held_layout, held, extra)
+    else:
+        layout, best = held_layout, held
     nat = layout.natural(best.x)
     params = _params(nat)
     assert params is not None
-    names = ["alpha", "theta_bar", "log_beta_bar"] + (["alpha_bar"] if layout.theta_model else [])
-    errors: dict[str, float] = {}
-    try:
-        hess = _hessian(lambda x: _negloglike(x, flights, layout), best.x)
-        diag = np.diag(np.linalg.inv(hess))
-        index = {name: layout.names.index(name) for name in names}
-        if np.all(diag[list(index.values())] > 0):
-            errors = {
-                "alpha": math.sqrt(diag[index["alpha"]]),
-                "theta_bar_deg": math.sqrt(diag[index["theta_bar"]]),
-                "beta_bar_per_s": params.beta_bar_per_s * math.sqrt(diag[index["log_beta_bar"]]),
-            }
-            if layout.theta_model:
-                errors["alpha_bar_per_deg_s"] = math.sqrt(diag[index["alpha_bar"]])
-    except np.linalg.LinAlgError:
-        errors = {}
+    errors = _standard_errors(
+        _hessian(lambda x: _negloglike(x, flights, layout), best.x), layout, params
+    )
     fits = []
     for inputs in flights:
         loglike, rate, mean_w = _smoothed(inputs, nat)
@@ -817,9 +989,42 @@ def identify_flights(
                 estimates=nat,
                 inputs=inputs,
                 flights=len(flights),
+                scaling=_scaling(nat),
+                scaling_measured=scaling is None,
+                eq_4_8_test=test,
+                gyro_bias_dps=nat["gyro_bias"] if held_layout.gyro_bias else None,
             )
         )
     return fits
+
+
+#: Standard errors reported, by the optimiser's name: (the name reported, whether it is a log).
+_REPORTED = {
+    "alpha": ("alpha", False),
+    "theta_bar": ("theta_bar_deg", False),
+    "log_beta_bar": ("beta_bar_per_s", True),
+    "alpha_bar": ("alpha_bar_per_deg_s", False),
+    "torque_exponent": ("torque_exponent", False),
+    "damping_exponent": ("damping_exponent", False),
+}
+
+
+def _standard_errors(hess: FloatArray, layout: _Layout, params: RollParams) -> dict[str, float]:
+    """The asymptotic standard errors of the model's parameters (and the measured
+    exponents) from the inverse Hessian; empty where it is not positive there."""
+    try:
+        diag = np.diag(np.linalg.inv(hess))
+    except np.linalg.LinAlgError:
+        return {}
+    index = {name: layout.names.index(name) for name in _REPORTED if name in layout.names}
+    if not np.all(diag[list(index.values())] > 0):
+        return {}
+    errors = {}
+    for name, k in index.items():
+        reported, is_log = _REPORTED[name]
+        se = math.sqrt(diag[k])
+        errors[reported] = params.beta_bar_per_s * se if is_log else se
+    return errors
 
 
 def c_coefficients(
@@ -844,10 +1049,13 @@ def rescale(
     params: RollParams,
     from_ref: tuple[float, float],
     to_ref: tuple[float, float],
+    scaling: AirspeedScaling = EQ_4_8,
 ) -> RollParams:
-    """The same rocket's parameters at another reference ``(V m/s, ρ kg/m³)`` (eq. 4-8)."""
+    """The same rocket's parameters at another reference ``(V m/s, ρ kg/m³)`` (by
+    ``scaling``, default eq. 4-8)."""
     (v1, rho1), (v2, rho2) = from_ref, to_ref
-    return params.scaled(v2 / v1, (rho2 * v2) / (rho1 * v1))
+    gain, damping = roll_scales(v2, rho2, v1, rho1, scaling)
+    return params.scaled(float(gain), float(damping))
 
 
 #: A fitted damping within this factor of :data:`MIN_DAMPING` (at its smallest over the
@@ -894,6 +1102,10 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         )
     for name, value in result.estimates.items():
         at_bound = value > 0 and abs(abs(math.log(value)) - _LOG_BOUND) < 1e-6
+        if name.endswith("_exponent"):
+            at_bound = result.scaling_measured and (
+                min(abs(value - edge) for edge in EXPONENT_BOUNDS) < 1e-6
+            )
         if at_bound and name not in _SENSOR_NOISE:
             on_bound.append(name)
             bad.append(f"{name} sits on the optimiser's bound: the flight does not determine it")
@@ -905,7 +1117,7 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         )
     alpha_se = errors.get("alpha", math.nan)
     rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) and params.alpha else math.nan
-    rate_r2 = _model_only_r2(inputs, params)
+    rate_r2 = model_only_r2(result)
     p99 = float(np.percentile(np.abs(result.u_d_deg), 99.0))
     fin_range = (servo or Servo()).range_deg
 
@@ -949,7 +1161,9 @@ def mach_numbers(recording: Recording) -> FloatArray:
     its altitude (at sea level without an altitude column)."""
     assert recording.airspeed_mps is not None
     altitude = (
-        recording.altitude_m if recording.altitude_m is not None else np.zeros(recording.n_samples)
+        recording.altitude_m + site_elevation(recording)
+        if recording.altitude_m is not None
+        else np.zeros(recording.n_samples)
     )
     return np.asarray(recording.airspeed_mps) / np.asarray(isa(altitude).speed_of_sound_mps)
 
@@ -998,25 +1212,43 @@ def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Reco
 HELD_OUT_SPLIT = 0.7
 
 
-def _model_only_r2(inputs: FlightInputs, params: RollParams) -> float:
-    """R² of the measured rate by ``params``' model without ``u_d`` over ``inputs``, from
-    the first measured rate."""
+def _model_only_r2(
+    inputs: FlightInputs,
+    params: RollParams,
+    scaling: AirspeedScaling = EQ_4_8,
+    gyro_bias_dps: float | None = None,
+) -> float:
+    """R² of the measured rate (less the gyro's bias) by ``params``' model without ``u_d``
+    over ``inputs`` along ``scaling``, from the first measured rate."""
     from identification.adequacy import r_squared
 
-    measured = measured_rate(inputs)
-    sim = resimulated(inputs, params, np.zeros(inputs.n), float(measured[0]))
+    measured = measured_rate(inputs) - (gyro_bias_dps or 0.0)
+    sim = resimulated(inputs, params, np.zeros(inputs.n), float(measured[0]), scaling)
     return r_squared(np.asarray(sim.rate_dps), measured)
 
 
+def model_only_r2(fit: FlightFit, inputs: FlightInputs | None = None) -> float:
+    """R² of the measured rate by ``fit``'s model without ``u_d`` (its scaling, less its
+    gyro bias) over ``inputs`` (default: the flight it fitted), from the first measured rate."""
+    return _model_only_r2(
+        fit.inputs if inputs is None else inputs, fit.params, fit.scaling, fit.gyro_bias_dps
+    )
+
+
 def held_out_prediction(
-    inputs: FlightInputs, models: Sequence[str], servo_rate_dps: float
+    inputs: FlightInputs,
+    models: Sequence[str],
+    servo_rate_dps: float,
+    scaling: AirspeedScaling | None = None,
+    gyro_bias: bool = False,
 ) -> tuple[dict[str, dict[str, Any]], FlightInputs | None]:
     """Each model fitted to the first :data:`HELD_OUT_SPLIT` of the flight's window and
     judged on the rest, which it did not see: the model without ``u_d`` over the later part
     (its rate R², from the measured rate where the part starts), beside the full fit's on
     the same samples (:func:`flight_method` adds it).  Per model ``{"from_s",
     "rate_r2"}``, or ``{"skipped": reason}`` where a part is too short or the fit fails;
-    and the later part's inputs (None where it could not be cut)."""
+    and the later part's inputs (None where it could not be cut).  ``scaling`` as for
+    :func:`identify_flights` (the first part's exponents measured on it alone where None)."""
     rec = inputs.recording
     t0, t1 = float(rec.time_s[0]), float(rec.time_s[-1])
     split = t0 + HELD_OUT_SPLIT * (t1 - t0)
@@ -1034,20 +1266,22 @@ def held_out_prediction(
     constant: list[FlightFit] | None = None
     for model in sorted(models, key=lambda m: m != "constant"):
         try:
-            fitted = identify_flights([early], model, constant=constant)
+            fitted = identify_flights(
+                [early], model, constant=constant, scaling=scaling, gyro_bias=gyro_bias
+            )
         except IdentificationError as exc:
             out[model] = {"skipped": f"the first part's fit failed ({exc})"}
             continue
         if model == "constant":
             constant = fitted
-        out[model] = {"from_s": split, "rate_r2": _model_only_r2(late, fitted[0].params)}
+        out[model] = {"from_s": split, "rate_r2": model_only_r2(fitted[0], late)}
     return out, late
 
 
 def _judge_held_out(
     adequacy: dict[str, Any],
     held_out: dict[str, Any] | None,
-    params: RollParams,
+    fit: FlightFit,
     late: FlightInputs | None,
 ) -> None:
     """Add the held-out prediction to a flight fit's adequacy: its figures, and a reason
@@ -1061,7 +1295,7 @@ def _judge_held_out(
     r2 = held_out.get("rate_r2")
     if r2 is None or late is None or not math.isfinite(r2):
         return
-    adequacy["held_out"]["full_fit_rate_r2"] = _model_only_r2(late, params)
+    adequacy["held_out"]["full_fit_rate_r2"] = model_only_r2(fit, late)
     text = (
         f"fitted on the flight to {held_out['from_s']:.3g} s, the model without u_d predicts "
         f"the rest to R² {r2:.2f}"
@@ -1080,33 +1314,65 @@ def _add_reason(adequacy: dict[str, Any], text: str, severity: int) -> None:
         adequacy["verdict"] = VERDICTS[worst]
 
 
+def scaling_of(fit: ModelFit) -> AirspeedScaling:
+    """The airspeed scaling a flight method's fit was made with (eq. 4-8 for fits that
+    predate measured exponents)."""
+    settings = fit.trace_settings
+    return AirspeedScaling(
+        float(settings.get("torque_exponent", 2.0)), float(settings.get("damping_exponent", 1.0))
+    )
+
+
+def _at_tunnel(fit: FlightFit) -> dict[str, float]:
+    """The fit's rocket carried to the tunnel's airspeed and ISA sea level by its scaling,
+    to set beside a tunnel identification (an extrapolation where the flight flew faster)."""
+    inputs = fit.inputs
+    params = rescale(
+        fit.params,
+        (inputs.v_ref_mps, inputs.rho_ref_kgm3),
+        (TUNNEL_AIRSPEED_MPS, ISA_SEA_LEVEL_DENSITY_KGM3),
+        fit.scaling,
+    )
+    return {
+        "v_ref_mps": TUNNEL_AIRSPEED_MPS,
+        "alpha": params.alpha,
+        "beta_bar_per_s": params.beta_bar_per_s,
+        "alpha_bar_per_deg_s": params.alpha_bar_per_deg_s,
+    }
+
+
 def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     """The ``flight`` identification method: :func:`identify_flights` per model on the
     recording and the flights fitted with it (``--together``), at the options' reference
-    airspeed (``--v-ref``); the recording's fit."""
+    airspeed (``--v-ref``; default the window's mean) and scaling (``--scaling``: measured
+    unless eq-4-8); the recording's fit."""
     options = context.options
+    scaling = None if options.scaling == "measured" else EQ_4_8
     recordings = [context.recording, *context.together]
     excluded = 0.0  # the recording's seconds above the Mach limit, left out
     if not options.include_supersonic:
         cut = [subsonic_part(recording) for recording in recordings]
         recordings = [part for part, _ in cut]
         excluded = cut[0][1]
+    v_ref = options.v_ref_mps or mean_airspeed(recordings)
     flights = [
-        flight_inputs(recording, v_ref_mps=options.v_ref_mps, servo_rate_dps=options.servo_rate_dps)
+        flight_inputs(recording, v_ref_mps=v_ref, servo_rate_dps=options.servo_rate_dps)
         for recording in recordings
     ]
     inputs = flights[0]
     fits: dict[str, ModelFit] = {}
     constant: list[FlightFit] | None = None
     held_out, late = (
-        held_out_prediction(inputs, models, options.servo_rate_dps)
+        held_out_prediction(inputs, models, options.servo_rate_dps, scaling, options.fit_gyro_bias)
         if len(flights) == 1
         else ({}, None)
     )
     peak = float(np.max(mach_numbers(inputs.recording)))
     # The constant model first: the θ-dependent one starts from its fit.
     for model in sorted(models, key=lambda m: m != "constant"):
-        joint = identify_flights(flights, model, constant=constant)
+        joint = identify_flights(
+            flights, model, constant=constant, scaling=scaling, gyro_bias=options.fit_gyro_bias
+        )
         if model == "constant":
             constant = joint
         result = joint[0]
@@ -1126,8 +1392,13 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "adequacy": flight_adequacy(result),
             "fitted_s": [float(inputs.recording.time_s[0]), float(inputs.recording.time_s[-1])],
             "supersonic_excluded_s": excluded,
+            "torque_exponent": result.scaling.torque_exponent,
+            "damping_exponent": result.scaling.damping_exponent,
+            "scaling_measured": result.scaling_measured,
+            "eq_4_8_test": result.eq_4_8_test,
+            "at_tunnel_airspeed": _at_tunnel(result),
         }
-        _judge_held_out(metrics["adequacy"], held_out.get(model), result.params, late)
+        _judge_held_out(metrics["adequacy"], held_out.get(model), result, late)
         _add_reason(
             metrics["adequacy"],
             f"it fits samples up to Mach {peak:.2f}: the roll model is subsonic "
@@ -1137,11 +1408,15 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
         if result.gyro_noise_pct is not None:
             metrics["gyro_noise_pct"] = result.gyro_noise_pct
             metrics["gyro_floor_dps"] = result.gyro_floor_dps
+            if result.gyro_bias_dps is not None:
+                metrics["gyro_bias_dps"] = result.gyro_bias_dps
         settings = {
             "interval_s": inputs.dt_s,
-            "equations": "flight Kalman smoother (eq. 4-8 scaling)",
+            "equations": f"flight Kalman smoother ({result.scaling.label()} scaling)",
             "frame": "flight",
             "v_ref_mps": inputs.v_ref_mps,
+            "torque_exponent": result.scaling.torque_exponent,
+            "damping_exponent": result.scaling.damping_exponent,
             "servo_rate_dps": options.servo_rate_dps,
             "rate0_dps": float(result.rate_dps[0]),  # the re-simulation's start
         }

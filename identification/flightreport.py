@@ -24,7 +24,13 @@ from collections.abc import Mapping
 import numpy as np
 from matplotlib.axes import Axes
 
-from identification.flightfit import SUBSTEPS, flight_inputs, measured_rate, resimulated
+from identification.flightfit import (
+    SUBSTEPS,
+    flight_inputs,
+    measured_rate,
+    resimulated,
+    scaling_of,
+)
 from identification.methods import ModelFit
 from identification.recording import Recording
 from rocketroll_common.plotting import new_figure, png_bytes
@@ -91,7 +97,7 @@ def render_flight_report(
     ax_rate.plot(t, measured, color="0.5", lw=1.6, label=f"measured ({source})")
     for model, f in fits.items():
         rate0 = float(f.trace_settings["rate0_dps"])
-        sim = resimulated(inputs, f.params, f.disturbance.u_d_deg, rate0)
+        sim = resimulated(inputs, f.params, f.disturbance.u_d_deg, rate0, scaling_of(f))
         mae = f.metrics["resim_rate_mae_pct"]
         ax_rate.plot(
             t,

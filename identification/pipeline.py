@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
-from identification.flight import TUNNEL_AIRSPEED_MPS
 from identification.model import RollParams, check_model, damping
 from identification.noise import NoiseStudy, noise_study
 from identification.recording import Recording
@@ -154,14 +153,25 @@ class IdentifyOptions:
     )
     noise_seed: int = setting(0, "seed of the noise study", flag="--mc-seed", ge=0, le=2**63 - 1)
     progress: bool = setting(False, "show a progress bar for the noise study", cli=False)
-    v_ref_mps: float = setting(
-        TUNNEL_AIRSPEED_MPS,
+    v_ref_mps: float | None = setting(
+        None,
         "a flight's identification gives a, α at this airspeed and ISA sea-level density "
-        "(default: the tunnel's 50 km/h)",
+        "(default: the fitted window's mean airspeed, where the coefficients and the measured "
+        "scaling are least correlated)",
         flag="--v-ref",
         gt=0.0,
         le=2_000.0,
         unit="m/s",
+    )
+    scaling: Literal["measured", "eq-4-8"] = setting(
+        "measured",
+        "a flight's airspeed scaling: measured (fin torque ∝ ρV^n, damping ∝ ρV^m, n and m "
+        "estimated, eq. 4-8's n = 2, m = 1 tested) or eq-4-8 (held at the paper's)",
+    )
+    fit_gyro_bias: bool = setting(
+        False,
+        "a flight's identification estimates a constant gyro bias (weakly determined in "
+        "flight: better subtract one measured on the pad)",
     )
     include_supersonic: bool = setting(
         False,

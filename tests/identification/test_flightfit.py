@@ -7,12 +7,20 @@ import dataclasses
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from disturbances.flightlog import FlightLogSpec, run_flight
-from identification.flight import ISA_SEA_LEVEL_DENSITY_KGM3, TUNNEL_AIRSPEED_MPS
+from disturbances.flightlog import FlightLogSpec, run_flight, truth_at
+from identification.flight import (
+    EQ_4_8,
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    TUNNEL_AIRSPEED_MPS,
+    AirspeedScaling,
+    isa,
+    roll_scales,
+)
 from identification.flightfit import (
     MACH_LIMIT,
     MIN_DAMPING,
@@ -44,7 +52,7 @@ from identification.recording import (
 from identification.steps import IdentificationError
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main
-from rocketroll_common.errors import SettingError
+from rocketroll_common.errors import SettingError, UsageError
 
 
 @pytest.fixture(scope="module")
@@ -69,10 +77,9 @@ def col(recording: Recording, name: str) -> np.ndarray:
     return np.asarray(values)
 
 
-def truth_of(recording: Recording) -> RollParams:
-    truth = recording.truth()
-    assert truth is not None
-    return truth
+def truth_of(recording: Recording, fit: FlightFit) -> RollParams:
+    """The recording's true rocket at the fit's reference airspeed."""
+    return truth_at(recording, fit.inputs.v_ref_mps, fit.inputs.rho_ref_kgm3)
 
 
 # ------------------------------------------------------------------ format 1.1
@@ -225,7 +232,7 @@ def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
         "--measured-fin"
     )
     # Re-simulating the truth with the logged u_d and the scales gives the logged rate.
-    inputs = flight_inputs(rec)
+    gain, damping = flight_inputs(rec, v_ref_mps=spec.v_ref).scales()
     sim = simulate(
         spec.params(),
         rec.dt_s,
@@ -234,8 +241,8 @@ def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
         rate0_dps=float(col(rec, "roll_rate_dps")[0]),
         servo=None,
         substeps=4,
-        gain=inputs.gain,
-        damping=inputs.damping,
+        gain=gain,
+        damping=damping,
     )
     assert np.max(np.abs(sim.rate_dps - col(rec, "roll_rate_dps"))) < 0.02 * np.mean(
         np.abs(col(rec, "roll_rate_dps"))
@@ -274,7 +281,7 @@ def test_bad_recorder_settings_are_named(tmp_path: Path, capsys):
 
 # ------------------------------------------------------------------ the flight method
 def test_the_flight_method_recovers_the_paper_rocket(paper_flight: Recording, paper_fit: FlightFit):
-    truth = truth_of(paper_flight)
+    truth = truth_of(paper_flight, paper_fit)
     p = paper_fit.params
     assert paper_fit.converged
     assert pct(p.alpha, truth.alpha) < 5.0
@@ -295,18 +302,10 @@ def test_the_likelihood_prefers_the_truth_to_a_wrong_gain(
     paper_flight: Recording, paper_fit: FlightFit
 ):
     inputs = flight_inputs(paper_flight)
-    layout = _Layout(theta_model=True, gyro=True)
-    assert paper_fit.gyro_noise_pct is not None and paper_fit.gyro_floor_dps is not None
-    best: dict[str, float] = {
-        "beta_bar": paper_fit.params.beta_bar_per_s,
-        "alpha": paper_fit.params.alpha,
-        "theta_bar": paper_fit.params.theta_bar_deg,
-        "alpha_bar": paper_fit.params.alpha_bar_per_deg_s,
-        "sigma_w": paper_fit.turbulence_sd_deg,
-        "tau": paper_fit.turbulence_tau_s,
-        "gyro_rel": paper_fit.gyro_noise_pct / 100,
-        "gyro_abs": paper_fit.gyro_floor_dps,
-    }
+    layout = _Layout(theta_model=True, gyro=True, scaling=None)
+    assert paper_fit.scaling_measured
+    best = dict(paper_fit.estimates)
+    assert best["alpha"] == paper_fit.params.alpha
     at_best = _negloglike(layout.vector(best), [inputs], layout)
     assert at_best == pytest.approx(-paper_fit.loglike)
     for factor in (0.9, 1.1):
@@ -328,7 +327,7 @@ def test_other_truths_come_back(settings, model):
     spec = FlightLogSpec(**settings)
     rec = run_flight(spec)
     result = identify_flight(flight_inputs(rec), model)
-    truth = spec.params()
+    truth = truth_of(rec, result)
     assert pct(result.params.alpha, truth.alpha) < 5.0
     assert pct(result.params.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
     assert abs(result.params.theta_bar_deg - truth.theta_bar_deg) < 0.5
@@ -366,8 +365,9 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert not (tmp_path / "r").exists()
     data = json.loads(out_json.read_text(encoding="utf-8"))
     constant = data["methods"]["flight"]["constant"]
-    assert constant["params"]["alpha"] == pytest.approx(PAPER_THETA.alpha, rel=0.05)
-    assert constant["params"]["beta_bar_per_s"] == pytest.approx(1.314, rel=0.05)
+    truth = truth_at(load_recording(path), constant["metrics"]["v_ref_mps"])
+    assert constant["params"]["alpha"] == pytest.approx(truth.alpha, rel=0.05)
+    assert constant["params"]["beta_bar_per_s"] == pytest.approx(truth.beta_bar_per_s, rel=0.05)
     assert constant["metrics"]["resim_rate_mae_pct"] < 2.0
     assert constant["metrics"]["adequacy"]["verdict"] == "good"
     # The database holds the tunnel's turbulence: a flight is refused, nothing written.
@@ -432,13 +432,12 @@ def test_a_jittered_logger_clock_keeps_the_fins_and_airspeed_on_their_samples():
     jittered = dataclasses.replace(rec, time_s=np.concatenate([[0.0], np.cumsum(steps)]))
     drift = np.max(np.abs(jittered.time_s - rec.time_s)) / rec.dt_s
     assert drift > 2.0  # samples, so a uniform grid would misalign the columns
-    even, uneven = flight_inputs(rec), flight_inputs(jittered)
+    even, uneven = flight_inputs(rec, v_ref_mps=90.0), flight_inputs(jittered, v_ref_mps=90.0)
     # (the servo ramps over the median interval, which the jitter moves by a hair)
     np.testing.assert_allclose(uneven.theta, even.theta, atol=5e-3)
-    np.testing.assert_allclose(uneven.gain, even.gain, rtol=1e-9)
-    np.testing.assert_allclose(uneven.damping, even.damping, rtol=1e-9)
-    truth = truth_of(rec)
+    np.testing.assert_allclose(uneven.scales(), even.scales(), rtol=1e-9)
     result = identify_flight(uneven, "constant")
+    truth = truth_of(rec, result)
     assert pct(result.params.alpha, truth.alpha) < 5.0
     assert pct(result.params.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
 
@@ -485,7 +484,7 @@ def test_flights_of_one_rocket_fitted_together_narrow_its_coefficients():
     flights = [flight_inputs(rec) for rec in recordings]
     alone = [identify_flight(inputs, "constant") for inputs in flights]
     together = identify_flights(flights, "constant")
-    truth = specs[0].params()
+    truth = truth_of(recordings[0], together[0])
     assert [f.flights for f in together] == [2, 2]
     assert [f.inputs for f in together] == flights
     p = together[0].params
@@ -495,7 +494,7 @@ def test_flights_of_one_rocket_fitted_together_narrow_its_coefficients():
     for key in ("alpha", "beta_bar_per_s"):
         assert together[0].std_errors[key] < 0.85 * min(f.std_errors[key] for f in alone)
     # The joint likelihood is the flights' sum; each flight keeps its own u_d.
-    layout = _Layout(theta_model=False, gyro=True)
+    layout = _Layout(theta_model=False, gyro=True, scaling=None)
     joint = _negloglike(layout.vector(together[0].estimates), flights, layout)
     assert joint == pytest.approx(-sum(f.loglike for f in together))
     for one, rec in zip(together, recordings, strict=True):
@@ -528,7 +527,8 @@ def test_rocketroll_identify_fits_flights_together(tmp_path: Path, capsys):
     assert "fitted together with 1 other flight(s): flight-tunnel-seed9" in out
     constant = json.loads(out_json.read_text(encoding="utf-8"))["methods"]["flight"]["constant"]
     assert constant["metrics"]["flights"] == 2
-    assert constant["params"]["alpha"] == pytest.approx(PAPER_THETA.alpha, rel=0.05)
+    truth = truth_at(load_recording(paths[0]), constant["metrics"]["v_ref_mps"])
+    assert constant["params"]["alpha"] == pytest.approx(truth.alpha, rel=0.05)
     # A tunnel run is one recording: the tunnel's methods refuse company; so does a missing file.
     tunnel = tmp_path / "tunnel.csv"
     save_recording(run_tunnel(TunnelSpec(seed=0)), tunnel)
@@ -609,3 +609,134 @@ def test_the_held_out_part_of_a_flight_is_predicted_as_well_as_by_the_whole_fit(
     )
     assert held["rate_r2"] >= 0.9 * held["full_fit_rate_r2"] and held["rate_r2"] > 0.8
     assert found.metrics["adequacy"]["verdict"] == "good"
+
+
+# ------------------------------------------------------------------ airspeed scaling
+def test_roll_scales_follow_the_exponents():
+    gain, damping = roll_scales(100.0, 1.0, 10.0, 2.0, AirspeedScaling(1.3, 0.7))
+    assert float(gain) == pytest.approx(10.0**0.6)  # α ∝ V^(n-m)
+    assert float(damping) == pytest.approx(0.5 * 10.0**0.7)  # a ∝ ρ·V^m
+    assert AirspeedScaling(2.0, 1.0).is_eq_4_8 and EQ_4_8.label() == "n 2, m 1 (eq. 4-8)"
+    held = roll_scales(100.0, 1.0, 10.0, 2.0, AirspeedScaling(2.0 + 1e-12, 1.0))
+    np.testing.assert_allclose(held, roll_scales(100.0, 1.0, 10.0, 2.0), rtol=1e-9)
+    with pytest.raises(UsageError, match="torque_exponent: must be in"):
+        AirspeedScaling(-1.0, 1.0)
+
+
+def test_the_recorder_flies_another_scaling_a_biased_gyro_and_logs_above_the_pad(
+    tmp_path: Path,
+):
+    ascent = tmp_path / "high.yml"
+    text = (Path("identification/data/ascent-default.yml")).read_text(encoding="utf-8")
+    ascent.write_text(text.replace("launch_altitude_m: 0.0", "launch_altitude_m: 1500.0"))
+    settings: dict[str, Any] = {"seed": 3, "model": "constant", "gyro_noise": 0.0}
+    settings |= {"gyro_floor": 0.0}
+    settings |= {"measured_fin": True}
+    settings |= {"ascent": str(ascent)}
+    plain = run_flight(FlightLogSpec(**settings))
+    quirky = run_flight(
+        FlightLogSpec(
+            **settings,
+            torque_exponent=1.3,
+            damping_exponent=0.7,
+            gyro_bias=1.5,
+            altitude_above_ground=True,
+        )
+    )
+    assert col(quirky, "altitude_m")[0] == pytest.approx(col(plain, "altitude_m")[0] - 1500.0)
+    assert float(quirky.metadata["flight.site_elevation_m"]) == pytest.approx(1500.0)
+    assert float(quirky.metadata["sensor.gyro_bias_dps"]) == 1.5
+    assert float(quirky.metadata["truth.torque_exponent"]) == 1.3
+    # The truth carried to 100 m/s by its own exponents: α by V^0.6, β̄ by ρ·V^0.7.
+    at = truth_at(quirky, 100.0, 1.0)
+    truth = plain.truth()
+    assert truth is not None
+    ratio = 100.0 / TUNNEL_AIRSPEED_MPS
+    assert at.alpha == pytest.approx(truth.alpha * ratio**0.6)
+    assert at.beta_bar_per_s == pytest.approx(
+        truth.beta_bar_per_s * ratio**0.7 / ISA_SEA_LEVEL_DENSITY_KGM3
+    )
+    # Re-simulating the truth along its exponents and the density at the pad's elevation plus
+    # the logged height gives the logged rate less the bias (no gyro noise); eq. 4-8 does not.
+    inputs = flight_inputs(quirky, v_ref_mps=TUNNEL_AIRSPEED_MPS)
+    assert inputs.density == "ISA at altitude_m + the site's 1500 m"
+    mid = 0.5 * (col(quirky, "altitude_m")[1:] + col(quirky, "altitude_m")[:-1])
+    np.testing.assert_allclose(
+        inputs.density_ratio[2::4],
+        isa(mid + 1500.0).density_kgm3 / ISA_SEA_LEVEL_DENSITY_KGM3,
+        rtol=2e-3,
+    )
+    measured = col(quirky, "roll_rate_dps") - 1.5
+    for scaling, close in ((AirspeedScaling(1.3, 0.7), True), (EQ_4_8, False)):
+        gain, damping = inputs.scales(scaling)
+        sim = simulate(
+            truth,
+            quirky.dt_s,
+            col(quirky, "fin_deg"),
+            col(quirky, "ud_true_deg")[:-1],
+            rate0_dps=float(measured[0]),
+            servo=None,
+            substeps=4,
+            gain=gain,
+            damping=damping,
+        )
+        error = np.max(np.abs(sim.rate_dps - measured)) / np.mean(np.abs(measured))
+        assert (error < 0.02) == close, (scaling, error)
+
+
+@pytest.fixture(scope="module")
+def weak_fins() -> tuple[Recording, FlightFit]:
+    """A recorder flight whose fin torque grows as ρV^1.3 (eq. 4-8: ρV²), and its fit."""
+    rec = run_flight(FlightLogSpec(seed=1, model="constant", torque_exponent=1.3))
+    return rec, identify_flight(flight_inputs(rec), "constant")
+
+
+def test_the_flight_method_measures_the_scaling_and_rejects_eq_4_8(weak_fins):
+    rec, result = weak_fins
+    assert result.scaling_measured and result.eq_4_8_test is not None
+    errors = result.std_errors
+    n, m = result.scaling.torque_exponent, result.scaling.damping_exponent
+    assert abs(n - 1.3) < 2.0 * errors["torque_exponent"] and errors["torque_exponent"] < 0.1
+    assert abs(m - 1.0) < 2.0 * errors["damping_exponent"]
+    assert result.eq_4_8_test["rejected"] and result.eq_4_8_test["p_value"] < 1e-6
+    # The coefficients at the flight's mean airspeed, the truth carried there by its n.
+    assert result.inputs.v_ref_mps == pytest.approx(np.mean(col(rec, "airspeed_mps")), abs=0.5)
+    truth = truth_of(rec, result)
+    assert pct(result.params.alpha, truth.alpha) < 5.0
+    assert pct(result.params.beta_bar_per_s, truth.beta_bar_per_s) < 5.0
+    # Held at eq. 4-8 the same flight is fitted worse, by the test's statistic.
+    held = identify_flight(result.inputs, "constant", scaling=EQ_4_8)
+    assert not held.scaling_measured and held.eq_4_8_test is None
+    statistic = result.eq_4_8_test["statistic"]
+    assert 2.0 * (result.loglike - held.loglike) == pytest.approx(statistic, rel=1e-3)
+
+
+def test_eq_4_8_is_not_rejected_on_a_flight_that_follows_it(paper_flight, paper_fit):
+    test = paper_fit.eq_4_8_test
+    assert test is not None and not test["rejected"], test
+    assert (
+        abs(paper_fit.scaling.torque_exponent - 2.0) < 2.0 * paper_fit.std_errors["torque_exponent"]
+    )
+
+
+def test_an_exponent_on_its_bound_is_unreliable(weak_fins) -> None:
+    _, result = weak_fins
+    stuck = dataclasses.replace(result, estimates={**result.estimates, "torque_exponent": 0.0})
+    judged = flight_adequacy(stuck)
+    assert judged["verdict"] == "unreliable" and "torque_exponent" in judged["on_bound"]
+
+
+def test_identify_prints_the_measured_scaling(tmp_path: Path, capsys):
+    path = tmp_path / "weak.csv"
+    argv = ["flight", "--out", str(path), "--seed", "2", "--model", "constant"]
+    assert main([*argv, "--torque-exponent", "1.3"]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(path), "--json", str(tmp_path / "fit.json")]) == 0
+    out = capsys.readouterr().out
+    assert "scaling measured: fin torque ∝ ρV^n, n 1.2" in out or "n 1.3" in out, out
+    assert "eq. 4-8 (n 2, m 1) rejected" in out
+    data = json.loads((tmp_path / "fit.json").read_text(encoding="utf-8"))
+    metrics = data["methods"]["flight"]["constant"]["metrics"]
+    assert metrics["eq_4_8_test"]["rejected"] and metrics["scaling_measured"]
+    assert main(["identify", str(path), "--scaling", "eq-4-8"]) == 0
+    assert "scaling held: fin torque ∝ ρV^2, damping ∝ ρV^1" in capsys.readouterr().out
