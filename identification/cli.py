@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -93,12 +94,14 @@ class ImportArgs:
 
 def import_csv(args: ImportArgs) -> int:
     """Convert the file and write the recording."""
-    from identification.importer import read_csv
+    from identification.importer import plausibility_warnings, read_csv
     from identification.recording import save_recording
 
     recording = read_csv(args.input, args.settings)
     save_recording(recording, args.out)
     print(f"wrote {args.out}: {recording!r}")
+    for text in plausibility_warnings(recording):
+        print(f"warning: {args.input}: {text}", file=sys.stderr)
     return 0
 
 

@@ -54,10 +54,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-import numba
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import optimize
 
+from identification import statespace
 from identification.flight import (
     EQ_4_8,
     ISA_SEA_LEVEL_DENSITY_KGM3,
@@ -76,12 +77,14 @@ from identification.model import (
     simulate,
 )
 from identification.recording import Recording, RecordingError
+from identification.statespace import LinearGaussian
 from identification.steps import Disturbance, IdentificationError
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.ou import interval_coefficients
 
 if TYPE_CHECKING:
     from identification.methods import Context
+    from identification.pipeline import IdentifyOptions
 
 __all__ = [
     "EQ_4_8_TEST_SIZE",
@@ -325,63 +328,6 @@ def interval_maps(
     return big_e, big_c0, big_c1, big_a, big_b0, big_b1
 
 
-@numba.njit(cache=True, nogil=True)
-def _kalman(  # pragma: no cover - compiled
-    trans: FloatArray,
-    offset: FloatArray,
-    noise: FloatArray,
-    y: FloatArray,
-    r: FloatArray,
-    x0: FloatArray,
-    p0: FloatArray,
-    smooth: bool,
-) -> tuple[float, FloatArray]:
-    """Log-likelihood of ``y`` (row k: the rate and the angle at sample k, with variances
-    ``r``; a variance ≤ 0 means not measured), and the smoothed means if ``smooth``.
-
-    ``x[k+1] = trans[k]·x[k] + offset[k] + noise[k]·z``, ``z`` standard normal (2-vector).
-    """
-    n = trans.shape[0]
-    x = x0.copy()
-    p = p0.copy()
-    loglike = 0.0
-    xs_pred = np.zeros((n + 1, 3))
-    ps_pred = np.zeros((n + 1, 3, 3))
-    xs_filt = np.zeros((n + 1, 3))
-    ps_filt = np.zeros((n + 1, 3, 3))
-    xs_pred[0] = x
-    ps_pred[0] = p
-    for k in range(n + 1):
-        for m in range(2):  # sequential scalar updates: rate (state 0), angle (state 1)
-            if r[k, m] <= 0.0:
-                continue
-            s = p[m, m] + r[k, m]
-            innovation = y[k, m] - x[m]
-            loglike -= 0.5 * (math.log(2.0 * math.pi * s) + innovation * innovation / s)
-            gain = p[:, m] / s
-            x = x + gain * innovation
-            p = p - np.outer(gain, gain) * s
-        p = 0.5 * (p + p.T)
-        xs_filt[k] = x
-        ps_filt[k] = p
-        if k == n:
-            break
-        f = trans[k]
-        g = noise[k]
-        x = f @ x + offset[k]
-        p = f @ p @ f.T + g @ g.T
-        xs_pred[k + 1] = x
-        ps_pred[k + 1] = p
-    if not smooth:
-        return loglike, xs_filt[:0]
-    xs = xs_filt.copy()
-    for k in range(n - 1, -1, -1):
-        pp = ps_pred[k + 1] + 1e-12 * np.eye(3)
-        j = np.linalg.solve(pp.T, (ps_filt[k] @ trans[k].T).T).T
-        xs[k] = xs_filt[k] + j @ (xs[k + 1] - xs_pred[k + 1])
-    return loglike, xs
-
-
 @dataclass(frozen=True)
 class _Layout:
     """Which parameters are free, in the optimiser's coordinates: a log for those that
@@ -458,10 +404,11 @@ def _params(nat: dict[str, float]) -> RollParams | None:
     return RollParams(nat["alpha"], nat["theta_bar"], nat["beta_bar"], nat["alpha_bar"])
 
 
-def _system(
-    inputs: FlightInputs, nat: dict[str, float]
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] | None:
-    """Transition, offset, noise, measurements, their variances and the first state."""
+def _system(inputs: FlightInputs, nat: dict[str, float]) -> LinearGaussian | None:
+    """The flight as a linear Gaussian state-space model (:mod:`identification.statespace`)
+    of the roll rate, the angle and the turbulence ``w``, its system matrices changing with
+    every interval's airspeed; None where ``nat`` is not a rocket (α 0, or a damping below
+    :data:`MIN_DAMPING` on the flown fins)."""
     params = _params(nat)
     if params is None:
         return None
@@ -481,37 +428,48 @@ def _system(
     mean = np.where(moving, mean, 1.0)
     a1, l21, l22 = (np.where(moving, x, 0.0) for x in (a1, l21, l22))
     n = inputs.n
-    trans = np.zeros((n, 3, 3))
-    trans[:, 0, 0] = e
-    trans[:, 0, 2] = c1 * mean
-    trans[:, 1, 0] = a
+    trans = np.zeros((n + 1, 3, 3))  # the last, after the last sample, is not used
+    trans[:n, 0, 0] = e
+    trans[:n, 0, 2] = c1 * mean
+    trans[:n, 1, 0] = a
     trans[:, 1, 1] = 1.0
-    trans[:, 1, 2] = b1 * mean
-    trans[:, 2, 2] = phi
-    offset = np.zeros((n, 3))
-    offset[:, 0] = c0
-    offset[:, 1] = b0
-    noise = np.zeros((n, 3, 2))
-    noise[:, 0, 0] = c1 * sigma * l21
-    noise[:, 0, 1] = c1 * sigma * l22
-    noise[:, 1, 0] = b1 * sigma * l21
-    noise[:, 1, 1] = b1 * sigma * l22
-    noise[:, 2, 0] = sigma * a1
-    y = np.zeros((n + 1, 2))
-    r = np.zeros((n + 1, 2))
+    trans[:n, 1, 2] = b1 * mean
+    trans[:n, 2, 2] = phi
+    offset = np.zeros((n + 1, 3))
+    offset[:n, 0] = c0
+    offset[:n, 1] = b0
+    # The state's shocks: two standard normals per interval (the turbulence's innovation
+    # and the part of its interval average that the innovation does not explain).
+    noise = np.zeros((n + 1, 3, 2))
+    noise[:n, 0, 0] = c1 * sigma * l21
+    noise[:n, 0, 1] = c1 * sigma * l22
+    noise[:n, 1, 0] = b1 * sigma * l21
+    noise[:n, 1, 1] = b1 * sigma * l22
+    noise[:n, 2, 0] = sigma * a1
     x0 = np.zeros(3)
     p0 = np.diag([1e4, 1e4, sigma**2])
     if inputs.rate is not None:
-        y[:, 0] = inputs.rate - nat["gyro_bias"]
-        r[:, 0] = nat["gyro_abs"] ** 2 + (nat["gyro_rel"] * inputs.rate) ** 2
-        x0[0] = y[0, 0]
+        y = inputs.rate - nat["gyro_bias"]
+        variance = nat["gyro_abs"] ** 2 + (nat["gyro_rel"] * inputs.rate) ** 2
+        observed = np.array([0])
+        x0[0] = y[0]
         p0[1, 1] = 1.0  # the angle is not measured: its start does not matter
     else:
         assert inputs.angle is not None
-        y[:, 1] = inputs.angle - inputs.angle[0]
-        r[:, 1] = inputs.quantum_deg**2 / 12.0 + nat["angle_sd"] ** 2
-        p0[1, 1] = r[0, 1]
-    return trans, offset, noise, y, r, np.stack([x0, np.diag(p0)])
+        y = inputs.angle - inputs.angle[0]
+        variance = np.full(y.size, inputs.quantum_deg**2 / 12.0 + nat["angle_sd"] ** 2)
+        observed = np.array([1])
+        p0[1, 1] = variance[0]
+    return LinearGaussian(
+        y=y[:, None],
+        observed=observed,
+        obs_var=variance[:, None],
+        transition=trans,
+        intercept=offset,
+        state_cov=noise @ np.swapaxes(noise, 1, 2),
+        initial_mean=x0,
+        initial_cov=p0,
+    )
 
 
 def _negloglike(x: FloatArray, flights: Sequence[FlightInputs], layout: _Layout) -> float:
@@ -527,8 +485,7 @@ def _negloglike(x: FloatArray, flights: Sequence[FlightInputs], layout: _Layout)
         system = _system(inputs, nat)
         if system is None:
             return 1e12
-        trans, offset, noise, y, r, start = system
-        loglike, _ = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), False)
+        loglike = statespace.loglike(system)
         if not math.isfinite(loglike):
             return 1e12
         total -= loglike
@@ -681,6 +638,13 @@ class FlightFit:
             u_d_deg=readonly_array(self.u_d_deg),
         )
 
+    def posterior_draws(self, size: int, seed: int = 0) -> FloatArray:
+        """``size`` draws of ``u_d`` per sample interval from its posterior given the flight
+        (the simulation smoother of :mod:`identification.statespace`, at the fit's
+        estimates), shape (size, n): each a turbulence the rocket may have flown."""
+        _, _, _, draws = _smoothed(self.inputs, self.estimates, size, seed)
+        return np.asarray(self.inputs.u_per_w * draws)
+
     def resimulate(self) -> dict[str, float]:
         """§3.5 in flight: the model driven by its ``u_d`` from the first sample, open loop.
 
@@ -792,22 +756,33 @@ _SHOWN = (
 )
 
 
-def _smoothed(inputs: FlightInputs, nat: dict[str, float]) -> tuple[float, FloatArray, FloatArray]:
-    """Log-likelihood, smoothed rate at the samples and smoothed ``w̄`` per interval."""
+def _smoothed(
+    inputs: FlightInputs, nat: dict[str, float], draws: int = 0, seed: int = 0
+) -> tuple[float, FloatArray, FloatArray, FloatArray]:
+    """Log-likelihood, smoothed rate at the samples, smoothed ``w̄`` per interval and
+    ``draws`` draws of ``w̄`` from its posterior (the simulation smoother, seeded)."""
     params = _params(nat)
     system = _system(inputs, nat)
     assert params is not None and system is not None
-    trans, offset, noise, y, r, start = system
-    loglike, smoothed = _kalman(trans, offset, noise, y, r, start[0], np.diag(start[1]), True)
+    smoothed = statespace.smooth(system)
     e, c0, c1, _, _, _ = interval_maps(inputs, params, _scaling(nat))
-    rate = smoothed[:, 0]
-    # v1 = E·v0 + C0 + C1·w̄ holds exactly in the model, so it holds for the smoothed means.
-    mean_w = np.where(
-        np.abs(c1) > 1e-9 * np.maximum(np.abs(rate[1:]), 1.0),
-        (rate[1:] - e * rate[:-1] - c0) / np.where(c1 == 0.0, 1.0, c1),
-        smoothed[:-1, 2],
-    )
-    return float(loglike), rate, mean_w
+
+    def mean_w(states: FloatArray) -> FloatArray:
+        # v1 = E·v0 + C0 + C1·w̄ holds exactly in the model, so it holds for the smoothed
+        # means and for each posterior draw of the states.
+        rate = states[:, 0]
+        return np.where(
+            np.abs(c1) > 1e-9 * np.maximum(np.abs(rate[1:]), 1.0),
+            (rate[1:] - e * rate[:-1] - c0) / np.where(c1 == 0.0, 1.0, c1),
+            states[:-1, 2],
+        )
+
+    samples = np.empty((draws, inputs.n))
+    if draws:
+        rng = np.random.default_rng(seed)
+        for k, states in enumerate(statespace.simulation_smoother(system, smoothed, rng, draws)):
+            samples[k] = mean_w(states)
+    return smoothed.loglike, smoothed.mean[:, 0], mean_w(smoothed.mean), samples
 
 
 def identify_flight(
@@ -972,7 +947,7 @@ def identify_flights(
     )
     fits = []
     for inputs in flights:
-        loglike, rate, mean_w = _smoothed(inputs, nat)
+        loglike, rate, mean_w, _ = _smoothed(inputs, nat)
         fits.append(
             FlightFit(
                 model=model,
@@ -1168,16 +1143,20 @@ def mach_numbers(recording: Recording) -> FloatArray:
     return np.asarray(recording.airspeed_mps) / np.asarray(isa(altitude).speed_of_sound_mps)
 
 
-def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Recording, float]:
-    """The longest stretch of ``recording`` whose Mach number (its airspeed over the ISA
-    speed of sound at its altitude, or at sea level without one) stays at or below
-    ``limit``, and how many seconds of the log it leaves out; the recording itself and 0
-    where it never goes above."""
+def longest_stretch(recording: Recording, keep: ArrayLike, why: str) -> Recording:
+    """The longest stretch of ``recording`` whose samples ``keep`` says (a boolean per
+    sample); the recording itself where it keeps every sample.
+
+    Raises
+    ------
+    IdentificationError
+        Where no stretch is kept, or the longest is shorter than
+        :data:`MIN_MOVING_INTERVALS` samples (``why`` says what was kept).
+    """
     time = np.asarray(recording.time_s)
-    mach = mach_numbers(recording)
-    below = mach <= limit
+    below = np.asarray(keep, dtype=bool)
     if bool(np.all(below)):
-        return recording, 0.0
+        return recording
     best, start, best_span = (0, 0), None, -1.0
     for k, ok in enumerate([*below.tolist(), False]):
         if ok and start is None:
@@ -1188,11 +1167,7 @@ def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Reco
                 best, best_span = (start, k), span
             start = None
     if best_span <= 0.0:
-        raise IdentificationError(
-            f"recording {recording.name!r}: above Mach {limit:g} all along (peak "
-            f"{float(mach.max()):.2f}): the roll model is subsonic (--include-supersonic "
-            "fits it anyway)"
-        )
+        raise IdentificationError(f"recording {recording.name!r}: no samples {why}")
     first, stop = best
     end = float(time[stop]) if stop < time.size else float(time[-1]) + 1.0
     try:
@@ -1201,11 +1176,61 @@ def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Reco
         part = None
     if part is None or part.n_samples < MIN_MOVING_INTERVALS:
         raise IdentificationError(
-            f"recording {recording.name!r}: its longest stretch below Mach {limit:g} lasts "
-            f"{best_span:.3g} s ({stop - first} samples), too short to fit; the roll model is "
-            "subsonic (--include-supersonic fits the rest anyway)"
+            f"recording {recording.name!r}: its longest stretch {why} lasts "
+            f"{best_span:.3g} s ({stop - first} samples), too short to fit"
         )
-    return part, float(time[-1] - time[0]) - float(part.time_s[-1] - part.time_s[0])
+    return part
+
+
+def _span(recording: Recording) -> float:
+    return float(recording.time_s[-1] - recording.time_s[0])
+
+
+def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Recording, float]:
+    """The longest stretch of ``recording`` whose Mach number (its airspeed over the ISA
+    speed of sound at its altitude, or at sea level without one) stays at or below
+    ``limit``, and how many seconds of the log it leaves out; the recording itself and 0
+    where it never goes above."""
+    mach = mach_numbers(recording)
+    try:
+        part = longest_stretch(recording, mach <= limit, f"at or below Mach {limit:g}")
+    except IdentificationError as exc:
+        raise IdentificationError(
+            f"{exc} (peak Mach {float(mach.max()):.2f}); the roll model is subsonic "
+            "(--include-supersonic fits it anyway)"
+        ) from None
+    return part, _span(recording) - _span(part)
+
+
+def flight_window(recording: Recording, options: IdentifyOptions) -> tuple[Recording, float]:
+    """The part of a flight the flight method fits: the options' time window (``--from``,
+    ``--to``), then the longest stretch within their airspeed range (``--min-airspeed``,
+    ``--max-airspeed``), then at or below :data:`MACH_LIMIT` (unless
+    ``--include-supersonic``); and how many seconds the Mach limit left out."""
+    part = recording
+    if options.flight_from is not None or options.flight_to is not None:
+        t0 = float(recording.time_s[0]) if options.flight_from is None else options.flight_from
+        t1 = float(recording.time_s[-1]) + 1.0 if options.flight_to is None else options.flight_to
+        try:
+            part = recording.part(t0, t1)
+        except RecordingError as exc:
+            raise IdentificationError(
+                f"recording {recording.name!r}: --from/--to leave nothing to fit ({exc})"
+            ) from None
+        if part.n_samples < MIN_MOVING_INTERVALS:
+            raise IdentificationError(
+                f"recording {recording.name!r}: --from/--to keep {part.n_samples} samples "
+                f"(at least {MIN_MOVING_INTERVALS} needed)"
+            )
+    low, high = options.min_airspeed_mps, options.max_airspeed_mps
+    if low is not None or high is not None:
+        speed = np.asarray(part.airspeed_mps)
+        keep = (speed >= (low or 0.0)) & (speed <= (math.inf if high is None else high))
+        shown = f"[{low or 0:g}, {'∞' if high is None else f'{high:g}'}] m/s"
+        part = longest_stretch(part, keep, f"with the airspeed in {shown}")
+    if options.include_supersonic:
+        return part, 0.0
+    return subsonic_part(part)
 
 
 #: The share of a flight's fitted window the held-out check fits; it predicts the rest.
@@ -1350,10 +1375,9 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     scaling = None if options.scaling == "measured" else EQ_4_8
     recordings = [context.recording, *context.together]
     excluded = 0.0  # the recording's seconds above the Mach limit, left out
-    if not options.include_supersonic:
-        cut = [subsonic_part(recording) for recording in recordings]
-        recordings = [part for part, _ in cut]
-        excluded = cut[0][1]
+    cut = [flight_window(recording, options) for recording in recordings]
+    recordings = [part for part, _ in cut]
+    excluded = cut[0][1]
     v_ref = options.v_ref_mps or mean_airspeed(recordings)
     flights = [
         flight_inputs(recording, v_ref_mps=v_ref, servo_rate_dps=options.servo_rate_dps)

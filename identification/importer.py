@@ -491,6 +491,28 @@ def _check_rate_unit(where: str, out: dict[str, FloatArray], settings: ImportSet
         )
 
 
+#: A flight's roll rate whose 99th percentile of ``|rate|`` stays below this, °/s, is
+#: implausibly small for a rocket in flight (a rad/s column read as °/s reads 57 times small).
+PLAUSIBLE_FLIGHT_RATE_DPS = 5.0
+
+
+def plausibility_warnings(recording: Recording) -> list[str]:
+    """What looks wrong in an imported recording without being certain: a flight whose roll
+    rate stays below :data:`PLAUSIBLE_FLIGHT_RATE_DPS` all along (where no angle beside it
+    lets the unit be checked, :func:`read_csv` refuses a rate that disagrees with one)."""
+    rate = recording.roll_rate_dps
+    if recording.airspeed_mps is None or rate is None or recording.roll_deg is not None:
+        return []
+    p99 = float(np.percentile(np.abs(rate), 99.0))
+    if p99 >= PLAUSIBLE_FLIGHT_RATE_DPS:
+        return []
+    return [
+        f"the roll rate stays within {p99:.3g} °/s (99th percentile) all flight: small for a "
+        f"rocket in flight (under {PLAUSIBLE_FLIGHT_RATE_DPS:g} °/s); a column in rad/s read as "
+        "°/s looks like this (--unit roll_rate=rad if so)"
+    ]
+
+
 def _window(
     where: str,
     columns: dict[str, FloatArray],

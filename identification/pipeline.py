@@ -159,6 +159,7 @@ class IdentifyOptions:
         "(default: the fitted window's mean airspeed, where the coefficients and the measured "
         "scaling are least correlated)",
         flag="--v-ref",
+        metavar="V",
         gt=0.0,
         le=2_000.0,
         unit="m/s",
@@ -173,6 +174,37 @@ class IdentifyOptions:
         "a flight's identification estimates a constant gyro bias (weakly determined in "
         "flight: better subtract one measured on the pad)",
     )
+    flight_from: float | None = setting(
+        None,
+        "a flight's identification fits the recording from this time on (the flights fitted "
+        "with it keep theirs)",
+        flag="--from",
+        metavar="T",
+        ge=-1e9,
+        le=1e9,
+        unit="s",
+    )
+    flight_to: float | None = setting(
+        None, "... and up to this time", flag="--to", metavar="T", ge=-1e9, le=1e9, unit="s"
+    )
+    min_airspeed_mps: float | None = setting(
+        None,
+        "a flight's identification fits the longest stretch at or above this airspeed",
+        flag="--min-airspeed",
+        metavar="V",
+        ge=0.0,
+        le=2_000.0,
+        unit="m/s",
+    )
+    max_airspeed_mps: float | None = setting(
+        None,
+        "... and at or below this one",
+        flag="--max-airspeed",
+        metavar="V",
+        gt=0.0,
+        le=2_000.0,
+        unit="m/s",
+    )
     include_supersonic: bool = setting(
         False,
         "a flight's identification fits the samples above Mach 0.8 too (by default it fits "
@@ -181,6 +213,19 @@ class IdentifyOptions:
 
     def __post_init__(self) -> None:
         check(self)
+        if (
+            self.flight_from is not None
+            and self.flight_to is not None
+            and not self.flight_from < self.flight_to
+        ):
+            raise SettingError(
+                "flight_from", f"{self.flight_from:g} s must come before --to {self.flight_to:g} s"
+            )
+        low, high = self.min_airspeed_mps, self.max_airspeed_mps
+        if low is not None and high is not None and not low < high:
+            raise SettingError(
+                "min_airspeed_mps", f"{low:g} m/s must be below --max-airspeed {high:g} m/s"
+            )
         if self.breakpoint_resolution_s > self.max_breakpoint_s:
             raise SettingError(
                 "max_breakpoint_s",

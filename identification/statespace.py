@@ -4,11 +4,13 @@ The model (the notation of Durbin & Koopman, *Time Series Analysis by State
 Space Methods*, and of ``statsmodels.tsa.statespace``)::
 
     y[k]   = Z · s[k] + ε[k],            ε[k] ~ N(0, diag(H[k]))
-    s[k+1] = T[k] · s[k] + c[k] + η[k],  η[k] ~ N(0, Q)
+    s[k+1] = T[k] · s[k] + c[k] + η[k],  η[k] ~ N(0, Q[k])
     s[0]   ~ N(a0, P0)
 
 with a time-varying transition ``T[k]`` and intercept ``c[k]`` (the roll
-model's closed form depends on the fin history, :mod:`identification.ml`),
+model's closed form depends on the fin history, :mod:`identification.ml`), a
+state covariance ``Q`` that is constant (the tunnel) or changes per step (a
+flight, whose airspeed scales the turbulence's effect: :mod:`identification.flightfit`),
 a selection ``Z`` of state components, diagonal measurement variances that may
 change per sample, and missing observations as NaN.  Observations are
 processed one component at a time (the univariate treatment of Koopman &
@@ -65,8 +67,9 @@ class LinearGaussian:
         ``T[k]``, from sample ``k`` to ``k + 1`` (the last one is not used).
     intercept : ndarray, shape (n, m)
         ``c[k]``.
-    state_cov : ndarray, shape (m, m)
-        ``Q``, the covariance of the state disturbance.
+    state_cov : ndarray, shape (m, m) or (n, m, m)
+        ``Q``, the covariance of the state disturbance: one for every step, or
+        ``Q[k]`` from sample ``k`` to ``k + 1`` (the last one is not used).
     initial_mean, initial_cov : ndarray, shapes (m,) and (m, m)
         ``a0`` and ``P0``.
     """
@@ -88,7 +91,7 @@ class LinearGaussian:
             "obs_var": (self.obs_var.shape, (n, d)),
             "transition": (self.transition.shape, (n, m, m)),
             "intercept": (self.intercept.shape, (n, m)),
-            "state_cov": (self.state_cov.shape, (m, m)),
+            "state_cov": (self.state_cov.shape, (n, m, m) if self.state_cov.ndim == 3 else (m, m)),
             "initial_cov": (self.initial_cov.shape, (m, m)),
         }
         for name, (got, want) in shapes.items():
@@ -104,14 +107,16 @@ class LinearGaussian:
     ) -> tuple[
         FloatArray, IntArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray
     ]:
-        """The arrays in the kernels' order, contiguous and of their dtypes."""
+        """The arrays in the kernels' order, contiguous and of their dtypes (``Q`` always
+        three-dimensional: one step's, or every step's)."""
+        state_cov = self.state_cov if self.state_cov.ndim == 3 else self.state_cov[None]
         return (
             np.ascontiguousarray(self.y, dtype=float),
             np.ascontiguousarray(self.observed, dtype=np.intp),
             np.ascontiguousarray(self.obs_var, dtype=float),
             np.ascontiguousarray(self.transition, dtype=float),
             np.ascontiguousarray(self.intercept, dtype=float),
-            np.ascontiguousarray(self.state_cov, dtype=float),
+            np.ascontiguousarray(state_cov, dtype=float),
             np.ascontiguousarray(self.initial_mean, dtype=float),
             np.ascontiguousarray(self.initial_cov, dtype=float),
         )
@@ -224,7 +229,8 @@ def _filter(
             a_filt[k] = a
             p_filt[k] = p
         if k + 1 < n:
-            predict(a, p, transition[k], intercept[k], state_cov, work)
+            q = state_cov[min(k, state_cov.shape[0] - 1)]
+            predict(a, p, transition[k], intercept[k], q, work)
     return ll, a_pred, p_pred, a_filt, p_filt, gains
 
 
@@ -372,7 +378,8 @@ def _simulate(
             else:
                 ys[k, j] = s[observed[j]] + math.sqrt(obs_var[k, j]) * eps[k, j]
         if k + 1 < n:
-            s = transition[k] @ s + intercept[k] + state_chol @ eta[k]
+            chol = state_chol[min(k, state_chol.shape[0] - 1)]
+            s = transition[k] @ s + intercept[k] + chol @ eta[k]
     return states, ys
 
 
@@ -414,7 +421,7 @@ def simulation_smoother(
     n, d = y.shape
     m = a0.size
     missing = np.isnan(y)
-    state_chol = _cholesky(state_cov)
+    state_chol = _cholesky(state_cov)  # one per step, or one for all
     if draws is None:
         generator = np.random.default_rng() if rng is None else rng
         eps = generator.standard_normal((size, n, d))
@@ -444,6 +451,8 @@ def simulation_smoother(
 
 
 def _cholesky(cov: FloatArray) -> FloatArray:
-    """A square root ``L`` with ``L·L' = cov`` that tolerates zero rows (singular ``Q``)."""
-    values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
-    return np.asarray(vectors * np.sqrt(np.clip(values, 0.0, None)), dtype=float)
+    """A square root ``L`` with ``L·L' = cov`` that tolerates zero rows (singular ``Q``);
+    of each matrix of a stack (..., m, m)."""
+    values, vectors = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))[..., None, :]
+    return np.ascontiguousarray(root, dtype=float)

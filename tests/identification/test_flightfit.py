@@ -30,13 +30,14 @@ from identification.flightfit import (
     c_coefficients,
     flight_adequacy,
     flight_inputs,
+    flight_window,
     identify_flight,
     identify_flights,
     mach_numbers,
     rescale,
     subsonic_part,
 )
-from identification.importer import import_csv
+from identification.importer import import_csv, plausibility_warnings
 from identification.methods import default_methods, fit
 from identification.model import PAPER_THETA, RollParams, Servo, simulate
 from identification.pipeline import IdentifyOptions
@@ -176,6 +177,30 @@ def test_import_csv_reads_airspeed_and_altitude_in_their_units(tmp_path: Path):
     assert col(rec, "altitude_m")[0] == pytest.approx(304.8)  # 1000 ft
     assert col(rec, "roll_rate_dps")[2] == pytest.approx(1.0)  # angles stay in their --units
     assert rec.metadata["import.speed_unit"] == "kmh"
+    assert plausibility_warnings(rec) == []  # up to 300 °/s: a rocket's rates
+
+
+def test_a_flight_rate_too_small_for_a_rocket_is_warned_about(tmp_path: Path, capsys):
+    """A gyro column in rad/s read as °/s: nothing beside it to check the unit against,
+    but rates within 5 °/s all flight are not a rocket's (the user's 2.6 °/s)."""
+    t = np.arange(600) * 0.01
+    rate = np.radians(60.0 * np.sin(t))  # 60 °/s written in rad/s
+    rows = [
+        f"{ti:.2f},{5.0 * (i > 50)},{r:.6f},{180.0 + i}"
+        for i, (ti, r) in enumerate(zip(t, rate, strict=True))
+    ]
+    src = tmp_path / "gyro.txt"
+    src.write_text("t,fin,rate,v\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    columns = ["--columns", "time,fin_cmd,roll_rate,airspeed", "--source", "flight"]
+    columns += ["--speed-unit", "kmh"]
+    out = tmp_path / "gyro.csv"
+    assert main(["import-csv", str(src), "--out", str(out), *columns]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "gyro.txt" in err and "--unit roll_rate=rad" in err
+    assert out.exists()
+    right = ["import-csv", str(src), "--out", str(tmp_path / "right.csv"), *columns]
+    assert main([*right, "--unit", "roll_rate=rad"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 # ------------------------------------------------------------------ the scaled model
@@ -560,7 +585,7 @@ def test_the_samples_above_mach_0_8_are_left_out_and_said(paper_flight: Recordin
     assert left_out == pytest.approx(
         float(time[-1] - time[0]) - float(part.time_s[-1] - part.time_s[0])
     )
-    with pytest.raises(IdentificationError, match=r"longest stretch below Mach 0\.01 lasts"):
+    with pytest.raises(IdentificationError, match=r"longest stretch at or below Mach 0\.01 lasts"):
         subsonic_part(fast, limit=0.01)
 
 
@@ -740,3 +765,40 @@ def test_identify_prints_the_measured_scaling(tmp_path: Path, capsys):
     assert metrics["eq_4_8_test"]["rejected"] and metrics["scaling_measured"]
     assert main(["identify", str(path), "--scaling", "eq-4-8"]) == 0
     assert "scaling held: fin torque ∝ ρV^2, damping ∝ ρV^1" in capsys.readouterr().out
+
+
+def test_a_flight_is_fitted_in_the_window_asked(paper_flight: Recording):
+    options = IdentifyOptions(flight_from=5.0, flight_to=20.0, min_airspeed_mps=60.0)
+    part, excluded = flight_window(paper_flight, options)
+    assert part.time_s[0] >= 5.0 and part.time_s[-1] < 20.0 and excluded == 0.0
+    assert np.min(col(part, "airspeed_mps")) >= 60.0
+    # The airspeed falls through 60 m/s on the coast (at 15.4 s): the window ends there.
+    after = int(np.searchsorted(paper_flight.time_s, part.time_s[-1])) + 1
+    assert col(paper_flight, "airspeed_mps")[after] < 60.0
+    with pytest.raises(SettingError, match="must come before --to"):
+        IdentifyOptions(flight_from=5.0, flight_to=4.0)
+    with pytest.raises(SettingError, match="must be below --max-airspeed"):
+        IdentifyOptions(min_airspeed_mps=50.0, max_airspeed_mps=40.0)
+    with pytest.raises(IdentificationError, match=r"no samples with the airspeed in \[1000"):
+        flight_window(paper_flight, IdentifyOptions(min_airspeed_mps=1000.0))
+    with pytest.raises(
+        IdentificationError, match=r"--from/--to leave nothing to fit .*too few samples: 10"
+    ):
+        flight_window(paper_flight, IdentifyOptions(flight_from=5.0, flight_to=5.1))
+
+
+def test_posterior_draws_of_u_d_cover_the_turbulence_flown(paper_flight, paper_fit):
+    """The simulation smoother on the flight's state-space model: draws of u_d given the
+    flight, centred on the smoothed u_d, whose 95 % band holds the true u_d about 95 % of
+    the time."""
+    draws = paper_fit.posterior_draws(40, seed=1)
+    assert draws.shape == (40, paper_fit.inputs.n)
+    np.testing.assert_array_equal(draws, paper_fit.posterior_draws(40, seed=1))
+    spread = draws.std(axis=0)
+    assert np.all(spread > 0.0)
+    centre = np.abs(draws.mean(axis=0) - paper_fit.u_d_deg) / (spread / math.sqrt(40))
+    assert np.mean(centre < 3.0) > 0.95
+    low, high = np.percentile(draws, [2.5, 97.5], axis=0)
+    truth = col(paper_flight, "ud_true_deg")[:-1]
+    coverage = float(np.mean((truth >= low) & (truth <= high)))
+    assert 0.85 < coverage < 0.995, coverage
