@@ -52,20 +52,31 @@ def _db_setting(new: bool = False) -> Any:
     )
 
 
-def _methods_help(text: str) -> Callable[[], str]:
-    """Help listing the registered methods when the parser is made (plugins included)."""
+def _methods_help(text: str, flight: bool = False) -> Callable[[], str]:
+    """Help listing the registered methods when the parser is made (plugins included);
+    ``flight``: the default for a flight is named too."""
 
     def help_text() -> str:
-        return (
-            f"{text} (repeatable; default: {', '.join(default_methods())}; registered: "
-            f"{', '.join(METHODS.names())})"
-        )
+        flights = [m for m in METHODS.names() if traits(m).flight and traits(m).default]
+        default = ", ".join(default_methods())
+        if flight and flights:
+            default += f" (a flight: {', '.join(flights)})"
+        return f"{text} (repeatable; default: {default}; registered: {', '.join(METHODS.names())})"
 
     return help_text
 
 
 def _default_methods() -> list[str]:
     return list(default_methods())
+
+
+def _check_posterior_methods(methods: list[str]) -> None:
+    """``--posterior`` needs a method with a posterior among ``methods``."""
+    if not any(has_posterior(m) for m in methods):
+        raise UsageError(
+            "--posterior needs a method with a posterior (--method ml, or flight on a flight); "
+            f"none of {', '.join(methods)} has one"
+        )
 
 
 def _check_methods(methods: list[str]) -> None:
@@ -225,11 +236,6 @@ def identify(args: IdentifyArgs) -> int:
     recording = load_recording(args.recording)
     together = [load_recording(path) for path in args.together]
     methods = args.method or list(default_methods(recording))
-    if recording.is_flight and args.db is not None:
-        raise UsageError(
-            f"--db: {args.recording} is a flight (its airspeed_mps changes); the database holds "
-            "the tunnel's turbulence, and a flight's identification is not stored"
-        )
     if args.report is not None and "paper" in methods and recording.is_flight:
         raise UsageError(
             f"--report: the paper's report is of a tunnel run; {args.recording} is a flight"
@@ -680,8 +686,8 @@ class AddArgs:
     recording: Path = setting(help="recording file (CSV, format v1)", positional=True, input=True)
     db: str | None = _db_setting(new=True)
     method: list[str] = setting(
-        default_factory=_default_methods,
-        help=_methods_help("identification method to store"),
+        default_factory=list,
+        help=_methods_help("identification method to store", flight=True),
         metavar="METHOD",
     )
     surrogates: int = setting(
@@ -722,11 +728,8 @@ class AddArgs:
                 "--holdout splits the run between the train and test splits itself, without "
                 "surrogates: drop " + ("--split" if self.split is not None else "--surrogates")
             )
-        if self.posterior and not any(has_posterior(m) for m in self.method):
-            raise UsageError(
-                "--posterior needs a method with a posterior (--method ml); none of "
-                f"{', '.join(self.method)} has one"
-            )
+        if self.posterior and self.method:
+            _check_posterior_methods(self.method)
         for kind in self.surrogate_kind:
             if kind not in SURROGATE_KINDS:
                 raise UsageError(
@@ -745,6 +748,9 @@ def add(args: AddArgs) -> int:
 
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
+    methods = args.method or list(default_methods(recording))
+    if args.posterior:
+        _check_posterior_methods(methods)
     if args.split is not None:
         recording = dataclasses.replace(
             recording, metadata={**recording.metadata, "split": args.split}
@@ -754,7 +760,7 @@ def add(args: AddArgs) -> int:
             db,
             recording,
             options,
-            methods=args.method,
+            methods=methods,
             surrogates=args.surrogates,
             surrogate_kinds=tuple(args.surrogate_kind or ["iaaft"]),
             posterior=args.posterior,

@@ -61,6 +61,7 @@ from disturbances.rows import (
 )
 from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
 from identification.adequacy import VERDICTS
+from identification.flight import AirspeedScaling, FlightReference
 from identification.methods import METHODS
 from identification.model import MODEL_NAMES, RollParams
 from identification.recording import SOURCES, Recording
@@ -575,7 +576,8 @@ class DisturbanceDB:
         cur = conn.execute(
             "INSERT INTO identifications (recording_id, method, model, alpha, theta_bar_deg, "
             "beta_bar_per_s, alpha_bar_per_deg_s, metrics, options, package_version, created_at, "
-            "verdict) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            "verdict, v_ref_mps, rho_ref_kgm3, torque_exponent, damping_exponent) "
+            "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 recording_id,
                 row.method,
@@ -589,6 +591,7 @@ class DisturbanceDB:
                 row.package_version,
                 row.created_at,
                 row.verdict,
+                *_reference_columns(row.flight_reference),
             ),
         )
         return int(cur.lastrowid or 0)
@@ -747,7 +750,8 @@ class DisturbanceDB:
         "r.split, i.method, "
         "i.model, i.alpha, i.theta_bar_deg, i.beta_bar_per_s, i.alpha_bar_per_deg_s, t.dt_s, "
         "t.t0_s, t.n_samples, t.checksum, t.mean_deg, t.sd_deg, t.q05_deg, t.q95_deg, "
-        "t.normality_p, i.package_version, i.verdict, t.created_at, t.validation "
+        "t.normality_p, i.package_version, i.verdict, t.created_at, t.validation, "
+        "i.v_ref_mps, i.rho_ref_kgm3, i.torque_exponent, i.damping_exponent "
         "FROM traces t JOIN identifications i ON i.id = t.identification_id "
         "JOIN recordings r ON r.id = i.recording_id LEFT JOIN traces s ON s.id = t.source_trace_id"
     )
@@ -785,6 +789,7 @@ class DisturbanceDB:
                 verdict=r["verdict"],
                 id=r["id"],
                 recording_id=r["recording_id"],
+                flight_reference=_reference(r),
             )
         except ChecksumError:
             raise self._corrupt(r["uid"]) from None
@@ -999,3 +1004,28 @@ def _check_names(identifications: Sequence[IdentificationRow], traces: Sequence[
                 f"{exc}: register it (identification.methods.register_method) before storing "
                 "its results"
             ) from None
+
+
+def _reference_columns(
+    reference: FlightReference | None,
+) -> tuple[float | None, float | None, float | None, float | None]:
+    """An identification's flight-reference columns (NULL for a tunnel fit)."""
+    if reference is None:
+        return (None, None, None, None)
+    return (
+        reference.v_ref_mps,
+        reference.rho_ref_kgm3,
+        reference.scaling.torque_exponent,
+        reference.scaling.damping_exponent,
+    )
+
+
+def _reference(r: sqlite3.Row) -> FlightReference | None:
+    """The flight reference a row's columns hold (None for a tunnel fit)."""
+    if r["v_ref_mps"] is None:
+        return None
+    return FlightReference(
+        r["v_ref_mps"],
+        r["rho_ref_kgm3"],
+        AirspeedScaling(r["torque_exponent"], r["damping_exponent"]),
+    )

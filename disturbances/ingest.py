@@ -55,6 +55,7 @@ from disturbances.rows import (
     surrogate_uid,
 )
 from disturbances.stores import Store
+from identification.flight import FlightReference
 from identification.methods import (
     METHODS,
     Context,
@@ -122,6 +123,7 @@ def _trace_row(
         source=recording.source,
         split=recording.split,
         package_version=version,
+        flight_reference=FlightReference.from_metrics(fitted.metrics),
     )
 
 
@@ -281,8 +283,9 @@ def _check_posterior(methods: Sequence[str], posterior: int) -> None:
         )
 
 
-def _methods(methods: Sequence[str] | None) -> tuple[str, ...]:
-    chosen = default_methods() if methods is None else tuple(methods)
+def _methods(methods: Sequence[str] | None, recording: Recording | None = None) -> tuple[str, ...]:
+    """``methods``, or the default ones for ``recording`` (a flight's are the flight's)."""
+    chosen = default_methods(recording) if methods is None else tuple(methods)
     if not chosen:
         raise ValueError("give at least one identification method")
     for method in chosen:
@@ -313,7 +316,7 @@ def identification_rows(
     posterior_seed : int
         Seed of the first draw (the next ones count up).
     """
-    chosen = _methods(methods)
+    chosen = _methods(methods, context.recording)
     _check_posterior(chosen, posterior)
     stamp = now()
     version = package_version()
@@ -377,8 +380,10 @@ def add_recording(
     db : Store
         Where to store (:class:`~disturbances.db.DisturbanceDB` or another back end).
     recording : Recording
-        Any recording the pipeline accepts; not a flight (its ``u_d`` is not the
-        tunnel's, which the environments replay and fly).
+        Any recording the pipeline accepts; a flight is stored with its flight
+        method's fits (their reference airspeed and measured scaling, and ``u_d``
+        in flight: the tunnel's environments do not replay it, the flight
+        environment flies that rocket with it).
     options : IdentifyOptions, optional
         Identification settings (the paper's by default).
     methods : sequence of str, optional
@@ -402,15 +407,7 @@ def add_recording(
         for evaluation (:func:`holdout_rows`: a design part and the held-out one, in
         :data:`HOLDOUT_RANGE`); no surrogates then.
     """
-    if recording.is_flight:
-        from identification.steps import IdentificationError
-
-        raise IdentificationError(
-            f"recording {recording.name!r} is a flight (its airspeed_mps changes): the database "
-            "holds the tunnel's turbulence, which the environments replay and fly; identify "
-            "a flight with `rocketroll identify` (it is not stored)"
-        )
-    chosen = _methods(methods)
+    chosen = _methods(methods, recording)
     _check_posterior(chosen, posterior)
     source_method = _surrogate_method(chosen, surrogate_method)
     if holdout:
@@ -491,7 +488,7 @@ def add_identification(
     The pipeline's result is reused for ``method="paper"``; other methods run
     on the same measurements.
     """
-    chosen = _methods(methods)
+    chosen = _methods(methods, result.recording)
     _check_not_split(db, result.recording, chosen)
     return _store(
         db,

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.adequacy import VERDICTS
+from identification.flight import FlightReference
 from identification.model import RollParams, check_model
 from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
@@ -314,6 +315,12 @@ class IdentificationRow(_Row):
         return None if not isinstance(figures, Mapping) else figures.get("verdict")
 
     @property
+    def flight_reference(self) -> FlightReference | None:
+        """Where a flight fit's parameters hold and how they scale (from its metrics);
+        None for a tunnel fit."""
+        return FlightReference.from_metrics(self.metrics)
+
+    @property
     def key(self) -> tuple[str, str, str]:
         """``(recording_hash, method, model)``: unique in a database."""
         return (self.recording_hash, self.method, self.model)
@@ -404,6 +411,9 @@ class TraceRow(_Row):
         Row id in the database it was read from (use ``uid`` across databases).
     recording_id : int or None
         Its recording's row id there (use ``recording_hash`` across databases).
+    flight_reference : FlightReference or None
+        A flight fit's reference airspeed, density and scaling, where its ``params``
+        hold (None: a tunnel fit, at the tunnel's airspeed).
     """
 
     uid: str
@@ -430,6 +440,7 @@ class TraceRow(_Row):
     verdict: str | None = None
     id: int | None = None
     recording_id: int | None = None
+    flight_reference: FlightReference | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:

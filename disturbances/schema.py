@@ -3,7 +3,11 @@
 Version :data:`SCHEMA_VERSION` is written to ``PRAGMA user_version``; the
 file is marked with ``PRAGMA application_id`` :data:`APPLICATION_ID`.
 
-Version 3 (this one) adds each identification's adequacy ``verdict`` (good, weak or
+Version 4 (this one) stores flights: a flight method's identification holds its
+parameters at a reference airspeed and density with the airspeed scaling it measured
+(``v_ref_mps``, ``rho_ref_kgm3``, ``torque_exponent``, ``damping_exponent``:
+:class:`identification.flight.FlightReference`; NULL for the tunnel's, which hold at
+the tunnel's airspeed).  Version 3 adds each identification's adequacy ``verdict`` (good, weak or
 unreliable: :mod:`identification.adequacy`; NULL where it was not assessed -- a flight
 fit, or one stored before version 3 without it in its metrics).  Version 2 validates
 method, model, kind and source names in Python -- against the registries of identification methods
@@ -30,7 +34,7 @@ from pathlib import Path
 __all__ = ["APPLICATION_ID", "SCHEMA", "SCHEMA_VERSION", "TABLES", "backup_path", "migrate"]
 
 #: Version of the schema this package writes and reads.
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: ``PRAGMA application_id`` of a rocketroll disturbance database ("RRDB").
 APPLICATION_ID = 0x52524442
 
@@ -64,10 +68,25 @@ CREATE TABLE identifications (
     package_version     TEXT NOT NULL,
     created_at          TEXT NOT NULL,
     verdict             TEXT,
+    v_ref_mps           REAL CHECK (v_ref_mps > 0),
+    rho_ref_kgm3        REAL CHECK (rho_ref_kgm3 > 0),
+    torque_exponent     REAL,
+    damping_exponent    REAL,
+    CHECK ((v_ref_mps IS NULL) = (torque_exponent IS NULL)),
     UNIQUE (recording_id, method, model)
 )"""
+#: The flight reference's lines of the identifications table (version 4).
+_FLIGHT_COLUMNS = (
+    "    v_ref_mps           REAL CHECK (v_ref_mps > 0),\n"
+    "    rho_ref_kgm3        REAL CHECK (rho_ref_kgm3 > 0),\n"
+    "    torque_exponent     REAL,\n"
+    "    damping_exponent    REAL,\n"
+    "    CHECK ((v_ref_mps IS NULL) = (torque_exponent IS NULL)),\n"
+)
 #: The identifications table of version 2 (before its ``verdict``), what 1 -> 2 makes.
-_IDENTIFICATIONS_V2 = _IDENTIFICATIONS.replace("    verdict             TEXT,\n", "")
+_IDENTIFICATIONS_V2 = _IDENTIFICATIONS.replace(_FLIGHT_COLUMNS, "").replace(
+    "    verdict             TEXT,\n", ""
+)
 _TRACES = """
 CREATE TABLE traces (
     id                INTEGER PRIMARY KEY,
@@ -141,10 +160,18 @@ def _migrate_2_to_3(conn: sqlite3.Connection) -> None:
     )
 
 
+def _migrate_3_to_4(conn: sqlite3.Connection) -> None:
+    """Version 3 -> 4: the flight reference of an identification (none is stored before:
+    version 3 refused flights), with its checks, by rebuilding the table."""
+    _rebuild(conn, "identifications", _IDENTIFICATIONS)
+    conn.execute(_INDEXES[2])
+
+
 #: ``version -> migration`` to ``version + 1``, applied in order.
 MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     1: _migrate_1_to_2,
     2: _migrate_2_to_3,
+    3: _migrate_3_to_4,
 }
 
 

@@ -52,7 +52,7 @@ import functools
 import itertools
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -168,6 +168,50 @@ class AirspeedScaling:
 
 #: The scaling of eq. 4-8 at constant ``C_P``, ``C_δ``: torque ``∝ ρV²``, damping ``∝ ρV``.
 EQ_4_8 = AirspeedScaling()
+
+
+@dataclass(frozen=True)
+class FlightReference:
+    """Where a flight-identified rocket's parameters hold and how they scale from there:
+    the reference airspeed and density and the airspeed scaling (measured or held).
+
+    A tunnel identification has none (it holds at the tunnel's airspeed, scaled by eq. 4-8
+    in flight); a flight fit stores one with its parameters.
+    """
+
+    v_ref_mps: float
+    rho_ref_kgm3: float
+    scaling: AirspeedScaling = EQ_4_8
+
+    def __post_init__(self) -> None:
+        for name in ("v_ref_mps", "rho_ref_kgm3"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise UsageError(f"{name}: must be finite and > 0, not {value!r}")
+
+    def scales(
+        self, airspeed_mps: ArrayLike, density_kgm3: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """The gain's and the damping's factors at ``airspeed_mps`` and ``density_kgm3``
+        (:func:`roll_scales` from this reference)."""
+        return roll_scales(
+            airspeed_mps, density_kgm3, self.v_ref_mps, self.rho_ref_kgm3, self.scaling
+        )
+
+    @classmethod
+    def from_metrics(cls, metrics: Mapping[str, Any]) -> FlightReference | None:
+        """The reference a flight fit's metrics record (``v_ref_mps``, ``rho_ref_kgm3``,
+        ``torque_exponent``, ``damping_exponent``); None for a tunnel fit's."""
+        if "v_ref_mps" not in metrics or "rho_ref_kgm3" not in metrics:
+            return None
+        return cls(
+            float(metrics["v_ref_mps"]),
+            float(metrics["rho_ref_kgm3"]),
+            AirspeedScaling(
+                float(metrics.get("torque_exponent", 2.0)),
+                float(metrics.get("damping_exponent", 1.0)),
+            ),
+        )
 
 
 # --------------------------------------------------------------------------- atmosphere

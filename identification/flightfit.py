@@ -585,6 +585,8 @@ class FlightFit:
     u_d_deg : ndarray, shape (n,)
         Posterior mean of ``u_d`` over each sample interval (the flight's
         equivalent fin angle, °).
+    u_d_sd_deg : ndarray, shape (n,)
+        Its posterior SD, °.
     rate_dps : ndarray, shape (n + 1,)
         Posterior mean of the roll rate at the samples, °/s.
     converged : bool
@@ -617,6 +619,7 @@ class FlightFit:
     loglike: float
     std_errors: dict[str, float]
     u_d_deg: FloatArray
+    u_d_sd_deg: FloatArray
     rate_dps: FloatArray
     converged: bool
     estimates: dict[str, float]
@@ -642,7 +645,7 @@ class FlightFit:
         """``size`` draws of ``u_d`` per sample interval from its posterior given the flight
         (the simulation smoother of :mod:`identification.statespace`, at the fit's
         estimates), shape (size, n): each a turbulence the rocket may have flown."""
-        _, _, _, draws = _smoothed(self.inputs, self.estimates, size, seed)
+        _, _, _, _, draws = _smoothed(self.inputs, self.estimates, size, seed)
         return np.asarray(self.inputs.u_per_w * draws)
 
     def resimulate(self) -> dict[str, float]:
@@ -758,9 +761,10 @@ _SHOWN = (
 
 def _smoothed(
     inputs: FlightInputs, nat: dict[str, float], draws: int = 0, seed: int = 0
-) -> tuple[float, FloatArray, FloatArray, FloatArray]:
-    """Log-likelihood, smoothed rate at the samples, smoothed ``w̄`` per interval and
-    ``draws`` draws of ``w̄`` from its posterior (the simulation smoother, seeded)."""
+) -> tuple[float, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Log-likelihood, smoothed rate at the samples, smoothed ``w̄`` per interval, its
+    posterior SD and ``draws`` draws of ``w̄`` from its posterior (the simulation smoother,
+    seeded)."""
     params = _params(nat)
     system = _system(inputs, nat)
     assert params is not None and system is not None
@@ -777,12 +781,23 @@ def _smoothed(
             states[:-1, 2],
         )
 
+    # Var(w̄) from v1 = E·v0 + C0 + C1·w̄: the smoothed variances of the rates at both ends
+    # and their covariance, P[k, k+1 | y] = J[k]·P[k+1 | y] (the RTS lag-one covariance).
+    cov, rts = smoothed.cov, smoothed.smoother_gains
+    lag = np.einsum("kij,kjl->kil", rts[:-1], cov[1:])[:, 0, 0]
+    var = cov[1:, 0, 0] + e**2 * cov[:-1, 0, 0] - 2.0 * e * lag
+    tiny = np.abs(c1) <= 1e-9
+    sd = np.where(
+        tiny,
+        np.sqrt(np.maximum(cov[:-1, 2, 2], 0.0)),
+        np.sqrt(np.maximum(var, 0.0)) / np.where(tiny, 1.0, np.abs(c1)),
+    )
     samples = np.empty((draws, inputs.n))
     if draws:
         rng = np.random.default_rng(seed)
         for k, states in enumerate(statespace.simulation_smoother(system, smoothed, rng, draws)):
             samples[k] = mean_w(states)
-    return smoothed.loglike, smoothed.mean[:, 0], mean_w(smoothed.mean), samples
+    return smoothed.loglike, smoothed.mean[:, 0], mean_w(smoothed.mean), sd, samples
 
 
 def identify_flight(
@@ -947,7 +962,7 @@ def identify_flights(
     )
     fits = []
     for inputs in flights:
-        loglike, rate, mean_w, _ = _smoothed(inputs, nat)
+        loglike, rate, mean_w, sd_w, _ = _smoothed(inputs, nat)
         fits.append(
             FlightFit(
                 model=model,
@@ -959,6 +974,7 @@ def identify_flights(
                 loglike=loglike,
                 std_errors=errors,
                 u_d_deg=readonly_array(inputs.u_per_w * mean_w),
+                u_d_sd_deg=readonly_array(inputs.u_per_w * sd_w),
                 rate_dps=readonly_array(rate),
                 converged=bool(best.success),
                 estimates=nat,
@@ -1445,6 +1461,13 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "rate0_dps": float(result.rate_dps[0]),  # the re-simulation's start
         }
         fits[model] = ModelFit(
-            "flight", model, result.params, result.disturbance(), metrics, settings
+            "flight",
+            model,
+            result.params,
+            result.disturbance(),
+            metrics,
+            settings,
+            u_d_sd_deg=result.u_d_sd_deg,
+            sample_posterior=result.posterior_draws,
         )
     return [fits[model] for model in models]

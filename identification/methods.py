@@ -471,8 +471,10 @@ register_method(
     "flight",
     "identification.flightfit:flight_method",
     summary="a flight (a recording with airspeed_mps): maximum likelihood of a, α at a "
-    "reference airspeed (--v-ref) scaled along the flight by eq. 4-8, the turbulence a "
-    "field flown through; u_d from the Kalman smoother",
+    "reference airspeed (--v-ref) with the airspeed scaling measured (fin torque ∝ ρV^n, "
+    "damping ∝ ρV^m) and eq. 4-8 tested, the turbulence a field flown through; u_d from "
+    "the Kalman smoother, its posterior draws from the simulation smoother",
     default=True,
     flight=True,
+    posterior=True,
 )

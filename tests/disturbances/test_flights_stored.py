@@ -1,0 +1,68 @@
+"""A flight in the database: its fits at their reference airspeed with the measured
+scaling, its u_d and posterior draws, kept apart from the tunnel's traces."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from disturbances.bank import TraceBank
+from disturbances.db import DisturbanceDB
+from disturbances.flightlog import FlightLogSpec, run_flight
+from identification.flight import AirspeedScaling, FlightReference
+from identification.recording import save_recording
+from rocketroll.cli import main
+
+
+@pytest.fixture(scope="module")
+def stored(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("flights")
+    flight = root / "flight.csv"
+    save_recording(
+        run_flight(FlightLogSpec(seed=3, model="constant", torque_exponent=1.5, split="test")),
+        flight,
+    )
+    db = root / "db.sqlite"
+    assert main(["db", "add", str(flight), "--db", str(db), "--posterior", "3"]) == 0
+    assert main(["tunnel", "--seed", "0", "--out", str(root / "tunnel.csv")]) == 0
+    assert main(["db", "add", str(root / "tunnel.csv"), "--db", str(db), "--split", "test"]) == 0
+    return db
+
+
+def test_a_flight_is_stored_with_its_reference_and_measured_scaling(stored: Path) -> None:
+    with DisturbanceDB(stored, create=False) as db:
+        flights = db.identifications(method="flight")
+        assert {row.model for row in flights} == {"constant", "theta"}
+        for row in flights:
+            reference = row.flight_reference
+            assert reference is not None
+            assert reference.v_ref_mps == row.metrics["v_ref_mps"]
+            assert abs(reference.scaling.torque_exponent - 1.5) < 0.1
+            assert row.verdict in ("good", "weak")
+        assert all(row.flight_reference is None for row in db.identifications(method="paper"))
+        traces = db.traces(method="flight")
+        assert sorted(t.kind for t in traces).count("posterior") == 6  # 3 draws per model
+        assert all(
+            t.flight_reference == flights[0].flight_reference
+            or t.flight_reference == flights[1].flight_reference
+            for t in traces
+        )
+        assert traces[0].dt_s == pytest.approx(0.01)  # u_d in the flight's own time
+        # The tunnel's replay never takes a flight's u_d (which is an equivalent fin angle
+        # in flight): its banks are of the tunnel's methods.
+        bank = TraceBank.from_db(db, "test", method="paper", model="theta")
+        assert all(t.flight_reference is None for t in bank.traces)
+
+
+def test_the_schema_keeps_a_reference_whole(stored: Path) -> None:
+    conn = sqlite3.connect(stored)
+    with pytest.raises(sqlite3.IntegrityError, match="CHECK"):
+        conn.execute("UPDATE identifications SET torque_exponent = NULL WHERE method = 'flight'")
+    with pytest.raises(sqlite3.IntegrityError, match="CHECK"):
+        conn.execute("UPDATE identifications SET v_ref_mps = -1 WHERE method = 'flight'")
+    conn.close()
+    reference = FlightReference(50.0, 1.0, AirspeedScaling(1.5, 1.0))
+    gain, damping = reference.scales(100.0, 0.5)
+    assert float(gain) == pytest.approx(2.0**0.5) and float(damping) == pytest.approx(1.0)
