@@ -119,6 +119,11 @@ P11_PA = P0_PA * (T11_K / T0_K) ** (G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK))
 #: ISA sea-level density, kg/m³ (1.2250): the tunnel's reference density ρ0.
 ISA_SEA_LEVEL_DENSITY_KGM3 = P0_PA / (R_AIR_JPKGK * T0_K)
 
+#: Mach number above which the roll model (eq. 4-8 at constant coefficients: subsonic
+#: aerodynamics, the paper's §4) does not hold: the flight method leaves such samples out
+#: unless asked, and a flight environment whose profile goes past it warns.
+MACH_LIMIT = 0.8
+
 #: The wind tunnel's airspeed, m/s: "roughly 50 km/h" (paper §4).  The
 #: identified ``a`` and ``α`` hold at this airspeed and sea-level density.
 TUNNEL_AIRSPEED_MPS = 50.0 / 3.6

@@ -62,6 +62,7 @@ from identification import statespace
 from identification.flight import (
     EQ_4_8,
     ISA_SEA_LEVEL_DENSITY_KGM3,
+    MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
     isa,
@@ -88,6 +89,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "EQ_4_8_TEST_SIZE",
+    "MACH_LIMIT",
     "FlightFit",
     "FlightInputs",
     "c_coefficients",
@@ -1140,11 +1142,6 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         "verdict": found.verdict,
         "reasons": list(found.reasons),
     }
-
-
-#: Mach number above which the roll model (eq. 4-8, subsonic aerodynamics) is not fitted
-#: unless asked (``--include-supersonic``).
-MACH_LIMIT = 0.8
 
 
 def mach_numbers(recording: Recording) -> FloatArray:

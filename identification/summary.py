@@ -66,6 +66,7 @@ class RecordingSummary:
     roll_total_deg: float | None
     truth: dict[str, str] | None
     ud_true: dict[str, float] | None
+    flight: dict[str, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -81,9 +82,30 @@ class RecordingSummary:
             f"columns        {', '.join(self.columns)}",
             f"fin angle      {self.fin_min_deg:g} .. {self.fin_max_deg:g} °"
             + ("" if self.fin_changes is None else f", {self.fin_changes} command changes"),
-            f"mean |rate|    {self.mean_abs_rate_dps:.2f} °/s  (from {self.rate_source}; "
-            f"paper: {paper.MEAN_ABS_RATE_DPS:g} °/s)",
+            f"mean |rate|    {self.mean_abs_rate_dps:.2f} °/s  (from {self.rate_source}"
+            + (
+                f"; paper: {paper.MEAN_ABS_RATE_DPS:g} °/s)"
+                if self.flight is None
+                else "; a flight: the paper's figure is the tunnel's)"
+            ),
         ]
+        if self.flight is not None:
+            f = self.flight
+            lines.append(
+                f"airspeed       {f['airspeed_min_mps']:.1f} .. {f['airspeed_max_mps']:.1f} m/s, "
+                f"peak Mach {f['peak_mach']:.2f}"
+                + (" (above 0.8: the roll model is subsonic)" if f["peak_mach"] > 0.8 else "")
+            )
+            if "altitude_min_m" in f:
+                lines.append(
+                    f"altitude       {f['altitude_min_m']:.0f} .. {f['altitude_max_m']:.0f} m "
+                    "above sea level"
+                    + (
+                        f" (logged above the pad, site {f['site_elevation_m']:g} m)"
+                        if f.get("site_elevation_m")
+                        else ""
+                    )
+                )
         if self.roll_total_deg is not None:
             lines.append(f"roll travel    {self.roll_total_deg:.1f} °")
         if self.truth:
@@ -149,7 +171,28 @@ def summarize(recording: Recording) -> RecordingSummary:
         else float(recording.roll_deg[-1] - recording.roll_deg[0]),
         truth=truth,
         ud_true=ud_stats,
+        flight=_flight(recording),
     )
+
+
+def _flight(recording: Recording) -> dict[str, float] | None:
+    """A flight's airspeed, Mach and altitude ranges (None for a tunnel run)."""
+    if not recording.is_flight:
+        return None
+    from identification.flightfit import mach_numbers, site_elevation
+
+    assert recording.airspeed_mps is not None
+    out = {
+        "airspeed_min_mps": float(recording.airspeed_mps.min()),
+        "airspeed_max_mps": float(recording.airspeed_mps.max()),
+        "peak_mach": float(mach_numbers(recording).max()),
+    }
+    if recording.altitude_m is not None:
+        site = site_elevation(recording)
+        out["altitude_min_m"] = float(recording.altitude_m.min()) + site
+        out["altitude_max_m"] = float(recording.altitude_m.max()) + site
+        out["site_elevation_m"] = site
+    return out
 
 
 def plot_recording(recording: Recording) -> bytes:

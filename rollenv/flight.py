@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +35,7 @@ from disturbances.flight import flight_bank
 from disturbances.rows import derived_row
 from identification.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
+    MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
     FlightProfile,
     flight_profile,
@@ -133,6 +135,14 @@ def flight_schedule(
 def _schedule(
     profile: FlightProfile, dt_s: float, substep_s: float, v_ref_mps: float, rho_ref_kgm3: float
 ) -> FlightSchedule:
+    if profile.max_mach > MACH_LIMIT:
+        warnings.warn(
+            f"flight: {profile.source} reaches Mach {profile.max_mach:.2f}; the roll model's "
+            f"airspeed scaling is subsonic (above Mach {MACH_LIMIT:g} it does not hold), so "
+            "the environment's rocket is not the real one there",
+            UserWarning,
+            stacklevel=3,
+        )
     start, end = profile.window(v_ref_mps)
     steps = math.floor((end - start) / dt_s + 1e-9)
     if steps < 1:

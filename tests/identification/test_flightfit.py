@@ -802,3 +802,14 @@ def test_posterior_draws_of_u_d_cover_the_turbulence_flown(paper_flight, paper_f
     truth = col(paper_flight, "ud_true_deg")[:-1]
     coverage = float(np.mean((truth >= low) & (truth <= high)))
     assert 0.85 < coverage < 0.995, coverage
+
+
+def test_info_on_a_flight_says_its_airspeed_not_the_tunnels_figure(
+    tmp_path: Path, paper_flight: Recording, capsys
+):
+    path = tmp_path / "flight.csv"
+    save_recording(paper_flight, path)
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "a flight: the paper's figure is the tunnel's" in out and "paper: 16.4" not in out
+    assert "peak Mach 0.50" in out and "altitude       " in out

@@ -10,6 +10,7 @@ given to a flight is flown first.
 from __future__ import annotations
 
 import functools
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -204,3 +205,16 @@ def test_rocketroll_env_flight_summarises_and_plots(tmp_path, capsys) -> None:
     assert str(bad) in err and "propellant_mass_kg: is missing" in err
     assert main(["env", "flight", "--flight", str(tmp_path / "none.yml")]) == 2
     assert "No such file" in capsys.readouterr().err
+
+
+def test_a_profile_past_mach_0_8_warns_that_the_model_is_subsonic(tmp_path) -> None:
+    t = np.linspace(0.0, 40.0, 401)
+    speed = np.interp(t, [0.0, 5.0, 40.0], [0.0, 320.0, 0.0])  # Mach 0.94 at 5 s
+    rows = "\n".join(f"{a:.2f},{v:.3f}" for a, v in zip(t, speed, strict=True))
+    fast = tmp_path / "fast.csv"
+    fast.write_text("time_s,airspeed_mps\n" + rows + "\n", encoding="utf-8")
+    with pytest.warns(UserWarning, match=r"reaches Mach 0\.9\d; .* subsonic"):
+        flight_schedule(str(fast), 0.1, 0.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        flight_schedule("default", 0.1, 0.01)  # Mach 0.50: nothing to say
