@@ -148,10 +148,19 @@ def replay_config(
     :func:`fit_episode`), the bank of ``split``, the options (with the fitted
     ``episode_s``: what a rerun or a Minari dataset needs), and the line that says the
     episode was fitted (None: it was not)."""
-    from rollenv.bank import load_bank
+    from rollenv.bank import load_bank, stored_flight_config
 
     options = replay_options(settings, recording)
     config = options_config(env_id, options, split)
+    flown = stored_flight_config(config, db)  # a stored flight, flown as that rocket
+    if flown is not config:
+        config = flown
+        options = {
+            **options,
+            "flight": config.flight,
+            "method": config.method,
+            "flight_turbulence": config.flight_turbulence,
+        }
     bank = load_bank(config, db)
     config, note = fit_episode(config, [bank], options)
     if note is not None:

@@ -387,7 +387,7 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                     + ", ".join(m["fitted_with"])
                 )
     return (
-        "flight identification (eq. 4-8: a ∝ ρV, α ∝ V)\n"
+        "flight identification (fin torque ∝ ρV^n, damping a ∝ ρV^m: α ∝ V^(n-m))\n"
         + "\n".join(lines)
         + "\n\n"
         + (methods_table(fits))

@@ -81,12 +81,15 @@ __all__ = [
     "AscentSpec",
     "Atmosphere",
     "FlightProfile",
+    "FlightReference",
     "FlightState",
+    "MACH_LIMIT",
     "flight_profile",
     "isa",
     "load_ascent_yaml",
     "load_profile_csv",
     "plot_profile",
+    "recorded_profile",
     "roll_scales",
     "simulate_ascent",
 ]
@@ -1160,6 +1163,18 @@ def load_profile_csv(
             f"{where}:{lines[k]}: altitude {altitude[k]:g} m is outside the standard "
             f"atmosphere's range [{ISA_MIN_ALTITUDE_M:g}, {ISA_MAX_ALTITUDE_M:g}] m"
         )
+    return recorded_profile(t, speed, altitude, f"recorded: {origin}")
+
+
+def recorded_profile(
+    t_s: ArrayLike, airspeed_mps: ArrayLike, altitude_m: ArrayLike, source: str
+) -> FlightProfile:
+    """A :class:`FlightProfile` of a logged flight: its times, airspeed (m/s) and altitude
+    above sea level (m), checked by the caller; density, ``q`` and Mach from :func:`isa`;
+    mass and burnout unknown (NaN); apogee the highest sample."""
+    t = np.asarray(t_s, dtype=float)
+    speed = np.asarray(airspeed_mps, dtype=float)
+    altitude = np.asarray(altitude_m, dtype=float)
     air = isa(altitude)
     density = np.asarray(air.density_kgm3)
     top = int(np.argmax(altitude))
@@ -1175,7 +1190,7 @@ def load_profile_csv(
         apogee_s=float(t[top]),
         apogee_m=float(altitude[top]),
         max_speed_mps=float(speed.max()),
-        source=f"recorded: {origin}",
+        source=source,
     )
 
 

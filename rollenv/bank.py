@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import os
 import threading
@@ -12,8 +13,9 @@ from typing import Any
 from disturbances.bank import TraceBank
 from disturbances.default import open_database
 from rollenv.core import RollConfig, config_fields
+from rollenv.flight import stored_flight_name
 
-__all__ = ["find_bank", "load_bank", "make_config", "variant_config"]
+__all__ = ["find_bank", "load_bank", "make_config", "stored_flight_config", "variant_config"]
 
 _CACHE: dict[tuple[Any, ...], TraceBank] = {}
 _LOCK = threading.Lock()
@@ -89,9 +91,12 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
                 only: dict[str, Any] = {}
                 if config.recording is not None:
                     only["recording"] = config.recording
+                split = config.split
+                if config.flies_stored_flight:  # one flight's rocket and u_d, in its split
+                    split = _split_of(database, str(config.recording))
                 bank = TraceBank.from_db(
                     database,
-                    config.split,
+                    split,
                     method=config.method,
                     model=config.model,
                     kind=kind,
@@ -104,6 +109,47 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     finally:
         database.close()
     return bank
+
+
+def _split_of(database: Any, recording: str) -> str:
+    """The split a stored flight's traces are in (a flight is flown as that rocket, with
+    its own u_d: there is no other split to evaluate it on)."""
+    splits = {t.split for t in database.traces(recording=recording, method=_flight_methods())}
+    return splits.pop() if len(splits) == 1 else "train"
+
+
+def _flight_methods() -> list[str]:
+    from identification.methods import METHODS, traits
+
+    return [m for m in METHODS.names() if traits(m).flight]
+
+
+def stored_flight_config(config: RollConfig, db: str | os.PathLike[str] | None) -> RollConfig:
+    """``config`` flying the stored flight ``config.recording`` as that rocket, where it
+    is a flight environment (``flight`` given) and the database holds that recording's
+    flight fit: its profile, its airspeed scaling and its own ``u_d``
+    (:func:`rollenv.flight.stored_flight_name`, ``method="flight"``,
+    ``flight_turbulence="recorded"``); ``config`` itself otherwise."""
+    if config.flight is None or config.recording is None or config.flies_stored_flight:
+        return config
+    database = open_database(None if db is None else Path(db))
+    try:
+        path = str(Path(database.path).resolve())
+        methods = [
+            row.method
+            for row in database.identifications(recording=config.recording, model=config.model)
+            if row.flight_reference is not None
+        ]
+    finally:
+        database.close()
+    if not methods:
+        return config
+    return dataclasses.replace(
+        config,
+        flight=stored_flight_name(path, config.recording),
+        method=methods[-1],
+        flight_turbulence="recorded",
+    )
 
 
 def find_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBank | None:

@@ -48,7 +48,7 @@ from disturbances.bank import TraceBank
 from identification.compiled import piece
 from identification.methods import METHODS, has_posterior
 from identification.model import MODEL_NAMES, RollParams, Servo
-from rollenv.flight import FlightSchedule, flight_schedule, for_flight
+from rollenv.flight import STORED_PREFIX, FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
     OBSERVATION_NAMES,
     Cfg,
@@ -80,7 +80,7 @@ DISTURBANCES = ("replay", "surrogate", "posterior", "none")
 SETPOINTS = ("steps", "zero")
 SPLITS = ("train", "test")
 ANGLE_SENSORS = ("encoder", "gyro")
-FLIGHT_TURBULENCE = ("tunnel", "dryden")
+FLIGHT_TURBULENCE = ("tunnel", "dryden", "recorded")
 GUST_SEVERITIES = ("light", "moderate", "severe")
 #: Episode length of the tunnel (no ``flight``), s.
 TUNNEL_EPISODE_S = 60.0
@@ -132,7 +132,10 @@ class RollConfig:
         With ``flight``: ``"tunnel"`` (default) flies the database's traces
         (``disturbance`` chooses which), time-compressed and scaled by
         :mod:`disturbances.flight`; ``"dryden"`` draws the standard
-        atmosphere's roll gust instead (:mod:`disturbances.dryden`).
+        atmosphere's roll gust instead (:mod:`disturbances.dryden`);
+        ``"recorded"`` replays a stored flight's own ``u_d`` (with
+        ``recording`` naming a flight in the database, the environment flies
+        that rocket: :func:`rollenv.bank.stored_flight_config`).
     gust_severity : str
         ``"light"``, ``"moderate"`` or ``"severe"`` (the Dryden model's
         turbulence levels; ``flight_turbulence="dryden"`` only).
@@ -338,11 +341,17 @@ class RollConfig:
         return float(self.episode_s)
 
     @property
+    def flies_stored_flight(self) -> bool:
+        """Whether ``flight`` is a flight stored in a database, flown as that rocket
+        (:func:`rollenv.flight.stored_flight_name`)."""
+        return self.flight is not None and self.flight.startswith(STORED_PREFIX)
+
+    @property
     def flight_schedule(self) -> FlightSchedule | None:
         """The flight on this configuration's grid (None in the tunnel)."""
         if self.flight is None:
             return None
-        return flight_schedule(self.flight, self.dt_s, self.substep_s)
+        return flight_schedule(self.flight, self.dt_s, self.substep_s, model=self.model)
 
     def flights(self, bank: TraceBank) -> TraceBank:
         """The traces this configuration replays from ``bank``: ``bank`` itself in the

@@ -15,6 +15,14 @@ configuration:
 * **the turbulence** is flown: a tunnel trace time-compressed and scaled by
   :mod:`disturbances.flight`, sampled on the env's substep grid.
 
+A flight stored in the database (``rocketroll db add`` of a flight log: its
+rocket identified at a reference airspeed with its measured airspeed scaling)
+is flown as **that rocket** (:func:`stored_flight_name`, ``flight="db:PATH#NAME"``):
+its own V(t) and altitude, its gain and damping scaled by its own exponents
+(:class:`identification.flight.FlightReference`), and its own ``u_d`` -- the
+identified one or its posterior draws, already in flight time -- replayed
+(``flight_turbulence="recorded"``).
+
 Documented assumptions: constant ``C_P``, ``C_δ`` and inertia (subsonic: the
 default flight peaks at Mach 0.5, the paper's §4 warns of change past 0.8);
 θ̄ (a geometric asymmetry) does not change with airspeed; ᾱ and β̄ of a(θ)
@@ -30,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from disturbances.bank import TraceBank
+from disturbances.bank import TraceBank, interval_means
 from disturbances.flight import flight_bank
 from disturbances.rows import derived_row
 from identification.flight import (
@@ -38,7 +46,9 @@ from identification.flight import (
     MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
     FlightProfile,
+    FlightReference,
     flight_profile,
+    recorded_profile,
     roll_scales,
 )
 from rocketroll_common.arrays import FloatArray, readonly_array
@@ -50,6 +60,7 @@ __all__ = [
     "flight_profile",
     "flight_schedule",
     "for_flight",
+    "stored_flight_name",
     "turbulence_of",
 ]
 
@@ -86,7 +97,11 @@ class FlightSchedule:
         ``airspeed_mps``, ``altitude_m``, ``dynamic_pressure_pa``, ``mach``
         (the env's ``info``; precomputed, so a step reads them, not interpolates).
     v_ref_mps, rho_ref_kgm3 : float
-        The tunnel's airspeed and density (where the model was identified).
+        The tunnel's airspeed and density (where the model was identified, and where the
+        episode starts).
+    reference : FlightReference or None
+        A stored flight's rocket's reference and scaling, which ``scales`` follow
+        (None: the tunnel's rocket by eq. 4-8 from ``v_ref_mps``, ``rho_ref_kgm3``).
     """
 
     profile: FlightProfile
@@ -100,6 +115,7 @@ class FlightSchedule:
     at_steps: dict[str, FloatArray]
     v_ref_mps: float
     rho_ref_kgm3: float
+    reference: FlightReference | None = None
 
     @property
     def duration_s(self) -> float:
@@ -124,16 +140,93 @@ def flight_schedule(
     substep_s: float,
     v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
     rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
+    model: str = "theta",
 ) -> FlightSchedule:
-    """The flight ``name`` (:func:`flight_profile`) on a grid of ``dt_s`` control steps of
-    ``substep_s`` substeps; ``ValueError`` if it never reaches ``v_ref_mps`` or is shorter
-    than one control step after that.  Cached per profile and grid."""
+    """The flight ``name`` (:func:`flight_profile`, or a stored flight's
+    :func:`stored_flight_name`, whose ``model`` fit gives the rocket's scaling) on a grid
+    of ``dt_s`` control steps of ``substep_s`` substeps; ``ValueError`` if it never
+    reaches ``v_ref_mps`` or is shorter than one control step after that.  Cached per
+    profile and grid."""
+    if name.startswith(STORED_PREFIX):
+        profile, reference = stored_flight(name, model)
+        return _schedule(profile, dt_s, substep_s, v_ref_mps, rho_ref_kgm3, reference)
     return _schedule(flight_profile(name), dt_s, substep_s, v_ref_mps, rho_ref_kgm3)
+
+
+#: How a stored flight is named as a profile: ``db:PATH#RECORDING``.
+STORED_PREFIX = "db:"
+
+
+def stored_flight_name(db_path: str, recording: str) -> str:
+    """The ``flight`` of a configuration that flies the flight ``recording`` stored in the
+    database at ``db_path`` as that rocket (its profile, scaling and ``u_d``)."""
+    return f"{STORED_PREFIX}{db_path}#{recording}"
+
+
+def stored_flight(name: str, model: str) -> tuple[FlightProfile, FlightReference]:
+    """The profile of the stored flight ``name`` (:func:`stored_flight_name`: its logged
+    airspeed and altitude, the site's elevation added back) and its ``model`` fit's
+    reference and scaling.  Cached per file state.
+
+    Raises
+    ------
+    ValueError
+        If the name is not a stored flight's, the database cannot be opened, or holds no
+        flight fit of ``model`` for the recording.
+    """
+    import os
+
+    path, sep, recording = name.removeprefix(STORED_PREFIX).rpartition("#")
+    if not (name.startswith(STORED_PREFIX) and sep and path and recording):
+        raise ValueError(f"flight: {name!r} is not a stored flight (db:PATH#RECORDING)")
+    try:
+        stat = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"flight: {path}: {exc.strerror or 'cannot be read'}") from None
+    return _stored(path, recording, model, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _stored(
+    path: str, recording: str, model: str, mtime_ns: int, size: int
+) -> tuple[FlightProfile, FlightReference]:
+    del mtime_ns, size  # the cache key: a changed file is read again
+    from disturbances.db import DisturbanceDB
+    from identification.flightfit import site_elevation
+
+    with DisturbanceDB(path, create=False) as db:
+        fits = [
+            row
+            for row in db.identifications(recording=recording, model=model)
+            if row.flight_reference is not None
+        ]
+        if not fits:
+            raise ValueError(
+                f"flight: {path} holds no flight fit of the {model} model for {recording!r} "
+                f"(rocketroll db add FLIGHT.csv --db {path})"
+            )
+        reference = fits[-1].flight_reference
+        assert reference is not None
+        log = db.recording(fits[-1].recording_hash)
+    if log.airspeed_mps is None or log.altitude_m is None:
+        raise ValueError(f"flight: {recording!r} in {path} logs no airspeed and altitude")
+    profile = recorded_profile(
+        log.time_s,
+        np.maximum(log.airspeed_mps, 0.0),
+        log.altitude_m + site_elevation(log),
+        f"stored flight {recording} ({path})",
+    )
+    return profile, reference
 
 
 @functools.lru_cache(maxsize=16)
 def _schedule(
-    profile: FlightProfile, dt_s: float, substep_s: float, v_ref_mps: float, rho_ref_kgm3: float
+    profile: FlightProfile,
+    dt_s: float,
+    substep_s: float,
+    v_ref_mps: float,
+    rho_ref_kgm3: float,
+    reference: FlightReference | None = None,
 ) -> FlightSchedule:
     if profile.max_mach > MACH_LIMIT:
         warnings.warn(
@@ -148,7 +241,12 @@ def _schedule(
     if steps < 1:
         raise ValueError(f"flight: {profile.source} lasts less than one control step")
     middle = profile.at(start + dt_s * (np.arange(steps) + 0.5))
-    gain, damping = roll_scales(middle.airspeed_mps, middle.density_kgm3, v_ref_mps, rho_ref_kgm3)
+    if reference is None:
+        gain, damping = roll_scales(
+            middle.airspeed_mps, middle.density_kgm3, v_ref_mps, rho_ref_kgm3
+        )
+    else:
+        gain, damping = reference.scales(middle.airspeed_mps, middle.density_kgm3)
     scales = np.maximum(np.column_stack([gain, damping]), MIN_SCALE)
     substeps = round(dt_s / substep_s)
     edges = substep_s * np.arange(steps * substeps + 1)
@@ -167,6 +265,7 @@ def _schedule(
         at_steps=at_steps,
         v_ref_mps=v_ref_mps,
         rho_ref_kgm3=rho_ref_kgm3,
+        reference=reference,
     )
 
 
@@ -206,6 +305,8 @@ def for_flight(
     ``substeps`` substeps, on ``bank``'s rockets.  Cached.
 
     ``turbulence="tunnel"``: ``bank``'s traces flown (:func:`disturbances.flight.flight_bank`).
+    ``"recorded"``: a stored flight's own ``u_d`` traces (identified or posterior draws,
+    in flight time), averaged onto the episode's substeps from its start.
     ``"dryden"``: :data:`DRYDEN_FLIGHTS` draws of the Dryden roll gust ``p_g``
     (:func:`disturbances.dryden.roll_gust`, ``severity``, seeded by ``split``) along the
     flight, the rockets taken in turn from ``bank``, as the equivalent fin angle
@@ -213,6 +314,8 @@ def for_flight(
     p_g)``, which is eq. 36 with ``α·u_d = p_g``.  A bank of flights of that turbulence is
     returned as it is.
     """
+    if turbulence == "recorded":
+        return _recorded(bank, schedule, steps * substeps + 1)
     made = turbulence_of(bank)
     if made == turbulence:
         return bank
@@ -239,6 +342,25 @@ def for_flight(
         _FLIGHTS.clear()
     _FLIGHTS[key] = (bank, result)
     return result
+
+
+def _recorded(bank: TraceBank, schedule: FlightSchedule, m: int) -> TraceBank:
+    """A stored flight's traces on the episode's ``m`` substep edges from its start."""
+    made = turbulence_of(bank)
+    if made == "recorded":
+        return bank
+    h = float(schedule.edges_s[1] - schedule.edges_s[0])
+    rows = []
+    for source in bank.traces:
+        if source.flight_reference is None or source.u_d_deg is None:
+            raise ValueError(
+                f"flight_turbulence='recorded' replays a stored flight's own u_d; "
+                f"{bank.description} holds the tunnel's (trace {source.uid})"
+            )
+        edges = schedule.start_s - source.t0_s + schedule.edges_s[:m]
+        u = interval_means(source.u_d_deg, source.dt_s, edges)
+        rows.append(derived_row(source, u, h, "recorded", {"turbulence": "recorded"}))
+    return TraceBank(rows, f"{bank.description}, as recorded in flight")
 
 
 def _dryden(

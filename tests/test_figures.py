@@ -244,6 +244,62 @@ def test_the_bring_your_own_rocket_guide_runs_as_written(
     assert "| observer |" in table and "(trained on another database's rockets)" in table
 
 
+def test_the_fly_your_flight_log_guide_runs_as_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The flight guide's commands on a flight computer's log: a virtual flight of a rocket
+    whose fin torque grows as ρV^1.5, from a pad at 1500 m, written with time in ms,
+    airspeed in km/h and altitude in feet above the pad."""
+    import shlex
+
+    from disturbances.flightlog import FlightLogSpec, run_flight
+
+    ascent = tmp_path / "high.yml"
+    default = (Path(__file__).parent.parent / "identification/data/ascent-default.yml").read_text(
+        encoding="utf-8"
+    )
+    ascent.write_text(default.replace("launch_altitude_m: 0.0", "launch_altitude_m: 1500.0"))
+    rec = run_flight(
+        FlightLogSpec(
+            seed=5, model="constant", torque_exponent=1.5, ascent=str(ascent),
+            altitude_above_ground=True,
+        )
+    )  # fmt: skip
+    assert rec.fin_cmd_deg is not None and rec.roll_rate_dps is not None
+    assert rec.airspeed_mps is not None and rec.altitude_m is not None
+    columns = [
+        1000.0 * rec.time_s, rec.fin_cmd_deg, rec.roll_rate_dps, 3.6 * rec.airspeed_mps,
+        rec.altitude_m / 0.3048,
+    ]  # fmt: skip
+    np.savetxt(
+        tmp_path / "log.csv", np.column_stack(columns), delimiter=",", fmt="%.9g",
+        header="t_ms,fin,gyro,v_kmh,h_ft", comments="",
+    )  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    section = page("guides/own-flight.md")
+    block = section.split("```bash\n", 1)[1].split("```", 1)[0]
+    commands = [
+        shlex.split(line)[1:] for line in block.splitlines() if line.startswith("rocketroll")
+    ]
+    assert 1 <= len(commands) <= 4
+    printed = []
+    for argv in commands:
+        assert rocketroll(argv) == 0, argv
+        printed.append(capsys.readouterr().out)
+    fits = [line for line in printed[1].splitlines() if line.startswith("flight ") and "[" in line]
+    assert len(fits) == 2 and all("[good]" in line for line in fits), printed[1]
+    assert "scaling measured" in printed[1] and "eq. 4-8 (n 2, m 1) rejected" in printed[1]
+    assert (tmp_path / "flight-report" / "flight_identification.png").is_file()
+    assert "8 posterior" in printed[2] or "traces" in printed[2]
+    assert "recording myflight" in printed[3]
+    rows = {
+        line.split("|")[1].strip(): float(line.split("|")[2].split("±")[0])
+        for line in (tmp_path / "flight-eval" / "table.md").read_text().splitlines()
+        if line.startswith("| ") and not line.startswith("| controller")
+    }
+    assert rows["PID"] < 0.5 * rows["trim"], rows
+
+
 # ------------------------------------------------------------------ the README, a front page
 def test_the_front_page_is_short_and_its_headline_table_is_the_results_tables() -> None:
     """The README stays a front page (at most 200 lines), and its headline table is the

@@ -66,3 +66,45 @@ def test_the_schema_keeps_a_reference_whole(stored: Path) -> None:
     reference = FlightReference(50.0, 1.0, AirspeedScaling(1.5, 1.0))
     gain, damping = reference.scales(100.0, 0.5)
     assert float(gain) == pytest.approx(2.0**0.5) and float(damping) == pytest.approx(1.0)
+
+
+def test_the_flight_env_flies_a_stored_flight_as_that_rocket(stored: Path) -> None:
+    """``recording=`` naming a stored flight: its profile, its measured scaling from its
+    reference, and its own posterior u_d, from the moment it reaches the tunnel's airspeed."""
+    import gymnasium as gym
+    import numpy as np
+
+    import rollenv  # noqa: F401  (registers the variants)
+    from identification.flight import TUNNEL_AIRSPEED_MPS
+
+    with DisturbanceDB(stored, create=False) as db:
+        (fit,) = db.identifications(method="flight", model="theta")
+        draws = [t for t in db.traces(method="flight", model="theta") if t.kind == "posterior"]
+    env = gym.make("RocketRollFlight-v0", db=str(stored), recording=fit.recording)
+    config = env.unwrapped.config  # type: ignore[attr-defined]
+    assert config.flies_stored_flight and config.method == "flight"
+    assert config.flight_turbulence == "recorded" and config.disturbance == "posterior"
+    schedule = config.flight_schedule
+    assert schedule.reference == fit.flight_reference
+    # The gain at each step is the fit's scaling from its reference: (V/V_ref)^(n - m).
+    reference = fit.flight_reference
+    assert reference is not None
+    speeds = schedule.profile.at(schedule.step_times_s() + 0.5 * schedule.dt_s).airspeed_mps
+    gain, _ = reference.scales(speeds, 1.0)
+    np.testing.assert_allclose(schedule.scales[:, 0], np.maximum(gain, schedule.scales[:, 0].min()))
+    assert schedule.profile.airspeed_mps[0] == pytest.approx(TUNNEL_AIRSPEED_MPS, rel=0.01)
+    _, info = env.reset(seed=0)
+    assert info["trace"].endswith("@recorded")
+    assert info["trace"].split("@")[0] in {t.uid for t in draws}
+    for _ in range(5):
+        env.step(np.zeros(1, dtype=np.float32))
+    env.close()
+    # A tunnel bank is not a flight's: recorded turbulence of tunnel traces is refused.
+    with pytest.raises(ValueError, match="replays a stored flight's own u_d"):
+        gym.make(
+            "RocketRollFlight-v0",
+            db=str(stored),
+            method="paper",
+            flight_turbulence="recorded",
+            split="test",
+        )
