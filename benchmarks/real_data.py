@@ -11,12 +11,19 @@ constant ahead, the share of ``u_d`` the fin explains, ``|u_d|`` against the fin
 range) and the verdict with its reasons; a method that cannot fit the recording
 says why in one line, and the others run.
 
-Where a truth is known -- the recording's ``truth.*`` metadata (the virtual tunnel's),
-or ``--truth alpha=3.39,a=9.55`` (e.g. an independent fit of the same rig) -- the
-errors of α and of the damping are printed beside each fit.
+A flight (a recording whose airspeed changes: a flight computer's log imported with
+``--source flight``, or ``rocketroll flight``'s) is fitted by the flight methods instead:
+the rocket at the fit's reference airspeed, its measured airspeed scaling (``n``, ``m``
+with their standard errors) and the test of eq. 4-8, and the same adequacy figures.
+
+Where a truth is known -- the recording's ``truth.*`` metadata (the virtual tunnel's or
+flight recorder's, a flight's carried to the fit's reference by its own scaling), or
+``--truth alpha=3.39,a=9.55`` (e.g. an independent fit of the same rig) -- the errors of
+α and of the damping are printed beside each fit.
 
     .venv/bin/python benchmarks/real_data.py rig.csv --every 1 --every 2 --every 10 \\
         --truth alpha=3.39,a=9.55
+    .venv/bin/python benchmarks/real_data.py flight.csv --every 1 --every 4
 """
 
 from __future__ import annotations
@@ -24,12 +31,13 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from identification.methods import Context, fit, tunnel_methods
+from identification.methods import Context, default_methods, fit, is_flight_method, tunnel_methods
 from identification.model import MODEL_NAMES, RollParams
 from identification.recording import Recording, RecordingError, load_recording
 from identification.steps import IdentificationError
@@ -60,13 +68,20 @@ def parse_truth(text: str) -> dict[str, float]:
     return out
 
 
-def truth_of(rec: Recording, given: dict[str, float] | None) -> dict[str, float]:
-    """The truth to score against: ``--truth``, else the recording's ``truth.*``."""
+def truth_of(
+    rec: Recording, given: dict[str, float] | None, v_ref_mps: float | None = None
+) -> dict[str, float]:
+    """The truth to score against: ``--truth``, else the recording's ``truth.*`` (a
+    virtual flight's at ``v_ref_mps``, the fit's reference)."""
     if given:
         return given
     params = rec.truth()
     if params is None:
         return {}
+    if v_ref_mps is not None and "truth.v_ref_mps" in rec.metadata:
+        from disturbances.flightlog import truth_at
+
+        params = truth_at(rec, v_ref_mps)
     out = {"alpha": params.alpha, "theta_bar": params.theta_bar_deg}
     if params.is_constant_damping:
         out["a"] = params.beta_bar_per_s
@@ -88,10 +103,13 @@ def _value(value: float | None, fmt: str) -> str:
     return "" if value is None or not np.isfinite(value) else format(value, fmt)
 
 
-def report(rec: Recording, methods: Sequence[str], truth: dict[str, float]) -> None:
-    """Print every method's fits of ``rec``."""
+def report(rec: Recording, methods: Sequence[str], given: dict[str, float] | None) -> None:
+    """Print every method's fits of ``rec`` (a flight's by the flight methods)."""
     print(f"\n{rec!r}")
-    if truth:
+    if rec.is_flight:
+        methods = [m for m in default_methods(rec) if is_flight_method(m)]
+    truth = truth_of(rec, given)
+    if truth and not rec.is_flight:
         print("  truth: " + ", ".join(f"{k} = {v:g}" for k, v in truth.items()))
     print(
         f"  {'method':13}{'model':9}{'α':>9}{'α SE':>8}{'θ̄ °':>8}{'a or β̄':>9}{'ᾱ':>9}"
@@ -116,11 +134,31 @@ def report(rec: Recording, methods: Sequence[str], truth: dict[str, float]) -> N
                 f"{_value(a['fin_share'], '8.2f'):>8}{_value(a['ud_range_fraction'], '10.2f'):>10}"
                 f"  {a['verdict']}"
             )
+            reference = found.metrics.get("v_ref_mps")
+            if rec.is_flight:
+                print(f"  {'':22}{_scaling(found.metrics)}")
+                truth = truth_of(rec, given, reference)
             if truth:
                 print(f"  {'':22}error: {_errors(p, model, truth)}")
             for reason in a["reasons"]:
                 print(f"  {'':22}{reason}")
         print(f"  {'':22}({seconds:.2f} s for both models)")
+
+
+def _scaling(metrics: Mapping[str, Any]) -> str:
+    """A flight fit's reference, measured scaling and eq. 4-8's test, in one line."""
+    errors = metrics.get("std_errors") or {}
+    text = f"at V_ref {metrics['v_ref_mps']:.1f} m/s: n {metrics['torque_exponent']:.3f}"
+    if metrics.get("scaling_measured"):
+        text += f" ± {errors.get('torque_exponent', float('nan')):.3f}"
+    text += f", m {metrics['damping_exponent']:.3f}"
+    if metrics.get("scaling_measured"):
+        text += f" ± {errors.get('damping_exponent', float('nan')):.3f}"
+    test = metrics.get("eq_4_8_test")
+    if test:
+        text += f"; eq. 4-8 {'rejected' if test['rejected'] else 'not rejected'} "
+        text += f"(p {test['p_value']:.2g})"
+    return text
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -162,7 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             except RecordingError as exc:
                 print(f"benchmarks/real_data.py: {path} --every {every}: {exc}", file=sys.stderr)
                 return 2
-            report(sampled, methods, truth_of(rec, args.truth))
+            report(sampled, methods, args.truth)
     return 0
 
 

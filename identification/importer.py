@@ -32,7 +32,7 @@ from identification.recording import (
 )
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
-from rocketroll_common.settings import check, setting
+from rocketroll_common.settings import check, check_order, setting
 
 __all__ = ["ROLES", "ImportSettings", "import_csv", "read_csv"]
 
@@ -150,14 +150,7 @@ class ImportSettings:
             for role, value in given.items():
                 timed = ("time",) if self.time_column is not None else ()
                 _check_column_setting(field, role, value, (*self.columns, *timed))
-        if (
-            self.time_from is not None
-            and self.time_to is not None
-            and not self.time_from < self.time_to
-        ):
-            raise SettingError(
-                "time_from", f"{self.time_from:g} s must come before --to {self.time_to:g} s"
-            )
+        check_order("time_from", self.time_from, self.time_to, "--to", "s")
         if self.site_elevation and "altitude" not in self.columns:
             raise SettingError("site_elevation", "is added to an altitude column; give one")
 

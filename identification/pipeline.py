@@ -49,7 +49,7 @@ from identification.steps import (
 )
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
-from rocketroll_common.settings import check, setting
+from rocketroll_common.settings import check, check_order, setting
 
 __all__ = [
     "Identification",
@@ -213,19 +213,14 @@ class IdentifyOptions:
 
     def __post_init__(self) -> None:
         check(self)
-        if (
-            self.flight_from is not None
-            and self.flight_to is not None
-            and not self.flight_from < self.flight_to
-        ):
-            raise SettingError(
-                "flight_from", f"{self.flight_from:g} s must come before --to {self.flight_to:g} s"
-            )
-        low, high = self.min_airspeed_mps, self.max_airspeed_mps
-        if low is not None and high is not None and not low < high:
-            raise SettingError(
-                "min_airspeed_mps", f"{low:g} m/s must be below --max-airspeed {high:g} m/s"
-            )
+        check_order("flight_from", self.flight_from, self.flight_to, "--to", "s")
+        check_order(
+            "min_airspeed_mps",
+            self.min_airspeed_mps,
+            self.max_airspeed_mps,
+            "--max-airspeed",
+            "m/s",
+        )
         if self.breakpoint_resolution_s > self.max_breakpoint_s:
             raise SettingError(
                 "max_breakpoint_s",

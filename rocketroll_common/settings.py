@@ -61,6 +61,7 @@ __all__ = [
     "Command",
     "add_arguments",
     "check",
+    "check_order",
     "flags",
     "from_namespace",
     "guarded",
@@ -371,6 +372,15 @@ def check(obj: Any) -> None:
         problem = _check_number(f, f.base, value)
         if problem:
             raise SettingError(f.name, problem)
+
+
+def check_order(
+    field: str, first: float | None, second: float | None, flag: str, unit: str
+) -> None:
+    """Refuse (:class:`SettingError` naming ``field``) a range whose two ends are both given
+    and not in order: ``first`` must be below ``second`` (given as ``flag``)."""
+    if first is not None and second is not None and not first < second:
+        raise SettingError(field, f"{first:g} {unit} must be below {flag} {second:g} {unit}")
 
 
 # ----------------------------------------------------------------------------- parsing

@@ -157,3 +157,22 @@ def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_tru
     assert all(abs(float(e.split("α")[1].split("%")[0])) < 5 for e in ml_errors)
     bad = run_benchmark("real_data.py", str(tmp_path / "missing.csv"), db=default_db)
     assert bad.returncode == 2 and "missing.csv" in bad.stderr
+
+
+def test_real_data_fits_a_flight_with_its_scaling(default_db: Path, tmp_path: Path) -> None:
+    """A flight log: the flight method, the measured scaling and eq. 4-8's test, and the
+    truth carried to the fit's reference airspeed."""
+    from disturbances.flightlog import FlightLogSpec, run_flight
+    from identification.recording import save_recording
+
+    path = tmp_path / "flight.csv"
+    save_recording(run_flight(FlightLogSpec(seed=3, model="constant", torque_exponent=1.5)), path)
+    out = run_script("real_data.py", str(path), db=default_db)
+    rows = [line.split() for line in out.splitlines() if line.strip().startswith("flight ")]
+    assert [row[1] for row in rows] == ["constant", "theta"]
+    assert out.count("eq. 4-8 rejected") == 2
+    scaling = [line for line in out.splitlines() if "at V_ref" in line]
+    exponents = [float(line.split(": n ")[1].split()[0]) for line in scaling]
+    assert len(exponents) == 2 and all(abs(n - 1.5) < 0.1 for n in exponents), scaling
+    errors = [line for line in out.splitlines() if "error: α" in line]
+    assert len(errors) == 2 and all(abs(float(e.split("α")[1].split("%")[0])) < 5 for e in errors)

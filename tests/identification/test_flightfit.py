@@ -395,13 +395,12 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert constant["params"]["beta_bar_per_s"] == pytest.approx(truth.beta_bar_per_s, rel=0.05)
     assert constant["metrics"]["resim_rate_mae_pct"] < 2.0
     assert constant["metrics"]["adequacy"]["verdict"] == "good"
-    # The database holds the tunnel's turbulence: a flight is refused, nothing written.
+    # A flight is stored with its fits' references (the flight env flies it as that rocket).
     db = tmp_path / "db.sqlite"
-    assert main(["identify", str(path), "--db", str(db)]) == 2
-    assert "is a flight" in capsys.readouterr().err
-    assert main(["db", "add", str(path), "--db", str(db)]) == 2
-    assert "is a flight" in capsys.readouterr().err
-    assert not db.exists()
+    assert main(["identify", str(path), "--db", str(db)]) == 0
+    assert "stored in" in capsys.readouterr().out
+    assert main(["db", "add", str(path), "--db", str(db)]) == 0
+    assert "already stored" in capsys.readouterr().out
 
 
 def test_a_right_flight_fit_is_judged_good(paper_fit: FlightFit) -> None:
@@ -775,7 +774,7 @@ def test_a_flight_is_fitted_in_the_window_asked(paper_flight: Recording):
     # The airspeed falls through 60 m/s on the coast (at 15.4 s): the window ends there.
     after = int(np.searchsorted(paper_flight.time_s, part.time_s[-1])) + 1
     assert col(paper_flight, "airspeed_mps")[after] < 60.0
-    with pytest.raises(SettingError, match="must come before --to"):
+    with pytest.raises(SettingError, match="must be below --to"):
         IdentifyOptions(flight_from=5.0, flight_to=4.0)
     with pytest.raises(SettingError, match="must be below --max-airspeed"):
         IdentifyOptions(min_airspeed_mps=50.0, max_airspeed_mps=40.0)

@@ -482,7 +482,7 @@ def test_a_window_per_column_units_scale_offset_and_sign(tmp_path: Path) -> None
         (["--scale", "fin=0"], "--scale: fin=0 would erase the column"),
         (["--offset", "fin=nan"], "--offset: fin=nan is not a finite number"),
         (["--from", "30"], "--from/--to keep no rows: the time column runs 0 to 9.9 s"),
-        (["--from", "5", "--to", "2"], "--from: 5 s must come before --to 2 s"),
+        (["--from", "5", "--to", "2"], "--from: 5 s must be below --to 2 s"),
     ],
 )
 def test_a_bad_column_setting_or_window_is_one_line(
