@@ -14,7 +14,11 @@ update), this measures:
   does with a numpy-batched classic-control env;
 * ``RocketRollFlight-v0``, single and at 4096 envs, against the tunnel's rows:
   **target: at least 0.8 x** (the rocket changes every step, the
-  traces are flown, the angle is the integrated gyro).
+  traces are flown, the angle is the integrated gyro);
+* with ``--flight-db DB --flight-recording NAME`` (a flight stored by ``rocketroll db
+  add``), ``RocketRollFlight-v0`` flying that stored flight as its rocket (its own
+  profile, measured scaling and recorded ``u_d``), single and batched, against the
+  default flight's rows: **target: at least 0.8 x**.
 
 With ``--against REF`` the RocketRoll rows are also timed in a worktree of
 ``REF`` (e.g. the last landed commit), block by block alternating with this
@@ -62,8 +66,8 @@ FLIGHT_TARGET = 0.8
 AGAINST_TOLERANCE = 0.05
 
 
-def _single_runner(env_id: str, steps: int, seed: int) -> Callable[[], float]:
-    env = gym.make(env_id)
+def _single_runner(env_id: str, steps: int, seed: int, **settings: Any) -> Callable[[], float]:
+    env = gym.make(env_id, **settings)
     env.reset(seed=seed)
     actions = (
         np.random.default_rng(seed)
@@ -122,7 +126,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--against", metavar="REF", help="also time the RocketRoll rows in a checkout of REF"
     )
     parser.add_argument("--strict", action="store_true", help="exit 1 when a target is missed")
+    parser.add_argument("--flight-db", help="a database holding a stored flight (rows of its own)")
+    parser.add_argument("--flight-recording", help="the stored flight's name in --flight-db")
     ns = parser.parse_args(words)
+    if (ns.flight_db is None) != (ns.flight_recording is None):
+        parser.error("--flight-db and --flight-recording go together")
 
     if not serving:
         print(
@@ -154,6 +162,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns.seed,
             discrete=False,
         )
+    stored = {"db": ns.flight_db, "recording": ns.flight_recording}
+    if ns.flight_db is not None:
+        stored_single = _single_runner(FLIGHT_ID, ns.single_steps, ns.seed, **stored)
+        stored_vector = _vector_runner(
+            lambda: gym.make_vec(FLIGHT_ID, num_envs=ns.num_envs, **stored),
+            ns.vector_steps,
+            ns.seed,
+            discrete=False,
+        )
     pendulum = _single_runner("Pendulum-v1", ns.single_steps, ns.seed)
     cartpole = _vector_runner(
         lambda: CartPoleVectorEnv(num_envs=ns.num_envs), ns.vector_steps, ns.seed, discrete=True
@@ -173,6 +190,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         tasks[f"{FLIGHT_ID} (gym.make)"] = (flight_single, ns.single_steps)
         tasks[f"{FLIGHT_ID} x {ns.num_envs} (make_vec)"] = (
             flight_vector,
+            ns.vector_steps * ns.num_envs,
+        )
+    if ns.flight_db is not None:
+        tasks[f"{FLIGHT_ID}, stored (gym.make)"] = (stored_single, ns.single_steps)
+        tasks[f"{FLIGHT_ID}, stored x {ns.num_envs}"] = (
+            stored_vector,
             ns.vector_steps * ns.num_envs,
         )
     warm = time.perf_counter()
@@ -232,6 +255,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{flight_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}): "
         f"{'PASS' if ok_flight else 'FAIL'}"
     )
+    if ns.flight_db is not None:
+        stored_single_ratio = med[names[7]] / med[names[5]]
+        stored_vector_ratio = med[names[8]] / med[names[6]]
+        ok_stored = min(stored_single_ratio, stored_vector_ratio) >= FLIGHT_TARGET
+        ok_flight &= ok_stored
+        print(
+            f"stored flight: {ns.flight_recording} / {FLIGHT_ID} = {stored_single_ratio:.2f} "
+            f"single, {stored_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}): "
+            f"{'PASS' if ok_stored else 'FAIL'}"
+        )
     ok_against = True
     if remote is not None:
         print(f"\nthis checkout against {ns.against} ({commit[:12]}), same blocks alternating:")
