@@ -176,3 +176,14 @@ def test_real_data_fits_a_flight_with_its_scaling(default_db: Path, tmp_path: Pa
     assert len(exponents) == 2 and all(abs(n - 1.5) < 0.1 for n in exponents), scaling
     errors = [line for line in out.splitlines() if "error: α" in line]
     assert len(errors) == 2 and all(abs(float(e.split("α")[1].split("%")[0])) < 5 for e in errors)
+
+
+def test_flight_fidelity_scores_a_design_on_the_replay_and_on_the_truth(default_db: Path) -> None:
+    args = ["--seeds", "1", "--n", "2.0", "--episodes", "2", "--policies", "trim,pid"]
+    out = run_script("flight_fidelity.py", *args, db=default_db)
+    rows = [line.split() for line in out.splitlines() if line.startswith(" 2.0    0  ")]
+    assert [row[2] for row in rows] == ["trim", "PID"]
+    for row in rows:  # truth, posterior, ratio, smoothed, ratio: numbers, ratios consistent
+        truth, posterior, ratio = float(row[3]), float(row[4]), float(row[5])
+        assert truth > 0 and abs(posterior / truth - ratio) < 0.006
+    assert "within [0.9, 1.1]:" in out
