@@ -3,7 +3,7 @@
 For each truth (``--truth``; default all of :data:`TRUTHS`: the paper's
 θ-dependent rocket and a constant-damping one, other gains and asymmetries of
 either sign, a positive ᾱ, Dryden gusts, a heavy-tailed turbulence, an
-angle-only log) and seed, the virtual flight (:func:`disturbances.flightlog.run_flight`)
+angle-only log) and seed, the virtual flight (:func:`identification.flightlog.run_flight`)
 logs the default ascent, and the ``flight`` method
 (:func:`identification.flightfit.identify_flight`, the truth's damping model)
 identifies it.  Per flight: the relative error of ``α₀`` and ``β̄₀`` (the
@@ -17,7 +17,7 @@ over every fit.
 Since the flight method measures the airspeed scaling (fin torque ``∝ ρV^n``,
 damping ``∝ ρV^m``), the coefficients are compared at the fit's reference
 airspeed (the flight's mean), with the truth carried there by its own scaling
-(:func:`disturbances.flightlog.truth_at`).
+(:func:`identification.flightlog.truth_at`).
 
 ``--scaling`` flies the truth of ``--truth`` (default the paper's rocket, flown
 tunnel turbulence, the recorder's default staircase and ascent) with every
@@ -52,13 +52,13 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from disturbances.flightlog import FlightLogSpec, run_flight, truth_at
 from identification.flightfit import (
     _model_only_r2,
     flight_inputs,
     held_out_prediction,
     identify_flights,
 )
+from identification.flightlog import FlightLogSpec, run_flight, truth_at
 
 #: Name -> (FlightLogSpec settings, what it tests).
 TRUTHS: dict[str, tuple[dict[str, Any], str]] = {

@@ -79,7 +79,7 @@ def truth_of(
     if params is None:
         return {}
     if v_ref_mps is not None and "truth.v_ref_mps" in rec.metadata:
-        from disturbances.flightlog import truth_at
+        from identification.flightlog import truth_at
 
         params = truth_at(rec, v_ref_mps)
     out = {"alpha": params.alpha, "theta_bar": params.theta_bar_deg}

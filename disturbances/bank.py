@@ -22,8 +22,9 @@ from disturbances.stores import Store
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError
+from rocketroll_physics.flown import interval_means
 
-__all__ = ["REPLAY_OF_KIND", "BankError", "TraceBank", "Window", "interval_means"]
+__all__ = ["REPLAY_OF_KIND", "BankError", "TraceBank", "Window"]
 
 #: The environment's ``disturbance`` option that replays each kind of trace.
 REPLAY_OF_KIND = {"identified": "replay", "surrogate": "surrogate", "posterior": "posterior"}
@@ -131,25 +132,6 @@ def _lacking(
 def _one(value: Any) -> str | None:
     """A filter's single value (None for none or a list)."""
     return value if isinstance(value, str) else None
-
-
-def interval_means(u_deg: FloatArray, dt_s: float, edges_s: FloatArray) -> FloatArray:
-    """The exact average of a trace held ``dt_s`` per sample over each interval between
-    consecutive ``edges_s`` (s from its first sample; a zero-width interval: the value
-    there).  Linear interpolation of the running integral is exact for a held signal."""
-    u = np.asarray(u_deg, dtype=float)
-    edges = np.asarray(edges_s, dtype=float)
-    grid = dt_s * np.arange(u.size + 1)
-    integral = np.concatenate([[0.0], np.cumsum(u) * dt_s])  # ∫u, exact at the sample edges
-    at = np.interp(edges, grid, integral)
-    width = np.diff(edges)
-    return np.asarray(
-        np.where(
-            width > 0,
-            np.diff(at) / np.where(width > 0, width, 1.0),
-            np.interp(edges[:-1], grid[:-1], u),
-        )
-    )
 
 
 class TraceBank:

@@ -21,7 +21,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from disturbances.flightlog import FlightLogSpec
 from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
 from identification.methods import METHODS, default_methods, has_posterior, traits
 from identification.model import MODEL_NAMES
@@ -126,31 +125,6 @@ def _new_database(db: str | None) -> Iterator[None]:
                 for suffix in ("", "-wal", "-shm"):
                     Path(f"{path}{suffix}").unlink(missing_ok=True)
             raise
-
-
-# --------------------------------------------------------------------------- flight
-@dataclass(frozen=True)
-class FlightArgs:
-    """``rocketroll flight``."""
-
-    out: Path = setting(
-        help="recording file to write (CSV, format 1.1)", output="file", kind="recording"
-    )
-    spec: FlightLogSpec = setting(default_factory=FlightLogSpec, flatten=True)
-
-
-def flight(args: FlightArgs) -> int:
-    """Fly the virtual flight and write its log."""
-    from disturbances.flightlog import AscentError, run_flight
-    from identification.recording import save_recording
-
-    try:
-        recording = run_flight(args.spec)
-    except AscentError as exc:
-        raise UsageError(f"--ascent {args.spec.ascent}: {exc}") from None
-    save_recording(recording, args.out)
-    print(f"wrote {args.out}: {recording!r}")
-    return 0
 
 
 # --------------------------------------------------------------------------- identify
@@ -948,16 +922,6 @@ _DB_COMMANDS = (
 
 #: The commands of this layer, by name.
 COMMANDS: dict[str, Command] = {
-    "flight": Command(
-        "flight",
-        "fly the virtual flight and write a synthetic flight log",
-        FlightArgs,
-        flight,
-        "The virtual tunnel's flight counterpart: the rocket (truth given at --v-ref) along "
-        "an ascent from the rail to apogee, its gain and damping scaled by eq. 4-8, a fin "
-        "staircase, flown turbulence, a rate gyro; a format-1.1 recording with the truth "
-        "in its metadata.  Identify it with: rocketroll identify LOG.csv",
-    ),
     "identify": Command(
         "identify",
         "identify roll parameters and the disturbance u_d(t) from a recording",

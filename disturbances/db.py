@@ -61,13 +61,13 @@ from disturbances.rows import (
 )
 from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
 from identification.adequacy import VERDICTS
-from identification.flight import AirspeedScaling, FlightReference
 from identification.methods import METHODS
 from identification.model import MODEL_NAMES, RollParams
 from identification.recording import SOURCES, Recording
 from rocketroll_common import __version__
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
+from rocketroll_physics.flight import AirspeedScaling, FlightReference
 
 __all__ = [
     "APPLICATION_ID",

@@ -1,37 +1,6 @@
-"""Tunnel turbulence flown: ``u_d`` traces time- and amplitude-scaled to a flight's airspeed.
-
-The database's traces were identified in the wind tunnel at one airspeed
-``V_ref`` (about 50 km/h, paper §4).  ``u_d`` is an equivalent fin angle: a
-flow-angle disturbance, roughly gust velocity / airspeed.  Flown at airspeed
-``V(t)``, a trace becomes::
-
-    u_flight(t) = (V_ref / max(V(t), V_ref)) · u_tunnel(s + τ(t)),   τ(t) = ∫₀ᵗ V/V_ref dt'
-
-Two documented assumptions:
-
-* **Taylor's frozen turbulence** (Taylor 1938): the eddies are carried past
-  the rocket by the mean flow and do not change on the way, so a stretch of
-  tunnel turbulence that took ``Δτ`` to pass at ``V_ref`` passes in
-  ``Δτ·V_ref/V`` at ``V``: time is compressed by ``V/V_ref``.
-* **The tunnel's gust velocities**: the air moves as fast relative to the
-  mean flow as it did in the tunnel, so the flow angle it makes shrinks like
-  ``V_ref/V``.  The tunnel's turbulence is strong (the paper's §4: no
-  screens, no honeycomb), so this is a pessimistic stand-in for the free
-  atmosphere; below ``V_ref`` (leaving the rail, near apogee) the factor is
-  held at 1 rather than grow without bound as ``V → 0``.
-
-With the flown gain ``α·V/V_ref`` of eq. 4-8 the disturbance's torque term
-``α·u_d`` is then the tunnel's: a gust pushes the roll rate as hard as in the
-tunnel, while the damping that fights it grows like ``ρ·V``.
-
-Each flown sample is the exact average of the (piecewise-constant) tunnel
-trace over the stretch of tunnel time it covers, so the compressed trace is
-not aliased when a 0.1-s tunnel sample passes in less than the env's 0.01-s
-substep.
-
-References
-----------
-G. I. Taylor, "The spectrum of turbulence", Proc. R. Soc. Lond. A 164 (1938) 476-490.
+"""Tunnel turbulence flown for the database's banks: each trace of a bank flown along a
+flight (:mod:`rocketroll_physics.flown` has the physics: Taylor's frozen field, time
+compressed by ``V/V_ref``, the flow angle scaled by ``V_ref/V``).
 """
 
 from __future__ import annotations
@@ -41,52 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from disturbances.bank import TraceBank, interval_means
+from disturbances.bank import TraceBank
 from disturbances.rows import TraceRow, derived_row
 from rocketroll_common.arrays import FloatArray
+from rocketroll_physics.flown import fly_trace, tunnel_time
 
-__all__ = ["flight_bank", "fly_trace", "tunnel_time"]
-
-
-def tunnel_time(edges_s: FloatArray, airspeed_mps: FloatArray, v_ref_mps: float) -> FloatArray:
-    """τ at each of ``edges_s``: the tunnel time that has passed, ∫ V/V_ref dt (trapezoid).
-
-    ``airspeed_mps`` is the airspeed at each edge (m/s, ≥ 0); τ starts at 0.
-    """
-    ratio = np.asarray(airspeed_mps, dtype=float) / v_ref_mps
-    steps = 0.5 * (ratio[1:] + ratio[:-1]) * np.diff(edges_s)
-    return np.concatenate([[0.0], np.cumsum(steps)])
-
-
-def fly_trace(
-    u_deg: FloatArray,
-    dt_s: float,
-    start_s: float,
-    tau_s: FloatArray,
-    amplitude: FloatArray,
-) -> FloatArray:
-    """One flown trace: the tunnel trace's average over ``[start + τ_j, start + τ_{j+1}]``,
-    times ``amplitude[j]``, for each flown sample ``j``.
-
-    Parameters
-    ----------
-    u_deg : ndarray, shape (n,)
-        The tunnel trace, °, each sample held for ``dt_s``.
-    dt_s : float
-        Its Δt, s.
-    start_s : float
-        Tunnel time of the flight's start, s.
-    tau_s : ndarray, shape (m + 1,)
-        Tunnel time at the flown samples' edges (:func:`tunnel_time`), increasing.
-    amplitude : ndarray, shape (m,)
-        ``V_ref / max(V, V_ref)`` at each flown sample.
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        The flown ``u_d``, °.
-    """
-    return np.asarray(interval_means(u_deg, dt_s, start_s + np.asarray(tau_s)) * amplitude)
+__all__ = ["flight_bank"]
 
 
 def flight_bank(

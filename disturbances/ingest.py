@@ -55,7 +55,6 @@ from disturbances.rows import (
     surrogate_uid,
 )
 from disturbances.stores import Store
-from identification.flight import FlightReference
 from identification.methods import (
     METHODS,
     Context,
@@ -70,6 +69,7 @@ from identification.recording import Recording
 from identification.statistics import trace_statistics
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import UsageError
+from rocketroll_physics.flight import FlightReference
 
 __all__ = [
     "HOLDOUT_RANGE",

@@ -40,11 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.adequacy import VERDICTS
-from identification.flight import FlightReference
 from identification.model import RollParams, check_model
 from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
+from rocketroll_physics.flight import FlightReference
 
 __all__ = [
     "KINDS",

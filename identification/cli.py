@@ -1,4 +1,5 @@
-"""``rocketroll`` commands of the identification layer: ``tunnel``, ``import-csv``, ``info``.
+"""``rocketroll`` commands of the identification layer: ``tunnel`` and ``flight`` (the
+virtual tunnel and flight recorder), ``import-csv``, ``info``.
 
 Each command is a settings dataclass (its options, with help, defaults and
 bounds on the fields) and a function; :mod:`rocketroll_common.settings`
@@ -15,6 +16,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from identification.flightlog import FlightLogSpec
 from identification.importer import ImportSettings
 from identification.tunnel import TunnelSpec
 from rocketroll_common.errors import UsageError
@@ -37,6 +39,30 @@ def tunnel(args: TunnelArgs) -> int:
     from identification.tunnel import run_tunnel
 
     recording = run_tunnel(args.spec)
+    save_recording(recording, args.out)
+    print(f"wrote {args.out}: {recording!r}")
+    return 0
+
+
+@dataclass(frozen=True)
+class FlightArgs:
+    """``rocketroll flight``."""
+
+    out: Path = setting(
+        help="recording file to write (CSV, format 1.1)", output="file", kind="recording"
+    )
+    spec: FlightLogSpec = setting(default_factory=FlightLogSpec, flatten=True)
+
+
+def flight(args: FlightArgs) -> int:
+    """Fly the virtual flight and write its log."""
+    from identification.flightlog import AscentError, run_flight
+    from identification.recording import save_recording
+
+    try:
+        recording = run_flight(args.spec)
+    except AscentError as exc:
+        raise UsageError(f"--ascent {args.spec.ascent}: {exc}") from None
     save_recording(recording, args.out)
     print(f"wrote {args.out}: {recording!r}")
     return 0
@@ -114,6 +140,16 @@ COMMANDS: dict[str, Command] = {
         tunnel,
         "Re-create the paper's wind-tunnel experiment with known ground truth "
         "(defaults: the paper's parameters and Table 1 schedule).",
+    ),
+    "flight": Command(
+        "flight",
+        "fly the virtual flight and write a synthetic flight log",
+        FlightArgs,
+        flight,
+        "The virtual tunnel's flight counterpart: the rocket (truth given at --v-ref) along "
+        "an ascent from the rail to apogee, its gain and damping scaled by eq. 4-8, a fin "
+        "staircase, flown turbulence, a rate gyro; a format-1.1 recording with the truth "
+        "in its metadata.  Identify it with: rocketroll identify LOG.csv",
     ),
     "import-csv": Command(
         "import-csv",

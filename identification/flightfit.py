@@ -7,7 +7,7 @@ eq. 5 carries them to any airspeed.  This module does that for a recording
 with an ``airspeed_mps`` column (format 1.1): it estimates the model **at a
 reference airspeed** ``V_ref`` and density ``ρ_ref`` (default: the tunnel's
 50 km/h at ISA sea level) with the flight's scaling (eq. 4-8,
-:func:`identification.flight.roll_scales`)::
+:func:`rocketroll_physics.flight.roll_scales`)::
 
     α(t) = α₀·V/V_ref,     a(θ, t) = (ᾱ₀·|θ + θ̄| + β̄₀)·ρV/(ρ_ref·V_ref)
 
@@ -18,7 +18,7 @@ Method: maximum likelihood with a Kalman filter (the flight's version of
 :mod:`identification.ml`).  The state is the roll rate ``v``, the roll angle
 ``φ`` and the turbulence ``w``; the rocket moves by the exact update of
 :mod:`identification.model` with the scales of each substep; the turbulence
-is the physics of :mod:`disturbances.flight` and :mod:`disturbances.dryden`
+is the physics of :mod:`rocketroll_physics.flown` and :mod:`rocketroll_physics.dryden`
 made a prior: a field frozen in the air (Taylor) that the rocket flies
 through, an Ornstein-Uhlenbeck process in *tunnel time* ``τ = ∫V/V_ref dt``
 (so its correlation time in flight shrinks like ``V_ref/V``) of SD ``σ_w``
@@ -26,7 +26,7 @@ and time constant ``T``, whose flow angle shrinks like ``V_ref/V``::
 
     u_d = (V_ref / max(V, V_ref)) · w̄,        w̄ = the average of w over the sample interval
 
-(the average exactly, :mod:`rocketroll_common.ou`).  Above ``V_ref`` the
+(the average exactly, :mod:`rocketroll_physics.ou`).  Above ``V_ref`` the
 Dryden gust (``α·u_d = p_g``, an OU process of time constant ``4b/(πV)``:
 constant in tunnel time) has this form, its intensity changing with height
 and airspeed where the prior's is stationary (``benchmarks/flight_ground_truth.py``
@@ -59,15 +59,6 @@ from numpy.typing import ArrayLike
 from scipy import optimize
 
 from identification import statespace
-from identification.flight import (
-    EQ_4_8,
-    ISA_SEA_LEVEL_DENSITY_KGM3,
-    MACH_LIMIT,
-    TUNNEL_AIRSPEED_MPS,
-    AirspeedScaling,
-    isa,
-    roll_scales,
-)
 from identification.methods import ModelFit
 from identification.model import (
     RollParams,
@@ -81,7 +72,16 @@ from identification.recording import Recording, RecordingError
 from identification.statespace import LinearGaussian
 from identification.steps import Disturbance, IdentificationError
 from rocketroll_common.arrays import FloatArray, readonly_array
-from rocketroll_common.ou import interval_coefficients
+from rocketroll_physics.flight import (
+    EQ_4_8,
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    MACH_LIMIT,
+    TUNNEL_AIRSPEED_MPS,
+    AirspeedScaling,
+    isa,
+    roll_scales,
+)
+from rocketroll_physics.ou import interval_coefficients
 
 if TYPE_CHECKING:
     from identification.methods import Context
@@ -182,7 +182,7 @@ class FlightInputs:
 
     def scales(self, scaling: AirspeedScaling = EQ_4_8) -> tuple[FloatArray, FloatArray]:
         """The gain's and the damping's factors at each substep's midpoint for
-        ``scaling`` (:func:`~identification.flight.roll_scales`)."""
+        ``scaling`` (:func:`~rocketroll_physics.flight.roll_scales`)."""
         return roll_scales(self.speed_ratio, self.density_ratio, 1.0, 1.0, scaling)
 
 

@@ -52,6 +52,7 @@ from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 from rocketroll_common.files import write_atomic
+from rocketroll_common.text import parse_number
 
 __all__ = [
     "COLUMNS",
@@ -101,7 +102,7 @@ ROLL_COLUMNS = ("roll_deg", "roll_rate_dps")
 #: The columns format 1.1 adds.
 FLIGHT_COLUMNS = ("airspeed_mps", "altitude_m")
 #: Allowed range of each flight column (the altitudes the ISA of
-#: :mod:`identification.flight` covers).
+#: :mod:`rocketroll_physics.flight` covers).
 FLIGHT_RANGES: Mapping[str, tuple[float, float]] = MappingProxyType(
     {"airspeed_mps": (0.0, 2_000.0), "altitude_m": (-500.0, 20_000.0)}
 )
@@ -367,27 +368,6 @@ def _check_time_scale(path: str, time_read: str, interval: float, duration: floa
     else:
         hint = "a roll log is sampled at 1 Hz to 1 kHz for 5 s to a day"
     raise RecordingError(path, None, f"{found}; {hint}")
-
-
-_NUMBER = re.compile(
-    r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:nan|inf|infinity)", re.ASCII | re.I
-)
-
-
-def parse_number(cell: str) -> float:
-    """A CSV number: ASCII decimal or scientific notation (or nan/inf, to be reported).
-
-    Stricter than ``float()``, which also takes ``5_0`` and non-ASCII digits.
-
-    Raises
-    ------
-    ValueError
-        If ``cell`` is not such a number.
-    """
-    text = cell.strip()
-    if not _NUMBER.fullmatch(text):
-        raise ValueError(f"not a number: {cell!r}")
-    return float(text)
 
 
 def _has_line_break(text: str) -> bool:

@@ -23,12 +23,9 @@ __all__ = ["COMMANDS", "build_parser", "main", "write_help"]
 #: Command -> (module defining it in its ``COMMANDS``, one line of help).
 COMMANDS: dict[str, tuple[str, str]] = {
     "tunnel": ("identification.cli", "run the virtual wind tunnel and write a synthetic recording"),
+    "flight": ("identification.cli", "fly the virtual flight and write a synthetic flight log"),
     "import-csv": ("identification.cli", "convert a foreign CSV/text log into a recording"),
     "info": ("identification.cli", "validate a recording and print its summary"),
-    "flight": (
-        "disturbances.cli",
-        "fly the virtual flight and write a synthetic flight log",
-    ),
     "identify": (
         "disturbances.cli",
         "identify roll parameters and the disturbance u_d(t) from a recording",
@@ -97,7 +94,7 @@ def write_help() -> None:
 SCHEMAS: dict[str, str] = {
     "sweep": "agents.sweep.spec:SweepDocument",
     "hyperparams": "agents.train.hyperparams:HyperparameterFile",
-    "ascent": "identification.flight:AscentDocument",
+    "ascent": "rocketroll_physics.flight:AscentDocument",
 }
 
 

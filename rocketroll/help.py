@@ -35,6 +35,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = (
     "rocketroll",
     "rocketroll_common",
+    "rocketroll_physics",
     "identification",
     "disturbances",
     "rollenv",

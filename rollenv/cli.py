@@ -224,9 +224,9 @@ def run_flight(args: FlightArgs) -> int:
         f"{gain.max():.2f} and damping x {damping.max():.2f} at most (eq. 4-8)"
     )
     if args.plot is not None:
-        from identification.flight import plot_profile
         from rocketroll_common.files import write_atomic
         from rocketroll_common.plotting import png_bytes
+        from rocketroll_physics.flight import plot_profile
 
         write_atomic(args.plot, png_bytes(plot_profile(profile), dpi=110))
         print(f"plot: {args.plot}")

@@ -131,8 +131,8 @@ class RollConfig:
     flight_turbulence : str
         With ``flight``: ``"tunnel"`` (default) flies the database's traces
         (``disturbance`` chooses which), time-compressed and scaled by
-        :mod:`disturbances.flight`; ``"dryden"`` draws the standard
-        atmosphere's roll gust instead (:mod:`disturbances.dryden`);
+        :mod:`rocketroll_physics.flown`; ``"dryden"`` draws the standard
+        atmosphere's roll gust instead (:mod:`rocketroll_physics.dryden`);
         ``"recorded"`` replays a stored flight's own ``u_d`` (with
         ``recording`` naming a flight in the database, the environment flies
         that rocket: :func:`rollenv.bank.stored_flight_config`).

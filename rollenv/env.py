@@ -237,7 +237,7 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
       (the rocket has left its rail, not rolling: rate 0) to apogee, in whole
       control steps -- 212 steps (21.2 s) of the default ascent, whose
       airspeed peaks at 603 km/h (Mach 0.50) at burnout and whose apogee is
-      2010 m (:func:`identification.flight.simulate_ascent`).  Truncation at
+      2010 m (:func:`rocketroll_physics.flight.simulate_ascent`).  Truncation at
       apogee; no termination.
     * **Transition**: the dynamics above with the rocket's coefficients
       scaled every control step by the airspeed ``V`` and density ``ρ`` at
@@ -259,10 +259,10 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
     * **Turbulence** (``flight_turbulence``): ``"tunnel"`` (default) flies the
       database's traces: time compressed by ``V/V_ref`` (Taylor's frozen
       turbulence) and the flow angle scaled by ``V_ref/V`` (the tunnel's gust
-      velocities; :mod:`disturbances.flight`), so the replay keeps the
+      velocities; :mod:`rocketroll_physics.flown`), so the replay keeps the
       database's identified data and its train/test split.  ``"dryden"``:
       the Dryden roll gust of MIL-F-8785C (``gust_severity`` light, moderate
-      or severe; :mod:`disturbances.dryden`), ``u_d = p_g/α(t)``.  Tunnel
+      or severe; :mod:`rocketroll_physics.dryden`), ``u_d = p_g/α(t)``.  Tunnel
       turbulence is the default because it is this project's measured data
       (and stronger than the free atmosphere's: a cautious default); Dryden is
       the standard model to check a controller against.

@@ -9,17 +9,17 @@ configuration:
   fins have the authority the tunnel identified) to apogee, in whole control
   steps;
 * **the rocket** changes every control step: gain ``α·V/V_ref`` and damping
-  ``a(θ)·ρV/(ρ_ref·V_ref)`` (eq. 4-8; :func:`identification.flight.roll_scales`),
+  ``a(θ)·ρV/(ρ_ref·V_ref)`` (eq. 4-8; :func:`rocketroll_physics.flight.roll_scales`),
   taken at the step's midpoint.  Both vanish as ``V → 0`` at apogee; they are
   held at :data:`MIN_SCALE` or above, where the rocket simply keeps rolling;
 * **the turbulence** is flown: a tunnel trace time-compressed and scaled by
-  :mod:`disturbances.flight`, sampled on the env's substep grid.
+  :mod:`rocketroll_physics.flown`, sampled on the env's substep grid.
 
 A flight stored in the database (``rocketroll db add`` of a flight log: its
 rocket identified at a reference airspeed with its measured airspeed scaling)
 is flown as **that rocket** (:func:`stored_flight_name`, ``flight="db:PATH#NAME"``):
 its own V(t) and altitude, its gain and damping scaled by its own exponents
-(:class:`identification.flight.FlightReference`), and its own ``u_d`` -- the
+(:class:`rocketroll_physics.flight.FlightReference`), and its own ``u_d`` -- the
 identified one or its posterior draws, already in flight time -- replayed
 (``flight_turbulence="recorded"``).
 
@@ -38,10 +38,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from disturbances.bank import TraceBank, interval_means
+from disturbances.bank import TraceBank
 from disturbances.flight import flight_bank
 from disturbances.rows import derived_row
-from identification.flight import (
+from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_physics.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
     MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
@@ -51,7 +52,7 @@ from identification.flight import (
     recorded_profile,
     roll_scales,
 )
-from rocketroll_common.arrays import FloatArray, readonly_array
+from rocketroll_physics.flown import interval_means
 
 __all__ = [
     "INFO_COLUMNS",
@@ -64,7 +65,7 @@ __all__ = [
     "turbulence_of",
 ]
 
-#: What a flight env's ``info`` adds (:class:`identification.flight.FlightState` fields).
+#: What a flight env's ``info`` adds (:class:`rocketroll_physics.flight.FlightState` fields).
 INFO_COLUMNS = ("airspeed_mps", "altitude_m", "dynamic_pressure_pa", "mach")
 
 #: The smallest gain and damping multiplier (near apogee the airflow, and with it the roll
@@ -308,7 +309,7 @@ def for_flight(
     ``"recorded"``: a stored flight's own ``u_d`` traces (identified or posterior draws,
     in flight time), averaged onto the episode's substeps from its start.
     ``"dryden"``: :data:`DRYDEN_FLIGHTS` draws of the Dryden roll gust ``p_g``
-    (:func:`disturbances.dryden.roll_gust`, ``severity``, seeded by ``split``) along the
+    (:func:`rocketroll_physics.dryden.roll_gust`, ``severity``, seeded by ``split``) along the
     flight, the rockets taken in turn from ``bank``, as the equivalent fin angle
     ``u_d = p_g / (α₀·gain)``: the gust rolls the air the damping works against, ``a·(v -
     p_g)``, which is eq. 36 with ``α·u_d = p_g``.  A bank of flights of that turbulence is
@@ -366,7 +367,7 @@ def _recorded(bank: TraceBank, schedule: FlightSchedule, m: int) -> TraceBank:
 def _dryden(
     bank: TraceBank, schedule: FlightSchedule, m: int, substeps: int, severity: str, split: str
 ) -> TraceBank:
-    from disturbances.dryden import roll_gust
+    from rocketroll_physics.dryden import roll_gust
 
     height = schedule.altitude_edges_m[:m] - schedule.profile.altitude_m[0]
     rng = np.random.default_rng([_DRYDEN_SEED, _SPLIT_INDEX[split]])

@@ -22,7 +22,15 @@ __all__ = ["LAYERS", "ROOT", "cycles", "module_graph", "package_graph", "upward_
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The top-level packages, lowest layer first: each may import only those before it.
-LAYERS = ("rocketroll_common", "identification", "disturbances", "rollenv", "agents", "rocketroll")
+LAYERS = (
+    "rocketroll_common",
+    "rocketroll_physics",
+    "identification",
+    "disturbances",
+    "rollenv",
+    "agents",
+    "rocketroll",
+)
 
 
 def _modules() -> dict[str, Path]:

@@ -162,7 +162,7 @@ def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_tru
 def test_real_data_fits_a_flight_with_its_scaling(default_db: Path, tmp_path: Path) -> None:
     """A flight log: the flight method, the measured scaling and eq. 4-8's test, and the
     truth carried to the fit's reference airspeed."""
-    from disturbances.flightlog import FlightLogSpec, run_flight
+    from identification.flightlog import FlightLogSpec, run_flight
     from identification.recording import save_recording
 
     path = tmp_path / "flight.csv"

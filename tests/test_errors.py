@@ -13,7 +13,14 @@ import pytest
 
 from rocketroll_common.errors import Interrupted, RocketrollError
 
-PACKAGES = ("rocketroll_common", "identification", "disturbances", "rollenv", "agents")
+PACKAGES = (
+    "rocketroll_common",
+    "rocketroll_physics",
+    "identification",
+    "disturbances",
+    "rollenv",
+    "agents",
+)
 
 
 def _modules() -> list[str]:

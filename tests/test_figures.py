@@ -252,7 +252,7 @@ def test_the_fly_your_flight_log_guide_runs_as_written(
     airspeed in km/h and altitude in feet above the pad."""
     import shlex
 
-    from disturbances.flightlog import FlightLogSpec, run_flight
+    from identification.flightlog import FlightLogSpec, run_flight
 
     ascent = tmp_path / "high.yml"
     default = (Path(__file__).parent.parent / "identification/data/ascent-default.yml").read_text(

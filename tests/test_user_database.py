@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from disturbances.bank import TraceBank, interval_means
+from disturbances.bank import TraceBank
 from identification.bundled import bundled_path
 from identification.recording import load_recording
 from rocketroll.cli import main as rocketroll
+from rocketroll_physics.flown import interval_means
 from tests.cli import ok, refused
 
 #: Fast identification: no Monte Carlo noise study.

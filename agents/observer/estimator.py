@@ -81,7 +81,7 @@ class TurbulenceModel:
 
         ``gains`` are the flight's ``V/V_ref`` per control step (:mod:`rollenv.flight`).
         The flight env flies the tunnel's traces time-compressed by ``V/V_ref`` and
-        scaled by ``V_ref/max(V, V_ref)`` (:mod:`disturbances.flight`), so from one
+        scaled by ``V_ref/max(V, V_ref)`` (:mod:`rocketroll_physics.flown`), so from one
         control step to the next the turbulence is as correlated as this model is at a
         lag of ``dt·V/V_ref`` (its autocorrelation, interpolated), and its SD is this
         model's times the scale.  Returns the per-step coefficient of ``w[k+1]`` on

@@ -1,4 +1,4 @@
-"""The Dryden roll-rate gust (disturbances.dryden): parameters, variance, exact held averages.
+"""The Dryden roll-rate gust (rocketroll_physics.dryden): parameters, variance, exact held averages.
 
 Reference values: MIL-F-8785C §3.7.2 (low altitude: ``L_w = h``,
 ``σ_w = 0.1·W20``, W20 = 15/30/45 kt) and Figure 7 as tabulated by MATLAB's
@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from disturbances.dryden import (
+from rocketroll_common.errors import UsageError
+from rocketroll_physics.dryden import (
     DEFAULT_SPAN_M,
     FT_M,
     KNOT_MPS,
@@ -33,7 +34,6 @@ from disturbances.dryden import (
     roll_gust_std,
     roll_gust_time_constant,
 )
-from rocketroll_common.errors import UsageError
 
 DEG = 180.0 / math.pi
 

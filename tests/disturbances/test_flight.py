@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from disturbances.bank import TraceBank
-from disturbances.flight import flight_bank, fly_trace, tunnel_time
+from disturbances.flight import flight_bank
 from identification.model import RollParams
+from rocketroll_physics.flown import fly_trace, tunnel_time
 
 V_REF = 50 / 3.6
 H = 0.01  # the env's substep

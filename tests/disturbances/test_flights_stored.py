@@ -10,10 +10,10 @@ import pytest
 
 from disturbances.bank import TraceBank
 from disturbances.db import DisturbanceDB
-from disturbances.flightlog import FlightLogSpec, run_flight
-from identification.flight import AirspeedScaling, FlightReference
+from identification.flightlog import FlightLogSpec, run_flight
 from identification.recording import save_recording
 from rocketroll.cli import main
+from rocketroll_physics.flight import AirspeedScaling, FlightReference
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +75,7 @@ def test_the_flight_env_flies_a_stored_flight_as_that_rocket(stored: Path) -> No
     import numpy as np
 
     import rollenv  # noqa: F401  (registers the variants)
-    from identification.flight import TUNNEL_AIRSPEED_MPS
+    from rocketroll_physics.flight import TUNNEL_AIRSPEED_MPS
 
     with DisturbanceDB(stored, create=False) as db:
         (fit,) = db.identifications(method="flight", model="theta")

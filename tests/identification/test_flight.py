@@ -10,7 +10,9 @@ import pytest
 from scipy.integrate import trapezoid
 
 import identification
-from identification.flight import (
+from rocketroll_common.errors import UsageError
+from rocketroll_common.plotting import png_bytes
+from rocketroll_physics.flight import (
     DEFAULT_ASCENT,
     G0_MPS2,
     ISA_SEA_LEVEL_DENSITY_KGM3,
@@ -24,8 +26,6 @@ from identification.flight import (
     roll_scales,
     simulate_ascent,
 )
-from rocketroll_common.errors import UsageError
-from rocketroll_common.plotting import png_bytes
 
 DEFAULT_YAML = Path(identification.__file__).resolve().parent / "data" / "ascent-default.yml"
 

@@ -12,15 +12,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from disturbances.flightlog import FlightLogSpec, run_flight, truth_at
-from identification.flight import (
-    EQ_4_8,
-    ISA_SEA_LEVEL_DENSITY_KGM3,
-    TUNNEL_AIRSPEED_MPS,
-    AirspeedScaling,
-    isa,
-    roll_scales,
-)
 from identification.flightfit import (
     MACH_LIMIT,
     MIN_DAMPING,
@@ -37,6 +28,7 @@ from identification.flightfit import (
     rescale,
     subsonic_part,
 )
+from identification.flightlog import FlightLogSpec, run_flight, truth_at
 from identification.importer import import_csv, plausibility_warnings
 from identification.methods import default_methods, fit
 from identification.model import PAPER_THETA, RollParams, Servo, simulate
@@ -54,6 +46,14 @@ from identification.steps import IdentificationError
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main
 from rocketroll_common.errors import SettingError, UsageError
+from rocketroll_physics.flight import (
+    EQ_4_8,
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    TUNNEL_AIRSPEED_MPS,
+    AirspeedScaling,
+    isa,
+    roll_scales,
+)
 
 
 @pytest.fixture(scope="module")

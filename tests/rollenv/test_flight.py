@@ -18,7 +18,7 @@ import pytest
 
 import rollenv  # noqa: F401  (registers the variants)
 from disturbances.bank import TraceBank
-from identification.flight import (
+from rocketroll_physics.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
     roll_scales,
@@ -161,7 +161,7 @@ def test_the_gyro_angle_starts_at_the_true_angle() -> None:
 
 
 def test_dryden_flights_roll_the_air_the_damping_works_against() -> None:
-    from disturbances.dryden import roll_gust_std
+    from rocketroll_physics.dryden import roll_gust_std
 
     train = RollConfig(flight="default", flight_turbulence="dryden")
     bank = train.flights(array_bank())

@@ -61,9 +61,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import BaseModel, ConfigDict, Field
 
-from identification.recording import parse_number
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import SettingError, UsageError
+from rocketroll_common.text import parse_number
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

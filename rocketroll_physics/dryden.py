@@ -167,7 +167,7 @@ from numpy.typing import ArrayLike
 
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import UsageError
-from rocketroll_common.ou import interval_coefficients
+from rocketroll_physics.ou import interval_coefficients
 
 __all__ = [
     "DEFAULT_SPAN_M",
@@ -345,7 +345,7 @@ def gust_parameters(altitude_m: ArrayLike, severity: Severity = "light") -> Gust
     ----------
     altitude_m : float or array_like
         Height above ground, m, ≥ 0, any shape (the specification's ``h``;
-        for an :class:`identification.flight.FlightProfile` its
+        for an :class:`rocketroll_physics.flight.FlightProfile` its
         ``altitude_m`` less the launch altitude).
     severity : {"light", "moderate", "severe"}
         Low altitude: wind at 20 ft of 15, 30, 45 kt; medium/high altitude:

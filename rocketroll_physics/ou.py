@@ -9,7 +9,7 @@ With ``z1``, ``z2`` independent standard normals and ``u = h/T``::
     I/h = mean·x0 + σ·(l21·z1 + l22·z2)
 
 :func:`interval_coefficients` gives ``phi, a1, mean, l21, l22``.  The Dryden
-gust generator (:mod:`disturbances.dryden`) draws with them, and the flight
+gust generator (:mod:`rocketroll_physics.dryden`) draws with them, and the flight
 identification (:mod:`identification.flightfit`) filters with them, so the
 turbulence both hold is one process.
 

@@ -3,7 +3,7 @@
 The tunnel (:mod:`identification.tunnel`) re-creates the paper's experiment so
 that every identification can be checked against the truth.  This module does
 the same for the flight the paper's §4 looks ahead to: the rocket of a
-:class:`~identification.flight.FlightProfile` (default: the 5-kg rocket to
+:class:`~rocketroll_physics.flight.FlightProfile` (default: the 5-kg rocket to
 603 km/h and 2 km) from the moment it reaches the reference airspeed (the
 tunnel's, unless ``--v-ref``; it has left the rail) to apogee -- with Dryden
 gusts, to the moment it slows back below ``v_ref`` just before apogee (there
@@ -13,16 +13,16 @@ equivalent fin angle grows without bound) -- with
 * the roll model of eq. 36/49 at the reference airspeed ``V_ref`` (the
   truth), its gain and damping scaled along the flight by eq. 4-8 or by
   other exponents (torque ``∝ ρV^n``, damping ``∝ ρV^m``:
-  :class:`identification.flight.AirspeedScaling`), integrated exactly
+  :class:`rocketroll_physics.flight.AirspeedScaling`), integrated exactly
   (:func:`identification.model.simulate`, scales per substep);
 * an excitation: a random staircase of fin commands, short dwells (the rocket
   settles in tens of milliseconds at speed), through the servo of eq. 23;
 * turbulence flown, from one of the two sources of the flight environment:
   ``tunnel`` -- a stationary ``u_d`` process like the tunnel's
   (:class:`identification.tunnel.Turbulence`) flown by the law of
-  :mod:`disturbances.flight` (Taylor's frozen field, amplitude
+  :mod:`rocketroll_physics.flown` (Taylor's frozen field, amplitude
   ``V_ref/max(V, V_ref)``) -- or ``dryden`` -- the MIL-F-8785C roll gust
-  ``p_g`` (:mod:`disturbances.dryden`) as ``α·u_d = p_g``;
+  ``p_g`` (:mod:`rocketroll_physics.dryden`) as ``α·u_d = p_g``;
 * flight sensors: a rate gyro with the multiplicative noise of eq. 52, an
   additive floor and a constant bias, optionally an encoder-like quantised
   angle; the airspeed and altitude of the profile (format 1.1), the altitude
@@ -42,16 +42,6 @@ from typing import Literal
 
 import numpy as np
 
-from disturbances.dryden import roll_gust
-from disturbances.flight import fly_trace, tunnel_time
-from identification.flight import (
-    ISA_SEA_LEVEL_DENSITY_KGM3,
-    TUNNEL_AIRSPEED_MPS,
-    AirspeedScaling,
-    FlightProfile,
-    flight_profile,
-    roll_scales,
-)
 from identification.flightfit import SITE_ELEVATION_KEY
 from identification.model import MODEL_NAMES, RollParams, Servo
 from identification.model import simulate as simulate_roll
@@ -67,6 +57,16 @@ from identification.tunnel import (
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv
+from rocketroll_physics.dryden import roll_gust
+from rocketroll_physics.flight import (
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    TUNNEL_AIRSPEED_MPS,
+    AirspeedScaling,
+    FlightProfile,
+    flight_profile,
+    roll_scales,
+)
+from rocketroll_physics.flown import fly_trace, tunnel_time
 
 __all__ = ["AscentError", "FlightLogSpec", "run_flight", "truth_at"]
 
