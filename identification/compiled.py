@@ -54,6 +54,29 @@ piece = numba.njit(cache=True, nogil=True)(model.piece_coefficients)
 
 
 @numba.njit(cache=True, nogil=True)
+def _substep(
+    alpha: float,
+    theta_bar: float,
+    beta_bar: float,
+    alpha_bar: float,
+    t0: float,
+    t1: float,
+    u: float,
+    h: float,
+    rate_limit: float,
+) -> tuple[float, float, float, float]:
+    """One substep's ``(E, c, A, B)``: the fin linear from ``t0`` to ``t1`` over ``h``, or,
+    with ``rate_limit > 0`` (a servo), moving at that rate until it reaches ``t1`` and then
+    holding (the two pieces composed, as :func:`identification.model.roll_coefficients`)."""
+    if rate_limit <= 0.0:
+        return piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, u, h)
+    ramp = min(abs(t1 - t0) / rate_limit, h)
+    e1, c1, a1, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, u, ramp)
+    e2, c2, a2, b2 = piece(alpha, theta_bar, beta_bar, alpha_bar, t1, t1, u, h - ramp)
+    return e2 * e1, e2 * c1 + c2, a1 + a2 * e1, b1 + a2 * c1 + b2
+
+
+@numba.njit(cache=True, nogil=True)
 def _interval_maps(
     alpha: float,
     theta_bar: float,
@@ -62,22 +85,30 @@ def _interval_maps(
     theta_fine: FloatArray,
     per: int,
     h: float,
+    gain: FloatArray,
+    damping: FloatArray,
+    rate_limit: float,
 ) -> FloatArray:
     """Per sample interval ``[E, G, f, A, B, g]`` of the affine update (module docstring).
 
-    An interval with the fin at rest is one exact piece; one with the fin
-    moving is the composition of its substeps, the fin linear in each.
+    ``gain`` and ``damping`` (one per substep, or empty: 1) multiply ``α`` and the
+    damping (``β̄`` and ``ᾱ``) substep by substep -- the rocket at a changing airspeed;
+    ``rate_limit > 0``: the fin is a servo's, its ramp may end inside a substep.  An
+    interval with the fin at rest and the rocket constant is one exact piece; any other
+    is the composition of its substeps.
     """
     n = (theta_fine.size - 1) // per
     out = np.empty((n, 6))
+    scaled = gain.size > 0
     for k in range(n):
         lo = k * per
         th = theta_fine[lo]
-        rest = True
+        rest = not scaled
         for j in range(1, per + 1):
+            if not rest:
+                break
             if theta_fine[lo + j] != th:
                 rest = False
-                break
         if rest:
             e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 0.0, per * h)
             _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, th, th, 1.0, per * h)
@@ -92,8 +123,11 @@ def _interval_maps(
         for j in range(per):
             t0 = theta_fine[lo + j]
             t1 = theta_fine[lo + j + 1]
-            e, c0, a, b0 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 0.0, h)
-            _, c1, _, b1 = piece(alpha, theta_bar, beta_bar, alpha_bar, t0, t1, 1.0, h)
+            g = gain[lo + j] if scaled else 1.0
+            d = damping[lo + j] if scaled else 1.0
+            args = (alpha * g, theta_bar, beta_bar * d, alpha_bar * d, t0, t1)
+            e, c0, a, b0 = _substep(*args, 0.0, h, rate_limit)
+            _, c1, _, b1 = _substep(*args, 1.0, h, rate_limit)
             # φ gains a·v + b with v the rate at the substep's start.
             a_p += a * e_v
             b_p += a * g_v + (b1 - b0)
@@ -103,15 +137,38 @@ def _interval_maps(
     return out
 
 
-def interval_maps(params: RollParams, theta_fine: FloatArray, per: int, h: float) -> FloatArray:
+#: No per-substep scales: the rocket the parameters say, throughout.
+_UNSCALED = np.empty(0)
+
+
+def interval_maps(
+    params: RollParams,
+    theta_fine: FloatArray,
+    per: int,
+    h: float,
+    *,
+    gain: FloatArray | None = None,
+    damping: FloatArray | None = None,
+    rate_limit_dps: float | None = None,
+) -> FloatArray:
     """``[E, G, f, A, B, g]`` of each sample interval of ``per`` substeps of ``h`` s
     (module docstring) for the fin path ``theta_fine`` (one value per substep
-    boundary, ``n·per + 1`` of them) under the rocket ``params``."""
+    boundary, ``n·per + 1`` of them) under the rocket ``params``; ``gain`` and
+    ``damping`` (one per substep) scale it along a flight, ``rate_limit_dps`` makes the
+    fin a servo's (its ramp may end inside a substep)."""
     theta = np.ascontiguousarray(theta_fine, dtype=float)
     if per < 1 or (theta.size - 1) % per:
         raise ValueError(
             f"theta_fine needs n·{per} + 1 values (a whole number of intervals), got {theta.size}"
         )
+    steps = theta.size - 1
+    if (gain is None) != (damping is None):
+        raise ValueError("give gain and damping together")
+    scales = [
+        _UNSCALED if x is None else np.ascontiguousarray(x, dtype=float) for x in (gain, damping)
+    ]
+    if gain is not None and any(x.shape != (steps,) for x in scales):
+        raise ValueError(f"gain and damping need one value per substep ({steps})")
     return np.asarray(
         _interval_maps(
             params.alpha,
@@ -121,5 +178,8 @@ def interval_maps(params: RollParams, theta_fine: FloatArray, per: int, h: float
             theta,
             per,
             h,
+            scales[0],
+            scales[1],
+            -1.0 if rate_limit_dps is None else float(rate_limit_dps),
         )
     )

@@ -58,13 +58,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import optimize
 
-from identification import statespace
+from identification import compiled, statespace
 from identification.methods import ModelFit
 from identification.model import (
     RollParams,
     Servo,
     SimResult,
-    roll_coefficients,
     servo_path,
     simulate,
 )
@@ -304,30 +303,21 @@ def interval_maps(
 
         v1 = E·v0 + C0 + C1·w̄,     φ1 = φ0 + A·v0 + B0 + B1·w̄
 
-    composed from the :data:`SUBSTEPS` substeps of :func:`~identification.model.roll_coefficients`.
+    composed from the :data:`SUBSTEPS` substeps, each with its airspeed's scales
+    (:func:`identification.compiled.interval_maps`, the maximum-likelihood method's).
     """
-    n = inputs.n
-    th0, th1 = inputs.theta[:-1], inputs.theta[1:]
-    h = inputs.dt_s / SUBSTEPS
-    unit = np.repeat(inputs.u_per_w, SUBSTEPS)
     gain, damping = inputs.scales(scaling)
-    kw = {"gain": gain, "damping": damping}
-    e, c0, a, b0 = roll_coefficients(params, th0, th1, 0.0, h, inputs.rate_limit_dps, **kw)
-    _, c1, _, b1 = roll_coefficients(params, th0, th1, unit, h, inputs.rate_limit_dps, **kw)
-    parts = [x.reshape(n, SUBSTEPS) for x in (e, c0, c1 - c0, a, b0, b1 - b0)]
-    e_s, c0_s, c1_s, a_s, b0_s, b1_s = parts
-    big_e, big_c0, big_c1 = np.ones(n), np.zeros(n), np.zeros(n)
-    big_a, big_b0, big_b1 = np.zeros(n), np.zeros(n), np.zeros(n)
-    for j in range(SUBSTEPS):  # v_j = E·v0 + C0 + C1·w̄ at the start of substep j
-        big_a += a_s[:, j] * big_e
-        big_b0 += a_s[:, j] * big_c0 + b0_s[:, j]
-        big_b1 += a_s[:, j] * big_c1 + b1_s[:, j]
-        big_e, big_c0, big_c1 = (
-            e_s[:, j] * big_e,
-            e_s[:, j] * big_c0 + c0_s[:, j],
-            e_s[:, j] * big_c1 + c1_s[:, j],
-        )
-    return big_e, big_c0, big_c1, big_a, big_b0, big_b1
+    maps = compiled.interval_maps(
+        params,
+        inputs.theta,
+        SUBSTEPS,
+        inputs.dt_s / SUBSTEPS,
+        gain=gain,
+        damping=damping,
+        rate_limit_dps=inputs.rate_limit_dps,
+    )
+    e, per_u, c0, a, per_u_angle, b0 = maps.T
+    return e, c0, per_u * inputs.u_per_w, a, b0, per_u_angle * inputs.u_per_w
 
 
 @dataclass(frozen=True)

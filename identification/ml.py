@@ -51,7 +51,7 @@ import numba
 import numpy as np
 from scipy import linalg, optimize
 
-from identification.compiled import _interval_maps, interval_maps
+from identification.compiled import _UNSCALED, _interval_maps, interval_maps
 from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.model import RollParams, check_model
 from identification.pipeline import IdentifyOptions, Measurements, measurements, model_inputs
@@ -322,7 +322,18 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
         return None
     ar = np.asarray(nat["ar"], dtype=float)
     m = 2 + ar.size
-    maps = _interval_maps(alpha, theta_bar, beta_bar, alpha_bar, data.theta_fine, data.per, data.h)
+    maps = _interval_maps(
+        alpha,
+        theta_bar,
+        beta_bar,
+        alpha_bar,
+        data.theta_fine,
+        data.per,
+        data.h,
+        _UNSCALED,
+        _UNSCALED,
+        -1.0,
+    )
     obs_var = np.empty(data.y.shape)
     for j, index in enumerate(data.observed.tolist()):
         if index == 1:

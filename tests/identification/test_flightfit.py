@@ -812,3 +812,41 @@ def test_info_on_a_flight_says_its_airspeed_not_the_tunnels_figure(
     out = capsys.readouterr().out
     assert "a flight: the paper's figure is the tunnel's" in out and "paper: 16.4" not in out
     assert "peak Mach 0.50" in out and "altitude       " in out
+
+
+def test_the_flights_interval_maps_are_the_models_substeps_composed(paper_flight: Recording):
+    """The compiled interval maps (the maximum-likelihood method's, with per-substep scales
+    and the servo's ramp) against the model's own substep coefficients
+    (:func:`identification.model.roll_coefficients`, numpy) composed here."""
+    from identification.flightfit import SUBSTEPS, interval_maps
+    from identification.model import roll_coefficients
+
+    inputs = flight_inputs(paper_flight)
+    params = RollParams(4.4, 4.0, 9.0, -0.05)
+    scaling = AirspeedScaling(1.7, 1.1)
+    gain, damping = inputs.scales(scaling)
+    h = inputs.dt_s / SUBSTEPS
+    th0, th1 = inputs.theta[:-1], inputs.theta[1:]
+    unit = np.repeat(inputs.u_per_w, SUBSTEPS)
+    kw = {"gain": gain, "damping": damping}
+    e, c0, a, b0 = roll_coefficients(params, th0, th1, 0.0, h, inputs.rate_limit_dps, **kw)
+    _, c1, _, b1 = roll_coefficients(params, th0, th1, unit, h, inputs.rate_limit_dps, **kw)
+    n = inputs.n
+    e_s, c0_s, c1_s, a_s, b0_s, b1_s = (
+        x.reshape(n, SUBSTEPS) for x in (e, c0, c1 - c0, a, b0, b1 - b0)
+    )
+    big = [np.ones(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)]
+    for j in range(SUBSTEPS):  # [E, C0, C1, A, B0, B1] after substep j
+        big_e, big_c0, big_c1, big_a, big_b0, big_b1 = big
+        big = [
+            e_s[:, j] * big_e,
+            e_s[:, j] * big_c0 + c0_s[:, j],
+            e_s[:, j] * big_c1 + c1_s[:, j],
+            big_a + a_s[:, j] * big_e,
+            big_b0 + a_s[:, j] * big_c0 + b0_s[:, j],
+            big_b1 + a_s[:, j] * big_c1 + b1_s[:, j],
+        ]
+    expected = big
+    got = interval_maps(inputs, params, scaling)  # (E, C0, C1, A, B0, B1)
+    for mine, theirs in zip(got, expected, strict=True):
+        np.testing.assert_allclose(mine, theirs, rtol=1e-11, atol=1e-12)

@@ -16,10 +16,10 @@ from identification.methods import fit
 from identification.ml import (
     _filter,
     _hessian,
-    _interval_maps,
     _parts,
     _prepare,
     _state_space,
+    interval_maps,
     maximum_likelihood,
     posterior_given,
     posterior_traces,
@@ -149,15 +149,7 @@ def test_the_interval_maps_are_the_models_simulation(negative: tuple) -> None:
     data = _prepare(measurements(rec, IdentifyOptions()))
     p = RollParams(0.9, -3.3, 2.4, -0.029)
     u = ar1_turbulence(data.n - 1, 9.0, 0.8, seed=0)
-    maps = _interval_maps(
-        p.alpha,
-        p.theta_bar_deg,
-        p.beta_bar_per_s,
-        p.alpha_bar_per_deg_s,
-        data.theta_fine,
-        data.per,
-        data.h,
-    )
+    maps = interval_maps(p, data.theta_fine, data.per, data.h)
     v, phi = np.empty(data.n), np.empty(data.n)
     v[0], phi[0] = 3.0, 1.0
     for k, (e, g, f, a, b, c) in enumerate(maps):
