@@ -12,15 +12,10 @@ import pkgutil
 import pytest
 
 from rocketroll_common.errors import Interrupted, RocketrollError
+from tests.import_graph import LAYERS
 
-PACKAGES = (
-    "rocketroll_common",
-    "rocketroll_physics",
-    "identification",
-    "disturbances",
-    "rollenv",
-    "agents",
-)
+#: Every library package (the layers but the command line's).
+PACKAGES = tuple(package for package in LAYERS if package != "rocketroll")
 
 
 def _modules() -> list[str]:
