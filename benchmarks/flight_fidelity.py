@@ -44,9 +44,8 @@ from agents.registry import make_controller
 from disturbances.db import DisturbanceDB
 from disturbances.ingest import identification_rows, trace_summary
 from disturbances.rows import checksum
-from identification.flightlog import FlightLogSpec, run_flight
+from identification.flightlog import FlightLogSpec, run_flight, truth_reference
 from identification.methods import Context
-from rocketroll_physics.flight import AirspeedScaling, FlightReference
 from rollenv.bank import load_bank, stored_flight_config, variant_config
 
 ENV_ID = "RocketRollFlight-v0"
@@ -58,15 +57,8 @@ def _truth_rows(rows: tuple[Any, list[Any], list[Any]], recording: Any) -> tuple
     rocket at its own reference with its true scaling, the true u_d as its identified trace
     (no posterior draws)."""
     stored, identifications, traces = rows
-    meta = recording.metadata
     truth = recording.truth()
-    reference = FlightReference(
-        float(meta["truth.v_ref_mps"]),
-        float(meta["truth.rho_ref_kgm3"]),
-        AirspeedScaling(
-            float(meta["truth.torque_exponent"]), float(meta["truth.damping_exponent"])
-        ),
-    )
+    reference = truth_reference(recording)
     facts = {
         "v_ref_mps": reference.v_ref_mps,
         "rho_ref_kgm3": reference.rho_ref_kgm3,

@@ -99,7 +99,6 @@ __all__ = [
     "identify_flights",
     "model_only_r2",
     "rescale",
-    "scaling_of",
 ]
 
 #: Exact-update substeps per sample interval (the servo ramp is resolved exactly within each).
@@ -1340,15 +1339,6 @@ def _add_reason(adequacy: dict[str, Any], text: str, severity: int) -> None:
         adequacy["reasons"] = [*adequacy["reasons"], text]
         worst = max(VERDICTS.index(adequacy["verdict"]), severity)
         adequacy["verdict"] = VERDICTS[worst]
-
-
-def scaling_of(fit: ModelFit) -> AirspeedScaling:
-    """The airspeed scaling a flight method's fit was made with (eq. 4-8 for fits that
-    predate measured exponents)."""
-    settings = fit.trace_settings
-    return AirspeedScaling(
-        float(settings.get("torque_exponent", 2.0)), float(settings.get("damping_exponent", 1.0))
-    )
 
 
 def _at_tunnel(fit: FlightFit) -> dict[str, float]:

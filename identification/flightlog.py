@@ -63,12 +63,13 @@ from rocketroll_physics.flight import (
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
     FlightProfile,
+    FlightReference,
     flight_profile,
     roll_scales,
 )
 from rocketroll_physics.flown import fly_trace, tunnel_time
 
-__all__ = ["AscentError", "FlightLogSpec", "run_flight", "truth_at"]
+__all__ = ["AscentError", "FlightLogSpec", "run_flight", "truth_at", "truth_reference"]
 
 #: The tunnel trace's hold interval that the ``tunnel`` turbulence is drawn at, s (the tunnel's Δt).
 TUNNEL_DT_S = 0.1
@@ -370,31 +371,39 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     )
 
 
-def truth_at(
-    recording: Recording, v_ref_mps: float, rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3
-) -> RollParams:
-    """A virtual flight's true rocket at the reference ``(v_ref_mps, rho_ref_kgm3)``: its
-    ``truth.*`` carried there by its true scaling (``truth.torque_exponent``,
-    ``truth.damping_exponent``; eq. 4-8's where a log predates them).
+def truth_reference(recording: Recording) -> FlightReference:
+    """Where a virtual flight's truth holds and how it scales: its ``truth.v_ref_mps``,
+    ``truth.rho_ref_kgm3`` and true exponents (eq. 4-8's where a log predates them).
 
     Raises
     ------
     ValueError
         If the recording holds no truth (not a virtual flight).
     """
-    truth = recording.truth()
-    meta = recording.metadata
-    if truth is None or "truth.v_ref_mps" not in meta:
+    facts = {
+        key.removeprefix("truth."): value
+        for key, value in recording.metadata.items()
+        if key.startswith("truth.")
+    }
+    reference = FlightReference.from_metrics(facts)
+    if recording.truth() is None or reference is None:
         raise ValueError(f"recording {recording.name!r} holds no flight truth")
-    scaling = AirspeedScaling(
-        float(meta.get("truth.torque_exponent", 2.0)),
-        float(meta.get("truth.damping_exponent", 1.0)),
-    )
-    gain, damping = roll_scales(
-        v_ref_mps,
-        rho_ref_kgm3,
-        float(meta["truth.v_ref_mps"]),
-        float(meta.get("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3)),
-        scaling,
-    )
+    return reference
+
+
+def truth_at(
+    recording: Recording, v_ref_mps: float, rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3
+) -> RollParams:
+    """A virtual flight's true rocket at the reference ``(v_ref_mps, rho_ref_kgm3)``: its
+    ``truth.*`` carried there by its true scaling (:func:`truth_reference`).
+
+    Raises
+    ------
+    ValueError
+        If the recording holds no truth (not a virtual flight).
+    """
+    reference = truth_reference(recording)
+    truth = recording.truth()
+    assert truth is not None
+    gain, damping = reference.scales(v_ref_mps, rho_ref_kgm3)
     return truth.scaled(float(gain), float(damping))

@@ -29,11 +29,11 @@ from identification.flightfit import (
     flight_inputs,
     measured_rate,
     resimulated,
-    scaling_of,
 )
 from identification.methods import ModelFit
 from identification.recording import Recording
 from rocketroll_common.plotting import new_figure, png_bytes
+from rocketroll_physics.flight import FlightReference
 
 __all__ = ["FIGURE_NAME", "REPORT_NAME", "render_flight_report"]
 
@@ -97,7 +97,9 @@ def render_flight_report(
     ax_rate.plot(t, measured, color="0.5", lw=1.6, label=f"measured ({source})")
     for model, f in fits.items():
         rate0 = float(f.trace_settings["rate0_dps"])
-        sim = resimulated(inputs, f.params, f.disturbance.u_d_deg, rate0, scaling_of(f))
+        reference = FlightReference.from_metrics(f.metrics)
+        assert reference is not None  # a flight method's fit records it
+        sim = resimulated(inputs, f.params, f.disturbance.u_d_deg, rate0, reference.scaling)
         mae = f.metrics["resim_rate_mae_pct"]
         ax_rate.plot(
             t,
