@@ -51,11 +51,11 @@ demo: $(VENV)/.installed
 		--out $(DEMO)/seeds-rate
 	$(BIN)/rocketroll robustness --env-id RocketRoll-v0 --out $(DEMO)/robustness-angle
 	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
-	$(BIN)/rocketroll env flight --plot $(DEMO)/flight-profile.png
+	$(BIN)/rocketroll env ascent --plot $(DEMO)/flight-profile.png
 	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
 		--policy trim --policy pid --policy pid-tunnel --policy observer --policy mpc \
 		--policy oracle --out $(DEMO)/eval-flight
-	$(BIN)/rocketroll flight --seed 0 --out $(DEMO)/flight-seed0.csv
+	$(BIN)/rocketroll record-flight --seed 0 --out $(DEMO)/flight-seed0.csv
 	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json \
 		--report $(DEMO)/flight-seed0-report
 	@echo "demo: wrote $(DEMO)/tunnel-seed0.csv, $(DEMO)/tunnel-seed0.png, the"

@@ -1,4 +1,4 @@
-"""Ground truth of the flight identification: ``rocketroll flight`` logs, identified back.
+"""Ground truth of the flight identification: ``rocketroll record-flight`` logs, identified back.
 
 For each truth (``--truth``; default all of :data:`TRUTHS`: the paper's
 θ-dependent rocket and a constant-damping one, other gains and asymmetries of

@@ -12,7 +12,7 @@ range) and the verdict with its reasons; a method that cannot fit the recording
 says why in one line, and the others run.
 
 A flight (a recording whose airspeed changes: a flight computer's log imported with
-``--source flight``, or ``rocketroll flight``'s) is fitted by the flight methods instead:
+``--source flight``, or ``rocketroll record-flight``'s) is fitted by the flight methods instead:
 the rocket at the fit's reference airspeed, its measured airspeed scaling (``n``, ``m``
 with their standard errors) and the test of eq. 4-8, and the same adequacy figures.
 

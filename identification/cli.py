@@ -1,5 +1,5 @@
-"""``rocketroll`` commands of the identification layer: ``tunnel`` and ``flight`` (the
-virtual tunnel and flight recorder), ``import-csv``, ``info``.
+"""``rocketroll`` commands of the identification layer: ``tunnel`` and ``record-flight``
+(the virtual tunnel and flight recorder), ``import-csv``, ``info``.
 
 Each command is a settings dataclass (its options, with help, defaults and
 bounds on the fields) and a function; :mod:`rocketroll_common.settings`
@@ -22,7 +22,7 @@ from identification.tunnel import TunnelSpec
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 
-__all__ = ["COMMANDS", "ImportArgs", "InfoArgs", "TunnelArgs"]
+__all__ = ["COMMANDS", "ImportArgs", "InfoArgs", "RecordFlightArgs", "TunnelArgs"]
 
 
 @dataclass(frozen=True)
@@ -45,8 +45,8 @@ def tunnel(args: TunnelArgs) -> int:
 
 
 @dataclass(frozen=True)
-class FlightArgs:
-    """``rocketroll flight``."""
+class RecordFlightArgs:
+    """``rocketroll record-flight``."""
 
     out: Path = setting(
         help="recording file to write (CSV, format 1.1)", output="file", kind="recording"
@@ -54,8 +54,8 @@ class FlightArgs:
     spec: FlightLogSpec = setting(default_factory=FlightLogSpec, flatten=True)
 
 
-def flight(args: FlightArgs) -> int:
-    """Fly the virtual flight and write its log."""
+def record_flight(args: RecordFlightArgs) -> int:
+    """Fly the virtual flight recorder and write its log."""
     from identification.flightlog import AscentError, run_flight
     from identification.recording import save_recording
 
@@ -141,11 +141,11 @@ COMMANDS: dict[str, Command] = {
         "Re-create the paper's wind-tunnel experiment with known ground truth "
         "(defaults: the paper's parameters and Table 1 schedule).",
     ),
-    "flight": Command(
-        "flight",
-        "fly the virtual flight and write a synthetic flight log",
-        FlightArgs,
-        flight,
+    "record-flight": Command(
+        "record-flight",
+        "fly the virtual flight recorder and write a synthetic flight log",
+        RecordFlightArgs,
+        record_flight,
         "The virtual tunnel's flight counterpart: the rocket (truth given at --v-ref) along "
         "an ascent from the rail to apogee, its gain and damping scaled by eq. 4-8, a fin "
         "staircase, flown turbulence, a rate gyro; a format-1.1 recording with the truth "

@@ -31,7 +31,7 @@ Dryden gust (``α·u_d = p_g``, an OU process of time constant ``4b/(πV)``:
 constant in tunnel time) has this form, its intensity changing with height
 and airspeed where the prior's is stationary (``benchmarks/flight_ground_truth.py``
 measures what that costs); below ``V_ref`` the prior holds the flow angle's
-scale at the tunnel's, which the gust does not (``rocketroll flight`` logs
+scale at the tunnel's, which the gust does not (``rocketroll record-flight`` logs
 only above ``V_ref``).  Measured: a rate gyro with the multiplicative noise of eq. 52 plus
 an additive floor (both estimated), or, without a gyro, the encoder angle
 with its quantisation.  The likelihood of the innovations is maximised over

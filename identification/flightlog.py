@@ -1,4 +1,5 @@
-"""The virtual tunnel's flight counterpart: a flight log with known truth (``rocketroll flight``).
+"""The virtual tunnel's flight counterpart: a flight log with known truth
+(``rocketroll record-flight``).
 
 The tunnel (:mod:`identification.tunnel`) re-creates the paper's experiment so
 that every identification can be checked against the truth.  This module does
@@ -79,7 +80,8 @@ LEAD_S = 0.5
 
 @dataclass(frozen=True)
 class FlightLogSpec:
-    """Everything that defines one virtual flight; each field is a ``rocketroll flight`` flag.
+    """Everything that defines one virtual flight; each field is a ``rocketroll record-flight``
+    flag.
 
     The rocket's truth is given at the reference airspeed ``v_ref`` (default:
     the tunnel's 50 km/h) and ISA sea-level density, as the tunnel's
@@ -196,8 +198,8 @@ class FlightLogSpec:
         return self.name or f"flight-{self.turbulence}-seed{self.seed}"
 
     def command(self) -> str:
-        """The full shell command, e.g. ``rocketroll flight --seed 0``."""
-        return shlex.join(["rocketroll", "flight", *to_argv(self)])
+        """The full shell command, e.g. ``rocketroll record-flight --seed 0``."""
+        return shlex.join(["rocketroll", "record-flight", *to_argv(self)])
 
 
 class AscentError(RocketrollError, ValueError):

@@ -16,14 +16,17 @@ import sys
 from collections.abc import Sequence
 
 from rocketroll_common import __version__
-from rocketroll_common.settings import Command, run_command
+from rocketroll_common.settings import Command, renamed_note, run_command
 
-__all__ = ["COMMANDS", "build_parser", "main", "write_help"]
+__all__ = ["ALIASES", "COMMANDS", "build_parser", "main", "write_help"]
 
 #: Command -> (module defining it in its ``COMMANDS``, one line of help).
 COMMANDS: dict[str, tuple[str, str]] = {
     "tunnel": ("identification.cli", "run the virtual wind tunnel and write a synthetic recording"),
-    "flight": ("identification.cli", "fly the virtual flight and write a synthetic flight log"),
+    "record-flight": (
+        "identification.cli",
+        "fly the virtual flight recorder and write a synthetic flight log",
+    ),
     "import-csv": ("identification.cli", "convert a foreign CSV/text log into a recording"),
     "info": ("identification.cli", "validate a recording and print its summary"),
     "identify": (
@@ -56,6 +59,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
 }
 
+#: Former name -> command: renamed commands still run under their old names for a release
+#: (not listed; a run says the new name on stderr).
+ALIASES: dict[str, str] = {"flight": "record-flight"}
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser: ``--version`` and the list of commands (their options are
@@ -71,6 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (_, text) in COMMANDS.items():
         sub.add_parser(name, help=text, add_help=False)
+    for alias in ALIASES:  # no help=: not in the list of commands
+        sub.add_parser(alias, add_help=False)
     return parser
 
 
@@ -117,6 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     words = list(sys.argv[1:] if argv is None else argv)
     ns, rest = build_parser().parse_known_args(words)
+    if ns.command in ALIASES:
+        renamed_note(f"rocketroll {ns.command}", f"rocketroll {ALIASES[ns.command]}")
+        ns.command = ALIASES[ns.command]
     prog = f"rocketroll {ns.command}"
     text = cached_help(ns.command, rest, prog)  # without importing the command's module
     if text is not None:

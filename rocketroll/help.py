@@ -88,6 +88,14 @@ def _fill(
             )
             _fill(made, child)
             children[child["name"]] = made
+            for alias in child.get("aliases", ()):  # former names: parsed, not listed
+                former = sub.add_parser(
+                    alias,
+                    description=child["description"],
+                    formatter_class=argparse.RawDescriptionHelpFormatter,
+                )
+                _fill(former, child)
+                children[alias] = former
         return children
     for flags, kwargs in tree.get("arguments", ()):
         kwargs = dict(kwargs)
@@ -148,7 +156,10 @@ def markdown_reference(trees: dict[str, dict[str, Any]], summaries: dict[str, st
             parser, children = _parser(tree, f"rocketroll {name}")
             out += [f"## rocketroll {name}", "", summaries[name] + ".", ""]
             out += ["```text", parser.format_help().rstrip(), "```", ""]
+            former = {a for c in tree.get("subcommands", ()) for a in c.get("aliases", ())}
             for sub, child in children.items():
+                if sub in former:  # a renamed command's old name: not documented
+                    continue
                 out += [f"### rocketroll {name} {sub}", ""]
                 out += ["```text", child.format_help().rstrip(), "```", ""]
         return "\n".join(out)

@@ -68,6 +68,7 @@ __all__ = [
     "make_parser",
     "parse",
     "parse_key_value",
+    "renamed_note",
     "run_command",
     "setting",
     "to_argv",
@@ -671,6 +672,9 @@ class Command:
         The text above the options in ``--help``.
     subcommands : tuple of Command
         For a group (``rocketroll db ...``): the commands under it.
+    aliases : tuple of str
+        Former names of a renamed subcommand: still parsed for a release, left out of the
+        list of commands, and a run under one says the new name on stderr.
     """
 
     name: str
@@ -679,6 +683,7 @@ class Command:
     run: Callable[[Any], int | None] | None = None
     description: str = ""
     subcommands: tuple[Command, ...] = ()
+    aliases: tuple[str, ...] = ()
 
     def parser(self, prog: str) -> ArgumentParser:
         """The full parser of this command (and of its subcommands)."""
@@ -698,7 +703,8 @@ class Command:
         if self.subcommands:
             tree["dest"] = f"_{self.name}_command"
             tree["subcommands"] = [
-                {"name": c.name, "help": c.help, **c.help_tree()} for c in self.subcommands
+                {"name": c.name, "help": c.help, "aliases": list(c.aliases), **c.help_tree()}
+                for c in self.subcommands
             ]
         elif self.args is not None:
             tree["arguments"] = [
@@ -719,6 +725,14 @@ class Command:
                     formatter_class=argparse.RawDescriptionHelpFormatter,
                 )
                 command._fill(child, f"{prog} {command.name}")
+                for alias in command.aliases:  # no help=: not in the list of commands
+                    former = sub.add_parser(
+                        alias,
+                        description=plain(command.description or command.help),
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                    )
+                    command._fill(former, f"{prog} {command.name}")
+                    former.set_defaults(_renamed=(f"{prog} {alias}", f"{prog} {command.name}"))
             return
         if self.args is not None:
             add_arguments(parser, self.args)
@@ -816,11 +830,20 @@ def _check_files(cls: type, args: Any) -> None:
                         )
 
 
+def renamed_note(old: str, new: str) -> None:
+    """Say on stderr that the command ``old`` is now ``new`` (a renamed command's former
+    name still runs for a release)."""
+    print(f"{old}: renamed '{new}'; the old name goes in the next release", file=sys.stderr)
+
+
 def run_command(command: Command, argv: Sequence[str], prog: str) -> int:
     """Parse ``argv`` for ``command``, check its outputs, run it; the exit code."""
 
     def work() -> int | None:
         ns = command.parser(prog).parse_args(list(argv))
+        renamed = getattr(ns, "_renamed", None)
+        if renamed is not None:
+            renamed_note(*renamed)
         leaf: Command = ns._command
         if leaf.args is None or leaf.run is None:
             return leaf.run(None) if leaf.run is not None else 0

@@ -14,7 +14,7 @@ from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 from rollenv import task_of
 
-__all__ = ["COMMANDS", "FlightArgs", "RolloutArgs", "rollout", "run_flight"]
+__all__ = ["COMMANDS", "AscentArgs", "RolloutArgs", "rollout", "show_ascent"]
 
 POLICIES = ("zero", "random")
 
@@ -183,8 +183,8 @@ def run_rollout(args: RolloutArgs) -> int:
 
 
 @dataclass(frozen=True)
-class FlightArgs:
-    """``rocketroll env flight``."""
+class AscentArgs:
+    """``rocketroll env ascent``."""
 
     flight: str = setting(
         "default",
@@ -201,7 +201,7 @@ class FlightArgs:
         check(self)
 
 
-def run_flight(args: FlightArgs) -> int:
+def show_ascent(args: AscentArgs) -> int:
     """Print the flight's summary and what it does to the roll model; plot it."""
     from rollenv.flight import flight_schedule
 
@@ -247,10 +247,11 @@ COMMANDS: dict[str, Command] = {
                 run_rollout,
             ),
             Command(
-                "flight",
+                "ascent",
                 "the ascent a flight variant flies (RocketRollFlight-v0): summary and plot",
-                FlightArgs,
-                run_flight,
+                AscentArgs,
+                show_ascent,
+                aliases=("flight",),
             ),
         ),
     )

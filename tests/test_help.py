@@ -22,6 +22,8 @@ def _words() -> Iterator[list[str]]:
         yield [name]
         for sub in command(name).subcommands:
             yield [name, sub.name]
+            for alias in sub.aliases:
+                yield [name, alias]
 
 
 WORDS = list(_words())
@@ -54,6 +56,33 @@ def test_the_kept_help_is_what_the_command_prints(
     live = capsys.readouterr().out
     assert kept.cached_help(words[0], [*words[1:], "--help"], prog) == live
     assert kept.cached_help(words[0], [*words[1:], "-h"], prog) == live
+
+
+def test_a_renamed_command_runs_under_its_former_name_and_says_the_new_one(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A renamed command keeps its old name for a release: it is not listed, it runs, and
+    it says the new name on stderr (the top level's and a group's)."""
+    from rocketroll.cli import ALIASES, build_parser, main
+
+    listed = build_parser().format_help()
+    for old, new in ALIASES.items():
+        assert new in COMMANDS and old not in COMMANDS and f"    {old} " not in listed
+    assert "ascent" in [c.name for c in command("env").subcommands]
+    assert main(["env", "flight"]) == 0
+    captured = capsys.readouterr()
+    assert "episode:" in captured.out
+    assert "rocketroll env flight: renamed 'rocketroll env ascent'" in captured.err
+    out = tmp_path / "log.csv"
+    assert main(["flight", "--out", str(out), "--seed", "1", "--log-dt", "0.05"]) == 0
+    captured = capsys.readouterr()
+    assert out.is_file() and "wrote" in captured.out
+    assert "rocketroll flight: renamed 'rocketroll record-flight'" in captured.err
+    try:  # from help.json, or, where the sources were edited since, argparse's exit
+        code = main(["flight", "--help"])
+    except SystemExit as stop:
+        code = int(stop.code or 0)
+    assert code == 0 and "usage: rocketroll record-flight" in capsys.readouterr().out
 
 
 def test_only_a_bare_help_is_answered_from_the_file(monkeypatch: pytest.MonkeyPatch) -> None:

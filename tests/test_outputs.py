@@ -88,7 +88,7 @@ def test_an_output_that_is_the_input_is_refused(
             "JSON",
             ["--out"],
         ),
-        (["flight", "--out", "{log}"], "log", "other content", ["--out"]),
+        (["record-flight", "--out", "{log}"], "log", "other content", ["--out"]),
         (
             ["info", "{recording}", "--json", "{sqlite}"],
             "sqlite",
@@ -103,9 +103,18 @@ def test_an_output_that_is_the_input_is_refused(
             ["--json", "not JSON"],
         ),
         (["env", "rollout", "--frames", "{png}"], None, None, []),
-        (["env", "flight", "--plot", "{png}"], None, None, []),
+        (["env", "ascent", "--plot", "{png}"], None, None, []),
     ],
-    ids=["tunnel", "import-csv", "flight", "info", "info-plot", "identify", "rollout", "ascent"],
+    ids=[
+        "tunnel",
+        "import-csv",
+        "record-flight",
+        "info",
+        "info-plot",
+        "identify",
+        "rollout",
+        "ascent",
+    ],
 )
 def test_an_existing_output_of_another_kind_is_refused(
     argv: list[str],
@@ -132,7 +141,7 @@ def test_an_existing_output_of_another_kind_is_refused(
 
 def test_a_png_is_named_png(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     refused(capsys, ["env", "rollout", "--frames", str(tmp_path / "x.txt")], "ending in .png")
-    refused(capsys, ["env", "flight", "--plot", str(tmp_path / "x.jpg")], "ending in .png")
+    refused(capsys, ["env", "ascent", "--plot", str(tmp_path / "x.jpg")], "ending in .png")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -422,11 +422,11 @@ def test_db_by_id(key: str, sub: str, default_db: Path) -> None:
     ),
     data=st.data(),
 )  # fmt: skip
-def test_flight(args: list[tuple[str, Any]], data: st.DataObject) -> None:
+def test_record_flight(args: list[tuple[str, Any]], data: st.DataObject) -> None:
     with folder() as root:
         (root / "rec.csv").write_text("# format: rocketroll-recording/1\n", encoding="utf-8")
         out = root / "flight.csv"
-        argv = ["flight", "--out", str(out)]
+        argv = ["record-flight", "--out", str(out)]
         for flag, values in args:
             value = data.draw(values)
             argv += [flag, str(root / value) if value == "rec.csv" else value]

@@ -253,7 +253,7 @@ def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
     assert float(rec.metadata["truth.v_ref_mps"]) == spec.v_ref
     assert (
         rec.metadata["command"]
-        == "rocketroll flight --seed 4 --model constant --gyro-noise 0.0 --gyro-floor 0.0 "
+        == "rocketroll record-flight --seed 4 --model constant --gyro-noise 0.0 --gyro-floor 0.0 "
         "--measured-fin"
     )
     # Re-simulating the truth with the logged u_d and the scales gives the logged rate.
@@ -275,7 +275,7 @@ def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
     # The same seed gives the same bytes; a file written is a file read.
     assert recording_text(run_flight(spec)) == recording_text(rec)
     path = tmp_path / "f.csv"
-    assert main(["flight", "--out", str(path), *spec.command().split()[2:]]) == 0
+    assert main(["record-flight", "--out", str(path), *spec.command().split()[2:]]) == 0
     assert path.read_text(encoding="utf-8") == recording_text(rec)
 
 
@@ -298,7 +298,7 @@ def test_bad_recorder_settings_are_named(tmp_path: Path, capsys):
     with pytest.raises(SettingError, match="alpha_bar"):
         FlightLogSpec(model="constant", alpha_bar=0.01)
     out = tmp_path / "x.csv"
-    assert main(["flight", "--out", str(out), "--ascent", str(tmp_path / "none.yml")]) == 2
+    assert main(["record-flight", "--out", str(out), "--ascent", str(tmp_path / "none.yml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "none.yml" in err
     assert not out.exists()
@@ -370,7 +370,7 @@ def test_tunnel_methods_refuse_a_flight_and_the_flight_method_a_tunnel_run(paper
 
 def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     path = tmp_path / "flight.csv"
-    assert main(["flight", "--out", str(path), "--seed", "5", "--model", "constant"]) == 0
+    assert main(["record-flight", "--out", str(path), "--seed", "5", "--model", "constant"]) == 0
     capsys.readouterr()
     out_json = tmp_path / "fit.json"
     report = tmp_path / "report"
@@ -541,7 +541,7 @@ def test_a_joint_fit_refuses_flights_it_cannot_put_together(paper_flight: Record
 def test_rocketroll_identify_fits_flights_together(tmp_path: Path, capsys):
     paths = [tmp_path / f"flight{seed}.csv" for seed in (8, 9)]
     for seed, path in zip((8, 9), paths, strict=True):
-        argv = ["flight", "--out", str(path), "--seed", str(seed), "--model", "constant"]
+        argv = ["record-flight", "--out", str(path), "--seed", str(seed), "--model", "constant"]
         assert main(argv) == 0
     capsys.readouterr()
     out_json = tmp_path / "fit.json"
@@ -752,7 +752,7 @@ def test_an_exponent_on_its_bound_is_unreliable(weak_fins) -> None:
 
 def test_identify_prints_the_measured_scaling(tmp_path: Path, capsys):
     path = tmp_path / "weak.csv"
-    argv = ["flight", "--out", str(path), "--seed", "2", "--model", "constant"]
+    argv = ["record-flight", "--out", str(path), "--seed", "2", "--model", "constant"]
     assert main([*argv, "--torque-exponent", "1.3"]) == 0
     capsys.readouterr()
     assert main(["identify", str(path), "--json", str(tmp_path / "fit.json")]) == 0

@@ -194,16 +194,16 @@ def test_rocketroll_env_flight_summarises_and_plots(tmp_path, capsys) -> None:
     from rocketroll.cli import main
 
     png = tmp_path / "profile.png"
-    assert main(["env", "flight", "--plot", str(png)]) == 0
+    assert main(["env", "ascent", "--plot", str(png)]) == 0
     out = capsys.readouterr().out
     assert "max 603 km/h" in out and "apogee 2010 m" in out and "212 control steps" in out
     assert png.read_bytes()[:4] == b"\x89PNG"
     bad = tmp_path / "rocket.yml"
     bad.write_text("dry_mass_kg: -1\n")
-    assert main(["env", "flight", "--flight", str(bad)]) == 2
+    assert main(["env", "ascent", "--flight", str(bad)]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "propellant_mass_kg: is missing" in err
-    assert main(["env", "flight", "--flight", str(tmp_path / "none.yml")]) == 2
+    assert main(["env", "ascent", "--flight", str(tmp_path / "none.yml")]) == 2
     assert "No such file" in capsys.readouterr().err
 
 
