@@ -3,10 +3,13 @@
 For each truth (``--truth``; default all of :data:`TRUTHS`: the paper's
 θ-dependent rocket and a constant-damping one, other gains and asymmetries of
 either sign, a positive ᾱ, Dryden gusts, a heavy-tailed turbulence, an
-angle-only log) and seed, the virtual flight (:func:`identification.flightlog.run_flight`)
-logs the default ascent, and the ``flight`` method
+angle-only log, and two stretches outside the model: a descent past apogee
+and a supersonic one) and seed, the virtual flight
+(:func:`identification.flightlog.run_flight`)
+logs its ascent (the default, unless the truth says), and the ``flight`` method
 (:func:`identification.flightfit.identify_flight`, the truth's damping model)
-identifies it.  Per flight: the relative error of ``α₀`` and ``β̄₀`` (the
+identifies it on the part ``identify`` fits (to apogee, at or below Mach 0.8;
+``--whole``: every sample).  Per flight: the relative error of ``α₀`` and ``β̄₀`` (the
 scaled coefficients at the reference airspeed: ``C_δ``- and ``C_P``-like),
 the error of θ̄ (°) and ᾱ₀, the RMS error of the damping ``a(θ)`` over the
 flown fin angles (%), the re-simulation's rate MAE as a percentage of the
@@ -39,6 +42,7 @@ Run from the repository root::
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 10 --joint 3 --truth dryden
     .venv/bin/python benchmarks/flight_ground_truth.py --seeds 3 --truth paper-theta --jobs 1
     .venv/bin/python benchmarks/flight_ground_truth.py --scaling --seeds 10 --held-out
+    .venv/bin/python benchmarks/flight_ground_truth.py --truth descent --truth supersonic --whole
 """
 
 from __future__ import annotations
@@ -55,10 +59,12 @@ from tqdm.auto import tqdm
 from identification.flightfit import (
     _model_only_r2,
     flight_inputs,
+    flight_window,
     held_out_prediction,
     identify_flights,
 )
 from identification.flightlog import FlightLogSpec, run_flight, truth_at
+from identification.pipeline import IdentifyOptions
 
 #: Name -> (FlightLogSpec settings, what it tests).
 TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
@@ -85,6 +91,14 @@ TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
         {"no_gyro": True, "encoder_counts": 4096, "model": "constant"},
         "no gyro: a 4096-count angle only",
     ),
+    "descent": (
+        {"descent": 5.0},
+        "the paper's rocket logged 5 s past apogee, falling tail-first (outside the model)",
+    ),
+    "supersonic": (
+        {"ascent": "supersonic", "model": "constant"},
+        "the supersonic ascent (peak Mach 1.04): fins compressible above Mach 0.8",
+    ),
 }
 
 
@@ -94,14 +108,19 @@ def one(
     joint: int = 1,
     extra: dict[str, Any] | None = None,
     held_out: bool = False,
+    whole: bool = False,
 ) -> dict[str, Any]:
     """Fly, identify, compare: flights ``seed·joint`` to ``seed·joint + joint - 1``, fitted
     together (:func:`identification.flightfit.identify_flights`), the first one's fit;
-    ``extra`` recorder settings on top of the truth's."""
+    ``extra`` recorder settings on top of the truth's.  Each flight is fitted on the part
+    ``identify`` fits (:func:`identification.flightfit.flight_window`: to apogee, at or
+    below Mach 0.8), or ``whole``."""
     settings, _ = TRUTHS[truth]
     settings = {**settings, **(extra or {})}
     specs = [FlightLogSpec(seed=seed * joint + k, **settings) for k in range(joint)]
     recordings = [run_flight(spec) for spec in specs]
+    if not whole:
+        recordings = [flight_window(rec, IdentifyOptions()).part for rec in recordings]
     flights = [flight_inputs(rec) for rec in recordings]
     if joint > 1:  # one reference for all
         flights = [flight_inputs(rec, v_ref_mps=flights[0].v_ref_mps) for rec in recordings]
@@ -145,7 +164,7 @@ def one(
     return row
 
 
-def _run(job: tuple[str, int, int, dict[str, Any], bool]) -> dict[str, Any]:
+def _run(job: tuple[str, int, int, dict[str, Any], bool, bool]) -> dict[str, Any]:
     return {**one(*job), "cell": tuple(sorted(job[3].items()))}
 
 
@@ -296,14 +315,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--held-out", action="store_true", help="with --scaling: the held-out prediction too"
     )
+    parser.add_argument(
+        "--whole",
+        action="store_true",
+        help="fit every sample: no cut at apogee or Mach 0.8 (what the cuts buy)",
+    )
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.jobs < 1 or args.joint < 1:
         parser.error("--seeds, --jobs and --joint must be at least 1")
     if args.scaling:
         return scaling_main(args)
     truths = args.truth or list(TRUTHS)
-    jobs: list[tuple[str, int, int, dict[str, Any], bool]] = [
-        (truth, seed, args.joint, {}, False) for truth in truths for seed in range(args.seeds)
+    jobs: list[tuple[str, int, int, dict[str, Any], bool, bool]] = [
+        (truth, seed, args.joint, {}, False, args.whole)
+        for truth in truths
+        for seed in range(args.seeds)
     ]
     print("truths:")
     for truth in truths:
@@ -331,7 +357,11 @@ def scaling_main(args: argparse.Namespace) -> int:
         for n in args.n
         for m in args.m
     ]
-    jobs = [(truth, seed, 1, cell, args.held_out) for cell in cells for seed in range(args.seeds)]
+    jobs = [
+        (truth, seed, 1, cell, args.held_out, args.whole)
+        for cell in cells
+        for seed in range(args.seeds)
+    ]
     print(f"truth {truth}: {TRUTHS[truth][1]}; {len(cells)} scalings x {args.seeds} seeds")
     start = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:

@@ -348,6 +348,11 @@ def _flight_table(fits: dict[str, dict[str, Any]]) -> str:
                 )
             elif "skipped" in held:
                 lines.append(f"  held out: not checked: {held['skipped']}")
+            if m.get("descent_excluded_s"):
+                lines.append(
+                    f"  left out {m['descent_excluded_s']:.2f} s after apogee (falling, the "
+                    "rocket no longer flies into the flow its fins were identified in)"
+                )
             if m.get("supersonic_excluded_s"):
                 first, last = m["fitted_s"]
                 lines.append(

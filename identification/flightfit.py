@@ -91,10 +91,13 @@ __all__ = [
     "MACH_LIMIT",
     "FlightFit",
     "FlightInputs",
+    "FlightWindow",
+    "apogee_index",
     "c_coefficients",
     "eq_4_8_test",
     "flight_inputs",
     "flight_method",
+    "flight_window",
     "identify_flight",
     "identify_flights",
     "model_only_r2",
@@ -1204,12 +1207,55 @@ def subsonic_part(recording: Recording, limit: float = MACH_LIMIT) -> tuple[Reco
     return part, _span(recording) - _span(part)
 
 
-def flight_window(recording: Recording, options: IdentifyOptions) -> tuple[Recording, float]:
-    """The part of a flight the flight method fits: the options' time window (``--from``,
+def apogee_index(recording: Recording) -> int | None:
+    """The sample of a flight's apogee where its log goes on past it, else None.
+
+    With an altitude column: its highest sample, where the altitude falls by more than
+    5 m (and 1 % of the climb) after it.  Without one: the slowest sample after the
+    fastest, where the airspeed drops below a tenth of the fastest and picks up again by
+    more than 5 m/s (and a tenth of the fastest) after it -- the fall.
+    """
+    if recording.altitude_m is not None:
+        height = np.asarray(recording.altitude_m)
+        top = int(np.argmax(height))
+        drop = float(height[top] - height[top:].min())
+        return top if drop > max(5.0, 0.01 * float(height[top] - height.min())) else None
+    assert recording.airspeed_mps is not None
+    speed = np.asarray(recording.airspeed_mps)
+    fastest = int(np.argmax(speed))
+    slowest = fastest + int(np.argmin(speed[fastest:]))
+    peak = float(speed[fastest])
+    if speed[slowest] < 0.1 * peak and speed[slowest:].max() > speed[slowest] + max(
+        5.0, 0.1 * peak
+    ):
+        return slowest
+    return None
+
+
+@dataclass(frozen=True)
+class FlightWindow:
+    """The part of a flight the flight method fits (:func:`flight_window`) and what the
+    model's limits left out of the rest, s."""
+
+    part: Recording
+    supersonic_excluded_s: float = 0.0
+    descent_excluded_s: float = 0.0
+
+
+def flight_window(recording: Recording, options: IdentifyOptions) -> FlightWindow:
+    """The part of a flight the flight method fits: the ascent (the log to apogee, where it
+    goes on past it: :func:`apogee_index`; falling, the rocket no longer flies into the
+    flow its fins were identified in), then the options' time window (``--from``,
     ``--to``), then the longest stretch within their airspeed range (``--min-airspeed``,
     ``--max-airspeed``), then at or below :data:`MACH_LIMIT` (unless
-    ``--include-supersonic``); and how many seconds the Mach limit left out."""
+    ``--include-supersonic``); and how many seconds the descent and the Mach limit left
+    out."""
     part = recording
+    top = apogee_index(recording)
+    descent = 0.0
+    if top is not None:
+        part = recording.part(float(recording.time_s[0]), float(recording.time_s[top + 1]))
+        descent = _span(recording) - _span(part)
     if options.flight_from is not None or options.flight_to is not None:
         t0 = float(recording.time_s[0]) if options.flight_from is None else options.flight_from
         t1 = float(recording.time_s[-1]) + 1.0 if options.flight_to is None else options.flight_to
@@ -1231,8 +1277,9 @@ def flight_window(recording: Recording, options: IdentifyOptions) -> tuple[Recor
         shown = f"[{low or 0:g}, {'∞' if high is None else f'{high:g}'}] m/s"
         part = longest_stretch(part, keep, f"with the airspeed in {shown}")
     if options.include_supersonic:
-        return part, 0.0
-    return subsonic_part(part)
+        return FlightWindow(part, 0.0, descent)
+    part, supersonic = subsonic_part(part)
+    return FlightWindow(part, supersonic, descent)
 
 
 #: The share of a flight's fitted window the held-out check fits; it predicts the rest.
@@ -1367,10 +1414,8 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     options = context.options
     scaling = None if options.scaling == "measured" else EQ_4_8
     recordings = [context.recording, *context.together]
-    excluded = 0.0  # the recording's seconds above the Mach limit, left out
     cut = [flight_window(recording, options) for recording in recordings]
-    recordings = [part for part, _ in cut]
-    excluded = cut[0][1]
+    recordings = [window.part for window in cut]
     v_ref = options.v_ref_mps or mean_airspeed(recordings)
     flights = [
         flight_inputs(recording, v_ref_mps=v_ref, servo_rate_dps=options.servo_rate_dps)
@@ -1408,7 +1453,8 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "fitted_with": [f.recording.name for f in flights[1:]],
             "adequacy": flight_adequacy(result),
             "fitted_s": [float(inputs.recording.time_s[0]), float(inputs.recording.time_s[-1])],
-            "supersonic_excluded_s": excluded,
+            "supersonic_excluded_s": cut[0].supersonic_excluded_s,
+            "descent_excluded_s": cut[0].descent_excluded_s,
             "torque_exponent": result.scaling.torque_exponent,
             "damping_exponent": result.scaling.damping_exponent,
             "scaling_measured": result.scaling_measured,

@@ -15,7 +15,9 @@ equivalent fin angle grows without bound) -- with
   truth), its gain and damping scaled along the flight by eq. 4-8 or by
   other exponents (torque ``∝ ρV^n``, damping ``∝ ρV^m``:
   :class:`rocketroll_physics.flight.AirspeedScaling`), integrated exactly
-  (:func:`identification.model.simulate`, scales per substep);
+  (:func:`identification.model.simulate`, scales per substep); above Mach
+  0.8 (the ``supersonic`` ascent) the fins' torque leaves that law
+  (:func:`rocketroll_physics.flight.fin_compressibility`: outside the model);
 * an excitation: a random staircase of fin commands, short dwells (the rocket
   settles in tens of milliseconds at speed), through the servo of eq. 23;
 * turbulence flown, from one of the two sources of the flight environment:
@@ -24,6 +26,9 @@ equivalent fin angle grows without bound) -- with
   :mod:`rocketroll_physics.flown` (Taylor's frozen field, amplitude
   ``V_ref/max(V, V_ref)``) -- or ``dryden`` -- the MIL-F-8785C roll gust
   ``p_g`` (:mod:`rocketroll_physics.dryden`) as ``α·u_d = p_g``;
+* optionally a descent past apogee (``descent``): the rocket falls
+  tail-first, the flow over its fins reversed and with it their torque --
+  outside the flight model, which fits the ascent only;
 * flight sensors: a rate gyro with the multiplicative noise of eq. 52, an
   additive floor and a constant bias, optionally an encoder-like quantised
   angle; the airspeed and altitude of the profile (format 1.1), the altitude
@@ -61,10 +66,12 @@ from rocketroll_common.settings import check, setting, to_argv
 from rocketroll_physics.dryden import roll_gust
 from rocketroll_physics.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
+    MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
     FlightProfile,
     FlightReference,
+    fin_compressibility,
     flight_profile,
     roll_scales,
 )
@@ -93,8 +100,9 @@ class FlightLogSpec:
     )
     ascent: str = setting(
         "default",
-        "the ascent: default (the 5-kg rocket to about 600 km/h and 2 km), a rocket YAML or "
-        "a recorded V(t) CSV",
+        "the ascent: default (the 5-kg rocket to about 600 km/h and 2 km), supersonic (on "
+        "a bigger motor: Mach 1.04, above Mach 0.8 for 3 s), a rocket YAML or a recorded "
+        "V(t) CSV",
         metavar="FLIGHT",
     )
     model: str = setting(
@@ -152,6 +160,15 @@ class FlightLogSpec:
     severity: Literal["light", "moderate", "severe"] = setting(
         "light", "Dryden gust severity (--turbulence dryden)"
     )
+    descent: float = setting(
+        0.0,
+        "log this long past apogee: the rocket falls tail-first (no recovery device), the "
+        "flow over its fins reversed and with it their torque; outside the flight model, "
+        "which fits the ascent (--turbulence tunnel)",
+        ge=0.0,
+        le=60.0,
+        unit="s",
+    )
     log_dt: float = setting(0.01, "logging interval", ge=0.001, le=0.1, unit="s")
     substeps: int = setting(4, "exact-update substeps per logging interval", ge=1, le=1000)
     gyro_noise: float = setting(
@@ -184,6 +201,12 @@ class FlightLogSpec:
         if self.no_gyro and self.encoder_counts == 0:
             raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
+        if self.descent > 0.0 and self.turbulence == "dryden":
+            raise SettingError(
+                "descent",
+                "needs --turbulence tunnel (a Dryden log ends where the airspeed falls back "
+                "below --v-ref)",
+            )
 
     def scaling(self) -> AirspeedScaling:
         """The truth's airspeed scaling (``n``, ``m``)."""
@@ -254,7 +277,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     children = np.random.SeedSequence(spec.seed).spawn(3)
     rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
     try:
-        profile = flight_profile(spec.ascent)
+        profile = flight_profile(spec.ascent, spec.descent)
         # Dryden's rolling gust does not fade with the airspeed while the fins' authority
         # does: near apogee its equivalent fin angle grows without bound, so a Dryden log
         # ends where the airspeed falls back below v_ref (the tunnel's law holds the flow
@@ -263,6 +286,8 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         start, end = profile.window(spec.v_ref, until=until)
     except ValueError as exc:
         raise AscentError(str(exc)) from None
+    if spec.descent > 0.0:
+        end = float(profile.t_s[-1])  # apogee + descent
     n = math.floor((end - start) / spec.log_dt + 1e-9)
     if n < 50:
         raise AscentError(
@@ -287,6 +312,13 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     scaling = spec.scaling()
     gain, damping = roll_scales(
         state.airspeed_mps, state.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3, scaling
+    )
+    # Past Mach 0.8 the fins' torque per degree leaves the subsonic law (outside the model);
+    # falling tail-first, the flow meets the fins from behind: their torque reverses.
+    gain = (
+        np.where(fine_middle > profile.apogee_s, -1.0, 1.0)
+        * fin_compressibility(state.mach)
+        * np.asarray(gain)
     )
     gain_mid, _ = roll_scales(
         profile.at(time[:-1] + 0.5 * spec.log_dt).airspeed_mps, 1.0, spec.v_ref, 1.0, scaling
@@ -331,6 +363,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         ("seed", spec.seed),
         ("flight.ascent", profile.source),
         ("flight.start_s", round(start, 9)),
+        ("flight.apogee_s", round(profile.apogee_s, 9)),
         ("truth.model", spec.model),
         ("truth.alpha", params.alpha),
         ("truth.beta_dps", params.beta_dps),
@@ -344,6 +377,12 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         ("truth.servo_rate_dps", servo.rate_limit_dps),
         ("truth.turbulence", "tunnel-flown" if spec.turbulence == "tunnel" else "dryden"),
     ]
+    if spec.descent > 0.0:
+        meta.append(("flight.descent", "tail-first after apogee: the fins' torque reversed"))
+    if profile.max_mach > MACH_LIMIT:
+        meta.append(
+            ("flight.compressibility", "fin torque x fin_compressibility(Mach) above Mach 0.8")
+        )
     if spec.turbulence == "tunnel":
         meta += [
             ("flight.turbulence_distribution", spec.distribution),

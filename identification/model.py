@@ -634,9 +634,10 @@ def simulate(
         Time of the first grid point, s.
     gain, damping : float or array_like, shape (n,) or (n * substeps,)
         Factors on ``α`` and on the damping ``a(θ)`` per interval or per
-        substep, ≥ 0: the rocket in flight (eq. 4-8,
-        :func:`rocketroll_physics.flight.roll_scales`).  Default 1: the rocket
-        as identified.
+        substep: the rocket in flight (eq. 4-8,
+        :func:`rocketroll_physics.flight.roll_scales`).  The damping's are
+        ≥ 0; a gain < 0 is the flow over the fins reversed (a rocket falling
+        tail-first).  Default 1: the rocket as identified.
 
     Returns
     -------
@@ -709,8 +710,10 @@ def _per_substep(name: str, value: ArrayLike, n: int, substeps: int) -> FloatArr
             f"{name} must be a number or have shape ({n},) (per interval) or "
             f"({n * substeps},) (per substep), not {x.shape}"
         )
-    if not (np.all(np.isfinite(x)) and np.all(x >= 0)):
-        raise ValueError(f"{name} must be finite and >= 0")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} must be finite")
+    if name == "damping" and not np.all(x >= 0):  # a gain < 0: the flow over the fins reversed
+        raise ValueError("damping must be >= 0")
     return x
 
 

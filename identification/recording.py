@@ -173,6 +173,21 @@ def _where(lines: NDArray[np.int64] | None, index: int) -> int | None:
     return None if lines is None else int(lines[index])
 
 
+def _descent_hint(name: str, values: NDArray[np.float64], time: NDArray[np.float64], i: int) -> str:
+    """What a negative airspeed after the flight's fastest means (an airspeed integrated
+    from the accelerometer: the vertical speed, negative on the way down), and the cut that
+    keeps the ascent; empty for anything else."""
+    fastest = int(np.argmax(values))
+    if name != "airspeed_mps" or values[i] >= 0 or i <= fastest or values[fastest] < 10.0:
+        return ""
+    return (
+        f": the descent after apogee (the fastest, {values[fastest]:.1f} m/s, at "
+        f"{time[fastest]:g} s), where an airspeed integrated from the accelerometer goes "
+        f"negative; keep the ascent with import-csv --to "
+        f"{np.format_float_positional(time[i - 1], trim='-')}"
+    )
+
+
 def _sample(lines: NDArray[np.int64] | None, index: int) -> str:
     return "" if lines is not None else f"sample {index}: "
 
@@ -278,7 +293,8 @@ def validate_samples(
                 raise RecordingError(
                     path,
                     _where(lines, i),
-                    f"{_sample(lines, i)}{name} is {values[i]:g}: outside [{low:g}, {high:g}]",
+                    f"{_sample(lines, i)}{name} is {values[i]:g}: outside [{low:g}, {high:g}]"
+                    + _descent_hint(name, values, columns["time_s"], i),
                 )
     if n < MIN_SAMPLES:
         raise RecordingError(

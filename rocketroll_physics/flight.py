@@ -55,6 +55,7 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -76,7 +77,10 @@ __all__ = [
     "ISA_MIN_ALTITUDE_M",
     "ISA_SEA_LEVEL_DENSITY_KGM3",
     "MACH_LIMIT",
+    "NAMED_ASCENTS",
     "PROFILE_COLUMNS",
+    "SUPERSONIC_ASCENT",
+    "SUPERSONIC_FROM_MACH",
     "TUNNEL_AIRSPEED_MPS",
     "AirspeedScaling",
     "AscentSpec",
@@ -84,6 +88,7 @@ __all__ = [
     "FlightProfile",
     "FlightReference",
     "FlightState",
+    "fin_compressibility",
     "flight_profile",
     "isa",
     "load_ascent_yaml",
@@ -528,6 +533,26 @@ DEFAULT_ASCENT = AscentSpec(
     launch_altitude_m=0.0,
 )
 
+#: The same airframe on a K-class motor (1940 N·s: 800 N for 2.5 s): briefly supersonic,
+#: peak Mach 1.04 at 2.5 s, above Mach 0.8 from 1.9 s to 5.0 s, apogee 3.4 km at 24.5 s --
+#: a flight with a supersonic stretch for the virtual flight recorder (``--ascent
+#: supersonic``).  A stand-in like :data:`DEFAULT_ASCENT`, its drag coefficient held at
+#: the subsonic 0.42 (a real one rises through Mach 1).
+SUPERSONIC_ASCENT = AscentSpec(
+    dry_mass_kg=4.35,
+    propellant_mass_kg=1.0,
+    thrust_time_s=(0.0, 0.05, 2.4, 2.5),
+    thrust_n=(0.0, 800.0, 800.0, 0.0),
+    drag_coefficient=0.42,
+    diameter_m=0.076,
+    length_m=1.3,
+    launch_altitude_m=0.0,
+)
+#: The ascents :func:`flight_profile` knows by name.
+NAMED_ASCENTS: Mapping[str, AscentSpec] = MappingProxyType(
+    {"default": DEFAULT_ASCENT, "supersonic": SUPERSONIC_ASCENT}
+)
+
 
 # --------------------------------------------------------------------------- the profile
 def _column(values: ArrayLike) -> FloatArray:
@@ -653,7 +678,8 @@ class FlightProfile:
         ----------
         t_s : float or array_like
             Times, s, finite.  Before the first sample or after the last the
-            first or last sample is held (the profile ends at apogee).
+            first or last sample is held (a profile ends at apogee, or its
+            descent's end).
 
         Returns
         -------
@@ -829,6 +855,39 @@ def roll_scales(
     return np.asarray(gain), np.asarray(np.power(ratio, m) * density / rho_ref_kgm3)
 
 
+#: Mach number from which :func:`fin_compressibility` follows Ackeret's supersonic law.
+SUPERSONIC_FROM_MACH = 1.2
+
+
+def fin_compressibility(mach: ArrayLike) -> FloatArray:
+    """A factor on the fins' torque per degree beyond the subsonic scaling: the virtual
+    flight recorder's truth above :data:`MACH_LIMIT`, outside the roll model (whose
+    coefficients are constant: the paper's §4).
+
+    1 up to Mach 0.8; from Mach 1.2, Ackeret's thin-aerofoil law, the lift slope
+    ``∝ 1/√(M² − 1)``, scaled to ``√(1 − 0.8²)/√(M² − 1)`` (0.90 at Mach 1.2, 0.45
+    at 1.67); linear across the transonic band between, where neither law holds.  A
+    stylised truth: real fins' transonic lift depends on their section and planform.
+
+    Examples
+    --------
+    >>> [round(float(k), 3) for k in fin_compressibility([0.5, 0.8, 1.0, 1.2, 2.0])]
+    [1.0, 1.0, 0.952, 0.905, 0.346]
+    """
+    m = np.asarray(mach, dtype=float)
+    if not (np.all(np.isfinite(m)) and np.all(m >= 0)):
+        raise UsageError("mach: must be finite and >= 0")
+    subsonic_beta = math.sqrt(1.0 - MACH_LIMIT**2)
+
+    def ackeret(x: FloatArray) -> FloatArray:
+        return np.asarray(subsonic_beta / np.sqrt(np.maximum(x**2 - 1.0, 1e-12)))
+
+    top = float(ackeret(np.asarray(SUPERSONIC_FROM_MACH)))
+    across = 1.0 + (top - 1.0) * (m - MACH_LIMIT) / (SUPERSONIC_FROM_MACH - MACH_LIMIT)
+    factor = np.where(m <= MACH_LIMIT, 1.0, np.where(m < SUPERSONIC_FROM_MACH, across, 0.0))
+    return np.asarray(np.where(m >= SUPERSONIC_FROM_MACH, ackeret(m), factor))
+
+
 # --------------------------------------------------------------------------- simulation
 def _liftoff_s(spec: AscentSpec) -> float:
     """First time the thrust exceeds the weight (the rocket leaves the pad), s."""
@@ -851,8 +910,10 @@ def _liftoff_s(spec: AscentSpec) -> float:
     return float(brentq(lambda t: float(excess(t)), grid[k - 1], grid[k], xtol=1e-12))
 
 
-def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> FlightProfile:
-    """Fly ``spec`` straight up from the pad to apogee.
+def simulate_ascent(
+    spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01, descent_s: float = 0.0
+) -> FlightProfile:
+    """Fly ``spec`` straight up from the pad to apogee (and on down for ``descent_s``).
 
     Parameters
     ----------
@@ -860,13 +921,18 @@ def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> Fl
         The rocket and its motor (default: :data:`DEFAULT_ASCENT`).
     dt_s : float
         Sampling interval of the profile, s, in (0, 1].
+    descent_s : float
+        Seconds flown on past apogee, falling tail-first on the same 1-D
+        equation with the drag reversed (no recovery device); the airspeed
+        there is the fall's speed, ``|V|``.  Default 0: the profile ends at
+        apogee.
 
     Returns
     -------
     FlightProfile
-        Samples every ``dt_s`` from ignition (t = 0) and, as the last sample,
-        the apogee itself (so the last interval is at most ``dt_s``).
-        ``source`` says ``simulated``.
+        Samples every ``dt_s`` from ignition (t = 0) and the apogee itself
+        (the last sample without a descent, so the last interval is at most
+        ``dt_s``).  ``source`` says ``simulated``.
 
     Raises
     ------
@@ -905,6 +971,8 @@ def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> Fl
         raise UsageError(f"spec: must be an AscentSpec, not {type(spec).__name__}")
     if not (isinstance(dt_s, int | float) and math.isfinite(dt_s) and 0 < dt_s <= 1.0):
         raise UsageError(f"dt_s: must be in (0, 1] s, not {dt_s!r}")
+    if not (isinstance(descent_s, int | float) and 0.0 <= descent_s <= 600.0):
+        raise UsageError(f"descent_s: must be in [0, 600] s, not {descent_s!r}")
 
     area_cd = spec.reference_area_m2 * spec.drag_coefficient
     knots_t = np.asarray(spec.thrust_time_s)
@@ -945,10 +1013,16 @@ def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> Fl
         raise RuntimeError("simulate_ascent: the coast did not reach apogee")
     apogee_s = float(coast.t_events[0][0])
     pieces.append((spec.burnout_s, apogee_s, coast.sol))
+    end_s = apogee_s
+    if descent_s > 0.0:
+        end_s = apogee_s + descent_s
+        top = np.array([float(coast.y_events[0][0][0]), 0.0])
+        fall = solve_ivp(rhs, (apogee_s, end_s), top, dense_output=True, **options)
+        pieces.append((apogee_s, end_s, fall.sol))
 
-    n = int(np.floor(apogee_s / dt_s * (1 + 1e-12)))
+    n = int(np.floor(end_s / dt_s * (1 + 1e-12)))
     grid = dt_s * np.arange(n + 1)
-    t: FloatArray = np.append(grid[grid < apogee_s - 1e-9 * dt_s], apogee_s)
+    t: FloatArray = np.unique(np.append(grid[grid < end_s - 1e-9 * dt_s], [apogee_s, end_s]))
     altitude = np.full(t.shape, spec.launch_altitude_m)
     speed = np.zeros(t.shape)
     for start, end, dense in pieces:
@@ -957,8 +1031,8 @@ def simulate_ascent(spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01) -> Fl
             states = dense(t[inside])
             altitude[inside] = states[0]
             speed[inside] = states[1]
-    speed[-1] = 0.0  # the apogee event: V = 0 to the solver's tolerance
-    speed = np.maximum(speed, 0.0)
+    speed[t == apogee_s] = 0.0  # the apogee event: V = 0 to the solver's tolerance
+    speed = np.where(t > apogee_s, np.abs(speed), np.maximum(speed, 0.0))
     if altitude.max() > ISA_MAX_ALTITUDE_M:
         raise UsageError(
             f"AscentSpec: the rocket climbs to {altitude.max():.0f} m, above the standard "
@@ -1245,36 +1319,46 @@ def plot_profile(profile: FlightProfile) -> Figure:
 
 
 # --------------------------------------------------------------------------- by name
-def flight_profile(name: str) -> FlightProfile:
-    """The ascent called ``name``: ``"default"`` (:data:`DEFAULT_ASCENT` simulated), a
-    rocket-and-motor YAML (``.yml``/``.yaml``, :func:`load_ascent_yaml`, simulated) or a
-    recorded ``V(t)`` CSV (:func:`load_profile_csv`).  Cached per file state.
+def flight_profile(name: str, descent_s: float = 0.0) -> FlightProfile:
+    """The ascent called ``name``: ``"default"`` (:data:`DEFAULT_ASCENT` simulated) or
+    another of :data:`NAMED_ASCENTS` (``"supersonic"``), a rocket-and-motor YAML
+    (``.yml``/``.yaml``, :func:`load_ascent_yaml`, simulated) or a recorded ``V(t)`` CSV
+    (:func:`load_profile_csv`).  Cached per file state.
+
+    ``descent_s`` flies a simulated ascent on past apogee (:func:`simulate_ascent`).
 
     Raises
     ------
     ValueError
-        ``flight: NAME: problem`` for a name that is none of these or a file that
-        cannot be read (the loaders' own errors for a bad file).
+        ``flight: NAME: problem`` for a name that is none of these, a file that
+        cannot be read (the loaders' own errors for a bad file), or a descent asked of
+        a recorded profile.
     """
-    if name == "default":
-        return _profile(name, 0, 0)
+    if name in NAMED_ASCENTS:
+        return _profile(name, 0, 0, descent_s)
     path = Path(name)
     if path.suffix.lower() not in (".yml", ".yaml", ".csv"):
         raise ValueError(
-            f"flight: {name!r} is neither 'default' nor a .yml/.yaml rocket or a .csv profile"
+            f"flight: {name!r} is none of {', '.join(map(repr, NAMED_ASCENTS))}, a .yml/.yaml "
+            "rocket or a .csv profile"
+        )
+    if descent_s > 0.0 and path.suffix.lower() == ".csv":
+        raise ValueError(
+            f"flight: {name}: a recorded profile ends where its log ends; a descent past "
+            "apogee needs a simulated ascent (default or a rocket YAML)"
         )
     try:
         stat = os.stat(path)
     except OSError as exc:
         raise ValueError(f"flight: {name}: {exc.strerror or 'cannot be read'}") from None
-    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size, descent_s)
 
 
 @functools.lru_cache(maxsize=8)
-def _profile(name: str, mtime_ns: int, size: int) -> FlightProfile:
+def _profile(name: str, mtime_ns: int, size: int, descent_s: float = 0.0) -> FlightProfile:
     del mtime_ns, size  # the cache key: a changed file is read again
-    if name == "default":
-        return simulate_ascent(DEFAULT_ASCENT)
+    if name in NAMED_ASCENTS:
+        return simulate_ascent(NAMED_ASCENTS[name], descent_s=descent_s)
     if name.lower().endswith(".csv"):
         return load_profile_csv(name)
-    return simulate_ascent(load_ascent_yaml(name))
+    return simulate_ascent(load_ascent_yaml(name), descent_s=descent_s)

@@ -188,8 +188,9 @@ class AscentArgs:
 
     flight: str = setting(
         "default",
-        "the ascent: 'default', a rocket YAML (identification/data/ascent-default.yml's keys) "
-        "or a recorded V(t) CSV (time_s, airspeed_mps[, altitude_m])",
+        "the ascent: 'default', 'supersonic' (Mach 1.04 on a bigger motor), a rocket YAML "
+        "(identification/data/ascent-default.yml's keys) or a recorded V(t) CSV (time_s, "
+        "airspeed_mps[, altitude_m])",
         metavar="FLIGHT",
         input=True,
     )

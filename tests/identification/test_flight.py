@@ -155,6 +155,34 @@ def test_drag_free_constant_thrust_matches_its_closed_form():
     assert coast.airspeed_mps == pytest.approx(v_b - 2.0 * G0_MPS2, rel=1e-7)
 
 
+def test_a_descent_past_apogee_is_a_free_fall_without_drag():
+    """Flown on past apogee, the drag-free rocket falls as g·t, its airspeed the fall's
+    speed; the ascent is the one without a descent."""
+    spec = AscentSpec(
+        dry_mass_kg=5.0,
+        propellant_mass_kg=1e-9,
+        thrust_time_s=(0.0, 3.0, 3.0 + 1e-9),
+        thrust_n=(100.0, 100.0, 0.0),
+        drag_coefficient=0.0,
+        diameter_m=0.076,
+    )
+    up = simulate_ascent(spec, dt_s=0.05)
+    both = simulate_ascent(spec, dt_s=0.05, descent_s=4.0)
+    assert both.apogee_s == up.apogee_s and both.t_s[-1] == pytest.approx(up.apogee_s + 4.0)
+    np.testing.assert_array_equal(both.airspeed_mps[: up.t_s.size], up.airspeed_mps)
+    after = both.t_s > both.apogee_s
+    fall = both.t_s[after] - both.apogee_s
+    np.testing.assert_allclose(both.airspeed_mps[after], G0_MPS2 * fall, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(
+        both.altitude_m[after], both.apogee_m - 0.5 * G0_MPS2 * fall**2, rtol=1e-9
+    )
+    # With drag the fall is slower than free.
+    dragged = simulate_ascent(DEFAULT_ASCENT, descent_s=4.0)
+    assert dragged.airspeed_mps[-1] < G0_MPS2 * 4.0 and dragged.airspeed_mps[-1] > 30.0
+    with pytest.raises(UsageError, match="descent_s"):
+        simulate_ascent(spec, descent_s=-1.0)
+
+
 def test_the_rocket_waits_on_the_pad_until_thrust_exceeds_weight():
     # thrust ramps from 0 to 200 N over 1 s: T = m·g0 at t = 5·9.80665/200 s
     spec = AscentSpec(5.0, 1e-9, (0.0, 1.0, 3.0, 3.5), (0.0, 200.0, 200.0, 0.0), 0.0, 0.07)

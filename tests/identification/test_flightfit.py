@@ -18,6 +18,7 @@ from identification.flightfit import (
     FlightFit,
     _Layout,
     _negloglike,
+    apogee_index,
     c_coefficients,
     flight_adequacy,
     flight_inputs,
@@ -51,6 +52,7 @@ from rocketroll_physics.flight import (
     ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
+    fin_compressibility,
     isa,
     roll_scales,
 )
@@ -221,8 +223,16 @@ def test_simulate_with_constant_scales_is_the_scaled_rocket():
     )
     with pytest.raises(ValueError, match="damping must be a number or have shape"):
         simulate(PAPER_THETA, 0.01, command, u, damping=np.ones(7))
-    with pytest.raises(ValueError, match="gain must be finite and >= 0"):
-        simulate(PAPER_THETA, 0.01, command, u, gain=-1.0)
+    with pytest.raises(ValueError, match="damping must be >= 0"):
+        simulate(PAPER_THETA, 0.01, command, u, damping=-1.0)
+    with pytest.raises(ValueError, match="gain must be finite"):
+        simulate(PAPER_THETA, 0.01, command, u, gain=np.nan)
+    # A negative gain is the flow over the fins reversed (a tail-first descent): the rocket
+    # whose α (with β = α·θ̄) changed sign.
+    reversed_flow = simulate(PAPER_THETA, 0.01, command, u, gain=-1.0, substeps=4)
+    mirrored = simulate(PAPER_THETA.scaled(-1.0, 1.0), 0.01, command, u, substeps=4)
+    np.testing.assert_allclose(reversed_flow.rate_dps, mirrored.rate_dps, rtol=1e-12, atol=1e-10)
+    assert PAPER_THETA.scaled(-1.0, 1.0).alpha == -PAPER_THETA.alpha
 
 
 def test_rescale_and_the_coefficients_behind_a_and_alpha():
@@ -277,6 +287,43 @@ def test_the_recorder_logs_the_truth_it_flew(tmp_path: Path):
     path = tmp_path / "f.csv"
     assert main(["record-flight", "--out", str(path), *spec.command().split()[2:]]) == 0
     assert path.read_text(encoding="utf-8") == recording_text(rec)
+
+
+def test_a_supersonic_stretch_flies_compressible_fins_and_is_left_out_of_the_fit() -> None:
+    """The supersonic ascent: above Mach 0.8 the recorder's fins leave the subsonic law
+    (fin_compressibility: the truth outside the model); the re-simulated truth with it
+    matches the log, without it does not; the flight method fits the subsonic coast,
+    says how long it left out, and finds the rocket within 5 %."""
+    spec = FlightLogSpec(
+        seed=3, ascent="supersonic", model="constant", gyro_noise=0.0, gyro_floor=0.0,
+        measured_fin=True,
+    )  # fmt: skip
+    rec = run_flight(spec)
+    mach = mach_numbers(rec)
+    assert mach.max() > 1.0 and "flight.compressibility" in rec.metadata
+    inputs = flight_inputs(rec, v_ref_mps=spec.v_ref)
+    gain, damping = inputs.scales()
+    fine = np.repeat(mach[:-1], 4) + np.tile(np.arange(4) + 0.5, mach.size - 1) / 4 * np.repeat(
+        np.diff(mach), 4
+    )
+    logged = col(rec, "roll_rate_dps")
+
+    def worst(gains: np.ndarray) -> float:
+        sim = simulate(
+            spec.params(), rec.dt_s, col(rec, "fin_deg"), col(rec, "ud_true_deg")[:-1],
+            rate0_dps=float(logged[0]), servo=None, substeps=4, gain=gains, damping=damping,
+        )  # fmt: skip
+        return float(np.max(np.abs(sim.rate_dps - logged)))
+
+    scale = float(np.mean(np.abs(logged)))
+    assert worst(gain * fin_compressibility(fine)) < 0.02 * scale
+    assert worst(gain) > 0.05 * scale
+    found = fit(rec, "flight", ["constant"], IdentifyOptions(noise_runs=0))["constant"]
+    m = found.metrics
+    assert m["supersonic_excluded_s"] > 2.5 and mach_numbers(rec.part(*m["fitted_s"])).max() <= 0.8
+    truth = truth_at(rec, m["v_ref_mps"], m["rho_ref_kgm3"])
+    assert found.params.alpha == pytest.approx(truth.alpha, rel=0.05)
+    assert found.params.beta_bar_per_s == pytest.approx(truth.beta_bar_per_s, rel=0.05)
 
 
 def test_dryden_flights_stay_inside_the_fins_authority():
@@ -766,10 +813,62 @@ def test_identify_prints_the_measured_scaling(tmp_path: Path, capsys):
     assert "scaling held: fin torque ∝ ρV^2, damping ∝ ρV^1" in capsys.readouterr().out
 
 
+def test_a_log_past_apogee_is_fitted_to_apogee_and_says_what_it_left_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The recorder's descent: the rocket falls tail-first, its fins' torque reversed
+    (outside the model). The flight method finds the apogee (by the altitude, or without
+    one by the airspeed's minimum), fits the ascent, says how long it left out, and finds
+    the rocket; the importer's refusal of an accelerometer's negative airspeed gives the
+    cut that keeps the ascent."""
+    falling = run_flight(FlightLogSpec(seed=1, model="constant", descent=5.0))
+    apogee = float(falling.metadata["flight.apogee_s"])
+    assert float(falling.time_s[-1]) == pytest.approx(apogee + 5.0, abs=0.011)
+    speed = col(falling, "airspeed_mps")
+    assert speed[falling.time_s > apogee].min() < 1.0 and speed[-1] > 30.0
+    blind = run_flight(FlightLogSpec(seed=1, model="constant", descent=5.0, no_altitude=True))
+    for log in (falling, blind):
+        top = apogee_index(log)
+        assert top is not None and abs(float(log.time_s[top]) - apogee) <= 0.011
+    assert apogee_index(run_flight(FlightLogSpec(seed=1, model="constant"))) is None
+    found = fit(falling, "flight", ["constant"], IdentifyOptions(noise_runs=0))["constant"]
+    m = found.metrics
+    assert m["descent_excluded_s"] == pytest.approx(5.0, abs=0.011)
+    assert m["fitted_s"][1] <= apogee + 0.011 and m["adequacy"]["verdict"] == "good"
+    truth = truth_at(falling, m["v_ref_mps"], m["rho_ref_kgm3"])
+    assert found.params.alpha == pytest.approx(truth.alpha, rel=0.05)
+    assert found.params.beta_bar_per_s == pytest.approx(truth.beta_bar_per_s, rel=0.05)
+    with pytest.raises(SettingError, match="needs --turbulence tunnel"):
+        FlightLogSpec(turbulence="dryden", descent=1.0)
+    # A flight computer's airspeed from the accelerometer: negative on the way down.
+    signed = np.where(falling.time_s > apogee, -speed, speed)
+    columns = [falling.time_s, col(falling, "fin_cmd_deg"), col(falling, "roll_rate_dps"), signed]
+    raw = tmp_path / "log.csv"
+    np.savetxt(raw, np.column_stack(columns), delimiter=",", fmt="%.9g", header="t,f,g,v")
+    out = tmp_path / "flight.csv"
+    argv = [
+        "import-csv",
+        str(raw),
+        "--out",
+        str(out),
+        "--columns",
+        "time,fin_cmd,roll_rate,airspeed",
+    ]
+    assert main([*argv, "--source", "flight"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the descent after apogee" in err and not out.exists()
+    cut = err.rsplit("--to ", 1)[1].strip()
+    assert main([*argv, "--source", "flight", "--to", cut]) == 0
+    kept = load_recording(out)
+    assert float(kept.time_s[-1]) == pytest.approx(apogee, abs=0.011)
+
+
 def test_a_flight_is_fitted_in_the_window_asked(paper_flight: Recording):
     options = IdentifyOptions(flight_from=5.0, flight_to=20.0, min_airspeed_mps=60.0)
-    part, excluded = flight_window(paper_flight, options)
-    assert part.time_s[0] >= 5.0 and part.time_s[-1] < 20.0 and excluded == 0.0
+    window = flight_window(paper_flight, options)
+    part = window.part
+    assert part.time_s[0] >= 5.0 and part.time_s[-1] < 20.0
+    assert window.supersonic_excluded_s == 0.0 and window.descent_excluded_s == 0.0
     assert np.min(col(part, "airspeed_mps")) >= 60.0
     # The airspeed falls through 60 m/s on the coast (at 15.4 s): the window ends there.
     after = int(np.searchsorted(paper_flight.time_s, part.time_s[-1])) + 1
