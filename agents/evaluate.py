@@ -495,6 +495,7 @@ def run(args: Args) -> list[Evaluation]:
         f"  replay: {config.method}'s {draws.get(str(config.disturbance), config.disturbance)}"
         f" of u_d, {config.model} model"
         + ("" if config.recording is None else f", recording {config.recording}")
+        + ("" if config.profile is None else f", flown on {config.profile}")
     )
     if episode_note:
         print(episode_note)

@@ -136,6 +136,12 @@ class RollConfig:
         ``"recorded"`` replays a stored flight's own ``u_d`` (with
         ``recording`` naming a flight in the database, the environment flies
         that rocket: :func:`rollenv.bank.stored_flight_config`).
+    profile : str or None
+        Another ascent to fly instead of ``flight``'s (a ``flight`` name: ``"default"``,
+        ``"supersonic"``, a rocket YAML or a ``V(t)`` CSV): for a stored flight
+        (``recording`` naming a flight in the database) that rocket on it, its recorded
+        ``u_d`` flown anew by height (:func:`rollenv.flight.reflown`).  Default (None):
+        ``flight``'s own.
     gust_severity : str
         ``"light"``, ``"moderate"`` or ``"severe"`` (the Dryden model's
         turbulence levels; ``flight_turbulence="dryden"`` only).
@@ -203,6 +209,7 @@ class RollConfig:
     angle_sensor: str = "encoder"
     flight: str | None = None
     flight_turbulence: str = "tunnel"
+    profile: str | None = None
     gust_severity: str = "light"
     disturbance: str | None = None
     disturbance_scale: float = 1.0
@@ -351,7 +358,9 @@ class RollConfig:
         """The flight on this configuration's grid (None in the tunnel)."""
         if self.flight is None:
             return None
-        return flight_schedule(self.flight, self.dt_s, self.substep_s, model=self.model)
+        return flight_schedule(
+            self.flight, self.dt_s, self.substep_s, model=self.model, profile=self.profile
+        )
 
     def flights(self, bank: TraceBank) -> TraceBank:
         """The traces this configuration replays from ``bank``: ``bank`` itself in the

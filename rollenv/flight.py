@@ -61,6 +61,7 @@ __all__ = [
     "flight_profile",
     "flight_schedule",
     "for_flight",
+    "reflown",
     "stored_flight_name",
     "turbulence_of",
 ]
@@ -103,6 +104,10 @@ class FlightSchedule:
     reference : FlightReference or None
         A stored flight's rocket's reference and scaling, which ``scales`` follow
         (None: the tunnel's rocket by eq. 4-8 from ``v_ref_mps``, ``rho_ref_kgm3``).
+    recorded_on : FlightProfile or None
+        Where a stored flight's rocket flies another ascent: the profile its ``u_d`` was
+        recorded on (the recorded turbulence is flown anew by height:
+        :func:`for_flight`); None on its own profile or a tunnel rocket's.
     """
 
     profile: FlightProfile
@@ -117,6 +122,7 @@ class FlightSchedule:
     v_ref_mps: float
     rho_ref_kgm3: float
     reference: FlightReference | None = None
+    recorded_on: FlightProfile | None = None
 
     @property
     def duration_s(self) -> float:
@@ -142,16 +148,23 @@ def flight_schedule(
     v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
     rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
     model: str = "theta",
+    profile: str | None = None,
 ) -> FlightSchedule:
     """The flight ``name`` (:func:`flight_profile`, or a stored flight's
     :func:`stored_flight_name`, whose ``model`` fit gives the rocket's scaling) on a grid
     of ``dt_s`` control steps of ``substep_s`` substeps; ``ValueError`` if it never
     reaches ``v_ref_mps`` or is shorter than one control step after that.  Cached per
-    profile and grid."""
+    profile and grid.
+
+    ``profile`` flies another ascent (a name of :func:`flight_profile`) instead: a stored
+    flight's rocket on it, its recorded ``u_d`` flown anew (:func:`reflown`)."""
     if name.startswith(STORED_PREFIX):
-        profile, reference = stored_flight(name, model)
-        return _schedule(profile, dt_s, substep_s, v_ref_mps, rho_ref_kgm3, reference)
-    return _schedule(flight_profile(name), dt_s, substep_s, v_ref_mps, rho_ref_kgm3)
+        own, reference = stored_flight(name, model)
+        if profile is None:
+            return _schedule(own, dt_s, substep_s, v_ref_mps, rho_ref_kgm3, reference)
+        other = flight_profile(profile)
+        return _schedule(other, dt_s, substep_s, v_ref_mps, rho_ref_kgm3, reference, own)
+    return _schedule(flight_profile(profile or name), dt_s, substep_s, v_ref_mps, rho_ref_kgm3)
 
 
 #: How a stored flight is named as a profile: ``db:PATH#RECORDING``.
@@ -228,6 +241,7 @@ def _schedule(
     v_ref_mps: float,
     rho_ref_kgm3: float,
     reference: FlightReference | None = None,
+    recorded_on: FlightProfile | None = None,
 ) -> FlightSchedule:
     if profile.max_mach > MACH_LIMIT:
         warnings.warn(
@@ -267,6 +281,7 @@ def _schedule(
         v_ref_mps=v_ref_mps,
         rho_ref_kgm3=rho_ref_kgm3,
         reference=reference,
+        recorded_on=recorded_on,
     )
 
 
@@ -307,7 +322,8 @@ def for_flight(
 
     ``turbulence="tunnel"``: ``bank``'s traces flown (:func:`disturbances.flight.flight_bank`).
     ``"recorded"``: a stored flight's own ``u_d`` traces (identified or posterior draws,
-    in flight time), averaged onto the episode's substeps from its start.
+    in flight time), averaged onto the episode's substeps from its start; on another
+    ascent (``schedule.recorded_on``), flown anew by height (:func:`reflown`).
     ``"dryden"``: :data:`DRYDEN_FLIGHTS` draws of the Dryden roll gust ``p_g``
     (:func:`rocketroll_physics.dryden.roll_gust`, ``severity``, seeded by ``split``) along the
     flight, the rockets taken in turn from ``bank``, as the equivalent fin angle
@@ -358,10 +374,57 @@ def _recorded(bank: TraceBank, schedule: FlightSchedule, m: int) -> TraceBank:
                 f"flight_turbulence='recorded' replays a stored flight's own u_d; "
                 f"{bank.description} holds the tunnel's (trace {source.uid})"
             )
-        edges = schedule.start_s - source.t0_s + schedule.edges_s[:m]
-        u = interval_means(source.u_d_deg, source.dt_s, edges)
+        if schedule.recorded_on is None:
+            edges = schedule.start_s - source.t0_s + schedule.edges_s[:m]
+            u = interval_means(source.u_d_deg, source.dt_s, edges)
+        else:
+            u = reflown(source.u_d_deg, source.t0_s, source.dt_s, schedule, m)
         rows.append(derived_row(source, u, h, "recorded", {"turbulence": "recorded"}))
-    return TraceBank(rows, f"{bank.description}, as recorded in flight")
+    where = "as recorded in flight" if schedule.recorded_on is None else "flown anew by height"
+    return TraceBank(rows, f"{bank.description}, {where}")
+
+
+def reflown(
+    u_d_deg: FloatArray, t0_s: float, dt_s: float, schedule: FlightSchedule, m: int
+) -> FloatArray:
+    """A stored flight's ``u_d`` (from ``t0_s``, every ``dt_s``, on the profile
+    ``schedule.recorded_on``) flown anew along ``schedule``'s other ascent: per interval of
+    its first ``m`` substep edges.
+
+    The law of :mod:`rocketroll_physics.flown` turned around: the recorded equivalent fin
+    angle is a frozen gust field's flow angle, ``u_d = w(x)·V_ref/max(V, V_ref)`` at the
+    height ``x`` above the pad (the distance a vertical flight has flown through it), so
+    ``w`` is read off the recording by height and flown at the other ascent's heights and
+    airspeeds (each interval's midpoint).
+
+    Raises
+    ------
+    ValueError
+        Where the other ascent's episode flies through heights the recording does not
+        cover (its turbulence there is unknown).
+    """
+    own = schedule.recorded_on
+    assert own is not None
+    v_ref = schedule.v_ref_mps
+    u = np.asarray(u_d_deg, dtype=float)
+    there = own.at(t0_s + dt_s * (np.arange(u.size) + 0.5))
+    heights = np.asarray(there.altitude_m) - float(own.altitude_m[0])
+    field = u * np.maximum(np.asarray(there.airspeed_mps), v_ref) / v_ref
+    order = np.argsort(heights, kind="stable")  # the ascent: heights rise
+    mid = 0.5 * (schedule.altitude_edges_m[1:m] + schedule.altitude_edges_m[: m - 1])
+    flown = mid - float(schedule.profile.altitude_m[0])
+    low, high = float(heights.min()), float(heights.max())
+    if flown.min() < low - 1.0 or flown.max() > high + 1.0:
+        raise ValueError(
+            f"flight: the stored flight's u_d covers {low:.0f}-{high:.0f} m above its pad; "
+            f"{schedule.profile.source} flies {flown.min():.0f}-{flown.max():.0f} m above its "
+            "own, where that turbulence is unknown (fly an ascent within those heights, or "
+            "cut the episode with episode_s)"
+        )
+    speed = 0.5 * (schedule.airspeed_edges_mps[1:m] + schedule.airspeed_edges_mps[: m - 1])
+    return np.asarray(
+        np.interp(flown, heights[order], field[order]) * v_ref / np.maximum(speed, v_ref)
+    )
 
 
 def _dryden(

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sqlite3
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -108,3 +109,57 @@ def test_the_flight_env_flies_a_stored_flight_as_that_rocket(stored: Path) -> No
             flight_turbulence="recorded",
             split="test",
         )
+
+
+def test_a_stored_flights_rocket_flies_another_ascent_its_u_d_flown_anew(
+    stored: Path, tmp_path: Path
+) -> None:
+    """``profile=`` flies the stored rocket on another ascent, its recorded u_d flown anew
+    by height (the flown law turned around): on its own log read as a V(t) CSV it is the
+    recorded replay again; on the default ascent it keeps the rocket and its scaling; an
+    ascent that climbs past the recorded heights is refused with the way out
+    (``episode_s``)."""
+    import warnings
+
+    import gymnasium as gym
+    import numpy as np
+
+    import rollenv  # noqa: F401  (registers the variants)
+    from identification.recording import load_recording
+    from rollenv.core import RollConfig
+    from rollenv.flight import FlightSchedule
+
+    with DisturbanceDB(stored, create=False) as db:
+        (fit,) = db.identifications(method="flight", model="theta")
+        log = db.recording(fit.recording_hash)
+    own_csv = tmp_path / "own.csv"
+    save_recording(log, own_csv)
+    assert load_recording(own_csv).airspeed_mps is not None
+
+    def episode_bank(**options: Any) -> tuple[RollConfig, FlightSchedule, TraceBank]:
+        env = gym.make("RocketRollFlight-v0", db=str(stored), recording=fit.recording, **options)
+        config = env.unwrapped.config  # type: ignore[attr-defined]
+        bank = env.unwrapped.bank  # type: ignore[attr-defined]
+        env.close()
+        schedule = config.flight_schedule
+        assert schedule is not None
+        return config, schedule, config.flights(bank)
+
+    _, schedule, recorded = episode_bank()
+    assert schedule.recorded_on is None
+    _, schedule, again = episode_bank(profile=str(own_csv))
+    assert schedule.recorded_on is not None and schedule.reference == fit.flight_reference
+    assert "flown anew by height" in again.description
+    for a, b in zip(recorded.traces, again.traces, strict=True):
+        np.testing.assert_allclose(b.samples(), a.samples(), rtol=1e-6, atol=1e-6)
+    _, schedule, on_default = episode_bank(profile="default")
+    assert schedule.profile.source.startswith("simulated")
+    assert schedule.reference == fit.flight_reference
+    for flown, own in zip(on_default.traces, recorded.traces, strict=True):
+        assert 0.5 < float(np.std(flown.samples())) / float(np.std(own.samples())) < 2.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the supersonic ascent warns of Mach
+        with pytest.raises(ValueError, match=r"covers 0-\d+ m above its pad.*episode_s"):
+            episode_bank(profile="supersonic")
+        short_config, _, short = episode_bank(profile="supersonic", episode_s=5.0)
+    assert short_config.max_episode_steps == 50 and len(short.traces) == len(recorded.traces)
