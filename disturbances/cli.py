@@ -249,14 +249,17 @@ def identify(args: IdentifyArgs) -> int:
     if args.db is not None:  # before any file is written: all or nothing
         from disturbances.ingest import add_identification
 
+        # The fits made above are stored, not made again; a fit with other flights
+        # (--together) is not this recording's alone, which is what is stored.
+        made = None if together else context
         with _new_database(args.db), _open(args.db, create=True) as db:
             fitted = list(fits)  # a method that refused the recording adds nothing
             if result is not None:
-                added = add_identification(db, result, methods=fitted)
+                added = add_identification(db, result, methods=fitted, context=made)
             else:
                 from disturbances.ingest import add_recording
 
-                added = add_recording(db, recording, options, methods=fitted)
+                added = add_recording(db, recording, options, methods=fitted, context=made)
         stored = (
             f"{args.db}: this recording is already stored (same samples); nothing added"
             if added.recordings == 0 and added.traces == 0

@@ -364,6 +364,7 @@ def add_recording(
     posterior: int = 0,
     posterior_seed: int = 0,
     holdout: float = 0.0,
+    context: Context | None = None,
 ) -> StoreResult:
     """Identify a recording and store it with all its results, in one transaction.
 
@@ -406,7 +407,12 @@ def add_recording(
         0 (default): the recording as one.  Else the share of it at its end held out
         for evaluation (:func:`holdout_rows`: a design part and the held-out one, in
         :data:`HOLDOUT_RANGE`); no surrogates then.
+    context : Context, optional
+        Where ``recording`` was identified already with ``options`` (``rocketroll
+        identify --db``): its methods' fits are stored, not made again.
     """
+    if context is not None and (context.recording is not recording or context.options != options):
+        raise ValueError("context: of another recording or other options")
     chosen = _methods(methods, recording)
     _check_posterior(chosen, posterior)
     source_method = _surrogate_method(chosen, surrogate_method)
@@ -447,7 +453,7 @@ def add_recording(
         return dataclasses.replace(stored, recording_id=stored_id, skipped=stored.skipped + 1)
     return _store(
         db,
-        Context(recording, options),
+        context or Context(recording, options),
         missing,
         surrogates=surrogates,
         surrogate_kinds=surrogate_kinds,
@@ -482,17 +488,21 @@ def add_identification(
     surrogate_kinds: Sequence[str] = ("iaaft",),
     surrogate_seed: int = 0,
     surrogate_method: str | None = None,
+    context: Context | None = None,
 ) -> StoreResult:
     """:func:`add_recording` for a recording the paper's pipeline has just identified.
 
     The pipeline's result is reused for ``method="paper"``; other methods run
-    on the same measurements.
+    on the same measurements (their fits in ``context``, where it holds them, are
+    reused too).
     """
     chosen = _methods(methods, result.recording)
     _check_not_split(db, result.recording, chosen)
+    if context is not None and context.paper is not result:
+        raise ValueError("context: of another identification")
     return _store(
         db,
-        Context(result.recording, result.options, paper=result),
+        context or Context(result.recording, result.options, paper=result),
         chosen,
         surrogates=surrogates,
         surrogate_kinds=surrogate_kinds,

@@ -256,6 +256,8 @@ class Context:
         self.recording = recording
         self.together = tuple(together)
         self.options = IdentifyOptions() if options is None else options
+        #: Each method's fits so far, by (method, models): :func:`fit` runs a method once.
+        self.fits: dict[tuple[str, tuple[str, ...]], dict[str, ModelFit]] = {}
         if paper is not None:
             if paper.recording is not recording or paper.options != self.options:
                 raise ValueError("the given identification is of another recording or options")
@@ -371,13 +373,17 @@ def fit(
         check_model(model)
         if model not in supported:
             raise ValueError(f"method {method!r} does not fit the {model!r} model")
+    key = (method, tuple(models))
+    if key in context.fits:  # fitted in this context already (identify, then store)
+        return dict(context.fits[key])
     fits = {f.model: f for f in entry.load()(context, list(models))}
     missing = [m for m in models if m not in fits]
     if missing:
         raise RuntimeError(f"method {method!r} returned no fit for model(s) {missing}")
     if not flight_method:
         fits = {model: with_adequacy(f, context) for model, f in fits.items()}
-    return {m: fits[m] for m in models}
+    context.fits[key] = {m: fits[m] for m in models}
+    return dict(context.fits[key])
 
 
 def with_adequacy(found: ModelFit, context: Context) -> ModelFit:

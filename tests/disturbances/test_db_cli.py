@@ -531,10 +531,24 @@ def test_import_not_an_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 # --------------------------------------------------------------------------- identify --db
 
 
-def test_identify_stores_in_database(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_identify_stores_in_database(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """What identify prints is what it stores: each method runs once, not again to store."""
+    import identification.methods as methods
+
+    judged: list[str] = []  # every tunnel fit made is judged once, as it is made
+    judge = methods.with_adequacy
+
+    def counted(found: methods.ModelFit, context: methods.Context) -> methods.ModelFit:
+        judged.append(found.method)
+        return judge(found, context)
+
+    monkeypatch.setattr(methods, "with_adequacy", counted)
     db = tmp_path / "identified.sqlite"
     argv = ["identify", str(bundled_path(NEW)), "--db", str(db), "--mc-runs", "0"]
     out = ok(argv, capsys)
+    assert sorted(judged) == ["output-error", "output-error", "paper", "paper"]
     stored_line = f"stored in {db}: 4 identifications, 4 traces (ids 1, 2, 3, 4)"
     assert stored_line in out.splitlines()
     assert out.index("\nparameter") < out.index(stored_line)  # after the usual table
