@@ -31,9 +31,8 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from identification.methods import Context, default_methods, fit, is_flight_meth
 from identification.model import MODEL_NAMES, RollParams
 from identification.recording import Recording, RecordingError, load_recording
 from identification.steps import IdentificationError
+from identification.tables import scaling_line
 
 
 def thinned(rec: Recording, every: int) -> Recording:
@@ -136,29 +136,13 @@ def report(rec: Recording, methods: Sequence[str], given: dict[str, float] | Non
             )
             reference = found.metrics.get("v_ref_mps")
             if rec.is_flight:
-                print(f"  {'':22}{_scaling(found.metrics)}")
+                print(f"  {'':22}at V_ref {reference:.1f} m/s; {scaling_line(found.metrics)}")
                 truth = truth_of(rec, given, reference)
             if truth:
                 print(f"  {'':22}error: {_errors(p, model, truth)}")
             for reason in a["reasons"]:
                 print(f"  {'':22}{reason}")
         print(f"  {'':22}({seconds:.2f} s for both models)")
-
-
-def _scaling(metrics: Mapping[str, Any]) -> str:
-    """A flight fit's reference, measured scaling and eq. 4-8's test, in one line."""
-    errors = metrics.get("std_errors") or {}
-    text = f"at V_ref {metrics['v_ref_mps']:.1f} m/s: n {metrics['torque_exponent']:.3f}"
-    if metrics.get("scaling_measured"):
-        text += f" ± {errors.get('torque_exponent', float('nan')):.3f}"
-    text += f", m {metrics['damping_exponent']:.3f}"
-    if metrics.get("scaling_measured"):
-        text += f" ± {errors.get('damping_exponent', float('nan')):.3f}"
-    test = metrics.get("eq_4_8_test")
-    if test:
-        text += f"; eq. 4-8 {'rejected' if test['rejected'] else 'not rejected'} "
-        text += f"(p {test['p_value']:.2g})"
-    return text
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import unicodedata
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from identification import paper
 from identification.methods import ModelFit
 from identification.pipeline import Identification
 
-__all__ = ["methods_table", "parameter_table"]
+__all__ = ["adequacy_table", "flight_table", "methods_table", "parameter_table", "scaling_line"]
 
 
 def _pad(text: str, width: int) -> str:
@@ -141,6 +142,93 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
             )
             reasons += [f"  {method} {model}: {reason}" for reason in a["reasons"]]
     return "\n".join(lines + reasons)
+
+
+def scaling_line(metrics: Mapping[str, Any]) -> str:
+    """A flight fit's airspeed scaling: the exponents (measured, with their standard errors
+    and eq. 4-8's test, or held) and the rocket carried to the tunnel's airspeed, in one
+    line."""
+    errors = metrics.get("std_errors") or {}
+    n, m = metrics.get("torque_exponent", 2.0), metrics.get("damping_exponent", 1.0)
+    if not metrics.get("scaling_measured"):
+        return f"scaling held: fin torque ∝ ρV^{n:g}, damping ∝ ρV^{m:g}"
+    nan = float("nan")
+    n_se, m_se = errors.get("torque_exponent", nan), errors.get("damping_exponent", nan)
+    text = (
+        f"scaling measured: fin torque ∝ ρV^n, n {n:.3f} ± {n_se:.3f}; "
+        f"damping ∝ ρV^m, m {m:.3f} ± {m_se:.3f}"
+    )
+    test = metrics.get("eq_4_8_test")
+    if test:
+        said = "rejected" if test["rejected"] else "not rejected"
+        text += (
+            f"; eq. 4-8 (n 2, m 1) {said} (likelihood ratio {test['statistic']:.3g}, "
+            f"p {test['p_value']:.3g})"
+        )
+    tunnel = metrics.get("at_tunnel_airspeed")
+    if tunnel:
+        text += (
+            f"; carried to {tunnel['v_ref_mps']:.2f} m/s by it: α {tunnel['alpha']:.4f}, "
+            f"β̄ {tunnel['beta_bar_per_s']:.4f} 1/s"
+        )
+    return text
+
+
+def flight_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
+    """A flight's identification (``rocketroll identify``): per model the coefficients at
+    the reference airspeed, the scaling (:func:`scaling_line`), the held-out check and what
+    the model's limits left out; then the methods' table."""
+    lines = []
+    for by_model in fits.values():
+        for model, f in by_model.items():
+            m = f.metrics
+            errors = m.get("std_errors", {})
+            verdict = (m.get("adequacy") or {}).get("verdict")
+            judged = f" [{verdict}]" if verdict else ""
+            lines.append(
+                f"{f.method} {model}{judged}: at V_ref {m['v_ref_mps']:.2f} m/s, ρ_ref "
+                f"{m['rho_ref_kgm3']:.4f} kg/m³ ({m['density']}): "
+                f"α₀ {f.params.alpha:.4f} ± {errors.get('alpha', float('nan')):.4f}, "
+                f"β̄₀ {f.params.beta_bar_per_s:.4f} ± "
+                f"{errors.get('beta_bar_per_s', float('nan')):.4f} 1/s; "
+                f"C_P-like β̄₀/(ρV) {m['damping_per_rho_v']:.5g} m²/kg, "
+                f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
+                f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"
+            )
+            lines.append(f"  {scaling_line(m)}")
+            held = (m.get("adequacy") or {}).get("held_out") or {}
+            if "rate_r2" in held:
+                full = held.get("full_fit_rate_r2")
+                lines.append(
+                    f"  held out: fitted to {held['from_s']:.2f} s, the model without u_d "
+                    f"predicts the rest to rate R² {held['rate_r2']:.3f}"
+                    + (f" (the whole flight's fit: {full:.3f})" if full is not None else "")
+                )
+            elif "skipped" in held:
+                lines.append(f"  held out: not checked: {held['skipped']}")
+            if m.get("descent_excluded_s"):
+                lines.append(
+                    f"  left out {m['descent_excluded_s']:.2f} s after apogee (falling, the "
+                    "rocket no longer flies into the flow its fins were identified in)"
+                )
+            if m.get("supersonic_excluded_s"):
+                first, last = m["fitted_s"]
+                lines.append(
+                    f"  left out {m['supersonic_excluded_s']:.2f} s above Mach 0.8 (the roll "
+                    f"model is subsonic): fitted {first:.2f}-{last:.2f} s "
+                    "(--include-supersonic fits them too)"
+                )
+            if m.get("fitted_with"):
+                lines.append(
+                    f"  fitted together with {len(m['fitted_with'])} other flight(s): "
+                    + ", ".join(m["fitted_with"])
+                )
+    return (
+        "flight identification (fin torque ∝ ρV^n, damping a ∝ ρV^m: α ∝ V^(n-m))\n"
+        + "\n".join(lines)
+        + "\n\n"
+        + (methods_table(fits))
+    )
 
 
 def _blank(value: float | None, fmt: str) -> str:

@@ -170,9 +170,9 @@ def test_real_data_fits_a_flight_with_its_scaling(default_db: Path, tmp_path: Pa
     out = run_script("real_data.py", str(path), db=default_db)
     rows = [line.split() for line in out.splitlines() if line.strip().startswith("flight ")]
     assert [row[1] for row in rows] == ["constant", "theta"]
-    assert out.count("eq. 4-8 rejected") == 2
+    assert out.count("eq. 4-8 (n 2, m 1) rejected") == 2
     scaling = [line for line in out.splitlines() if "at V_ref" in line]
-    exponents = [float(line.split(": n ")[1].split()[0]) for line in scaling]
+    exponents = [float(line.split("ρV^n, n ")[1].split()[0]) for line in scaling]
     assert len(exponents) == 2 and all(abs(n - 1.5) < 0.1 for n in exponents), scaling
     errors = [line for line in out.splitlines() if "error: α" in line]
     assert len(errors) == 2 and all(abs(float(e.split("α")[1].split("%")[0])) < 5 for e in errors)
