@@ -67,7 +67,7 @@ from identification.recording import SOURCES, Recording
 from rocketroll_common import __version__
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
-from rocketroll_physics.flight import AirspeedScaling, FlightReference
+from rocketroll_physics.scaling import AirspeedScaling, FlightReference
 
 __all__ = [
     "APPLICATION_ID",

@@ -69,7 +69,7 @@ from identification.recording import Recording
 from identification.statistics import trace_statistics
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import UsageError
-from rocketroll_physics.flight import FlightReference
+from rocketroll_physics.scaling import FlightReference
 
 __all__ = [
     "HOLDOUT_RANGE",

@@ -44,7 +44,7 @@ from identification.model import RollParams, check_model
 from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
-from rocketroll_physics.flight import FlightReference
+from rocketroll_physics.scaling import FlightReference
 
 __all__ = [
     "KINDS",

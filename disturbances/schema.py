@@ -6,7 +6,7 @@ file is marked with ``PRAGMA application_id`` :data:`APPLICATION_ID`.
 Version 4 (this one) stores flights: a flight method's identification holds its
 parameters at a reference airspeed and density with the airspeed scaling it measured
 (``v_ref_mps``, ``rho_ref_kgm3``, ``torque_exponent``, ``damping_exponent``:
-:class:`rocketroll_physics.flight.FlightReference`; NULL for the tunnel's, which hold at
+:class:`rocketroll_physics.scaling.FlightReference`; NULL for the tunnel's, which hold at
 the tunnel's airspeed).  Version 3 adds each identification's adequacy ``verdict`` (good, weak or
 unreliable: :mod:`identification.adequacy`; NULL where it was not assessed -- a flight
 fit, or one stored before version 3 without it in its metrics).  Version 2 validates

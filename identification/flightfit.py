@@ -7,7 +7,7 @@ eq. 5 carries them to any airspeed.  This module does that for a recording
 with an ``airspeed_mps`` column (format 1.1): it estimates the model **at a
 reference airspeed** ``V_ref`` and density ``ρ_ref`` (default: the tunnel's
 50 km/h at ISA sea level) with the flight's scaling (eq. 4-8,
-:func:`rocketroll_physics.flight.roll_scales`)::
+:func:`rocketroll_physics.scaling.roll_scales`)::
 
     α(t) = α₀·V/V_ref,     a(θ, t) = (ᾱ₀·|θ + θ̄| + β̄₀)·ρV/(ρ_ref·V_ref)
 
@@ -71,16 +71,15 @@ from identification.recording import Recording, RecordingError
 from identification.statespace import LinearGaussian
 from identification.steps import Disturbance, IdentificationError
 from rocketroll_common.arrays import FloatArray, readonly_array
-from rocketroll_physics.flight import (
+from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3, isa
+from rocketroll_physics.ou import interval_coefficients
+from rocketroll_physics.scaling import (
     EQ_4_8,
-    ISA_SEA_LEVEL_DENSITY_KGM3,
     MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
-    isa,
     roll_scales,
 )
-from rocketroll_physics.ou import interval_coefficients
 
 if TYPE_CHECKING:
     from identification.methods import Context
@@ -183,7 +182,7 @@ class FlightInputs:
 
     def scales(self, scaling: AirspeedScaling = EQ_4_8) -> tuple[FloatArray, FloatArray]:
         """The gain's and the damping's factors at each substep's midpoint for
-        ``scaling`` (:func:`~rocketroll_physics.flight.roll_scales`)."""
+        ``scaling`` (:func:`~rocketroll_physics.scaling.roll_scales`)."""
         return roll_scales(self.speed_ratio, self.density_ratio, 1.0, 1.0, scaling)
 
 

@@ -4,7 +4,7 @@
 The tunnel (:mod:`identification.tunnel`) re-creates the paper's experiment so
 that every identification can be checked against the truth.  This module does
 the same for the flight the paper's §4 looks ahead to: the rocket of a
-:class:`~rocketroll_physics.flight.FlightProfile` (default: the 5-kg rocket to
+:class:`~rocketroll_physics.ascent.FlightProfile` (default: the 5-kg rocket to
 603 km/h and 2 km) from the moment it reaches the reference airspeed (the
 tunnel's, unless ``--v-ref``; it has left the rail) to apogee -- with Dryden
 gusts, to the moment it slows back below ``v_ref`` just before apogee (there
@@ -14,10 +14,10 @@ equivalent fin angle grows without bound) -- with
 * the roll model of eq. 36/49 at the reference airspeed ``V_ref`` (the
   truth), its gain and damping scaled along the flight by eq. 4-8 or by
   other exponents (torque ``∝ ρV^n``, damping ``∝ ρV^m``:
-  :class:`rocketroll_physics.flight.AirspeedScaling`), integrated exactly
+  :class:`rocketroll_physics.scaling.AirspeedScaling`), integrated exactly
   (:func:`identification.model.simulate`, scales per substep); above Mach
   0.8 (the ``supersonic`` ascent) the fins' torque leaves that law
-  (:func:`rocketroll_physics.flight.fin_compressibility`: outside the model);
+  (:func:`rocketroll_physics.scaling.fin_compressibility`: outside the model);
 * an excitation: a random staircase of fin commands, short dwells (the rocket
   settles in tens of milliseconds at speed), through the servo of eq. 23;
 * turbulence flown, from one of the two sources of the flight environment:
@@ -63,19 +63,18 @@ from identification.tunnel import (
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv
+from rocketroll_physics.ascent import FlightProfile, flight_profile
+from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
 from rocketroll_physics.dryden import roll_gust
-from rocketroll_physics.flight import (
-    ISA_SEA_LEVEL_DENSITY_KGM3,
+from rocketroll_physics.flown import fly_trace, tunnel_time
+from rocketroll_physics.scaling import (
     MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
-    FlightProfile,
     FlightReference,
     fin_compressibility,
-    flight_profile,
     roll_scales,
 )
-from rocketroll_physics.flown import fly_trace, tunnel_time
 
 __all__ = ["AscentError", "FlightLogSpec", "run_flight", "truth_at", "truth_reference"]
 

@@ -33,7 +33,7 @@ from identification.flightfit import (
 from identification.methods import ModelFit
 from identification.recording import Recording
 from rocketroll_common.plotting import new_figure, png_bytes
-from rocketroll_physics.flight import FlightReference
+from rocketroll_physics.scaling import FlightReference
 
 __all__ = ["FIGURE_NAME", "REPORT_NAME", "render_flight_report"]
 

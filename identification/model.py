@@ -154,7 +154,7 @@ class RollParams:
 
     def scaled(self, gain: float, damping: float) -> RollParams:
         """The rocket at another airspeed and density: ``α`` times ``gain``, ``ᾱ`` and ``β̄``
-        times ``damping``, θ̄ unchanged (eq. 4-8; :func:`rocketroll_physics.flight.roll_scales`)."""
+        times ``damping``, θ̄ unchanged (eq. 4-8; :func:`rocketroll_physics.scaling.roll_scales`)."""
         return RollParams(
             self.alpha * gain,
             self.theta_bar_deg,
@@ -487,7 +487,7 @@ def roll_coefficients(
     All inputs broadcast; ``h_s`` is a scalar.  ``gain`` and ``damping``
     multiply ``α`` and the damping ``a(θ)`` (both ᾱ and β̄) piece by piece:
     the rocket at another airspeed and density (eq. 4-8,
-    :func:`rocketroll_physics.flight.roll_scales`).
+    :func:`rocketroll_physics.scaling.roll_scales`).
 
     Returns
     -------
@@ -635,7 +635,7 @@ def simulate(
     gain, damping : float or array_like, shape (n,) or (n * substeps,)
         Factors on ``α`` and on the damping ``a(θ)`` per interval or per
         substep: the rocket in flight (eq. 4-8,
-        :func:`rocketroll_physics.flight.roll_scales`).  The damping's are
+        :func:`rocketroll_physics.scaling.roll_scales`).  The damping's are
         ≥ 0; a gain < 0 is the flow over the fins reversed (a rocket falling
         tail-first).  Default 1: the rocket as identified.
 

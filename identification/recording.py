@@ -102,7 +102,7 @@ ROLL_COLUMNS = ("roll_deg", "roll_rate_dps")
 #: The columns format 1.1 adds.
 FLIGHT_COLUMNS = ("airspeed_mps", "altitude_m")
 #: Allowed range of each flight column (the altitudes the ISA of
-#: :mod:`rocketroll_physics.flight` covers).
+#: :mod:`rocketroll_physics.atmosphere` covers).
 FLIGHT_RANGES: Mapping[str, tuple[float, float]] = MappingProxyType(
     {"airspeed_mps": (0.0, 2_000.0), "altitude_m": (-500.0, 20_000.0)}
 )

@@ -103,7 +103,7 @@ def write_help() -> None:
 SCHEMAS: dict[str, str] = {
     "sweep": "agents.sweep.spec:SweepDocument",
     "hyperparams": "agents.train.hyperparams:HyperparameterFile",
-    "ascent": "rocketroll_physics.flight:AscentDocument",
+    "ascent": "rocketroll_physics.ascent:AscentDocument",
 }
 
 

@@ -345,7 +345,7 @@ def gust_parameters(altitude_m: ArrayLike, severity: Severity = "light") -> Gust
     ----------
     altitude_m : float or array_like
         Height above ground, m, ≥ 0, any shape (the specification's ``h``;
-        for an :class:`rocketroll_physics.flight.FlightProfile` its
+        for an :class:`rocketroll_physics.ascent.FlightProfile` its
         ``altitude_m`` less the launch altitude).
     severity : {"light", "moderate", "severe"}
         Low altitude: wind at 20 ft of 15, 30, 45 kt; medium/high altitude:

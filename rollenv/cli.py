@@ -227,7 +227,7 @@ def show_ascent(args: AscentArgs) -> int:
     if args.plot is not None:
         from rocketroll_common.files import write_atomic
         from rocketroll_common.plotting import png_bytes
-        from rocketroll_physics.flight import plot_profile
+        from rocketroll_physics.ascent import plot_profile
 
         write_atomic(args.plot, png_bytes(plot_profile(profile), dpi=110))
         print(f"plot: {args.plot}")

@@ -237,7 +237,7 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
       (the rocket has left its rail, not rolling: rate 0) to apogee, in whole
       control steps -- 212 steps (21.2 s) of the default ascent, whose
       airspeed peaks at 603 km/h (Mach 0.50) at burnout and whose apogee is
-      2010 m (:func:`rocketroll_physics.flight.simulate_ascent`).  Truncation at
+      2010 m (:func:`rocketroll_physics.ascent.simulate_ascent`).  Truncation at
       apogee; no termination.
     * **Transition**: the dynamics above with the rocket's coefficients
       scaled every control step by the airspeed ``V`` and density ``ρ`` at

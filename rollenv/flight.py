@@ -9,7 +9,7 @@ configuration:
   fins have the authority the tunnel identified) to apogee, in whole control
   steps;
 * **the rocket** changes every control step: gain ``α·V/V_ref`` and damping
-  ``a(θ)·ρV/(ρ_ref·V_ref)`` (eq. 4-8; :func:`rocketroll_physics.flight.roll_scales`),
+  ``a(θ)·ρV/(ρ_ref·V_ref)`` (eq. 4-8; :func:`rocketroll_physics.scaling.roll_scales`),
   taken at the step's midpoint.  Both vanish as ``V → 0`` at apogee; they are
   held at :data:`MIN_SCALE` or above, where the rocket simply keeps rolling;
 * **the turbulence** is flown: a tunnel trace time-compressed and scaled by
@@ -19,7 +19,7 @@ A flight stored in the database (``rocketroll db add`` of a flight log: its
 rocket identified at a reference airspeed with its measured airspeed scaling)
 is flown as **that rocket** (:func:`stored_flight_name`, ``flight="db:PATH#NAME"``):
 its own V(t) and altitude, its gain and damping scaled by its own exponents
-(:class:`rocketroll_physics.flight.FlightReference`), and its own ``u_d`` -- the
+(:class:`rocketroll_physics.scaling.FlightReference`), and its own ``u_d`` -- the
 identified one or its posterior draws, already in flight time -- replayed
 (``flight_turbulence="recorded"``).
 
@@ -42,17 +42,10 @@ from disturbances.bank import TraceBank
 from disturbances.flight import flight_bank
 from disturbances.rows import derived_row
 from rocketroll_common.arrays import FloatArray, readonly_array
-from rocketroll_physics.flight import (
-    ISA_SEA_LEVEL_DENSITY_KGM3,
-    MACH_LIMIT,
-    TUNNEL_AIRSPEED_MPS,
-    FlightProfile,
-    FlightReference,
-    flight_profile,
-    recorded_profile,
-    roll_scales,
-)
+from rocketroll_physics.ascent import FlightProfile, flight_profile, recorded_profile
+from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
 from rocketroll_physics.flown import interval_means
+from rocketroll_physics.scaling import MACH_LIMIT, TUNNEL_AIRSPEED_MPS, FlightReference, roll_scales
 
 __all__ = [
     "INFO_COLUMNS",
@@ -66,7 +59,7 @@ __all__ = [
     "turbulence_of",
 ]
 
-#: What a flight env's ``info`` adds (:class:`rocketroll_physics.flight.FlightState` fields).
+#: What a flight env's ``info`` adds (:class:`rocketroll_physics.ascent.FlightState` fields).
 INFO_COLUMNS = ("airspeed_mps", "altitude_m", "dynamic_pressure_pa", "mach")
 
 #: The smallest gain and damping multiplier (near apogee the airflow, and with it the roll

@@ -111,7 +111,7 @@ class Scale(IntEnum):
     ``a(θ)·damping[k]`` (``β̄`` and ``ᾱ`` both scaled); θ̄ stays.  With
     airspeed ``V`` and density ``ρ``, eq. 4-8 give ``b ∝ ρV²`` and ``c ∝ ρV``,
     so ``α = b/c`` grows like ``V`` and ``a = c/I`` like ``ρV``
-    (:func:`rocketroll_physics.flight.roll_scales`).  All ones is the rocket of the
+    (:func:`rocketroll_physics.scaling.roll_scales`).  All ones is the rocket of the
     database.
     """
 

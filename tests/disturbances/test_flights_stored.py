@@ -14,7 +14,7 @@ from disturbances.db import DisturbanceDB
 from identification.flightlog import FlightLogSpec, run_flight
 from identification.recording import save_recording
 from rocketroll.cli import main
-from rocketroll_physics.flight import AirspeedScaling, FlightReference
+from rocketroll_physics.scaling import AirspeedScaling, FlightReference
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +76,7 @@ def test_the_flight_env_flies_a_stored_flight_as_that_rocket(stored: Path) -> No
     import numpy as np
 
     import rollenv  # noqa: F401  (registers the variants)
-    from rocketroll_physics.flight import TUNNEL_AIRSPEED_MPS
+    from rocketroll_physics.scaling import TUNNEL_AIRSPEED_MPS
 
     with DisturbanceDB(stored, create=False) as db:
         (fit,) = db.identifications(method="flight", model="theta")

@@ -12,20 +12,17 @@ from scipy.integrate import trapezoid
 import identification
 from rocketroll_common.errors import UsageError
 from rocketroll_common.plotting import png_bytes
-from rocketroll_physics.flight import (
+from rocketroll_physics.ascent import (
     DEFAULT_ASCENT,
-    G0_MPS2,
-    ISA_SEA_LEVEL_DENSITY_KGM3,
-    TUNNEL_AIRSPEED_MPS,
     AscentSpec,
     FlightProfile,
-    isa,
     load_ascent_yaml,
     load_profile_csv,
     plot_profile,
-    roll_scales,
     simulate_ascent,
 )
+from rocketroll_physics.atmosphere import G0_MPS2, ISA_SEA_LEVEL_DENSITY_KGM3, isa
+from rocketroll_physics.scaling import TUNNEL_AIRSPEED_MPS, roll_scales
 
 DEFAULT_YAML = Path(identification.__file__).resolve().parent / "data" / "ascent-default.yml"
 

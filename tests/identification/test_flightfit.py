@@ -47,13 +47,12 @@ from identification.steps import IdentificationError
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main
 from rocketroll_common.errors import SettingError, UsageError
-from rocketroll_physics.flight import (
+from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3, isa
+from rocketroll_physics.scaling import (
     EQ_4_8,
-    ISA_SEA_LEVEL_DENSITY_KGM3,
     TUNNEL_AIRSPEED_MPS,
     AirspeedScaling,
     fin_compressibility,
-    isa,
     roll_scales,
 )
 

@@ -1,22 +1,20 @@
-"""The flight the tunnel stands in for: a 1-D vertical ascent and its roll-model scales.
+"""The flight the tunnel stands in for: a rocket, its motor, and its 1-D vertical ascent.
 
-The paper identifies the roll model at one operating point, the wind tunnel's
-airspeed of "roughly 50 km/h" at sea-level density (§4).  In flight the
-airspeed ``V`` and the density ``ρ`` change, and with them the coefficients
-of eq. 7-8 (§4: "the dynamic pressure q in equation (5) will also
-increase").  This module gives the flight: airspeed ``V(t)``, altitude
-``h(t)``, dynamic pressure ``q(t)``, Mach number and density of a sounding
-rocket like the paper's (5 kg, 1.3 m, "maximum velocity [...] approximately
-600 km/h and it can reach up to 2 km in altitude", §1), and the factors that
-carry the tunnel's identified ``a`` and ``α`` to each instant of it.
+A sounding rocket like the paper's (5 kg, 1.3 m, "maximum velocity [...]
+approximately 600 km/h and it can reach up to 2 km in altitude", §1): its
+airspeed ``V(t)``, altitude ``h(t)``, dynamic pressure ``q(t)``, Mach number
+and density (:mod:`rocketroll_physics.atmosphere`), and the factors that carry
+the tunnel's identified ``a`` and ``α`` to each instant of it
+(:mod:`rocketroll_physics.scaling`).
 
-* :func:`isa`: the International Standard Atmosphere, 0-20 km.
-* :class:`AscentSpec`, :data:`DEFAULT_ASCENT`, :func:`load_ascent_yaml`: a
-  rocket and its motor.
+* :class:`AscentSpec`, :data:`DEFAULT_ASCENT`, :data:`SUPERSONIC_ASCENT`,
+  :func:`load_ascent_yaml`: a rocket and its motor.
 * :func:`simulate_ascent` -> :class:`FlightProfile`: the point-mass vertical
-  ascent from the pad to apogee (:func:`load_profile_csv` reads a recorded one).
-* :meth:`FlightProfile.scales` / :func:`roll_scales`: gain ``V/V_ref`` and
-  damping ``ρV/(ρ_ref·V_ref)`` (eq. 4-8).
+  ascent from the pad to apogee (and on down, if asked);
+  :func:`load_profile_csv` and :func:`recorded_profile` read a recorded one;
+  :func:`flight_profile` any of them by name.
+* :meth:`FlightProfile.scales`: the roll model's gain and damping factors
+  along it.
 * :func:`plot_profile`: the profile in four panels.
 
 Model (the textbook 1-D point-mass ascent, with the motor's mass model of OpenRocket
@@ -32,12 +30,6 @@ why ``g0`` is constant: at 2 km the geometric altitude is 0.6 m higher.
 
 References
 ----------
-ISO 2533:1975, *Standard Atmosphere*. International Organization for
-Standardization, Geneva, 1975.
-
-*U.S. Standard Atmosphere, 1976*. NOAA, NASA and USAF, NOAA-S/T 76-1562,
-Washington D.C., 1976.
-
 S. Niskanen, *Development of an Open Source model rocket simulation software*
 (the OpenRocket technical documentation), M.Sc. thesis, Helsinki University of
 Technology, 2009: the flight simulation, and the motor's propellant mass
@@ -65,286 +57,35 @@ from pydantic import BaseModel, ConfigDict, Field
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import SettingError, UsageError
 from rocketroll_common.text import parse_number
+from rocketroll_physics.atmosphere import (
+    G0_MPS2,
+    ISA_MAX_ALTITUDE_M,
+    ISA_MIN_ALTITUDE_M,
+    ISA_SEA_LEVEL_DENSITY_KGM3,
+    isa,
+    isa_density,
+)
+from rocketroll_physics.scaling import EQ_4_8, TUNNEL_AIRSPEED_MPS, AirspeedScaling, roll_scales
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = [
     "DEFAULT_ASCENT",
-    "EQ_4_8",
-    "G0_MPS2",
-    "ISA_MAX_ALTITUDE_M",
-    "ISA_MIN_ALTITUDE_M",
-    "ISA_SEA_LEVEL_DENSITY_KGM3",
-    "MACH_LIMIT",
     "NAMED_ASCENTS",
     "PROFILE_COLUMNS",
     "SUPERSONIC_ASCENT",
-    "SUPERSONIC_FROM_MACH",
-    "TUNNEL_AIRSPEED_MPS",
-    "AirspeedScaling",
+    "AscentDocument",
     "AscentSpec",
-    "Atmosphere",
     "FlightProfile",
-    "FlightReference",
     "FlightState",
-    "fin_compressibility",
     "flight_profile",
-    "isa",
     "load_ascent_yaml",
     "load_profile_csv",
     "plot_profile",
     "recorded_profile",
-    "roll_scales",
     "simulate_ascent",
 ]
-
-# --------------------------------------------------------------------------- ISA constants
-# ISO 2533:1975 / U.S. Standard Atmosphere 1976: the defining constants.
-#: Standard acceleration of gravity, m/s².
-G0_MPS2 = 9.80665
-#: Specific gas constant of dry air, J/(kg·K) (R* / M0 = 8314.32 / 28.9644).
-R_AIR_JPKGK = 287.05287
-#: Ratio of specific heats of air.
-GAMMA_AIR = 1.4
-#: Sea-level temperature, K.
-T0_K = 288.15
-#: Sea-level pressure, Pa.
-P0_PA = 101_325.0
-#: Temperature lapse rate of the troposphere, K/m.
-LAPSE_K_PER_M = 0.0065
-#: Base of the isothermal layer (tropopause), geopotential m.
-TROPOPAUSE_M = 11_000.0
-#: Highest altitude :func:`isa` covers (top of the isothermal layer), m.
-ISA_MAX_ALTITUDE_M = 20_000.0
-#: Lowest altitude :func:`isa` accepts, m: below the lowest dry land (the Dead Sea
-#: shore, about -430 m); the troposphere's formula itself holds further down.
-ISA_MIN_ALTITUDE_M = -500.0
-#: Temperature of the isothermal layer, K.
-T11_K = T0_K - LAPSE_K_PER_M * TROPOPAUSE_M
-#: Pressure at the tropopause, Pa (22 632.06).
-P11_PA = P0_PA * (T11_K / T0_K) ** (G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK))
-#: ISA sea-level density, kg/m³ (1.2250): the tunnel's reference density ρ0.
-ISA_SEA_LEVEL_DENSITY_KGM3 = P0_PA / (R_AIR_JPKGK * T0_K)
-
-#: Mach number above which the roll model (eq. 4-8 at constant coefficients: subsonic
-#: aerodynamics, the paper's §4) does not hold: the flight method leaves such samples out
-#: unless asked, and a flight environment whose profile goes past it warns.
-MACH_LIMIT = 0.8
-
-#: The wind tunnel's airspeed, m/s: "roughly 50 km/h" (paper §4).  The
-#: identified ``a`` and ``α`` hold at this airspeed and sea-level density.
-TUNNEL_AIRSPEED_MPS = 50.0 / 3.6
-
-
-@dataclass(frozen=True)
-class AirspeedScaling:
-    """How the fins' torque and the roll damping grow with the airspeed: ``∝ ρ·V^n`` and
-    ``∝ ρ·V^m``.
-
-    Eq. 4-8 at constant coefficients give ``n = 2`` (the dynamic pressure) and
-    ``m = 1`` (the damping's ``q/v_M``): :data:`EQ_4_8`.  A real airframe need
-    not follow them -- canards whose effectiveness falls with the airspeed
-    (flow separation, aeroelastic twist, the body's interference) give a smaller
-    ``n`` -- and the flight method measures both
-    (:mod:`identification.flightfit`).  The identified model's gain ``α``
-    (torque per damping) then scales as ``V^(n−m)`` and its damping ``a`` as
-    ``ρ·V^m``.
-
-    Attributes
-    ----------
-    torque_exponent : float
-        ``n``: the fins' torque per degree ``∝ ρ·V^n``.
-    damping_exponent : float
-        ``m``: the damping ``a ∝ ρ·V^m``.
-    """
-
-    torque_exponent: float = 2.0
-    damping_exponent: float = 1.0
-
-    def __post_init__(self) -> None:
-        for name in ("torque_exponent", "damping_exponent"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value <= 4.0):
-                raise UsageError(f"{name}: must be in [0, 4], not {value!r}")
-
-    @property
-    def is_eq_4_8(self) -> bool:
-        """Whether these are the exponents of eq. 4-8 (``n = 2``, ``m = 1``)."""
-        return self == EQ_4_8
-
-    def label(self) -> str:
-        """``n 2, m 1`` (with eq. 4-8 named when it is that)."""
-        text = f"n {self.torque_exponent:.3g}, m {self.damping_exponent:.3g}"
-        return text + (" (eq. 4-8)" if self.is_eq_4_8 else "")
-
-
-#: The scaling of eq. 4-8 at constant ``C_P``, ``C_δ``: torque ``∝ ρV²``, damping ``∝ ρV``.
-EQ_4_8 = AirspeedScaling()
-
-
-@dataclass(frozen=True)
-class FlightReference:
-    """Where a flight-identified rocket's parameters hold and how they scale from there:
-    the reference airspeed and density and the airspeed scaling (measured or held).
-
-    A tunnel identification has none (it holds at the tunnel's airspeed, scaled by eq. 4-8
-    in flight); a flight fit stores one with its parameters.
-    """
-
-    v_ref_mps: float
-    rho_ref_kgm3: float
-    scaling: AirspeedScaling = EQ_4_8
-
-    def __post_init__(self) -> None:
-        for name in ("v_ref_mps", "rho_ref_kgm3"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise UsageError(f"{name}: must be finite and > 0, not {value!r}")
-
-    def scales(
-        self, airspeed_mps: ArrayLike, density_kgm3: ArrayLike
-    ) -> tuple[FloatArray, FloatArray]:
-        """The gain's and the damping's factors at ``airspeed_mps`` and ``density_kgm3``
-        (:func:`roll_scales` from this reference)."""
-        return roll_scales(
-            airspeed_mps, density_kgm3, self.v_ref_mps, self.rho_ref_kgm3, self.scaling
-        )
-
-    @classmethod
-    def from_metrics(cls, metrics: Mapping[str, Any]) -> FlightReference | None:
-        """The reference a flight fit's metrics record (``v_ref_mps``, ``rho_ref_kgm3``,
-        ``torque_exponent``, ``damping_exponent``); None for a tunnel fit's."""
-        if "v_ref_mps" not in metrics or "rho_ref_kgm3" not in metrics:
-            return None
-        return cls(
-            float(metrics["v_ref_mps"]),
-            float(metrics["rho_ref_kgm3"]),
-            AirspeedScaling(
-                float(metrics.get("torque_exponent", 2.0)),
-                float(metrics.get("damping_exponent", 1.0)),
-            ),
-        )
-
-
-# --------------------------------------------------------------------------- atmosphere
-@dataclass(frozen=True, eq=False)
-class Atmosphere:
-    """The ISA at some altitudes (floats for a scalar altitude, else arrays of its shape).
-
-    Attributes
-    ----------
-    temperature_k : float or ndarray
-        Air temperature, K.
-    pressure_pa : float or ndarray
-        Static pressure, Pa.
-    density_kgm3 : float or ndarray
-        Air density ρ, kg/m³.
-    speed_of_sound_mps : float or ndarray
-        Speed of sound ``sqrt(γ·R·T)``, m/s.
-    """
-
-    temperature_k: FloatArray | float
-    pressure_pa: FloatArray | float
-    density_kgm3: FloatArray | float
-    speed_of_sound_mps: FloatArray | float
-
-    def __repr__(self) -> str:
-        def show(value: FloatArray | float) -> str:
-            return f"{value:.6g}" if isinstance(value, float) else f"array{np.shape(value)}"
-
-        return (
-            f"Atmosphere(T={show(self.temperature_k)} K, p={show(self.pressure_pa)} Pa, "
-            f"ρ={show(self.density_kgm3)} kg/m³, a={show(self.speed_of_sound_mps)} m/s)"
-        )
-
-
-def _isa_arrays(h: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """T, p, ρ, a at geopotential altitudes ``h`` (m), unchecked (both layers)."""
-    low = h <= TROPOPAUSE_M
-    temperature = np.where(low, T0_K - LAPSE_K_PER_M * h, T11_K)
-    exponent = G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK)
-    pressure = np.where(
-        low,
-        P0_PA * (temperature / T0_K) ** exponent,
-        P11_PA * np.exp(-G0_MPS2 * (h - TROPOPAUSE_M) / (R_AIR_JPKGK * T11_K)),
-    )
-    density = pressure / (R_AIR_JPKGK * temperature)
-    speed = np.sqrt(GAMMA_AIR * R_AIR_JPKGK * temperature)
-    return temperature, pressure, density, speed
-
-
-def _isa_density(h: float) -> float:
-    """ρ at one altitude (m), clipped into the ISA's range: the integrator's hot path."""
-    h = min(max(h, ISA_MIN_ALTITUDE_M), ISA_MAX_ALTITUDE_M)
-    if h <= TROPOPAUSE_M:
-        t = T0_K - LAPSE_K_PER_M * h
-        p = P0_PA * (t / T0_K) ** (G0_MPS2 / (LAPSE_K_PER_M * R_AIR_JPKGK))
-    else:
-        t = T11_K
-        p = P11_PA * math.exp(-G0_MPS2 * (h - TROPOPAUSE_M) / (R_AIR_JPKGK * T11_K))
-    return p / (R_AIR_JPKGK * t)
-
-
-def isa(h_m: ArrayLike) -> Atmosphere:
-    """The International Standard Atmosphere at geopotential altitude ``h_m``.
-
-    Parameters
-    ----------
-    h_m : float or array_like
-        Geopotential altitude, m, in [-500, 20 000] (troposphere and the
-        isothermal layer above it).  Any shape.
-
-    Returns
-    -------
-    Atmosphere
-        Temperature, pressure, density and speed of sound: floats for a scalar
-        ``h_m``, arrays of its shape otherwise.
-
-    Raises
-    ------
-    UsageError
-        If an altitude is not finite or lies outside [-500, 20 000] m.
-
-    Notes
-    -----
-    Troposphere (``h ≤ 11 km``), with ``L = 0.0065 K/m``::
-
-        T = T0 − L·h,    p = p0·(T/T0)^(g0/(L·R))
-
-    Isothermal layer (11-20 km)::
-
-        T = T11 = 216.65 K,    p = p11·exp(−g0·(h − 11 000)/(R·T11))
-
-    and ``ρ = p/(R·T)``, ``a = sqrt(γ·R·T)``, with T0 = 288.15 K,
-    p0 = 101 325 Pa, R = 287.05287 J/(kg·K), g0 = 9.80665 m/s², γ = 1.4.
-    The altitude is geopotential; the geometric altitude ``z = r·h/(r − h)``
-    (``r`` = 6 356 766 m) is 0.6 m higher at 2 km.
-
-    References
-    ----------
-    ISO 2533:1975, *Standard Atmosphere* (the same model up to 32 km).
-    *U.S. Standard Atmosphere, 1976*, NOAA-S/T 76-1562, Part 1 (the
-    equations) and Part 4 (the tables, to which the tests compare).
-
-    Examples
-    --------
-    >>> round(isa(0.0).density_kgm3, 4), round(isa(11_000.0).temperature_k, 2)
-    (1.225, 216.65)
-    """
-    h = np.asarray(h_m, dtype=float)
-    bad = ~np.isfinite(h) | (h < ISA_MIN_ALTITUDE_M) | (h > ISA_MAX_ALTITUDE_M)
-    if np.any(bad):
-        value = float(h.ravel()[int(np.argmax(bad.ravel()))])
-        raise UsageError(
-            f"h_m: {value:g} m is outside the standard atmosphere's range "
-            f"[{ISA_MIN_ALTITUDE_M:g}, {ISA_MAX_ALTITUDE_M:g}] m (troposphere and the "
-            "isothermal layer)"
-        )
-    columns = _isa_arrays(h)
-    if h.ndim == 0:
-        return Atmosphere(*(float(c) for c in columns))
-    return Atmosphere(*columns)
 
 
 # --------------------------------------------------------------------------- the rocket
@@ -779,115 +520,6 @@ class FlightProfile:
         return roll_scales(self.airspeed_mps, self.density_kgm3, v_ref_mps, rho_ref_kgm3, scaling)
 
 
-def roll_scales(
-    airspeed_mps: ArrayLike,
-    density_kgm3: ArrayLike,
-    v_ref_mps: float = TUNNEL_AIRSPEED_MPS,
-    rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
-    scaling: AirspeedScaling = EQ_4_8,
-) -> tuple[FloatArray, FloatArray]:
-    """How the identified roll model's gain ``α`` and damping ``a`` scale with ``V`` and ``ρ``.
-
-    Parameters
-    ----------
-    airspeed_mps : array_like
-        Airspeed ``V``, m/s, ≥ 0.
-    density_kgm3 : array_like
-        Air density ``ρ``, kg/m³, > 0 (broadcast against ``airspeed_mps``).
-    v_ref_mps : float
-        Airspeed of the identification, m/s (the tunnel's 50 km/h).
-    rho_ref_kgm3 : float
-        Density of the identification, kg/m³ (ISA sea level).
-    scaling : AirspeedScaling
-        The exponents (default eq. 4-8's).
-
-    Returns
-    -------
-    gain : ndarray
-        ``α/α0 = (V/V_ref)^(n−m)`` (eq. 4-8: ``V/V_ref``).
-    damping : ndarray
-        ``a/a0 = (ρ/ρ_ref)·(V/V_ref)^m`` (eq. 4-8: ``ρ·V/(ρ_ref·V_ref)``).
-
-    Notes
-    -----
-    Eq. 7-8 with the dynamic pressure of eq. 5, ``q = ½·ρ·v_M²``::
-
-        I·dv/dt = −c·v + b·θ + τ_d,   c = q·S·d²·|C_P|/(2·v_M) = ρ·v_M·S·d²·|C_P|/4,
-                                      b = q·S·d·C_δ = ½·ρ·v_M²·S·d·C_δ
-
-    so ``c ∝ ρ·V`` and ``b ∝ ρ·V²`` at constant coefficients ``C_P``, ``C_δ``
-    (subsonic: the paper's §4 warns they change past about Mach 0.8).  The
-    identified model (eq. 21-22, 30) has ``a = c/I`` and ``α = b/c``::
-
-        a ∝ ρ·V,     α ∝ V,     a·α = b/I ∝ ρ·V²
-
-    with the inertia ``I`` taken as constant (the burning propellant changes it
-    a little).  At the tunnel's operating point both factors are 1.
-
-    References
-    ----------
-    The paper, eq. 4-8 and §4 ("the dynamic pressure q in equation (5) will
-    also increase"; the tunnel's airspeed "roughly 50 km/h").
-
-    Examples
-    --------
-    >>> gain, damping = roll_scales(600 / 3.6, ISA_SEA_LEVEL_DENSITY_KGM3)
-    >>> round(float(gain), 6), round(float(damping), 6)
-    (12.0, 12.0)
-    """
-    if not (math.isfinite(v_ref_mps) and v_ref_mps > 0):
-        raise UsageError(f"v_ref_mps: must be finite and > 0, not {v_ref_mps!r}")
-    if not (math.isfinite(rho_ref_kgm3) and rho_ref_kgm3 > 0):
-        raise UsageError(f"rho_ref_kgm3: must be finite and > 0, not {rho_ref_kgm3!r}")
-    speed = np.asarray(airspeed_mps, dtype=float)
-    density = np.asarray(density_kgm3, dtype=float)
-    if not (np.all(np.isfinite(speed)) and np.all(speed >= 0)):
-        raise UsageError("airspeed_mps: must be finite and >= 0")
-    if not (np.all(np.isfinite(density)) and np.all(density > 0)):
-        raise UsageError("density_kgm3: must be finite and > 0")
-    ratio = speed / v_ref_mps
-    if scaling.is_eq_4_8:  # exact, and no power of 0
-        return np.asarray(ratio), np.asarray(ratio * density / rho_ref_kgm3)
-    n, m = scaling.torque_exponent, scaling.damping_exponent
-    # a gain exponent below 0 would make the fins' gain unbounded at rest: held at 1e-6 V_ref
-    held = np.maximum(ratio, 1e-6) if n < m else ratio
-    gain = np.power(held, n - m)
-    return np.asarray(gain), np.asarray(np.power(ratio, m) * density / rho_ref_kgm3)
-
-
-#: Mach number from which :func:`fin_compressibility` follows Ackeret's supersonic law.
-SUPERSONIC_FROM_MACH = 1.2
-
-
-def fin_compressibility(mach: ArrayLike) -> FloatArray:
-    """A factor on the fins' torque per degree beyond the subsonic scaling: the virtual
-    flight recorder's truth above :data:`MACH_LIMIT`, outside the roll model (whose
-    coefficients are constant: the paper's §4).
-
-    1 up to Mach 0.8; from Mach 1.2, Ackeret's thin-aerofoil law, the lift slope
-    ``∝ 1/√(M² − 1)``, scaled to ``√(1 − 0.8²)/√(M² − 1)`` (0.90 at Mach 1.2, 0.45
-    at 1.67); linear across the transonic band between, where neither law holds.  A
-    stylised truth: real fins' transonic lift depends on their section and planform.
-
-    Examples
-    --------
-    >>> [round(float(k), 3) for k in fin_compressibility([0.5, 0.8, 1.0, 1.2, 2.0])]
-    [1.0, 1.0, 0.952, 0.905, 0.346]
-    """
-    m = np.asarray(mach, dtype=float)
-    if not (np.all(np.isfinite(m)) and np.all(m >= 0)):
-        raise UsageError("mach: must be finite and >= 0")
-    subsonic_beta = math.sqrt(1.0 - MACH_LIMIT**2)
-
-    def ackeret(x: FloatArray) -> FloatArray:
-        return np.asarray(subsonic_beta / np.sqrt(np.maximum(x**2 - 1.0, 1e-12)))
-
-    top = float(ackeret(np.asarray(SUPERSONIC_FROM_MACH)))
-    across = 1.0 + (top - 1.0) * (m - MACH_LIMIT) / (SUPERSONIC_FROM_MACH - MACH_LIMIT)
-    factor = np.where(m <= MACH_LIMIT, 1.0, np.where(m < SUPERSONIC_FROM_MACH, across, 0.0))
-    return np.asarray(np.where(m >= SUPERSONIC_FROM_MACH, ackeret(m), factor))
-
-
 # --------------------------------------------------------------------------- simulation
 def _liftoff_s(spec: AscentSpec) -> float:
     """First time the thrust exceeds the weight (the rocket leaves the pad), s."""
@@ -982,7 +614,7 @@ def simulate_ascent(
         h, v = float(y[0]), float(y[1])
         thrust = float(np.interp(t, knots_t, knots_f, left=0.0, right=0.0))
         mass = float(spec.mass_at(t))
-        drag = 0.5 * _isa_density(h) * v * abs(v) * area_cd
+        drag = 0.5 * isa_density(h) * v * abs(v) * area_cd
         return [v, (thrust - drag) / mass - G0_MPS2]
 
     def stops(t: float, y: FloatArray) -> float:
