@@ -23,6 +23,7 @@ controller and replay.  A ratio within [0.9, 1.1] is the fidelity asked of the
 tunnel's replays (``benchmarks/closed_loop.py``).
 
     .venv/bin/python benchmarks/flight_fidelity.py --seeds 5
+    .venv/bin/python benchmarks/flight_fidelity.py --seeds 5 --policies trim,pid,observer,mpc
 """
 
 from __future__ import annotations

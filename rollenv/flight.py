@@ -44,7 +44,7 @@ from disturbances.rows import derived_row
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_physics.ascent import FlightProfile, flight_profile, recorded_profile
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
-from rocketroll_physics.flown import interval_means
+from rocketroll_physics.flown import interval_means, tunnel_time
 from rocketroll_physics.scaling import MACH_LIMIT, TUNNEL_AIRSPEED_MPS, FlightReference, roll_scales
 
 __all__ = [
@@ -56,6 +56,7 @@ __all__ = [
     "for_flight",
     "reflown",
     "stored_flight_name",
+    "tunnel_frame",
     "turbulence_of",
 ]
 
@@ -101,6 +102,12 @@ class FlightSchedule:
         Where a stored flight's rocket flies another ascent: the profile its ``u_d`` was
         recorded on (the recorded turbulence is flown anew by height:
         :func:`for_flight`); None on its own profile or a tunnel rocket's.
+    airspeed_ratio : ndarray, shape (steps,)
+        ``V/v_ref_mps`` at each control step's midpoint (at least :data:`MIN_SCALE`): how
+        fast the flight flies through the turbulence's frozen field, which is stated at
+        the tunnel's airspeed (:mod:`rocketroll_physics.flown`).  For the tunnel's rocket
+        by eq. 4-8 it is the gain of ``scales``; a stored rocket's gain follows its own
+        reference and exponents.
     """
 
     profile: FlightProfile
@@ -116,6 +123,15 @@ class FlightSchedule:
     rho_ref_kgm3: float
     reference: FlightReference | None = None
     recorded_on: FlightProfile | None = None
+    airspeed_ratio: FloatArray | None = None
+
+    @property
+    def tunnel_gain(self) -> float:
+        """The rocket's gain factor (of ``scales``) at the tunnel's airspeed."""
+        if self.reference is None:
+            return 1.0
+        gain, _ = self.reference.scales(self.v_ref_mps, self.rho_ref_kgm3)
+        return float(gain)
 
     @property
     def duration_s(self) -> float:
@@ -275,6 +291,9 @@ def _schedule(
         rho_ref_kgm3=rho_ref_kgm3,
         reference=reference,
         recorded_on=recorded_on,
+        airspeed_ratio=readonly_array(
+            np.maximum(np.asarray(middle.airspeed_mps) / v_ref_mps, MIN_SCALE)
+        ),
     )
 
 
@@ -375,6 +394,38 @@ def _recorded(bank: TraceBank, schedule: FlightSchedule, m: int) -> TraceBank:
         rows.append(derived_row(source, u, h, "recorded", {"turbulence": "recorded"}))
     where = "as recorded in flight" if schedule.recorded_on is None else "flown anew by height"
     return TraceBank(rows, f"{bank.description}, {where}")
+
+
+def tunnel_frame(bank: TraceBank, schedule: FlightSchedule) -> TraceBank:
+    """A stored flight's ``u_d`` traces (in flight time, on the profile they were recorded
+    on) in the tunnel's frame, where a turbulence model is stated before it is flown along
+    a flight (:meth:`agents.observer.TurbulenceModel.flown`).
+
+    The flown law turned around in time, as :func:`reflown` turns it around in height: a
+    sample held over ``[t, t + Δt]`` of flight time covers tunnel time ``∫V/V_ref dt``
+    (:func:`rocketroll_physics.flown.tunnel_time`) and its flow angle at the tunnel's
+    scale is ``u_d·max(V, V_ref)/V_ref``; the result is averaged onto a uniform grid of
+    the trace's own ``Δt``.
+    """
+    own = schedule.recorded_on or schedule.profile
+    v_ref = schedule.v_ref_mps
+    rows = []
+    for source in bank.traces:
+        if source.flight_reference is None or source.u_d_deg is None:
+            raise ValueError(f"{bank.description}: trace {source.uid} is not a stored flight's u_d")
+        u = np.asarray(source.u_d_deg, dtype=float)
+        dt = source.dt_s
+        edges = source.t0_s + dt * np.arange(u.size + 1)
+        tau = tunnel_time(
+            np.asarray(edges, dtype=np.float64), np.asarray(own.at(edges).airspeed_mps), v_ref
+        )
+        middle = np.asarray(own.at(edges[:-1] + 0.5 * dt).airspeed_mps)
+        field = u * np.maximum(middle, v_ref) / v_ref
+        swept = np.concatenate([[0.0], np.cumsum(field * np.diff(tau))])
+        grid = dt * np.arange(math.floor(tau[-1] / dt + 1e-9) + 1)
+        means = np.diff(np.interp(grid, tau, swept)) / dt
+        rows.append(derived_row(source, means, dt, "tunnel-frame", {"frame": "tunnel"}))
+    return TraceBank(rows, f"{bank.description}, in the tunnel's frame")
 
 
 def reflown(

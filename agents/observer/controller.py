@@ -17,6 +17,7 @@ from disturbances.bank import TraceBank
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 from rollenv.core import RollConfig
+from rollenv.flight import tunnel_frame
 from rollenv.layout import Obs
 
 # ----------------------------------------------------------------------------- control
@@ -60,8 +61,12 @@ class ObserverController:
         self.rocket = rocket
         self.turbulence = turbulence
         flight = config.flight_schedule if scheduled else None
-        scales = None if flight is None else flight.scales[: config.max_episode_steps]
-        self.observer = RollObserver(rocket.params, turbulence, config, scales)
+        steps = config.max_episode_steps
+        scales = None if flight is None else flight.scales[:steps]
+        speeds = None if flight is None else flight.airspeed_ratio
+        self.observer = RollObserver(
+            rocket.params, turbulence, config, scales, None if speeds is None else speeds[:steps]
+        )
         self.weights = {**DEFAULT_WEIGHTS[config.task], **(weights or {})}
         self._range = config.fin_range_deg
         self._angle = config.task == "angle"
@@ -73,8 +78,8 @@ class ObserverController:
         #: ... and each step's rocket and Riccati matrix (the MPC plans on them).
         self.rockets: list[RollParams] = []
         self.riccati_schedule: list[FloatArray] = []
-        if scales is not None:
-            held = np.maximum(scales[:, 0], 1.0)
+        if scales is not None and speeds is not None and flight is not None:
+            held = np.where(speeds[:steps] >= 1.0, scales[:, 0], flight.tunnel_gain)
             self.rockets = [
                 rocket.params.scaled(speed, damping * speed / gain)
                 for (gain, damping), speed in zip(scales, held, strict=True)
@@ -224,8 +229,13 @@ def clone(controller: ObserverController) -> ObserverController:
 
 
 def designed_on(bank: TraceBank, config: RollConfig) -> tuple[NominalModel, TurbulenceModel]:
-    """The nominal rocket and the turbulence model a design fits to ``bank``'s traces."""
+    """The nominal rocket and the turbulence model a design fits to ``bank``'s traces: in
+    the tunnel's frame, where the model is flown from (a stored flight's own ``u_d``,
+    recorded in flight, is taken there first: :func:`rollenv.flight.tunnel_frame`)."""
     nominal = NominalModel.from_bank(bank)
+    schedule = config.flight_schedule
+    if schedule is not None and any(t.flight_reference is not None for t in bank.traces):
+        bank = tunnel_frame(bank, schedule)
     return nominal, TurbulenceModel.from_bank(bank, config.dt_s, nominal)
 
 

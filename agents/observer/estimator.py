@@ -183,6 +183,10 @@ class RollObserver:
         step ``k`` is ``rocket`` carried there (:meth:`rocket_at`), and its turbulence
         ``turbulence`` flown there (:meth:`TurbulenceModel.flown`: an AR(1) per step).  The
         step is counted from :meth:`reset`, as the scheduled PID counts it.
+    airspeed_ratio : ndarray, shape (steps,), optional
+        With ``scales``: the flight's ``V/V_ref`` per step, which the turbulence is flown
+        by (:attr:`rollenv.flight.FlightSchedule.airspeed_ratio`; default the gain of
+        ``scales``, which it is for the tunnel's rocket by eq. 4-8).
     """
 
     def __init__(
@@ -191,6 +195,7 @@ class RollObserver:
         turbulence: TurbulenceModel,
         config: RollConfig,
         scales: FloatArray | None = None,
+        airspeed_ratio: FloatArray | None = None,
     ) -> None:
         if abs(turbulence.dt_s - config.dt_s) > 1e-9:
             raise ValueError(
@@ -211,7 +216,8 @@ class RollObserver:
         self.ar = np.pad(turbulence.ar, (0, max(0, 2 - turbulence.order)))
         self._flown: tuple[FloatArray, FloatArray] | None = None
         if scales is not None:  # in flight: an AR(1) per step, two lags kept
-            self._flown = turbulence.flown(np.asarray(scales)[:, 0])
+            speeds = np.asarray(scales)[:, 0] if airspeed_ratio is None else airspeed_ratio
+            self._flown = turbulence.flown(np.asarray(speeds))
             self.ar = np.array([self._flown[0][0], 0.0])
         p = self.ar.size
         self.m = 3 + p

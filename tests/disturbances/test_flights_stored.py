@@ -163,3 +163,64 @@ def test_a_stored_flights_rocket_flies_another_ascent_its_u_d_flown_anew(
             episode_bank(profile="supersonic")
         short_config, _, short = episode_bank(profile="supersonic", episode_s=5.0)
     assert short_config.max_episode_steps == 50 and len(short.traces) == len(recorded.traces)
+
+
+def test_model_based_designs_on_a_stored_flight_model_its_turbulence_in_the_tunnels_frame(
+    stored: Path,
+) -> None:
+    """The observer's and the MPC's turbulence model is stated in the tunnel's frame and
+    flown by the airspeed: a stored flight's own u_d (recorded in flight) is taken there
+    first (rollenv.flight.tunnel_frame), where it has the recorder's tunnel process's SD
+    (9.8°), and is flown by V/V_ref, not by the stored rocket's gain; on the flight the
+    scheduled observer then holds the roll better than trim. For the tunnel's rocket the
+    airspeed ratio is the gain of eq. 4-8, as before."""
+    import math
+
+    import gymnasium as gym
+    import numpy as np
+
+    import rollenv  # noqa: F401  (registers the variants)
+    from agents.base import Design
+    from agents.evaluate import evaluate, headline_scores, protocol_episodes
+    from agents.observer.controller import designed_on
+    from agents.observer.estimator import TurbulenceModel, stationary_cov
+    from agents.registry import make_controller
+    from rollenv.core import RollConfig
+    from rollenv.flight import tunnel_frame
+
+    def sd(model: TurbulenceModel) -> float:
+        return math.sqrt(float(stationary_cov(model.ar, model.innovation_sd)[0, 0]))
+
+    with DisturbanceDB(stored, create=False) as db:
+        (fit,) = db.identifications(method="flight", model="theta")
+    env = gym.make("RocketRollFlight-v0", db=str(stored), recording=fit.recording)
+    config = env.unwrapped.config  # type: ignore[attr-defined]
+    replayed = env.unwrapped.bank  # type: ignore[attr-defined]
+    env.close()
+    schedule = config.flight_schedule
+    bank = Design(config, "RocketRollFlight-v0", db=str(stored)).design_bank
+    assert all(t.flight_reference is not None for t in bank.traces)
+    nominal, turbulence = designed_on(bank, config)
+    assert 0.8 * 9.8 < sd(turbulence) < 1.2 * 9.8
+    in_flight = TurbulenceModel.from_bank(bank, config.dt_s, nominal)  # as recorded
+    assert sd(in_flight) < 0.5 * 9.8
+    framed = tunnel_frame(bank, schedule)
+    assert "tunnel's frame" in framed.description
+    assert all(t.duration_s > s.duration_s for t, s in zip(framed.traces, bank.traces, strict=True))
+    # The stored rocket's gain is not the airspeed ratio the turbulence is flown by.
+    assert not np.allclose(schedule.airspeed_ratio, schedule.scales[:, 0])
+    specs = protocol_episodes(config, 4, 0, bank=replayed)
+    scores = {
+        policy: evaluate(
+            config,
+            make_controller(policy, config, "RocketRollFlight-v0", db=str(stored)),
+            specs,
+            bank=replayed,
+        )
+        for policy in ("trim", "observer")
+    }
+    observer, trim = (float(headline_scores(scores[p]).mean()) for p in ("observer", "trim"))
+    assert observer < 0.7 * trim, (observer, trim)
+    tunnel = RollConfig(flight="default").flight_schedule
+    assert tunnel is not None
+    np.testing.assert_array_equal(tunnel.airspeed_ratio, tunnel.scales[:, 0])
