@@ -20,6 +20,7 @@ sample):
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -65,27 +66,39 @@ def render_flight_report(
     if not fits:
         raise ValueError("no flight fits to report")
     first = next(iter(fits.values()))
+    fitted = _fitted_part(recording, first.metrics.get("fitted_s"))
     inputs = flight_inputs(
-        recording,
+        fitted,
         v_ref_mps=float(first.trace_settings["v_ref_mps"]),
         servo_rate_dps=float(first.trace_settings["servo_rate_dps"]),
     )
-    t = np.asarray(recording.time_s) - float(recording.time_s[0])
+    start = float(recording.time_s[0])
+    t_all = np.asarray(recording.time_s) - start
+    t = np.asarray(fitted.time_s) - start
     fig = new_figure(figsize=(8.0, 9.0), layout="constrained")
     ax_air, ax_fin, ax_rate, ax_ud = fig.subplots(4, 1, sharex=True)
+    if fitted.n_samples < recording.n_samples:  # the model's limits left some out
+        for ax in (ax_air, ax_fin, ax_rate, ax_ud):
+            ax.axvspan(t[0], t[-1], color="tab:green", alpha=0.07, lw=0)
+        ax_air.text(
+            0.5 * (t[0] + t[-1]), 0.02, "fitted", transform=ax_air.get_xaxis_transform(),
+            ha="center", va="bottom", fontsize=8, color="tab:green",
+        )  # fmt: skip
 
     assert recording.airspeed_mps is not None
-    ax_air.plot(t, recording.airspeed_mps, color="tab:blue", lw=1.2, label="airspeed")
+    ax_air.plot(t_all, recording.airspeed_mps, color="tab:blue", lw=1.2, label="airspeed")
     ax_air.axhline(inputs.v_ref_mps, color="0.4", ls=":", lw=1.0, label="V_ref")
     ax_air.set_ylabel("airspeed (m/s)")
     if recording.altitude_m is not None:
         height = ax_air.twinx()
-        height.plot(t, recording.altitude_m, color="tab:brown", lw=1.0, ls="--")
+        height.plot(t_all, recording.altitude_m, color="tab:brown", lw=1.0, ls="--")
         height.set_ylabel("altitude (m, dashed)", color="tab:brown")
     ax_air.legend(loc="upper left", fontsize=8)
 
     if recording.fin_cmd_deg is not None:
-        ax_fin.step(t, recording.fin_cmd_deg, where="post", color="0.6", lw=0.8, label="command")
+        ax_fin.step(
+            t_all, recording.fin_cmd_deg, where="post", color="0.6", lw=0.8, label="command"
+        )
     theta = inputs.theta[::SUBSTEPS]
     label = "servo (eq. 23)" if inputs.rate_limit_dps is not None else "measured"
     ax_fin.plot(t, theta, color="black", lw=0.9, label=f"fin angle θ, {label}")
@@ -114,7 +127,7 @@ def render_flight_report(
 
     edges = t[:-1] + 0.5 * np.diff(t)
     if recording.ud_true_deg is not None:
-        ax_ud.plot(t, recording.ud_true_deg, color="0.5", lw=1.6, label="true u_d (synthetic)")
+        ax_ud.plot(t_all, recording.ud_true_deg, color="0.5", lw=1.6, label="true u_d (synthetic)")
     for model, f in fits.items():
         ax_ud.plot(edges, f.disturbance.u_d_deg, color=_COLORS.get(model), lw=0.8, label=model)
     _headroom(ax_ud)
@@ -136,3 +149,17 @@ def render_flight_report(
         f"![airspeed, fin, roll rate measured and re-simulated, u_d]({FIGURE_NAME})\n"
     )
     return {FIGURE_NAME: png, REPORT_NAME: markdown}
+
+
+def _fitted_part(recording: Recording, fitted_s: Any) -> Recording:
+    """The part of ``recording`` a flight fit saw (its ``fitted_s``: first and last sample
+    times); the whole where it saw all of it or does not say."""
+    if not fitted_s:
+        return recording
+    first, last = (float(x) for x in fitted_s)
+    time = np.asarray(recording.time_s)
+    if first <= time[0] and last >= time[-1]:
+        return recording
+    stop = int(np.searchsorted(time, last, side="right"))
+    end = float(time[stop]) if stop < time.size else float(time[-1]) + 1.0
+    return recording.part(first, end)

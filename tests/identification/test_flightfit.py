@@ -323,6 +323,11 @@ def test_a_supersonic_stretch_flies_compressible_fins_and_is_left_out_of_the_fit
     truth = truth_at(rec, m["v_ref_mps"], m["rho_ref_kgm3"])
     assert found.params.alpha == pytest.approx(truth.alpha, rel=0.05)
     assert found.params.beta_bar_per_s == pytest.approx(truth.beta_bar_per_s, rel=0.05)
+    # The report re-simulates the part fitted (the whole log drawn, that part shaded).
+    from identification.flightreport import render_flight_report
+
+    report = render_flight_report(rec, {"constant": found}, "the table")
+    assert report["flight_identification.png"][:4] == b"\x89PNG"
 
 
 def test_dryden_flights_stay_inside_the_fins_authority():
