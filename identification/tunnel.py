@@ -75,6 +75,7 @@ from identification.model import (
     simulate,
 )
 from identification.recording import Recording, metadata_items
+from identification.reference import Effects, gust_factor, simulate_reference
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, parse, setting, to_argv
 
@@ -556,6 +557,36 @@ class TunnelSpec:
     dof: float = setting(
         Turbulence().dof, "degrees of freedom of the student-t marginal", gt=2.0, le=1000.0
     )
+    servo_lag: float = setting(
+        0.0,
+        "outside the model: a first-order lag of the fin behind the rate-limited servo",
+        ge=0.0,
+        le=0.5,
+        unit="s",
+    )
+    backlash: float = setting(
+        0.0, "outside the model: play between servo and fin", ge=0.0, le=5.0, unit="°"
+    )
+    sensor_latency: float = setting(
+        0.0, "outside the model: delay of the roll sensors", ge=0.0, le=0.5, unit="s"
+    )
+    quadratic_damping: float = setting(
+        0.0,
+        "outside the model: damping added at 30 °/s, as a fraction of a(θ) (a damping "
+        "growing with the roll rate)",
+        ge=0.0,
+        le=2.0,
+    )
+    gust_sd: float = setting(
+        0.0,
+        "outside the model: SD of the turbulence's log intensity, which wanders (0.35: "
+        "between about 0.5x and 1.8x)",
+        ge=0.0,
+        le=1.5,
+    )
+    gust_time: float = setting(
+        20.0, "correlation time of the wandering intensity (--gust-sd)", ge=0.1, le=600.0, unit="s"
+    )
     log_dt: float = setting(0.1, "logging interval (the paper: 0.1)", ge=0.001, le=1.0, unit="s")
     substeps: int = setting(10, "exact-update substeps per logging interval", ge=1, le=1000)
     encoder_counts: int = setting(
@@ -618,6 +649,17 @@ class TunnelSpec:
     def servo(self) -> Servo:
         """Servo model of this run."""
         return Servo(rate_limit_dps=self.servo_rate)
+
+    def effects(self) -> Effects:
+        """What this run's rocket adds to the roll model (none by default)."""
+        return Effects(
+            servo_lag_s=self.servo_lag,
+            backlash_deg=self.backlash,
+            latency_s=self.sensor_latency,
+            quadratic_damping=self.quadratic_damping,
+            gust_sd=self.gust_sd,
+            gust_time_s=self.gust_time,
+        )
 
     def turbulence_model(self) -> Turbulence:
         """Turbulence process of this run."""
@@ -765,30 +807,41 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     u_d = turbulence.sample(n + 1, spec.log_dt, rng_turbulence)
     params = spec.params()
     servo = spec.servo()
-
+    effects = spec.effects()
     # The rocket starts at its steady roll rate for the initial fin angle.
-    sim = simulate(
-        params,
-        spec.log_dt,
-        command[:-1],
-        u_d[:-1],
-        rate0_dps=float(params.steady_rate(command[0], turbulence.mean_deg)),
-        servo=servo,
-        substeps=spec.substeps,
-    )
+    rate0 = float(params.steady_rate(command[0], turbulence.mean_deg))
+    if effects.any:  # a rocket outside the model: the reference integrator
+        gust = gust_factor(n + 1, spec.log_dt, effects, _gust_stream(spec.seed))
+        u_d = turbulence.mean_deg + (u_d - turbulence.mean_deg) * gust
+        ref = simulate_reference(
+            params, spec.log_dt, command[:-1], u_d[:-1], effects,
+            rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg, rate0_dps=rate0,
+        )  # fmt: skip
+        fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
+    else:
+        sim = simulate(
+            params,
+            spec.log_dt,
+            command[:-1],
+            u_d[:-1],
+            rate0_dps=rate0,
+            servo=servo,
+            substeps=spec.substeps,
+        )
+        fin, rate, angle = sim.fin_deg, sim.rate_dps, sim.angle_deg
 
     columns: dict[str, FloatArray] = {"fin_cmd_deg": command}
     if spec.measured_fin:
-        columns["fin_deg"] = sim.fin_deg
+        columns["fin_deg"] = fin
     if not spec.no_encoder:
         if spec.encoder_counts:
             resolution = 360.0 / spec.encoder_counts
-            columns["roll_deg"] = np.floor(sim.angle_deg / resolution + 1e-9) * resolution
+            columns["roll_deg"] = np.floor(angle / resolution + 1e-9) * resolution
         else:
-            columns["roll_deg"] = sim.angle_deg
+            columns["roll_deg"] = angle
     if spec.gyro_noise is not None:
-        eps = rng_sensor.standard_normal(sim.rate_dps.size)
-        columns["roll_rate_dps"] = (1.0 + spec.gyro_noise / 100.0 * eps) * sim.rate_dps  # eq. 52
+        eps = rng_sensor.standard_normal(rate.size)
+        columns["roll_rate_dps"] = (1.0 + spec.gyro_noise / 100.0 * eps) * rate  # eq. 52
     columns["ud_true_deg"] = u_d
 
     meta: list[tuple[str, object]] = [
@@ -812,6 +865,16 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     ]
     if turbulence.distribution == "student-t":
         meta.append(("truth.turbulence_dof", turbulence.dof))
+    if effects.any:  # the truth outside the model
+        meta += [
+            ("truth.servo_lag_s", effects.servo_lag_s),
+            ("truth.backlash_deg", effects.backlash_deg),
+            ("truth.sensor_latency_s", effects.latency_s),
+            ("truth.quadratic_damping", effects.quadratic_damping),
+            ("truth.gust_sd", effects.gust_sd),
+            ("truth.gust_time_s", effects.gust_time_s),
+            ("tunnel.effects", f"outside the model: {effects.describe()}"),
+        ]
     if not spec.no_encoder:
         meta.append(("sensor.encoder_counts", spec.encoder_counts))
     if spec.gyro_noise is not None:
@@ -825,6 +888,12 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         metadata=metadata_items(meta),
         **columns,
     )
+
+
+def _gust_stream(seed: int) -> np.random.Generator:
+    """The wandering intensity's generator: a fourth child of the seed, so the schedule,
+    turbulence and sensor streams (:func:`_streams`) stay what they are without it."""
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
 
 
 def spec_from_command(command: str | Sequence[str]) -> TunnelSpec:

@@ -1,0 +1,100 @@
+"""The reference integrator of a rocket outside the roll model, and the virtual tunnel's
+effects: servo lag, backlash, sensor latency, quadratic damping, gusty turbulence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from identification.model import PAPER_CONSTANT, simulate
+from identification.recording import recording_text
+from identification.reference import Effects, ReferenceRun, gust_factor, simulate_reference
+from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
+from rocketroll_common.errors import SettingError
+
+
+def test_without_effects_the_reference_is_the_models_exact_kernel() -> None:
+    """Two implementations of the roll dynamics, written apart: on the paper's run they
+    agree to 1.3e-3 °/s with the tunnel's 10 substeps (the kernel's frozen a(θ) over a
+    ramp) and to 2e-5 °/s with 100; the reference has converged at its 1-ms step."""
+    spec = TunnelSpec(seed=0)
+    rec = run_tunnel(spec)
+    params = spec.params()
+    assert rec.fin_cmd_deg is not None and rec.ud_true_deg is not None
+    command, u_d = rec.fin_cmd_deg[:-1], rec.ud_true_deg[:-1]
+    rate0 = float(params.steady_rate(command[0], spec.turbulence_model().mean_deg))
+    ref = simulate_reference(params, spec.log_dt, command, u_d, Effects(), rate0_dps=rate0)
+    for substeps, tolerance in ((10, 2e-3), (100, 5e-5)):
+        exact = simulate(params, spec.log_dt, command, u_d, rate0_dps=rate0,
+                         servo=spec.servo(), substeps=substeps)  # fmt: skip
+        assert np.max(np.abs(ref.rate_dps - exact.rate_dps)) < tolerance
+        assert np.max(np.abs(ref.fin_deg - exact.fin_deg)) < 1e-9
+    finer = simulate_reference(
+        params, spec.log_dt, command, u_d, Effects(), rate0_dps=rate0, fine_step_s=2e-4
+    )
+    assert np.max(np.abs(finer.rate_dps - ref.rate_dps)) < 1e-4
+    np.testing.assert_allclose(ref.rate_dps, ref.true_rate_dps, rtol=0, atol=1e-12)  # no latency
+
+
+def _step(effects: Effects, level: float = 10.0, seconds: float = 4.0) -> ReferenceRun:
+    n = round(seconds / 0.01)
+    command = np.r_[0.0, np.full(n - 1, level)]
+    return simulate_reference(PAPER_CONSTANT, 0.01, command, np.zeros(n), effects, rate0_dps=0.0)
+
+
+def test_each_effect_does_what_it_says() -> None:
+    plain = _step(Effects())
+    # Servo lag: the fin follows the servo (at 10° after 0.077 s) a time constant behind.
+    lagged = _step(Effects(servo_lag_s=0.2))
+    assert plain.fin_deg[20] == pytest.approx(10.0)
+    assert lagged.fin_deg[10] < 5.0 < lagged.fin_deg[60]
+    assert lagged.fin_deg[-1] == pytest.approx(10.0, abs=1e-6)
+    # Backlash: approached from below, the fin stops half the play short.
+    played = _step(Effects(backlash_deg=1.0))
+    assert played.fin_deg[-1] == pytest.approx(9.5)
+    # Latency: the sensors read the rocket as it was 0.03 s ago.
+    late = _step(Effects(latency_s=0.03))
+    np.testing.assert_allclose(late.rate_dps[3:], late.true_rate_dps[:-3], atol=1e-9)
+    np.testing.assert_allclose(late.true_rate_dps, plain.true_rate_dps)
+    # Quadratic damping: the steady rate solves a·(v − α·x) + a·q·v·|v|/30 = 0.
+    q = 0.15
+    steady = _step(Effects(quadratic_damping=q), seconds=16.0).rate_dps[-1]
+    drive = PAPER_CONSTANT.alpha * (10.0 + PAPER_CONSTANT.theta_bar_deg)
+    assert steady < plain.rate_dps[-1]
+    assert steady - drive + q * steady * abs(steady) / 30.0 == pytest.approx(0.0, abs=1e-6)
+
+
+def test_the_gust_factor_wanders_about_one() -> None:
+    rng = np.random.default_rng(0)
+    factor = gust_factor(200_000, 0.1, Effects(gust_sd=0.35, gust_time_s=20.0), rng)
+    assert np.mean(factor) == pytest.approx(1.0, abs=0.05)
+    assert np.std(np.log(factor)) == pytest.approx(0.35, rel=0.1)
+    lo, hi = np.percentile(factor, [5, 95])
+    assert 0.45 < lo < 0.65 and 1.5 < hi < 1.9
+    np.testing.assert_array_equal(gust_factor(5, 0.1, Effects(), rng), np.ones(5))
+
+
+def test_the_tunnel_flies_the_effects_and_records_them_in_its_truth() -> None:
+    """Off by default (the default run unchanged); on, the run says so in its metadata, its
+    command reproduces it, and the gust makes the turbulence's intensity swell."""
+    plain = TunnelSpec(seed=2)
+    assert not plain.effects().any
+    assert "truth.servo_lag_s" not in run_tunnel(plain).metadata
+    spec = TunnelSpec(seed=2, servo_lag=0.05, backlash=0.5, sensor_latency=0.03,
+                      quadratic_damping=0.15, gust_sd=0.35, measured_fin=True)  # fmt: skip
+    rec = run_tunnel(spec)
+    meta = rec.metadata
+    assert float(meta["truth.servo_lag_s"]) == 0.05 and float(meta["truth.gust_sd"]) == 0.35
+    assert "servo lag 0.05 s" in meta["tunnel.effects"]
+    assert recording_text(run_tunnel(spec_from_command(meta["command"]))) == recording_text(rec)
+    # The same seed's turbulence, its intensity wandering over 20-s windows.
+    swells = []
+    for run in (run_tunnel(plain), rec):
+        assert run.ud_true_deg is not None
+        windows = run.ud_true_deg[: run.ud_true_deg.size // 200 * 200].reshape(-1, 200)
+        swells.append(float(np.std(np.std(windows, axis=1))))
+    assert swells[1] > 1.5 * swells[0]
+    with pytest.raises(SettingError, match="servo_lag"):
+        TunnelSpec(servo_lag=1.0)
+    with pytest.raises(ValueError, match="backlash_deg"):
+        Effects(backlash_deg=-1.0)
