@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike
 
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
+from rocketroll_common.settings import check, setting
 
 __all__ = ["QUADRATIC_RATE_DPS", "Effects", "ReferenceRun", "gust_factor", "simulate_reference"]
 
@@ -51,42 +52,55 @@ FINE_STEP_S = 0.001
 class Effects:
     """What a rocket adds to the roll model; every field 0 is the model itself.
 
-    Attributes
-    ----------
-    servo_lag_s : float
-        First-order lag of the fin behind the rate-limited servo, s (0-0.5).
-    backlash_deg : float
-        Play between servo and fin, ° (0-5): a dead band of this width.
-    latency_s : float
-        Delay of the roll sensors, s (0-0.5).
-    quadratic_damping : float
-        Damping added at 30 °/s, as a fraction of ``a(θ)`` (0-2).
-    gust_sd : float
-        SD of the turbulence's log intensity (0-1.5).
-    gust_time_s : float
-        Correlation time of the intensity, s (0.1-600).
+    Each field is a ``rocketroll tunnel`` flag (:class:`identification.tunnel.TunnelSpec`
+    holds one), bounded to a physical range.
     """
 
-    servo_lag_s: float = 0.0
-    backlash_deg: float = 0.0
-    latency_s: float = 0.0
-    quadratic_damping: float = 0.0
-    gust_sd: float = 0.0
-    gust_time_s: float = 20.0
+    servo_lag_s: float = setting(
+        0.0,
+        "outside the model: a first-order lag of the fin behind the rate-limited servo",
+        ge=0.0,
+        le=0.5,
+        unit="s",
+        flag="--servo-lag",
+        metavar="S",
+    )
+    backlash_deg: float = setting(
+        0.0, "outside the model: play between servo and fin", ge=0.0, le=5.0, unit="°",
+        flag="--backlash", metavar="DEG",
+    )  # fmt: skip
+    latency_s: float = setting(
+        0.0, "outside the model: delay of the roll sensors", ge=0.0, le=0.5, unit="s",
+        flag="--sensor-latency", metavar="S",
+    )  # fmt: skip
+    quadratic_damping: float = setting(
+        0.0,
+        "outside the model: damping added at 30 °/s, as a fraction of a(θ) (a damping "
+        "growing with the roll rate)",
+        ge=0.0,
+        le=2.0,
+        metavar="Q",
+    )
+    gust_sd: float = setting(
+        0.0,
+        "outside the model: SD of the turbulence's log intensity, which wanders (0.35: "
+        "between about 0.5x and 1.8x)",
+        ge=0.0,
+        le=1.5,
+        metavar="SD",
+    )
+    gust_time_s: float = setting(
+        20.0,
+        "correlation time of the wandering intensity (--gust-sd)",
+        ge=0.1,
+        le=600.0,
+        unit="s",
+        flag="--gust-time",
+        metavar="S",
+    )
 
     def __post_init__(self) -> None:
-        bounds = {
-            "servo_lag_s": (0.0, 0.5),
-            "backlash_deg": (0.0, 5.0),
-            "latency_s": (0.0, 0.5),
-            "quadratic_damping": (0.0, 2.0),
-            "gust_sd": (0.0, 1.5),
-            "gust_time_s": (0.1, 600.0),
-        }
-        for name, (low, high) in bounds.items():
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and low <= value <= high):
-                raise ValueError(f"Effects.{name} must be in [{low:g}, {high:g}], not {value!r}")
+        check(self)
 
     @property
     def any(self) -> bool:

@@ -557,36 +557,7 @@ class TunnelSpec:
     dof: float = setting(
         Turbulence().dof, "degrees of freedom of the student-t marginal", gt=2.0, le=1000.0
     )
-    servo_lag: float = setting(
-        0.0,
-        "outside the model: a first-order lag of the fin behind the rate-limited servo",
-        ge=0.0,
-        le=0.5,
-        unit="s",
-    )
-    backlash: float = setting(
-        0.0, "outside the model: play between servo and fin", ge=0.0, le=5.0, unit="°"
-    )
-    sensor_latency: float = setting(
-        0.0, "outside the model: delay of the roll sensors", ge=0.0, le=0.5, unit="s"
-    )
-    quadratic_damping: float = setting(
-        0.0,
-        "outside the model: damping added at 30 °/s, as a fraction of a(θ) (a damping "
-        "growing with the roll rate)",
-        ge=0.0,
-        le=2.0,
-    )
-    gust_sd: float = setting(
-        0.0,
-        "outside the model: SD of the turbulence's log intensity, which wanders (0.35: "
-        "between about 0.5x and 1.8x)",
-        ge=0.0,
-        le=1.5,
-    )
-    gust_time: float = setting(
-        20.0, "correlation time of the wandering intensity (--gust-sd)", ge=0.1, le=600.0, unit="s"
-    )
+    effects: Effects = setting(default_factory=Effects, flatten=True)
     log_dt: float = setting(0.1, "logging interval (the paper: 0.1)", ge=0.001, le=1.0, unit="s")
     substeps: int = setting(10, "exact-update substeps per logging interval", ge=1, le=1000)
     encoder_counts: int = setting(
@@ -649,17 +620,6 @@ class TunnelSpec:
     def servo(self) -> Servo:
         """Servo model of this run."""
         return Servo(rate_limit_dps=self.servo_rate)
-
-    def effects(self) -> Effects:
-        """What this run's rocket adds to the roll model (none by default)."""
-        return Effects(
-            servo_lag_s=self.servo_lag,
-            backlash_deg=self.backlash,
-            latency_s=self.sensor_latency,
-            quadratic_damping=self.quadratic_damping,
-            gust_sd=self.gust_sd,
-            gust_time_s=self.gust_time,
-        )
 
     def turbulence_model(self) -> Turbulence:
         """Turbulence process of this run."""
@@ -807,7 +767,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     u_d = turbulence.sample(n + 1, spec.log_dt, rng_turbulence)
     params = spec.params()
     servo = spec.servo()
-    effects = spec.effects()
+    effects = spec.effects
     # The rocket starts at its steady roll rate for the initial fin angle.
     rate0 = float(params.steady_rate(command[0], turbulence.mean_deg))
     if effects.any:  # a rocket outside the model: the reference integrator

@@ -10,6 +10,7 @@ from identification.model import PAPER_CONSTANT, simulate
 from identification.recording import recording_text
 from identification.reference import Effects, ReferenceRun, gust_factor, simulate_reference
 from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
+from rocketroll.cli import main
 from rocketroll_common.errors import SettingError
 
 
@@ -78,10 +79,11 @@ def test_the_tunnel_flies_the_effects_and_records_them_in_its_truth() -> None:
     """Off by default (the default run unchanged); on, the run says so in its metadata, its
     command reproduces it, and the gust makes the turbulence's intensity swell."""
     plain = TunnelSpec(seed=2)
-    assert not plain.effects().any
+    assert not plain.effects.any
     assert "truth.servo_lag_s" not in run_tunnel(plain).metadata
-    spec = TunnelSpec(seed=2, servo_lag=0.05, backlash=0.5, sensor_latency=0.03,
-                      quadratic_damping=0.15, gust_sd=0.35, measured_fin=True)  # fmt: skip
+    effects = Effects(servo_lag_s=0.05, backlash_deg=0.5, latency_s=0.03,
+                      quadratic_damping=0.15, gust_sd=0.35)  # fmt: skip
+    spec = TunnelSpec(seed=2, effects=effects, measured_fin=True)
     rec = run_tunnel(spec)
     meta = rec.metadata
     assert float(meta["truth.servo_lag_s"]) == 0.05 and float(meta["truth.gust_sd"]) == 0.35
@@ -94,7 +96,6 @@ def test_the_tunnel_flies_the_effects_and_records_them_in_its_truth() -> None:
         windows = run.ud_true_deg[: run.ud_true_deg.size // 200 * 200].reshape(-1, 200)
         swells.append(float(np.std(np.std(windows, axis=1))))
     assert swells[1] > 1.5 * swells[0]
-    with pytest.raises(SettingError, match="servo_lag"):
-        TunnelSpec(servo_lag=1.0)
-    with pytest.raises(ValueError, match="backlash_deg"):
-        Effects(backlash_deg=-1.0)
+    with pytest.raises(SettingError, match="servo_lag_s"):
+        Effects(servo_lag_s=1.0)
+    assert main(["tunnel", "--out", "never.csv", "--backlash", "-1"]) == 2
