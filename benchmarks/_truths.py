@@ -11,9 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from identification.reference import Effects
 from identification.tunnel import TunnelSpec
 
-__all__ = ["SHAPES", "SHAPE_TRUTHS", "TRUTHS", "shape_command", "spec_of"]
+__all__ = ["MISMATCH_TRUTHS", "SHAPES", "SHAPE_TRUTHS", "TRUTHS", "shape_command", "spec_of"]
 
 #: name -> (description, tunnel settings other than the seed)
 TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
@@ -44,7 +45,39 @@ TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
         "rate gyro (2 % noise, eq. 52) and measured fin, no encoder; Student-t turbulence",
         {"no_encoder": True, "gyro_noise": 2.0, "measured_fin": True, "turbulence": "student-t"},
     ),
+    # Outside the model (identification.reference): the paper's rocket and schedule with one
+    # effect at a physically modest level, or all four together.
+    "servo-lag": (
+        "outside the model: a 50-ms servo lag and 0.5° of backlash",
+        {"effects": Effects(servo_lag_s=0.05, backlash_deg=0.5)},
+    ),
+    "quadratic": (
+        "outside the model: quadratic damping, 15 % more at 30 °/s",
+        {"effects": Effects(quadratic_damping=0.15)},
+    ),
+    "latency": (
+        "outside the model: 30 ms of sensor latency",
+        {"effects": Effects(latency_s=0.03)},
+    ),
+    "gusty": (
+        "outside the model: turbulence whose intensity wanders (0.5-1.8x over ~20 s)",
+        {"effects": Effects(gust_sd=0.35, gust_time_s=20.0)},
+    ),
+    "mismatch-all": (
+        "outside the model: servo lag and backlash, quadratic damping, latency and gusts",
+        {
+            "effects": Effects(
+                servo_lag_s=0.05,
+                backlash_deg=0.5,
+                quadratic_damping=0.15,
+                latency_s=0.03,
+                gust_sd=0.35,
+            )
+        },
+    ),
 }
+#: The truths outside the model class.
+MISMATCH_TRUTHS = ("servo-lag", "quadratic", "latency", "gusty", "mismatch-all")
 
 
 def spec_of(truth: str, seed: int) -> TunnelSpec:

@@ -24,6 +24,16 @@ averaged RMS, settled-RMS and headline (regulation RMS) ratio of the
 deployable controllers within [0.90, 1.10] and the oracle's within [0.80,
 1.25], on every task and every truth.
 
+Truths outside the model (``servo-lag``, ``quadratic``, ``latency``, ``gusty``,
+``mismatch-all``: ``benchmarks/_truths.py``) fly their true rocket on the
+independent reference integrator (``benchmarks/_reference_env.py``:
+:mod:`identification.reference` in closed loop, the environment's sensors and
+reward); ``--reference`` flies every true rocket there (with no effects it
+scores what the environment scores).  Below the ratios, the **ranking
+agreement**: per replay, the controller pairs it orders against the truth on
+the headline, pairs within each other's 95 % interval over seeds counted as
+ties.
+
 The oracle's errors are hundredths of a degree, set by rare events (a
 setpoint step whose slew ends just as the settled window begins, a gust
 beyond the fin's reach), so its ratios need many windows and draws: with 4
@@ -34,6 +44,7 @@ Run from the repository root::
 
     .venv/bin/python benchmarks/closed_loop.py --seeds 10 --jobs 2     # 10 seeds x 4 truths
     .venv/bin/python benchmarks/closed_loop.py --seeds 2 --truth paper --policies pid
+    .venv/bin/python benchmarks/closed_loop.py --seeds 3 --truth latency --methods ml
 """
 
 from __future__ import annotations
@@ -50,6 +61,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from _reference_env import ReferenceRollEnv
 from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
@@ -60,6 +72,7 @@ from disturbances.bank import TraceBank
 from identification.methods import METHODS, Context, fit, tunnel_methods
 from identification.model import RollParams
 from identification.pipeline import IdentifyOptions
+from identification.reference import Effects
 from identification.tunnel import run_tunnel
 from rocketroll_common.arrays import FloatArray
 from rollenv.bank import variant_config
@@ -81,21 +94,26 @@ DEFAULT_TRUTHS = ("paper", "negative", "rising", "staircase-laplace")
 
 @dataclass(frozen=True)
 class Rocket:
-    """One replayable rocket: parameters and a ``u_d`` trace held per 0.1 s."""
+    """One replayable rocket: parameters and a ``u_d`` trace held per 0.1 s; ``effects``
+    where it is a true rocket outside the model (or checked on the reference integrator),
+    which :class:`_reference_env.ReferenceRollEnv` flies."""
 
     params: RollParams
     u_d_deg: FloatArray
+    effects: Effects | None = None
 
 
 def rockets_of(
-    truth: str, seed: int, methods: Sequence[str], draws: int
+    truth: str, seed: int, methods: Sequence[str], draws: int, reference: bool = False
 ) -> tuple[Rocket, dict[str, list[Rocket]]]:
-    """The true rocket of one recording and, per replay, what it would replay."""
+    """The true rocket of one recording and, per replay, what it would replay (the true one
+    on the reference integrator where it is outside the model, or ``reference``)."""
     spec = spec_of(truth, seed)
     rec = run_tunnel(spec)
     if rec.ud_true_deg is None:
         raise RuntimeError(f"{truth} seed {seed}: no true u_d")
-    true = Rocket(spec.params(), np.asarray(rec.ud_true_deg[:-1], dtype=float))
+    effects = spec.effects if (spec.effects.any or reference) else None
+    true = Rocket(spec.params(), np.asarray(rec.ud_true_deg[:-1], dtype=float), effects)
     context = Context(rec, IdentifyOptions(noise_runs=0))
     replays: dict[str, list[Rocket]] = {}
     for method in methods:
@@ -109,8 +127,12 @@ def rockets_of(
 
 
 def env_of(config: RollConfig, rocket: Rocket) -> RocketRollEnv:
-    """The environment of ``config`` replaying one rocket."""
-    return env_on(config, TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params))
+    """The environment of ``config`` replaying one rocket (on the reference integrator, with
+    its effects, where it has them)."""
+    bank = TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params)
+    if rocket.effects is not None:
+        return ReferenceRollEnv(config, bank, rocket.effects)
+    return env_on(config, bank)
 
 
 def windows(
@@ -168,10 +190,11 @@ def recording_rows(
     tasks: Sequence[str],
     policies: Sequence[str],
     count: int,
+    reference: bool = False,
 ) -> list[dict[str, object]]:
     """Every score of one recording: per task, controller, replay and metric, the true
     score, the replayed one and their ratio (one CSV row each)."""
-    true, replays = rockets_of(truth, seed, methods, draws)
+    true, replays = rockets_of(truth, seed, methods, draws, reference)
     length = min(r.u_d_deg.size for rs in replays.values() for r in rs)
     length = min(length, true.u_d_deg.size)
     rows: list[dict[str, object]] = []
@@ -199,6 +222,59 @@ def recording_rows(
                         }
                     )
     return rows
+
+
+def ranking_lines(
+    rows: Sequence[dict[str, object]], tasks: Sequence[str], policies: Sequence[str]
+) -> list[str]:
+    """Ranking agreement on the headline: per replay, truth and task, the controller pairs
+    the replay orders against the truth.  A pair whose true scores (over the truth's
+    seeds) lie within each other's 95 % interval is a tie and cannot be misordered."""
+    scores: dict[tuple[str, str, str, str], tuple[list[float], list[float]]] = {}
+    for row in rows:
+        if row["metric"] != HEADLINE:
+            continue
+        key = (str(row["replay"]), str(row["truth"]), str(row["task"]), str(row["controller"]))
+        true, replayed = scores.setdefault(key, ([], []))
+        true.append(float(row["true"]))  # type: ignore[arg-type]
+        replayed.append(float(row["replayed"]))  # type: ignore[arg-type]
+
+    def interval(values: list[float]) -> tuple[float, float, float]:
+        x = np.asarray(values)
+        half = 1.96 * float(np.std(x, ddof=1)) / math.sqrt(x.size) if x.size > 1 else 0.0
+        return float(x.mean()), float(x.mean()) - half, float(x.mean()) + half
+
+    lines = ["Ranking agreement on the headline (controller pairs the replay orders against the "
+             "truth; pairs within each other's 95 % interval over seeds are ties):"]  # fmt: skip
+    replays = list(dict.fromkeys(k[0] for k in scores))
+    truths = list(dict.fromkeys(k[1] for k in scores))
+    for replay in replays:
+        against = pairs = ties = 0
+        cells = []
+        for truth in truths:
+            for task in tasks:
+                mine = [p for p in policies if (replay, truth, task, p) in scores]
+                bad = 0
+                for i, first in enumerate(mine):
+                    for second in mine[i + 1 :]:
+                        t1, r1 = scores[(replay, truth, task, first)]
+                        t2, r2 = scores[(replay, truth, task, second)]
+                        m1, lo1, hi1 = interval(t1)
+                        m2, lo2, hi2 = interval(t2)
+                        pairs += 1
+                        if lo2 <= m1 <= hi2 or lo1 <= m2 <= hi1:
+                            ties += 1
+                            continue
+                        if (m1 < m2) != (float(np.mean(r1)) < float(np.mean(r2))):
+                            bad += 1
+                if bad:
+                    cells.append(f"{truth}/{task} {bad}")
+                against += bad
+        lines.append(
+            f"  {replay}: {against} of {pairs} pairs against the truth ({ties} ties)"
+            + (f": {', '.join(cells)}" if cells else "")
+        )
+    return lines
 
 
 def summarise(values: Sequence[float]) -> tuple[float, float, float, float]:
@@ -243,6 +319,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--csv", type=Path, default=None, help="per-recording scores to a CSV")
     parser.add_argument("--strict", action="store_true", help="exit 1 if no method passes")
+    parser.add_argument(
+        "--reference",
+        action="store_true",
+        help="fly every true rocket on the independent reference integrator (with no effects "
+        "it must score what the environment scores: a check of both)",
+    )
     ns = parser.parse_args(argv)
     truths = list(dict.fromkeys(ns.truth or DEFAULT_TRUTHS))
     if "all" in truths:
@@ -273,7 +355,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     rows: list[dict[str, object]] = []
     began = time.perf_counter()
     jobs = [
-        (truth, seed, tuple(methods), ns.draws, tuple(tasks), tuple(policies), ns.windows)
+        (
+            truth,
+            seed,
+            tuple(methods),
+            ns.draws,
+            tuple(tasks),
+            tuple(policies),
+            ns.windows,
+            ns.reference,
+        )
         for truth in truths
         for seed in seeds
     ]
@@ -334,6 +425,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 else ""
             )
         )
+    print()
+    for line in ranking_lines(rows, tasks, policies):
+        print(line)
     if ns.csv is not None:
         with ns.csv.open("w", newline="") as handle:
             writer = csv.DictWriter(handle, fieldnames=list(rows[0]))

@@ -40,7 +40,15 @@ from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.settings import check, setting
 
-__all__ = ["QUADRATIC_RATE_DPS", "Effects", "ReferenceRun", "gust_factor", "simulate_reference"]
+__all__ = [
+    "QUADRATIC_RATE_DPS",
+    "STATE_COLUMNS",
+    "Effects",
+    "ReferenceRun",
+    "advance",
+    "gust_factor",
+    "simulate_reference",
+]
 
 #: The roll rate at which :attr:`Effects.quadratic_damping` is the fraction added, °/s.
 QUADRATIC_RATE_DPS = 30.0
@@ -176,19 +184,15 @@ def _integrate(
     fin_range: float,
     lag: float,
     backlash: float,
-    servo0: float,
-    v0: float,
+    state: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Fin, rate and angle at every fine step edge (``len(command)·per + 1``)."""
+    """Fin, rate and angle at every fine step edge (``len(command)·per + 1``), from
+    ``state`` (:data:`STATE_COLUMNS`), which is advanced to the end in place."""
     n = command.size * per
     fin = np.empty(n + 1)
     rate = np.empty(n + 1)
     angle = np.empty(n + 1)
-    servo = min(max(servo0, -fin_range), fin_range)
-    lagged = servo  # the fin's drive, behind the servo by the lag
-    theta = servo  # the fin, behind its drive by the play
-    v = v0
-    phi = 0.0
+    servo, lagged, theta, v, phi = state[0], state[1], state[2], state[3], state[4]
     fin[0], rate[0], angle[0] = theta, v, phi
     follow = 1.0 - math.exp(-h / lag) if lag > 0.0 else 1.0
     half = 0.5 * backlash
@@ -217,7 +221,48 @@ def _integrate(
         phi += dphi
         theta = new
         fin[j + 1], rate[j + 1], angle[j + 1] = theta, v, phi
+    state[0], state[1], state[2], state[3], state[4] = servo, lagged, theta, v, phi
     return fin, rate, angle
+
+
+#: The reference integrator's state: the servo, the fin's drive (behind it by the lag), the
+#: fin (behind its drive by the play), the roll rate and the roll angle.
+STATE_COLUMNS = ("servo_deg", "drive_deg", "fin_deg", "rate_dps", "angle_deg")
+
+
+def rocket_tuple(params: RollParams, effects: Effects) -> tuple[float, ...]:
+    """The numbers :func:`_accel` reads: the rocket and its quadratic damping."""
+    return (
+        params.alpha,
+        params.theta_bar_deg,
+        params.beta_bar_per_s,
+        params.alpha_bar_per_deg_s,
+        effects.quadratic_damping,
+    )
+
+
+def advance(
+    state: FloatArray,
+    params: RollParams,
+    effects: Effects,
+    command_deg: float,
+    u_d_deg: ArrayLike,
+    h_s: float,
+    *,
+    rate_limit_dps: float,
+    fin_range_deg: float,
+) -> tuple[FloatArray, FloatArray]:
+    """One command held over ``len(u_d_deg)`` fine steps of ``h_s`` (one ``u_d`` each):
+    ``state`` (:data:`STATE_COLUMNS`) advanced in place; the rate and angle at every fine
+    step edge (the first is the start) -- the closed-loop truth of the benchmarks steps the
+    rocket this way."""
+    u = np.ascontiguousarray(u_d_deg, dtype=np.float64)
+    command = np.full(u.size, float(command_deg))
+    _, rate, angle = _integrate(
+        command, u, 1, h_s, rocket_tuple(params, effects), rate_limit_dps, fin_range_deg,
+        effects.servo_lag_s, effects.backlash_deg, state,
+    )  # fmt: skip
+    return rate, angle
 
 
 def simulate_reference(
@@ -263,19 +308,12 @@ def simulate_reference(
         raise ValueError("command_deg and u_d_deg must be 1-D, of one length >= 1")
     per = max(1, math.ceil(dt_s / fine_step_s - 1e-9))
     h = dt_s / per
-    theta_bar = params.theta_bar_deg
-    p = (
-        params.alpha,
-        theta_bar,
-        params.beta_bar_per_s,
-        params.alpha_bar_per_deg_s,
-        effects.quadratic_damping,
-    )
     start = float(np.clip(command[0], -fin_range_deg, fin_range_deg))
-    v0 = params.alpha * (start + theta_bar + u[0]) if rate0_dps is None else float(rate0_dps)
+    v0 = params.steady_rate(start, u[0]) if rate0_dps is None else rate0_dps
+    state = np.array([start, start, start, float(v0), 0.0])
     fin, rate, angle = _integrate(
-        command, u, per, h, p, rate_limit_dps, fin_range_deg, effects.servo_lag_s,
-        effects.backlash_deg, start, v0,
+        command, u, per, h, rocket_tuple(params, effects), rate_limit_dps, fin_range_deg,
+        effects.servo_lag_s, effects.backlash_deg, state,
     )  # fmt: skip
     log_t = dt_s * np.arange(command.size + 1, dtype=np.float64)
     # Where the sensors look, in fine steps (exact on the grid where there is no latency).
