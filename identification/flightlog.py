@@ -52,6 +52,7 @@ from identification.flightfit import SITE_ELEVATION_KEY
 from identification.model import MODEL_NAMES, RollParams, Servo
 from identification.model import simulate as simulate_roll
 from identification.recording import Recording, metadata_items
+from identification.reference import Effects, fine_steps, gust_factor, simulate_reference
 from identification.tunnel import (
     FinSchedule,
     Turbulence,
@@ -168,6 +169,7 @@ class FlightLogSpec:
         le=60.0,
         unit="s",
     )
+    effects: Effects = setting(default_factory=Effects, flatten=True)
     log_dt: float = setting(0.01, "logging interval", ge=0.001, le=0.1, unit="s")
     substeps: int = setting(4, "exact-update substeps per logging interval", ge=1, le=1000)
     gyro_noise: float = setting(
@@ -273,8 +275,8 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         For an ascent that cannot be read, or spends fewer than 50 logging
         intervals above ``v_ref``.
     """
-    children = np.random.SeedSequence(spec.seed).spawn(3)
-    rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
+    children = np.random.SeedSequence(spec.seed).spawn(4)  # the fourth: the gusts' intensity
+    rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children[:3])
     try:
         profile = flight_profile(spec.ascent, spec.descent)
         # Dryden's rolling gust does not fade with the airspeed while the fins' authority
@@ -325,27 +327,49 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     u_d = _turbulence(spec, profile, time, np.asarray(gain_mid), rng_turbulence)
     params = spec.params()
     servo = Servo(rate_limit_dps=spec.servo_rate)
-    sim = simulate_roll(
-        params,
-        spec.log_dt,
-        command[:-1],
-        u_d,
-        servo=servo,
-        substeps=spec.substeps,
-        t0_s=float(time[0]),
-        gain=gain,
-        damping=damping,
-    )
+    effects = spec.effects
+    if effects.any:  # a rocket outside the model: the reference integrator, its own grid
+        u_d = u_d * gust_factor(u_d.size, spec.log_dt, effects, np.random.default_rng(children[3]))
+        per, h = fine_steps(spec.log_dt)
+        fine = profile.at(start + h * (np.arange(n * per) + 0.5))
+        scales = roll_scales(
+            fine.airspeed_mps, fine.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3, scaling
+        )
+        fine_gain = (
+            np.where(np.asarray(fine.t_s) > profile.apogee_s, -1.0, 1.0)
+            * fin_compressibility(fine.mach)
+            * np.asarray(scales[0])
+        )
+        ref = simulate_reference(
+            params, spec.log_dt, command[:-1], u_d, effects,
+            rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
+            rate0_dps=float(params.steady_rate(command[0], u_d[0]) * gain[0]),  # as below
+            gain=fine_gain, damping=scales[1],
+        )  # fmt: skip
+        fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
+    else:
+        sim = simulate_roll(
+            params,
+            spec.log_dt,
+            command[:-1],
+            u_d,
+            servo=servo,
+            substeps=spec.substeps,
+            t0_s=float(time[0]),
+            gain=gain,
+            damping=damping,
+        )
+        fin, rate, angle = sim.fin_deg, sim.rate_dps, sim.angle_deg
     columns: dict[str, FloatArray] = {"fin_cmd_deg": command}
     if spec.measured_fin:
-        columns["fin_deg"] = sim.fin_deg
+        columns["fin_deg"] = fin
     if spec.encoder_counts:
         resolution = 360.0 / spec.encoder_counts
-        columns["roll_deg"] = np.floor(sim.angle_deg / resolution + 1e-9) * resolution
+        columns["roll_deg"] = np.floor(angle / resolution + 1e-9) * resolution
     if not spec.no_gyro:
-        eps = rng_sensor.standard_normal((2, sim.rate_dps.size))
+        eps = rng_sensor.standard_normal((2, rate.size))
         columns["roll_rate_dps"] = (
-            (1.0 + spec.gyro_noise / 100.0 * eps[0]) * sim.rate_dps
+            (1.0 + spec.gyro_noise / 100.0 * eps[0]) * rate
             + spec.gyro_floor * eps[1]
             + spec.gyro_bias
         )
@@ -378,6 +402,16 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     ]
     if spec.descent > 0.0:
         meta.append(("flight.descent", "tail-first after apogee: the fins' torque reversed"))
+    if effects.any:  # the truth outside the model
+        meta += [
+            ("truth.servo_lag_s", effects.servo_lag_s),
+            ("truth.backlash_deg", effects.backlash_deg),
+            ("truth.sensor_latency_s", effects.latency_s),
+            ("truth.quadratic_damping", effects.quadratic_damping),
+            ("truth.gust_sd", effects.gust_sd),
+            ("truth.gust_time_s", effects.gust_time_s),
+            ("flight.effects", f"outside the model: {effects.describe()}"),
+        ]
     if profile.max_mach > MACH_LIMIT:
         meta.append(
             ("flight.compressibility", "fin torque x fin_compressibility(Mach) above Mach 0.8")

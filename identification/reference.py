@@ -24,7 +24,9 @@ the roll dynamics, written apart from the exact kernel of
 :mod:`identification.model` so that a bug in one is not a bug in both (with
 every effect off the two agree to within 1e-3 °/s on the paper's run;
 ``tests/identification/test_reference.py``).  The virtual tunnel
-(:mod:`identification.tunnel`) writes its truth with it when an effect is on.
+(:mod:`identification.tunnel`) and the flight recorder
+(:mod:`identification.flightlog`, the gain and damping per step) write their truth with
+it when an effect is on; ``benchmarks/closed_loop.py`` flies it in closed loop.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ __all__ = [
     "Effects",
     "ReferenceRun",
     "advance",
+    "fine_steps",
     "gust_factor",
     "simulate_reference",
 ]
@@ -180,6 +183,8 @@ def _integrate(
     per: int,
     h: float,
     p: tuple[float, ...],
+    gain: FloatArray,
+    damping: FloatArray,
     rate_limit: float,
     fin_range: float,
     lag: float,
@@ -187,7 +192,8 @@ def _integrate(
     state: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Fin, rate and angle at every fine step edge (``len(command)·per + 1``), from
-    ``state`` (:data:`STATE_COLUMNS`), which is advanced to the end in place."""
+    ``state`` (:data:`STATE_COLUMNS`), which is advanced to the end in place; ``gain`` and
+    ``damping`` multiply ``α`` and ``a(θ)`` per fine step (the rocket in flight)."""
     n = command.size * per
     fin = np.empty(n + 1)
     rate = np.empty(n + 1)
@@ -212,10 +218,12 @@ def _integrate(
         u = u_d[k]
         t0, t1 = theta, new
         tm = 0.5 * (t0 + t1)
-        k1 = _accel(v, t0, u, p)
-        k2 = _accel(v + 0.5 * h * k1, tm, u, p)
-        k3 = _accel(v + 0.5 * h * k2, tm, u, p)
-        k4 = _accel(v + h * k3, t1, u, p)
+        d = damping[j]
+        q = (p[0] * gain[j], p[1], p[2] * d, p[3] * d, p[4])
+        k1 = _accel(v, t0, u, q)
+        k2 = _accel(v + 0.5 * h * k1, tm, u, q)
+        k3 = _accel(v + 0.5 * h * k2, tm, u, q)
+        k4 = _accel(v + h * k3, t1, u, q)
         dphi = h * (v + h * (k1 + k2 + k3) / 6.0)
         v += h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
         phi += dphi
@@ -258,11 +266,19 @@ def advance(
     rocket this way."""
     u = np.ascontiguousarray(u_d_deg, dtype=np.float64)
     command = np.full(u.size, float(command_deg))
+    ones = np.ones(u.size)
     _, rate, angle = _integrate(
-        command, u, 1, h_s, rocket_tuple(params, effects), rate_limit_dps, fin_range_deg,
-        effects.servo_lag_s, effects.backlash_deg, state,
+        command, u, 1, h_s, rocket_tuple(params, effects), ones, ones, rate_limit_dps,
+        fin_range_deg, effects.servo_lag_s, effects.backlash_deg, state,
     )  # fmt: skip
     return rate, angle
+
+
+def fine_steps(dt_s: float, fine_step_s: float = FINE_STEP_S) -> tuple[int, float]:
+    """How :func:`simulate_reference` cuts a logging interval ``dt_s``: the number of
+    Runge-Kutta steps (at most ``fine_step_s`` each) and their length."""
+    per = max(1, math.ceil(dt_s / fine_step_s - 1e-9))
+    return per, dt_s / per
 
 
 def simulate_reference(
@@ -276,6 +292,8 @@ def simulate_reference(
     fin_range_deg: float = 40.0,
     rate0_dps: float | None = None,
     fine_step_s: float = FINE_STEP_S,
+    gain: ArrayLike = 1.0,
+    damping: ArrayLike = 1.0,
 ) -> ReferenceRun:
     """The rocket ``params`` with ``effects``, commanded ``command_deg`` (held over each of
     the ``n`` logging intervals of ``dt_s``) through ``u_d_deg`` (one per interval).
@@ -295,7 +313,12 @@ def simulate_reference(
     rate0_dps : float, optional
         The roll rate at the start (default: steady for the first command).
     fine_step_s : float
-        The Runge-Kutta step, at most this (a whole number of them per interval).
+        The Runge-Kutta step, at most this (a whole number of them per interval):
+        :func:`fine_steps` gives it.
+    gain, damping : float or array_like, shape (n·per,)
+        Factors on ``α`` and on ``a(θ)``, one per fine step or for all (the rocket in
+        flight: :func:`rocketroll_physics.scaling.roll_scales`; a gain below 0 is the flow
+        over the fins reversed).
 
     Returns
     -------
@@ -306,14 +329,16 @@ def simulate_reference(
     u = np.ascontiguousarray(u_d_deg, dtype=np.float64)
     if command.ndim != 1 or u.shape != command.shape or command.size < 1:
         raise ValueError("command_deg and u_d_deg must be 1-D, of one length >= 1")
-    per = max(1, math.ceil(dt_s / fine_step_s - 1e-9))
-    h = dt_s / per
+    per, h = fine_steps(dt_s, fine_step_s)
     start = float(np.clip(command[0], -fin_range_deg, fin_range_deg))
     v0 = params.steady_rate(start, u[0]) if rate0_dps is None else rate0_dps
     state = np.array([start, start, start, float(v0), 0.0])
+    fine = command.size * per
+    scale = [np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (fine,)))
+             for x in (gain, damping)]  # fmt: skip
     fin, rate, angle = _integrate(
-        command, u, per, h, rocket_tuple(params, effects), rate_limit_dps, fin_range_deg,
-        effects.servo_lag_s, effects.backlash_deg, state,
+        command, u, per, h, rocket_tuple(params, effects), scale[0], scale[1], rate_limit_dps,
+        fin_range_deg, effects.servo_lag_s, effects.backlash_deg, state,
     )  # fmt: skip
     log_t = dt_s * np.arange(command.size + 1, dtype=np.float64)
     # Where the sensors look, in fine steps (exact on the grid where there is no latency).

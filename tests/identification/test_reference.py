@@ -3,6 +3,8 @@ effects: servo lag, backlash, sensor latency, quadratic damping, gusty turbulenc
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -99,3 +101,20 @@ def test_the_tunnel_flies_the_effects_and_records_them_in_its_truth() -> None:
     with pytest.raises(SettingError, match="servo_lag_s"):
         Effects(servo_lag_s=1.0)
     assert main(["tunnel", "--out", "never.csv", "--backlash", "-1"]) == 2
+
+
+def test_the_flight_recorder_flies_the_effects_on_the_reference_integrator() -> None:
+    """In flight too: with a vanishing effect the reference integrator (its gain and
+    damping per 1-ms step) logs what the exact kernel logs to 0.01 °/s on a rate of 40 °/s;
+    30 ms of latency delays the gyro by three samples; the log names its effects."""
+    from identification.flightlog import FlightLogSpec, run_flight
+
+    base: dict[str, Any] = {"seed": 0, "gyro_noise": 0.0, "gyro_floor": 0.0, "measured_fin": True}
+    exact = run_flight(FlightLogSpec(**base))
+    nearly = run_flight(FlightLogSpec(**base, effects=Effects(quadratic_damping=1e-9)))
+    assert exact.roll_rate_dps is not None and nearly.roll_rate_dps is not None
+    assert np.max(np.abs(nearly.roll_rate_dps - exact.roll_rate_dps)) < 0.01
+    assert "flight.effects" in nearly.metadata and "flight.effects" not in exact.metadata
+    late = run_flight(FlightLogSpec(**base, effects=Effects(latency_s=0.03)))
+    assert late.roll_rate_dps is not None
+    np.testing.assert_allclose(late.roll_rate_dps[3:], nearly.roll_rate_dps[:-3], atol=0.02)
