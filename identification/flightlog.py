@@ -403,15 +403,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     if spec.descent > 0.0:
         meta.append(("flight.descent", "tail-first after apogee: the fins' torque reversed"))
     if effects.any:  # the truth outside the model
-        meta += [
-            ("truth.servo_lag_s", effects.servo_lag_s),
-            ("truth.backlash_deg", effects.backlash_deg),
-            ("truth.sensor_latency_s", effects.latency_s),
-            ("truth.quadratic_damping", effects.quadratic_damping),
-            ("truth.gust_sd", effects.gust_sd),
-            ("truth.gust_time_s", effects.gust_time_s),
-            ("flight.effects", f"outside the model: {effects.describe()}"),
-        ]
+        meta += effects.metadata("flight")
     if profile.max_mach > MACH_LIMIT:
         meta.append(
             ("flight.compressibility", "fin torque x fin_compressibility(Mach) above Mach 0.8")

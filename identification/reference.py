@@ -118,6 +118,19 @@ class Effects:
         """Whether any effect is on (the gust's time alone is not an effect)."""
         return any(getattr(self, f.name) for f in fields(self) if f.name != "gust_time_s")
 
+    def metadata(self, section: str) -> list[tuple[str, object]]:
+        """A recording's metadata of a truth with these effects: each as ``truth.*`` and a
+        line ``SECTION.effects`` saying which are on."""
+        return [
+            ("truth.servo_lag_s", self.servo_lag_s),
+            ("truth.backlash_deg", self.backlash_deg),
+            ("truth.sensor_latency_s", self.latency_s),
+            ("truth.quadratic_damping", self.quadratic_damping),
+            ("truth.gust_sd", self.gust_sd),
+            ("truth.gust_time_s", self.gust_time_s),
+            (f"{section}.effects", f"outside the model: {self.describe()}"),
+        ]
+
     def describe(self) -> str:
         """The effects that are on, e.g. ``servo lag 0.05 s, latency 0.03 s``; ``none``."""
         words = {

@@ -826,15 +826,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     if turbulence.distribution == "student-t":
         meta.append(("truth.turbulence_dof", turbulence.dof))
     if effects.any:  # the truth outside the model
-        meta += [
-            ("truth.servo_lag_s", effects.servo_lag_s),
-            ("truth.backlash_deg", effects.backlash_deg),
-            ("truth.sensor_latency_s", effects.latency_s),
-            ("truth.quadratic_damping", effects.quadratic_damping),
-            ("truth.gust_sd", effects.gust_sd),
-            ("truth.gust_time_s", effects.gust_time_s),
-            ("tunnel.effects", f"outside the model: {effects.describe()}"),
-        ]
+        meta += effects.metadata("tunnel")
     if not spec.no_encoder:
         meta.append(("sensor.encoder_counts", spec.encoder_counts))
     if spec.gyro_noise is not None:
