@@ -42,12 +42,15 @@ rocketroll_common.errors.SettingError: sd: must be in [0, 45], got 100.0
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import numbers
 import os
 import re
+import signal
 import sys
+import threading
 import types
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import MISSING, dataclass, field
@@ -65,6 +68,7 @@ __all__ = [
     "flags",
     "from_namespace",
     "guarded",
+    "interrupts_held",
     "make_parser",
     "parse",
     "parse_key_value",
@@ -750,6 +754,24 @@ def _close_progress_bars() -> None:
             bar.close()
         except Exception:
             continue
+
+
+@contextlib.contextmanager
+def interrupts_held() -> Iterator[None]:
+    """Hold a Ctrl-C that comes while the block runs (a file being written, which an
+    interrupt would leave cut short) until the block is done, then raise it.  Where
+    signals cannot be handled (not the main thread) the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
 
 
 def guarded(prog: str, work: Callable[[], int | None]) -> int:

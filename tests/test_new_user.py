@@ -297,6 +297,24 @@ def test_ctrl_c_during_db_build(tmp_path: Path) -> None:
     assert not (tmp_path / "db").exists()  # no database, no leftovers, no folder
 
 
+def test_a_ctrl_c_while_a_checkpoint_is_written_waits_for_it() -> None:
+    """A Ctrl-C inside a checkpoint's write (torch's zip writer) is held until the files
+    are whole, then raised: never a file cut short and a traceback."""
+    from rocketroll_common.settings import interrupts_held
+
+    before = signal.getsignal(signal.SIGINT)
+    written = []
+    with pytest.raises(KeyboardInterrupt), interrupts_held():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)
+        written.append("whole")
+    assert written == ["whole"]
+    assert signal.getsignal(signal.SIGINT) is before
+    with interrupts_held():  # no Ctrl-C: nothing raised
+        written.append("again")
+    assert written == ["whole", "again"]
+
+
 def test_ctrl_c_during_training_leaves_a_resumable_checkpoint(tmp_path: Path) -> None:
     db = tmp_path / "small.sqlite"
     recordings = [bundled_path(n) for n in ("tunnel-paper-seed0", "tunnel-paper-seed4")]

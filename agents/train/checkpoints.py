@@ -8,6 +8,7 @@ from typing import Any
 
 from agents.train.hyperparams import algorithm_class
 from rocketroll_common.errors import UsageError
+from rocketroll_common.settings import interrupts_held
 
 #: SB3's ``VecNormalize`` statistics of the final model (``VecNormalize.load(path, venv)``).
 VECNORMALIZE_FILE = "vecnormalize.pkl"
@@ -29,15 +30,32 @@ def _replay_buffer_file(checkpoint: Path, algo: str) -> Path:
 
 def _checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> Path:
     """Save a resumable checkpoint as SB3's ``CheckpointCallback`` names them (the model,
-    its ``VecNormalize`` statistics, and for SAC/TD3 the replay buffer)."""
+    its ``VecNormalize`` statistics, and for SAC/TD3 the replay buffer), whole: a second
+    Ctrl-C waits for it."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{algo}_{model.num_timesteps}_steps.zip"
-    model.save(path)
-    if normalize is not None:
-        normalize.save(str(_normalization_file(path, algo)))
-    if algo != "ppo":
-        model.save_replay_buffer(_replay_buffer_file(path, algo))
+    with interrupts_held():
+        model.save(path)
+        if normalize is not None:
+            normalize.save(str(_normalization_file(path, algo)))
+        if algo != "ppo":
+            model.save_replay_buffer(_replay_buffer_file(path, algo))
     return path
+
+
+def checkpoint_callback(**settings: Any) -> Any:
+    """SB3's ``CheckpointCallback`` (``settings`` its arguments) whose periodic saves a
+    Ctrl-C does not cut short: it is held until the files are whole, then stops the run,
+    which saves its own resumable checkpoint (an interrupt inside torch's zip writer left
+    a traceback and no clean stop)."""
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    class WholeCheckpoints(CheckpointCallback):
+        def _on_step(self) -> bool:
+            with interrupts_held():
+                return bool(super()._on_step())
+
+    return WholeCheckpoints(**settings)
 
 
 def _resume(

@@ -27,7 +27,7 @@ from agents.replay import (
     recording_setting,
 )
 from agents.train.callbacks import _make_eval_callback_class, evaluate_held_out
-from agents.train.checkpoints import VECNORMALIZE_FILE, _checkpoint, _resume
+from agents.train.checkpoints import VECNORMALIZE_FILE, _checkpoint, _resume, checkpoint_callback
 from agents.train.envs import make_env, normalization_record, observation_names
 from agents.train.hyperparams import (
     ALGORITHMS,
@@ -294,7 +294,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     out = Path(out)
 
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import CallbackList
 
     # Seeding: torch and SB3 (python, numpy, torch, the action space, the env) and the
     # adapters' generators; PPO(seed=...) reseeds the training adapter before its first reset.
@@ -372,7 +372,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     callbacks: list[Any] = [held_out]
     if args.checkpoint_freq:
         callbacks.append(
-            CheckpointCallback(
+            checkpoint_callback(
                 save_freq=max(args.checkpoint_freq // n_envs, 1),
                 save_path=str(out / "checkpoints"),
                 name_prefix=algo,
