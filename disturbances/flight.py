@@ -13,7 +13,7 @@ import numpy as np
 from disturbances.bank import TraceBank
 from disturbances.rows import TraceRow, derived_row
 from rocketroll_common.arrays import FloatArray
-from rocketroll_physics.flown import fly_trace, tunnel_time
+from rocketroll_physics.flown import flow_amplitude, fly_trace, tunnel_time
 
 __all__ = ["flight_bank"]
 
@@ -69,7 +69,7 @@ def flight_bank(
         raise ValueError("v_ref_mps and stride_s must be positive, max_traces at least 1")
     tau = tunnel_time(edges, speed, v_ref_mps)
     middle = 0.5 * (speed[1:] + speed[:-1])
-    amplitude = v_ref_mps / np.maximum(middle, v_ref_mps)
+    amplitude = flow_amplitude(middle, v_ref_mps)
     need = float(tau[-1])
     pairs = [
         (k, float(s))

@@ -47,12 +47,19 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from identification.flightfit import SITE_ELEVATION_KEY
 from identification.model import MODEL_NAMES, RollParams, Servo
 from identification.model import simulate as simulate_roll
 from identification.recording import Recording, metadata_items
-from identification.reference import Effects, fine_steps, gust_factor, simulate_reference
+from identification.reference import (
+    Effects,
+    fine_steps,
+    gust_factor,
+    gust_stream,
+    simulate_reference,
+)
 from identification.tunnel import (
     FinSchedule,
     Turbulence,
@@ -67,7 +74,7 @@ from rocketroll_common.settings import check, setting, to_argv
 from rocketroll_physics.ascent import FlightProfile, flight_profile
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
 from rocketroll_physics.dryden import roll_gust
-from rocketroll_physics.flown import fly_trace, tunnel_time
+from rocketroll_physics.flown import flow_amplitude, fly_trace, tunnel_time
 from rocketroll_physics.scaling import (
     MACH_LIMIT,
     TUNNEL_AIRSPEED_MPS,
@@ -251,7 +258,7 @@ def _turbulence(
         )
         u = process.sample(math.ceil(tau[-1] / TUNNEL_DT_S) + 2, TUNNEL_DT_S, rng)
         middle = 0.5 * (speed[1:] + speed[:-1])
-        return fly_trace(u, TUNNEL_DT_S, 0.0, tau, spec.v_ref / np.maximum(middle, spec.v_ref))
+        return fly_trace(u, TUNNEL_DT_S, 0.0, tau, flow_amplitude(middle, spec.v_ref))
     height = np.maximum(np.asarray(along.altitude_m) - profile.altitude_m[0], 0.0)
     gust = roll_gust(edges, speed, height, severity=spec.severity, rng=rng)
     return np.asarray(gust / (spec.params().alpha * np.maximum(gain_mid, 1e-3)))
@@ -275,8 +282,8 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         For an ascent that cannot be read, or spends fewer than 50 logging
         intervals above ``v_ref``.
     """
-    children = np.random.SeedSequence(spec.seed).spawn(4)  # the fourth: the gusts' intensity
-    rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children[:3])
+    children = np.random.SeedSequence(spec.seed).spawn(3)
+    rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
     try:
         profile = flight_profile(spec.ascent, spec.descent)
         # Dryden's rolling gust does not fade with the airspeed while the fins' authority
@@ -307,20 +314,21 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         grid_s=spec.log_dt,
     )
     command = schedule.command(time - start)
-    h = spec.log_dt / spec.substeps
-    fine_middle = start + h * (np.arange(n * spec.substeps) + 0.5)
-    state = profile.at(fine_middle)
     scaling = spec.scaling()
-    gain, damping = roll_scales(
-        state.airspeed_mps, state.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3, scaling
-    )
-    # Past Mach 0.8 the fins' torque per degree leaves the subsonic law (outside the model);
-    # falling tail-first, the flow meets the fins from behind: their torque reverses.
-    gain = (
-        np.where(fine_middle > profile.apogee_s, -1.0, 1.0)
-        * fin_compressibility(state.mach)
-        * np.asarray(gain)
-    )
+
+    def true_scales(t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """The true rocket's gain and damping factors at the times ``t_s``."""
+        at = profile.at(t_s)
+        gain, damping = roll_scales(
+            at.airspeed_mps, at.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3, scaling
+        )
+        # Past Mach 0.8 the fins' torque per degree leaves the subsonic law (outside the
+        # model); falling tail-first, the flow meets the fins from behind: it reverses.
+        sign = np.where(np.asarray(t_s) > profile.apogee_s, -1.0, 1.0)
+        return sign * fin_compressibility(at.mach) * np.asarray(gain), np.asarray(damping)
+
+    h = spec.log_dt / spec.substeps
+    gain, damping = true_scales(start + h * (np.arange(n * spec.substeps) + 0.5))
     gain_mid, _ = roll_scales(
         profile.at(time[:-1] + 0.5 * spec.log_dt).airspeed_mps, 1.0, spec.v_ref, 1.0, scaling
     )
@@ -329,22 +337,14 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     servo = Servo(rate_limit_dps=spec.servo_rate)
     effects = spec.effects
     if effects.any:  # a rocket outside the model: the reference integrator, its own grid
-        u_d = u_d * gust_factor(u_d.size, spec.log_dt, effects, np.random.default_rng(children[3]))
-        per, h = fine_steps(spec.log_dt)
-        fine = profile.at(start + h * (np.arange(n * per) + 0.5))
-        scales = roll_scales(
-            fine.airspeed_mps, fine.density_kgm3, spec.v_ref, ISA_SEA_LEVEL_DENSITY_KGM3, scaling
-        )
-        fine_gain = (
-            np.where(np.asarray(fine.t_s) > profile.apogee_s, -1.0, 1.0)
-            * fin_compressibility(fine.mach)
-            * np.asarray(scales[0])
-        )
+        u_d = u_d * gust_factor(u_d.size, spec.log_dt, effects, gust_stream(spec.seed))
+        per, fine_h = fine_steps(spec.log_dt)
+        fine_gain, fine_damping = true_scales(start + fine_h * (np.arange(n * per) + 0.5))
         ref = simulate_reference(
             params, spec.log_dt, command[:-1], u_d, effects,
             rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
             rate0_dps=float(params.steady_rate(command[0], u_d[0]) * gain[0]),  # as below
-            gain=fine_gain, damping=scales[1],
+            gain=fine_gain, damping=fine_damping,
         )  # fmt: skip
         fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
     else:

@@ -50,6 +50,7 @@ __all__ = [
     "advance",
     "fine_steps",
     "gust_factor",
+    "gust_stream",
     "simulate_reference",
 ]
 
@@ -178,6 +179,13 @@ def gust_factor(n: int, dt_s: float, effects: Effects, rng: np.random.Generator)
         x[k] = rho * x[k - 1] + scale * noise[k]
     sigma = effects.gust_sd
     return np.asarray(np.exp(sigma * x - 0.5 * sigma * sigma))
+
+
+def gust_stream(seed: int) -> np.random.Generator:
+    """The wandering intensity's generator for a virtual run of ``seed``: the seed's fourth
+    child, so the three streams the tunnel and the flight recorder draw their schedule,
+    turbulence and sensors from (its first three) stay what they are without it."""
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
 
 
 @numba.njit(cache=True, nogil=True)

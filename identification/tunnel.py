@@ -75,7 +75,7 @@ from identification.model import (
     simulate,
 )
 from identification.recording import Recording, metadata_items
-from identification.reference import Effects, gust_factor, simulate_reference
+from identification.reference import Effects, gust_factor, gust_stream, simulate_reference
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, parse, setting, to_argv
 
@@ -771,7 +771,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     # The rocket starts at its steady roll rate for the initial fin angle.
     rate0 = float(params.steady_rate(command[0], turbulence.mean_deg))
     if effects.any:  # a rocket outside the model: the reference integrator
-        gust = gust_factor(n + 1, spec.log_dt, effects, _gust_stream(spec.seed))
+        gust = gust_factor(n + 1, spec.log_dt, effects, gust_stream(spec.seed))
         u_d = turbulence.mean_deg + (u_d - turbulence.mean_deg) * gust
         ref = simulate_reference(
             params, spec.log_dt, command[:-1], u_d[:-1], effects,
@@ -840,12 +840,6 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         metadata=metadata_items(meta),
         **columns,
     )
-
-
-def _gust_stream(seed: int) -> np.random.Generator:
-    """The wandering intensity's generator: a fourth child of the seed, so the schedule,
-    turbulence and sensor streams (:func:`_streams`) stay what they are without it."""
-    return np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
 
 
 def spec_from_command(command: str | Sequence[str]) -> TunnelSpec:

@@ -37,10 +37,11 @@ G. I. Taylor, "The spectrum of turbulence", Proc. R. Soc. Lond. A 164 (1938) 476
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["fly_trace", "interval_means", "tunnel_time"]
+__all__ = ["flow_amplitude", "fly_trace", "interval_means", "tunnel_time"]
 
 
 def interval_means(u_deg: FloatArray, dt_s: float, edges_s: FloatArray) -> FloatArray:
@@ -72,6 +73,14 @@ def tunnel_time(edges_s: FloatArray, airspeed_mps: FloatArray, v_ref_mps: float)
     return np.concatenate([[0.0], np.cumsum(steps)])
 
 
+def flow_amplitude(airspeed_mps: ArrayLike, v_ref_mps: float) -> FloatArray:
+    """The flown law's amplitude at each airspeed: ``V_ref / max(V, V_ref)``.  A frozen
+    gust's flow angle at the rocket falls as ``1/V``, and the tunnel's traces hold it at
+    ``V_ref``: faster flight scales them by this, slower keeps the tunnel's scale.  A
+    recorded ``u_d`` divided by it is the field at the tunnel's scale again."""
+    return np.asarray(v_ref_mps / np.maximum(np.asarray(airspeed_mps, dtype=float), v_ref_mps))
+
+
 def fly_trace(
     u_deg: FloatArray,
     dt_s: float,
@@ -93,7 +102,7 @@ def fly_trace(
     tau_s : ndarray, shape (m + 1,)
         Tunnel time at the flown samples' edges (:func:`tunnel_time`), increasing.
     amplitude : ndarray, shape (m,)
-        ``V_ref / max(V, V_ref)`` at each flown sample.
+        ``V_ref / max(V, V_ref)`` at each flown sample (:func:`flow_amplitude`).
 
     Returns
     -------

@@ -44,7 +44,7 @@ from disturbances.rows import derived_row
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_physics.ascent import FlightProfile, flight_profile, recorded_profile
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
-from rocketroll_physics.flown import interval_means, tunnel_time
+from rocketroll_physics.flown import flow_amplitude, interval_means, tunnel_time
 from rocketroll_physics.scaling import MACH_LIMIT, TUNNEL_AIRSPEED_MPS, FlightReference, roll_scales
 
 __all__ = [
@@ -420,7 +420,7 @@ def tunnel_frame(bank: TraceBank, schedule: FlightSchedule) -> TraceBank:
             np.asarray(edges, dtype=np.float64), np.asarray(own.at(edges).airspeed_mps), v_ref
         )
         middle = np.asarray(own.at(edges[:-1] + 0.5 * dt).airspeed_mps)
-        field = u * np.maximum(middle, v_ref) / v_ref
+        field = u / flow_amplitude(middle, v_ref)
         swept = np.concatenate([[0.0], np.cumsum(field * np.diff(tau))])
         grid = dt * np.arange(math.floor(tau[-1] / dt + 1e-9) + 1)
         means = np.diff(np.interp(grid, tau, swept)) / dt
@@ -453,7 +453,7 @@ def reflown(
     u = np.asarray(u_d_deg, dtype=float)
     there = own.at(t0_s + dt_s * (np.arange(u.size) + 0.5))
     heights = np.asarray(there.altitude_m) - float(own.altitude_m[0])
-    field = u * np.maximum(np.asarray(there.airspeed_mps), v_ref) / v_ref
+    field = u / flow_amplitude(there.airspeed_mps, v_ref)
     order = np.argsort(heights, kind="stable")  # the ascent: heights rise
     mid = 0.5 * (schedule.altitude_edges_m[1:m] + schedule.altitude_edges_m[: m - 1])
     flown = mid - float(schedule.profile.altitude_m[0])
@@ -466,9 +466,7 @@ def reflown(
             "cut the episode with episode_s)"
         )
     speed = 0.5 * (schedule.airspeed_edges_mps[1:m] + schedule.airspeed_edges_mps[: m - 1])
-    return np.asarray(
-        np.interp(flown, heights[order], field[order]) * v_ref / np.maximum(speed, v_ref)
-    )
+    return np.asarray(np.interp(flown, heights[order], field[order]) * flow_amplitude(speed, v_ref))
 
 
 def _dryden(
