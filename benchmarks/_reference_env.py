@@ -23,7 +23,7 @@ import numpy as np
 from disturbances.bank import TraceBank
 from identification.model import RollParams
 from identification.reference import Effects, advance
-from rollenv.core import RollConfig, observe_kernel, wrap_deg
+from rollenv.core import RollConfig, observe_kernel, step_reward
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Cfg, Cursor, State
 
@@ -105,19 +105,15 @@ class ReferenceRollEnv(RocketRollEnv):
         state = b.state
         state[0, State.FIN] = fin
         state[0, State.COMMAND] = command
+        # The true error (the env's own), then what the sensors read a latency late.
+        state[0, State.RATE], state[0, State.ANGLE] = true_rate, true_angle
+        observe_kernel(b.all, state, b.cursor, b.setpoints, eps, cfg, b.obs, b.error)
+        error = float(b.error[0])
         state[0, State.RATE], state[0, State.ANGLE] = seen_rate, seen_angle
         observe_kernel(b.all, state, b.cursor, b.setpoints, eps, cfg, b.obs, b.error)
         state[0, State.RATE], state[0, State.ANGLE] = true_rate, true_angle
-        setpoint = b.setpoint_of(0)
-        if cfg[Cfg.TASK_RATE] > 0.0:
-            error = setpoint - true_rate
-        else:
-            error = float(wrap_deg(setpoint - true_angle))
         b.error[0] = error
-        e_n = error / cfg[Cfg.ERROR_NORM]
-        v_n = true_rate / cfg[Cfg.RATE_NORM]
-        t_n = abs(fin - before) / cfg[Cfg.TRAVEL_NORM]
-        reward = -(e_n * e_n + cfg[Cfg.RATE_WEIGHT] * v_n * v_n + cfg[Cfg.FIN_WEIGHT] * t_n * t_n)
+        reward = step_reward(error, true_rate, abs(fin - before), cfg)
         b.reward[0] = reward
         truncated = bool(b.step_count[0] >= self._max_steps)
         return b.obs[0].copy(), float(reward), False, truncated, self._info()

@@ -72,6 +72,7 @@ __all__ = [
     "RollBatch",
     "RollConfig",
     "observation_bounds",
+    "step_reward",
     "wrap_deg",
 ]
 
@@ -553,6 +554,16 @@ def observe_kernel(
         error[i] = _observe_one(i, state, sp, eps[k], cfg, obs)
 
 
+@numba.njit(cache=True, nogil=True)
+def step_reward(error: float, rate: float, travel: float, cfg: FloatArray) -> float:
+    """One control step's reward: minus the squared normalised tracking error, the weighted
+    squared normalised roll rate and the weighted squared normalised fin travel."""
+    e_n = error / cfg[Cfg.ERROR_NORM]
+    v_n = rate / cfg[Cfg.RATE_NORM]
+    t_n = travel / cfg[Cfg.TRAVEL_NORM]
+    return -(e_n * e_n + cfg[Cfg.RATE_WEIGHT] * v_n * v_n + cfg[Cfg.FIN_WEIGHT] * t_n * t_n)
+
+
 def _step_envs(
     index: IntArray,
     action: FloatArray,
@@ -650,12 +661,7 @@ def _step_envs(
         sp = setpoints[i, min((step + 1) // period, last_sp)]
         err = _observe_one(i, state, sp, eps[k], cfg, obs)
         error[i] = err
-        e_n = err / cfg[Cfg.ERROR_NORM]
-        v_n = v / cfg[Cfg.RATE_NORM]
-        t_n = travel / cfg[Cfg.TRAVEL_NORM]
-        reward[i] = -(
-            e_n * e_n + cfg[Cfg.RATE_WEIGHT] * v_n * v_n + cfg[Cfg.FIN_WEIGHT] * t_n * t_n
-        )
+        reward[i] = step_reward(err, v, travel, cfg)
 
 
 #: The step kernel, one env after the other (small batches, the single env).
