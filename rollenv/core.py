@@ -48,6 +48,7 @@ from disturbances.bank import TraceBank
 from identification.compiled import piece
 from identification.methods import METHODS, has_posterior
 from identification.model import MODEL_NAMES, RollParams, Servo
+from identification.reference import Effects
 from rollenv.flight import STORED_PREFIX, FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
     OBSERVATION_NAMES,
@@ -195,6 +196,13 @@ class RollConfig:
     rate_weight, fin_weight : float
         Reward weights of the roll-rate term (angle task only) and the fin
         travel term.
+    servo_lag_s, backlash_deg : float
+        The fin's linkage beyond eq. 23's servo: a first-order lag of the fin
+        behind the rate-limited servo (time constant, s) and play between them
+        (°, the fin stays put until its drive is half of it away); 0 is none.
+    sensor_latency_s : float
+        Delay of the roll sensors (encoder and gyro): they read the rocket as it
+        was this long ago, s; 0 is none.
     """
 
     task: str = "angle"
@@ -227,6 +235,9 @@ class RollConfig:
     rate_scale_dps: float = 10.0
     rate_weight: float = 0.1
     fin_weight: float = 0.1
+    servo_lag_s: float = 0.0
+    backlash_deg: float = 0.0
+    sensor_latency_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.disturbance is None:
@@ -300,6 +311,10 @@ class RollConfig:
             raise TypeError(f"encoder_counts must be an int, got {self.encoder_counts!r}")
         if self.encoder_counts < 0:
             raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
+        try:
+            self.actuation  # noqa: B018  (the bounds of Effects: one home for them)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("latency_s", "sensor_latency_s")) from None
         try:
             METHODS.check(self.method)
         except ValueError as exc:
@@ -422,6 +437,16 @@ class RollConfig:
         return 360.0 / self.encoder_counts if encoder else 0.0
 
     @property
+    def actuation(self) -> Effects:
+        """The fin's linkage and the sensors' latency as the reference integrator's
+        :class:`~identification.reference.Effects` (what the kernel adds to eq. 23)."""
+        return Effects(
+            servo_lag_s=self.servo_lag_s,
+            backlash_deg=self.backlash_deg,
+            latency_s=self.sensor_latency_s,
+        )
+
+    @property
     def servo(self) -> Servo:
         """The servo of eq. 23 with this rate limit and range."""
         return Servo(self.rate_limit_dps, self.fin_range_deg)
@@ -447,6 +472,12 @@ class RollConfig:
         cfg[Cfg.ERROR_MAX] = observation_bounds(self)[0][Obs.ERROR]
         cfg[Cfg.U_PER] = 1.0  # set by RollBatch from the bank's Δt
         cfg[Cfg.ANGLE_GYRO] = 1.0 if self.sensors and self.angle_sensor == "gyro" else 0.0
+        lag = self.servo_lag_s
+        if lag > 0.0:
+            cfg[Cfg.SERVO_DECAY] = math.exp(-self.substep_s / lag)
+            cfg[Cfg.SERVO_RAMP] = -lag * math.expm1(-self.substep_s / lag) / self.substep_s
+        cfg[Cfg.BACKLASH_HALF] = 0.5 * self.backlash_deg
+        cfg[Cfg.LATENCY] = self.sensor_latency_s / self.substep_s
         return cfg
 
 
@@ -505,21 +536,25 @@ def _gyro(rate: float, eps: float, cfg: FloatArray) -> float:
 def _observe_one(
     i: int,
     state: FloatArray,
+    seen_rate: float,
+    seen_angle: float,
     setpoint: float,
     eps: float,
     cfg: FloatArray,
     obs: NDArray[np.float32],
 ) -> float:
-    """Sensor readings of env ``i`` into ``obs[i]``; returns the true tracking error."""
+    """Sensor readings of env ``i`` into ``obs[i]``, the sensors seeing the roll rate
+    ``seen_rate`` and angle ``seen_angle`` (the state's own, or as it was a latency ago);
+    returns the true tracking error."""
     rate = state[i, State.RATE]
     angle = state[i, State.ANGLE]
     res = cfg[Cfg.ENCODER_RES]
-    measured_angle = angle
+    measured_angle = seen_angle
     if cfg[Cfg.ANGLE_GYRO] > 0.0:
         measured_angle = state[i, State.GYRO_ANGLE]
     elif res > 0.0:
-        measured_angle = math.floor(angle / res + 1e-9) * res
-    measured_rate = _gyro(rate, eps, cfg)
+        measured_angle = math.floor(seen_angle / res + 1e-9) * res
+    measured_rate = _gyro(seen_rate, eps, cfg)
     if cfg[Cfg.TASK_RATE] > 0.0:
         error = setpoint - rate
         measured_error = setpoint - measured_rate
@@ -545,13 +580,15 @@ def observe_kernel(
     obs: NDArray[np.float32],
     error: FloatArray,
 ) -> None:
-    """Observations of the envs in ``index`` (``eps[k]`` is the gyro draw of ``index[k]``)."""
+    """Observations of the envs in ``index`` (``eps[k]`` is the gyro draw of ``index[k]``),
+    the sensors reading the state as it is now."""
     period = int(cfg[Cfg.SETPOINT_PERIOD])
     last = setpoints.shape[1] - 1
     for k in range(index.size):
         i = index[k]
         sp = setpoints[i, min(cursor[i, Cursor.STEP] // period, last)]
-        error[i] = _observe_one(i, state, sp, eps[k], cfg, obs)
+        rate, angle = state[i, State.RATE], state[i, State.ANGLE]
+        error[i] = _observe_one(i, state, rate, angle, sp, eps[k], cfg, obs)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -579,6 +616,7 @@ def _step_envs(
     reward: FloatArray,
     error: FloatArray,
     u_now: FloatArray,
+    past: FloatArray,
 ) -> None:
     """Advance the envs in ``index`` by one control step.
 
@@ -591,6 +629,16 @@ def _step_envs(
     constant rocket), ``u_flat[u_start + m]`` is env ``i``'s ``m``-th ``u_d``
     sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new state,
     the step plus one, observation, reward, true error and the last ``u_d``.
+
+    With a linkage (:attr:`Cfg.SERVO_DECAY` or :attr:`Cfg.BACKLASH_HALF` above 0)
+    the servo moves at its rate limit towards the command, the fin's drive follows
+    it through the first-order lag (exact for the servo's ramp over the substep)
+    and the fin its drive through the play; the fin moves linearly over each
+    substep as without.
+    With a sensor latency every substep's rate and angle go into the ring
+    ``past[i]`` (row ``g % rows`` for substep ``g`` of the episode) and the sensors
+    read the rocket :attr:`Cfg.LATENCY` substeps ago, linearly between substeps.
+    Either off, the step is the model's and its arithmetic today's.
     """
     n_sub = int(cfg[Cfg.SUBSTEPS])
     h = cfg[Cfg.H]
@@ -600,6 +648,13 @@ def _step_envs(
     u_per = int(cfg[Cfg.U_PER])
     period = int(cfg[Cfg.SETPOINT_PERIOD])
     last_sp = setpoints.shape[1] - 1
+    decay = cfg[Cfg.SERVO_DECAY]
+    ramp = cfg[Cfg.SERVO_RAMP]
+    half = cfg[Cfg.BACKLASH_HALF]
+    linkage = decay > 0.0 or half > 0.0
+    delay = cfg[Cfg.LATENCY]
+    late = delay > 0.0
+    rows = past.shape[1]
     for k in numba.prange(index.size):
         i = index[k]
         step = cursor[i, Cursor.STEP]
@@ -621,13 +676,35 @@ def _step_envs(
         held = 0  # fin-at-rest substeps with the same u_d, not yet applied (merged: exact)
         held_u = 0.0
         u = 0.0
-        for _ in range(n_sub):
+        servo = state[i, State.SERVO]
+        drive = state[i, State.DRIVE]
+        for sub in range(n_sub):
             u = scale * u_flat[u_index]
             u_phase += 1
             if u_phase == u_per:
                 u_phase = 0
                 u_index += 1
-            moved = theta + min(max(command - theta, -max_move), max_move)
+            if linkage:
+                moved_servo = servo + min(max(command - servo, -max_move), max_move)
+                # τ·dd/dt = servo - d with the servo ramping from servo to moved_servo
+                drive = moved_servo - ramp * (moved_servo - servo) + decay * (drive - servo)
+                servo = moved_servo
+                moved = theta  # the fin moves once its drive is half the play away
+                if drive > theta + half:
+                    moved = drive - half
+                elif drive < theta - half:
+                    moved = drive + half
+            else:
+                moved = theta + min(max(command - theta, -max_move), max_move)
+            if late:  # every substep's roll kept for the sensors: none merged
+                e, c, a_, b_ = _piece(alpha, theta_bar, beta_bar, alpha_bar, theta, moved, u, h)
+                phi = phi + a_ * v + b_
+                v = e * v + c
+                theta = moved
+                slot = (first + sub + 1) % rows
+                past[i, slot, 0] = v
+                past[i, slot, 1] = phi
+                continue
             if held > 0 and (moved != theta or u != held_u):
                 e, c, a_, b_ = _piece(
                     alpha, theta_bar, beta_bar, alpha_bar, theta, theta, held_u, held * h
@@ -654,12 +731,24 @@ def _step_envs(
         state[i, State.ANGLE] = phi
         state[i, State.FIN] = theta
         state[i, State.COMMAND] = command
+        state[i, State.SERVO] = servo
+        state[i, State.DRIVE] = drive
         cursor[i, Cursor.STEP] = step + 1
         u_now[i] = u
+        seen_v = v
+        seen_phi = phi
+        if late:  # what the sensors read: the rocket ``delay`` substeps ago
+            at = max(first + n_sub - delay, 0.0)
+            g = int(at)  # at >= 0: its floor
+            w = at - g
+            s0 = g % rows
+            s1 = (g + 1) % rows
+            seen_v = (1.0 - w) * past[i, s0, 0] + w * past[i, s1, 0]
+            seen_phi = (1.0 - w) * past[i, s0, 1] + w * past[i, s1, 1]
         if cfg[Cfg.ANGLE_GYRO] > 0.0:  # the flight computer sums the gyro's reading
-            state[i, State.GYRO_ANGLE] += n_sub * h * _gyro(v, eps[k], cfg)
+            state[i, State.GYRO_ANGLE] += n_sub * h * _gyro(seen_v, eps[k], cfg)
         sp = setpoints[i, min((step + 1) // period, last_sp)]
-        err = _observe_one(i, state, sp, eps[k], cfg, obs)
+        err = _observe_one(i, state, seen_v, seen_phi, sp, eps[k], cfg, obs)
         error[i] = err
         reward[i] = step_reward(err, v, travel, cfg)
 
@@ -767,6 +856,10 @@ class RollBatch:
         self.reward = np.zeros(n)
         self.error = np.zeros(n)
         self.u_now = np.zeros(n)
+        # The sensors' ring of past substeps (rate, angle), as deep as their latency needs
+        # (see _step_envs); one unused row without a latency.
+        delay = float(self.cfg[Cfg.LATENCY])
+        self.past = np.zeros((n, math.ceil(delay) + 2 if delay > 0.0 else 1, 2))
         self.parallel = bool(parallel)
         self._noisy = bool(self.cfg[Cfg.GYRO_ETA] > 0.0)
         self._no_noise = np.zeros(n)
@@ -871,6 +964,11 @@ class RollBatch:
         self.state[index, State.GYRO_ANGLE] = angles  # aligned on the pad
         self.state[index, State.FIN] = fin
         self.state[index, State.COMMAND] = fin
+        self.state[index, State.SERVO] = fin
+        self.state[index, State.DRIVE] = fin
+        # Before the episode the rocket was as it starts (what a late sensor reads first).
+        self.past[index, :, 0] = self.state[index, State.RATE][:, None]
+        self.past[index, :, 1] = angles[:, None]
         self.step_count[index] = 0
         self.u_now[index] = u0
         eps = self._gyro_draws(rng, m)
@@ -897,6 +995,7 @@ class RollBatch:
             self.reward,
             self.error,
             self.u_now,
+            self.past,
         )
 
     def _randomized_params(self, rng: np.random.Generator, m: int) -> FloatArray:
@@ -1022,6 +1121,7 @@ class RollBatch:
         if source.bank is not self.bank:
             raise ValueError("copy_env needs two batches over the same bank")
         self.state[index] = source.state[i]
+        self.past[index] = source.past[i]
         self.params[index] = source.params[i]
         self.trace[index] = source.trace[i]
         self.start[index] = source.start[i]

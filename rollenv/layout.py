@@ -51,6 +51,8 @@ class State(IntEnum):
     FIN = 2  #: the servo's actual fin angle θ, °
     COMMAND = 3  #: the last fin command, °
     GYRO_ANGLE = 4  #: the flight computer's angle: the gyro's readings integrated, °
+    SERVO = 5  #: the rate-limited servo ahead of the fin (a lagging or loose linkage), °
+    DRIVE = 6  #: the fin's drive: the servo through the linkage's lag, before its play, °
 
 
 class Obs(IntEnum):
@@ -149,3 +151,7 @@ class Cfg(IntEnum):
     ERROR_MAX = 15  #: bound of the observed error
     U_PER = 16  #: substeps per u_d sample (set by the bank)
     ANGLE_GYRO = 17  #: 1: the angle is the integrated gyro (flight), 0: the encoder
+    SERVO_DECAY = 18  #: exp(-δt/τ) of the fin's drive lagging the servo (0: no lag)
+    SERVO_RAMP = 19  #: τ·(1 - exp(-δt/τ))/δt, the drive's lag behind a servo ramp (0: no lag)
+    BACKLASH_HALF = 20  #: half the play between drive and fin, ° (0: none)
+    LATENCY = 21  #: the roll sensors' delay, substeps (0: none)

@@ -1,0 +1,165 @@
+"""The kernel's fin linkage (servo lag, backlash) and sensor latency.
+
+Off, they leave the kernel's arithmetic as it was (the golden trajectories of the
+other tests); on, the kernel flies what the independent reference integrator
+(:mod:`identification.reference`, in closed loop by ``benchmarks/_reference_env.py``)
+flies, the vector env steps them like the single env, and the oracle's predictors
+copy the sensors' past with the state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from identification.reference import Effects
+from rollenv.core import RollConfig
+from rollenv.env import RocketRollEnv
+from rollenv.layout import Obs, State
+from rollenv.vector import RocketRollVectorEnv
+from tests.rollenv.conftest import array_bank
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _env(**settings: Any) -> RocketRollEnv:
+    return RocketRollEnv(bank=array_bank(), sensors=False, **settings)
+
+
+def _actions(n: int) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    t = np.arange(n)
+    return (0.3 * np.sin(t / 7.0) + 0.1 * rng.standard_normal(n)).astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    "effects",
+    [
+        Effects(servo_lag_s=0.05),
+        Effects(backlash_deg=0.5),
+        Effects(latency_s=0.03),
+        Effects(servo_lag_s=0.08, backlash_deg=1.0, latency_s=0.25),
+    ],
+    ids=lambda e: e.describe(),
+)
+def test_the_kernel_flies_the_reference_integrators_linkage_and_latency(
+    effects: Effects, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Against the reference integrator (1-ms Runge-Kutta, the fin's drive integrated
+    step by step) over 300 control steps: the fin within 0.15°, the sensed rate within
+    0.03 °/s -- the same order as the two integrators differ without any effect (6e-3).
+    A kernel that ignored the lag is 0.6° off, one that ignored the latency 1 °/s."""
+    monkeypatch.syspath_prepend(str(REPO / "benchmarks"))
+    from _reference_env import ReferenceRollEnv
+
+    bank = array_bank()
+    config = RollConfig(sensors=False, setpoint="zero")
+    reference = ReferenceRollEnv(config, bank, effects)
+    kernel = _env(
+        setpoint="zero",
+        servo_lag_s=effects.servo_lag_s,
+        backlash_deg=effects.backlash_deg,
+        sensor_latency_s=effects.latency_s,
+    )
+    assert kernel.config.actuation == dataclasses.replace(effects)
+    options = {"trace": 0, "start": 0}
+    reference.reset(seed=0, options=options)
+    kernel.reset(seed=0, options=options)
+    fin, rate, ideal_rate = [], [], []
+    ideal = _env(setpoint="zero")
+    ideal.reset(seed=0, options=options)
+    for a in _actions(300):
+        ref_obs, *_ = reference.step(np.array([a]))
+        obs, *_ = kernel.step(np.array([a]))
+        ideal_obs, *_ = ideal.step(np.array([a]))
+        fin.append(abs(ref_obs[Obs.FIN] - obs[Obs.FIN]))
+        rate.append(abs(ref_obs[Obs.RATE] - obs[Obs.RATE]))
+        ideal_rate.append(abs(ref_obs[Obs.RATE] - ideal_obs[Obs.RATE]))
+    assert max(fin) < 0.15
+    assert max(rate) < 0.03
+    assert max(ideal_rate) > 10.0 * max(rate)  # the effect matters at this level
+
+
+def test_a_late_sensor_reads_the_rate_of_a_latency_ago() -> None:
+    """Latency of one control step: the observed rate is the true rate of the step
+    before, exactly (the ring holds every substep); a latency longer than the episode's
+    start reads the initial state until the rocket has flown it."""
+    late = _env(task="rate", sensor_latency_s=0.1)
+    late.reset(seed=0, options={"trace": 0, "start": 0})
+    before = late.core.state[0, State.RATE]
+    for a in _actions(20):
+        obs, *_ = late.step(np.array([a]))
+        assert obs[Obs.RATE] == np.float32(before)
+        before = late.core.state[0, State.RATE]
+    longer = _env(task="rate", sensor_latency_s=0.45)
+    obs, _ = longer.reset(seed=0, options={"trace": 0, "start": 0, "rate_dps": 3.0})
+    for a in _actions(4):
+        obs, *_ = longer.step(np.array([a]))
+        assert obs[Obs.RATE] == np.float32(3.0)
+    obs, *_ = longer.step(np.array([0.0]))
+    assert obs[Obs.RATE] != np.float32(3.0)
+
+
+def test_the_linkage_makes_the_fin_trail_its_command_and_stops_inside_its_play() -> None:
+    lagged = _env(servo_lag_s=0.2)
+    lagged.reset(seed=0, options={"trace": 0, "start": 0, "fin_deg": 0.0})
+    obs, *_ = lagged.step(np.array([0.25]))  # 10° asked, 15° of servo travel in 0.1 s
+    assert 0.0 < obs[Obs.FIN] < 0.5 * 10.0
+    assert lagged.core.state[0, State.SERVO] == pytest.approx(10.0)
+    loose = _env(backlash_deg=2.0)
+    loose.reset(seed=0, options={"trace": 0, "start": 0, "fin_deg": 0.0})
+    obs, *_ = loose.step(np.array([0.5 / 40.0]))  # 0.5°: inside the 1° half-play
+    assert obs[Obs.FIN] == 0.0
+    obs, *_ = loose.step(np.array([3.0 / 40.0]))
+    assert obs[Obs.FIN] == pytest.approx(2.0)  # the drive at 3°, the fin half the play behind
+
+
+def test_the_vector_env_steps_linkage_and_latency_like_the_single_env() -> None:
+    settings: dict[str, Any] = {"servo_lag_s": 0.05, "backlash_deg": 0.5, "sensor_latency_s": 0.03}
+    options = {"trace": 0, "start": 0}
+    envs = RocketRollVectorEnv(2, bank=array_bank(), sensors=False, **settings)
+    single = _env(**settings)
+    envs.reset(seed=0, options=options)
+    single.reset(seed=0, options=options)
+    for a in _actions(50):
+        obs, *_ = envs.step(np.full((2, 1), a, dtype=np.float32))
+        one, *_ = single.step(np.array([a]))
+        np.testing.assert_array_equal(envs._batch.state[0], single.core.state[0])
+        np.testing.assert_array_equal(obs[0], one)
+
+
+def test_a_predictor_copies_the_sensors_past_with_the_state() -> None:
+    from rollenv.core import RollBatch
+
+    env = _env(sensor_latency_s=0.2)
+    env.reset(seed=0, options={"trace": 0, "start": 0})
+    for a in _actions(5):
+        env.step(np.array([a]))
+    predictor = RollBatch(env.config, env.bank, 2)
+    predictor.copy_env(env.core, 0, predictor.all)
+    np.testing.assert_array_equal(predictor.past[1], env.core.past[0])
+    rng = np.random.default_rng(0)
+    predictor.step(np.full(2, 0.1), rng, predictor.all)
+    env.step(np.array([0.1]))
+    np.testing.assert_array_equal(predictor.obs[1], env.core.obs[0])
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "says"),
+    [
+        ("servo_lag_s", -0.1, "servo_lag_s: must be in [0, 0.5] s"),
+        ("backlash_deg", 9.0, "backlash_deg: must be in [0, 5] °"),
+        ("sensor_latency_s", 0.7, "sensor_latency_s: must be in [0, 0.5] s"),
+    ],
+)
+def test_linkage_and_latency_out_of_range_are_refused_by_name(
+    name: str, value: float, says: str
+) -> None:
+    with pytest.raises(ValueError, match=re.escape(says)):
+        settings: dict[str, Any] = {name: value}
+        RollConfig(**settings)
