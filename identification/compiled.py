@@ -19,7 +19,7 @@ from identification import model
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["interval_maps", "piece"]
+__all__ = ["interval_maps", "linkage", "linkage_path", "piece"]
 
 
 @numba.extending.overload(model.select)
@@ -51,6 +51,39 @@ def _phi_functions_scalar(z: Any) -> Any:
 #: ``piece(alpha, theta_bar, beta_bar, alpha_bar, theta0, theta1, u_d, h) -> (E, c, A, B)``
 #: for scalars, compiled (see :func:`identification.model.piece_coefficients`).
 piece = numba.njit(cache=True, nogil=True)(model.piece_coefficients)
+#: ``linkage(servo, drive, theta, command, max_move, decay, ramp, half) -> (servo, drive,
+#: fin)``, compiled (see :func:`identification.model.linkage_step`).
+linkage = numba.njit(cache=True, nogil=True)(model.linkage_step)
+
+
+@numba.njit(cache=True, nogil=True)
+def _linkage_path(
+    command: FloatArray, start: float, max_move: float, decay: float, ramp: float, half: float
+) -> FloatArray:
+    out = np.empty(command.size + 1)
+    servo = drive = theta = start
+    out[0] = start
+    for k in range(command.size):
+        servo, drive, theta = linkage(servo, drive, theta, command[k], max_move, decay, ramp, half)
+        out[k + 1] = theta
+    return out
+
+
+def linkage_path(
+    command_deg: FloatArray,
+    theta0_deg: float,
+    dt_s: float,
+    servo: model.Servo,
+    link: model.Linkage,
+) -> FloatArray:
+    """:func:`identification.model.servo_path` through a :class:`~identification.model.Linkage`:
+    the fin at the boundaries of consecutive steps of ``dt_s`` with held commands (shape
+    ``(n + 1,)``), servo, drive and fin starting together at ``theta0_deg``."""
+    cmd = np.clip(np.asarray(command_deg, dtype=np.float64), -servo.range_deg, servo.range_deg)
+    decay, ramp, half = link.coefficients(dt_s)
+    return np.asarray(
+        _linkage_path(cmd, float(theta0_deg), servo.rate_limit_dps * dt_s, decay, ramp, half)
+    )
 
 
 @numba.njit(cache=True, nogil=True)

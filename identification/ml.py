@@ -39,6 +39,7 @@ alike, from the angle, the rate or both.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -54,7 +55,13 @@ from scipy import linalg, optimize
 from identification.compiled import _UNSCALED, _interval_maps, interval_maps
 from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.model import RollParams, check_model
-from identification.pipeline import IdentifyOptions, Measurements, measurements, model_inputs
+from identification.pipeline import (
+    IdentifyOptions,
+    Measurements,
+    delayed,
+    measurements,
+    model_inputs,
+)
 from identification.recording import Recording
 from identification.statespace import (
     LinearGaussian,
@@ -70,7 +77,10 @@ from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
     "MAX_ORDER",
+    "DelaySearch",
     "MLFit",
+    "delay_search",
+    "delayed_fin",
     "interval_maps",
     "maximum_likelihood",
     "ml_method",
@@ -1137,6 +1147,56 @@ def maximum_likelihood(
     """
     inputs = model_inputs(recording, model, options)
     return _fit(_Search(_prepare(inputs), inputs), model, max_order)
+
+
+@dataclass(frozen=True)
+class DelaySearch:
+    """:func:`delay_search`'s answer: the fin's delay (in fine-grid steps) that describes the
+    roll best, and the log-likelihoods it was judged by."""
+
+    delay_steps: int
+    step_s: float
+    loglike_undelayed: float
+    loglike_delayed: float
+    screened: dict[int, float]
+
+    @property
+    def statistic(self) -> float:
+        """The likelihood-ratio statistic of the delay against none (0 at none)."""
+        return max(2.0 * (self.loglike_delayed - self.loglike_undelayed), 0.0)
+
+
+def delayed_fin(inputs: Measurements, steps: int) -> Measurements:
+    """``inputs`` with the fin angle delayed by ``steps`` fine-grid steps (held at its first
+    value before): the rocket as late sensors read it is the rocket driven by that fin."""
+    if steps == 0:
+        return inputs
+    return dataclasses.replace(inputs, theta_fine=delayed(inputs.theta_fine, steps))
+
+
+def delay_search(inputs: Measurements, model: str, delays: Sequence[int]) -> DelaySearch:
+    """The fin's delay, in fine-grid steps among ``delays``, that best describes the roll:
+    each screened by the log-likelihood at the undelayed fit's parameters (one filter pass),
+    the screen's best and its two neighbours then fitted from there, the best fit kept (its
+    likelihood-ratio statistic against no delay is conservative: the screen may miss a
+    better delay, never invent one)."""
+    search = _Search(_prepare(inputs), inputs)
+    base = _fit(search, model)
+    nat = search.order(model, base.ar.size)[1]
+    screened = {
+        int(d): -_negloglike_natural(_prepare(delayed_fin(inputs, int(d))), nat) for d in delays
+    }
+    top = max(screened, key=lambda d: screened[d])
+    if top == 0:
+        return DelaySearch(0, inputs.grid.step_s, base.loglike, base.loglike, screened)
+    fitted = {0: base.loglike}
+    for d in (top - 1, top, top + 1):  # the screen's peak leans towards none: its neighbours
+        if d in screened and d not in fitted:
+            data = _prepare(delayed_fin(inputs, d))
+            result = _minimize(data, _layout(data, model, base.ar.size, nat), nat)
+            fitted[d] = max(-float(result.fun), screened[d])
+    best = max(fitted, key=lambda d: fitted[d])
+    return DelaySearch(best, inputs.grid.step_s, base.loglike, fitted[best], screened)
 
 
 def posterior_traces(fit: MLFit, size: int, seed: int = 0) -> FloatArray:

@@ -43,6 +43,7 @@ computed for all substeps at once; :func:`simulate` exploits this.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -61,11 +62,13 @@ __all__ = [
     "PAPER_CONSTANT",
     "PAPER_THETA",
     "DampingModel",
+    "Linkage",
     "RollParams",
     "Servo",
     "SimResult",
     "check_model",
     "damping",
+    "linkage_step",
     "model_of",
     "piece_coefficients",
     "roll_coefficients",
@@ -350,6 +353,73 @@ def servo_path(command_deg: ArrayLike, theta0_deg: float, dt_s: float, servo: Se
         theta += max(-max_move, min(max_move, delta))
         out[k + 1] = theta
     return out
+
+
+@dataclass(frozen=True)
+class Linkage:
+    """What lies between the servo of eq. 23 and the fin, beyond the model: a first-order
+    lag of the fin's drive behind the servo (``τ·dd/dt = θ_servo − d``) and play between
+    drive and fin (the fin stays put until its drive is half the play away).  Both 0 is
+    the model's direct linkage.
+
+    Attributes
+    ----------
+    lag_s : float
+        Time constant τ of the lag, s.
+    backlash_deg : float
+        The play, °.
+    """
+
+    lag_s: float = 0.0
+    backlash_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("lag_s", "backlash_deg"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"Linkage.{name} must be a finite number >= 0, got {value!r}")
+
+    @property
+    def direct(self) -> bool:
+        """Whether the fin is the servo (no lag, no play)."""
+        return self.lag_s == 0.0 and self.backlash_deg == 0.0
+
+    def coefficients(self, step_s: float) -> tuple[float, float, float]:
+        """``(decay, ramp, half)`` of :func:`linkage_step` for steps of ``step_s``."""
+        if self.lag_s == 0.0:
+            return 0.0, 0.0, 0.5 * self.backlash_deg
+        decay = math.exp(-step_s / self.lag_s)
+        return (
+            decay,
+            -self.lag_s * math.expm1(-step_s / self.lag_s) / step_s,
+            0.5 * self.backlash_deg,
+        )
+
+
+def linkage_step(
+    servo: float,
+    drive: float,
+    theta: float,
+    command: float,
+    max_move: float,
+    decay: float,
+    ramp: float,
+    half: float,
+) -> tuple[float, float, float]:
+    """One step of the servo and its :class:`Linkage`: the servo ``max_move`` at most
+    towards ``command``, the fin's drive after it through the lag (exact for the servo's
+    ramp over the step: ``decay = exp(−δt/τ)``, ``ramp = τ·(1 − decay)/δt``, both 0 without
+    a lag) and the fin after its drive through the play (``half`` of it).  Returns the
+    new ``(servo, drive, fin)``; the environment's kernel calls it compiled
+    (:data:`identification.compiled.linkage`)."""
+    moved = servo + min(max(command - servo, -max_move), max_move)
+    drive = moved - ramp * (moved - servo) + decay * (drive - servo)
+    fin = theta
+    if drive > theta + half:
+        fin = drive - half
+    elif drive < theta - half:
+        fin = drive + half
+    return moved, drive, fin
 
 
 def select(condition: Any, if_true: Any, if_false: Any) -> Any:

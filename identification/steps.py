@@ -38,7 +38,8 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.linalg import lapack
 from scipy.ndimage import uniform_filter1d
 
-from identification.model import RollParams, Servo, damping, servo_path, simulate
+from identification.compiled import linkage_path
+from identification.model import Linkage, RollParams, Servo, damping, servo_path, simulate
 from identification.recording import Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
@@ -535,14 +536,18 @@ def fine_grid(recording: Recording, fine_step_s: float = 0.01) -> FineGrid:
 
 
 def fin_angle_model(
-    recording: Recording, grid: FineGrid, servo: Servo | None = PAPER_SERVO
+    recording: Recording,
+    grid: FineGrid,
+    servo: Servo | None = PAPER_SERVO,
+    link: Linkage | None = None,
 ) -> tuple[FloatArray, str]:
     """Step 5: the actual fin angle θ(t) on the fine grid (eq. 23-24).
 
     With a measured fin angle (``fin_deg``) it is interpolated and no lag is
     applied.  Otherwise the commanded angle, held over each sample interval,
     is passed through the servo of eq. 23: the fin ramps at
-    ``servo.rate_limit_dps`` (150 °/s: 0.4 s per 60°) to the command.
+    ``servo.rate_limit_dps`` (150 °/s: 0.4 s per 60°) to the command -- and
+    through ``link`` where the rig states one (a lag and play behind the servo).
 
     Returns
     -------
@@ -560,8 +565,14 @@ def fin_angle_model(
     command = np.repeat(np.asarray(recording.fin_cmd_deg)[:-1], grid.per_sample)
     if servo is None:
         return np.append(command, recording.fin_cmd_deg[-1]), "commanded fin angle, no lag"
-    theta = servo_path(command, float(recording.fin_cmd_deg[0]), grid.step_s, servo)
     rate = servo.rate_limit_dps
+    if link is not None and not link.direct:
+        theta = linkage_path(command, float(recording.fin_cmd_deg[0]), grid.step_s, servo, link)
+        return theta, (
+            f"commanded fin angle through the servo of eq. 23 ({rate:g} °/s), a "
+            f"{link.lag_s:g}-s lag and {link.backlash_deg:g}° of play"
+        )
+    theta = servo_path(command, float(recording.fin_cmd_deg[0]), grid.step_s, servo)
     return theta, f"commanded fin angle through the servo lag of eq. 23 ({rate:g} °/s)"
 
 

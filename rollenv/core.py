@@ -45,9 +45,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
-from identification.compiled import piece
+from identification.compiled import linkage, piece
 from identification.methods import METHODS, has_posterior
-from identification.model import MODEL_NAMES, RollParams, Servo
+from identification.model import MODEL_NAMES, Linkage, RollParams, Servo
 from identification.reference import Effects
 from rollenv.flight import STORED_PREFIX, FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
@@ -447,6 +447,11 @@ class RollConfig:
         )
 
     @property
+    def linkage(self) -> Linkage:
+        """The fin's linkage behind the servo (:class:`~identification.model.Linkage`)."""
+        return Linkage(self.servo_lag_s, self.backlash_deg)
+
+    @property
     def servo(self) -> Servo:
         """The servo of eq. 23 with this rate limit and range."""
         return Servo(self.rate_limit_dps, self.fin_range_deg)
@@ -472,11 +477,8 @@ class RollConfig:
         cfg[Cfg.ERROR_MAX] = observation_bounds(self)[0][Obs.ERROR]
         cfg[Cfg.U_PER] = 1.0  # set by RollBatch from the bank's Δt
         cfg[Cfg.ANGLE_GYRO] = 1.0 if self.sensors and self.angle_sensor == "gyro" else 0.0
-        lag = self.servo_lag_s
-        if lag > 0.0:
-            cfg[Cfg.SERVO_DECAY] = math.exp(-self.substep_s / lag)
-            cfg[Cfg.SERVO_RAMP] = -lag * math.expm1(-self.substep_s / lag) / self.substep_s
-        cfg[Cfg.BACKLASH_HALF] = 0.5 * self.backlash_deg
+        decay, ramp, half = self.linkage.coefficients(self.substep_s)
+        cfg[Cfg.SERVO_DECAY], cfg[Cfg.SERVO_RAMP], cfg[Cfg.BACKLASH_HALF] = decay, ramp, half
         cfg[Cfg.LATENCY] = self.sensor_latency_s / self.substep_s
         return cfg
 
@@ -498,6 +500,7 @@ def config_fields() -> tuple[str, ...]:
 
 # ----------------------------------------------------------------------------- kernels
 _piece = piece  # the one closed form, compiled (identification.compiled)
+_linkage = linkage  # the one servo linkage, compiled (identification.compiled)
 
 
 def wrap_deg(angle_deg: Any) -> Any:
@@ -651,7 +654,7 @@ def _step_envs(
     decay = cfg[Cfg.SERVO_DECAY]
     ramp = cfg[Cfg.SERVO_RAMP]
     half = cfg[Cfg.BACKLASH_HALF]
-    linkage = decay > 0.0 or half > 0.0
+    linked = decay > 0.0 or half > 0.0
     delay = cfg[Cfg.LATENCY]
     late = delay > 0.0
     rows = past.shape[1]
@@ -684,16 +687,10 @@ def _step_envs(
             if u_phase == u_per:
                 u_phase = 0
                 u_index += 1
-            if linkage:
-                moved_servo = servo + min(max(command - servo, -max_move), max_move)
-                # τ·dd/dt = servo - d with the servo ramping from servo to moved_servo
-                drive = moved_servo - ramp * (moved_servo - servo) + decay * (drive - servo)
-                servo = moved_servo
-                moved = theta  # the fin moves once its drive is half the play away
-                if drive > theta + half:
-                    moved = drive - half
-                elif drive < theta - half:
-                    moved = drive + half
+            if linked:
+                servo, drive, moved = _linkage(
+                    servo, drive, theta, command, max_move, decay, ramp, half
+                )
             else:
                 moved = theta + min(max(command - theta, -max_move), max_move)
             if late:  # every substep's roll kept for the sensors: none merged

@@ -1,0 +1,205 @@
+"""The fin's linkage and the sensors' latency, identified where the data can tell them.
+
+The roll model drives the rocket by the servo of eq. 23 and reads it at once.  A
+real rig adds a lag between servo and fin, play in the linkage and late sensors
+(:class:`identification.model.Linkage`, ``RollConfig.sensor_latency_s``); a
+replay without them flatters every feedback controller
+(``docs/results/closed-loop-fidelity.md``).  :func:`identify_actuation` looks for
+each as an optional term, admitted by a likelihood-ratio test at a stated level
+so that a rig inside the model keeps the model:
+
+* **servo lag and backlash**, from a measured fin column (``fin_deg``) against
+  the command: least squares of the fin through the servo and a
+  :class:`~identification.model.Linkage` (on 1-ms steps), the residual variance
+  floored at the fin sensor's resolution; each term tested against the fit
+  without it (Gaussian likelihood ratio; a parameter on its boundary at 0, so
+  half a χ²(1) tail);
+* **sensor latency**, from the roll response: the maximum-likelihood fit with the
+  fin delayed by each candidate on the fine grid (:func:`identification.ml.delay_search`),
+  tested against no delay the same way.  Below one logging interval a latency
+  cannot be resolved, and the answer says so.
+
+A likelihood ratio assumes white residuals; a fin's residuals are not, so the
+level is a screen, not an exact size (``benchmarks/actuation.py`` measures how
+often each term is admitted on truths with and without it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, stats
+
+from identification.compiled import linkage_path
+from identification.model import Linkage, Servo
+from identification.pipeline import IdentifyOptions
+from identification.recording import Recording
+
+__all__ = ["LEVEL", "MAX_LATENCY_S", "Actuation", "Term", "fit_linkage", "identify_actuation"]
+
+#: The level at which each term is admitted.
+LEVEL = 0.01
+#: The longest sensor latency looked for, s.
+MAX_LATENCY_S = 0.1
+#: The linkage is integrated on steps of at most this, s.
+LINK_STEP_S = 0.001
+#: The fin sensor's resolution when the column does not show one, °.
+FIN_RESOLUTION_DEG = 0.01
+
+
+@dataclass(frozen=True)
+class Term:
+    """One optional term: its estimate, the likelihood-ratio statistic against the model
+    without it, the p-value, whether it is admitted, and what limits it (``note``)."""
+
+    name: str
+    value: float
+    unit: str
+    statistic: float
+    p_value: float
+    admitted: bool
+    note: str = ""
+
+    def line(self) -> str:
+        said = "admitted" if self.admitted else "not admitted"
+        tail = f"; {self.note}" if self.note else ""
+        p = "p < 1e-9" if self.p_value < 1e-9 else f"p {self.p_value:.2g}"
+        return (
+            f"{self.name:15s} {self.value:8.4g} {self.unit:2s}  LR {max(self.statistic, 0.0):9.2f}"
+            f"  {p:9s} {said}{tail}"
+        )
+
+
+@dataclass(frozen=True)
+class Actuation:
+    """What :func:`identify_actuation` found: the admitted linkage and latency (0 where a
+    term is not admitted) and every term's test."""
+
+    linkage: Linkage
+    latency_s: float
+    terms: tuple[Term, ...]
+    level: float
+
+    def lines(self) -> list[str]:
+        head = f"actuation and sensors (each term admitted at p < {self.level:g}):"
+        return [head, *(f"  {t.line()}" for t in self.terms)]
+
+    def settings(self) -> dict[str, float]:
+        """The environment's settings that replay it (``RollConfig``'s names)."""
+        return {
+            "servo_lag_s": self.linkage.lag_s,
+            "backlash_deg": self.linkage.backlash_deg,
+            "sensor_latency_s": self.latency_s,
+        }
+
+
+def _boundary_p(statistic: float) -> float:
+    """p of a likelihood ratio for one parameter on its boundary (½χ²₀ + ½χ²₁)."""
+    return 0.5 * float(stats.chi2.sf(max(statistic, 0.0), 1)) if statistic > 0.0 else 1.0
+
+
+def _resolution(fin: np.ndarray) -> float:
+    steps = np.abs(np.diff(fin))
+    steps = steps[steps > 1e-9]
+    return float(steps.min()) if steps.size else FIN_RESOLUTION_DEG
+
+
+def fit_linkage(recording: Recording, servo: Servo, level: float = LEVEL) -> tuple[Term, Term]:
+    """Servo lag and backlash from the measured fin column against the command.
+
+    Raises ``ValueError`` where the recording has no measured fin or no command.
+    """
+    if recording.fin_deg is None or recording.fin_cmd_deg is None:
+        raise ValueError(f"{recording.name}: needs both fin_cmd_deg and a measured fin_deg")
+    dt = float(np.median(np.diff(recording.time_s)))
+    per = max(1, math.ceil(dt / LINK_STEP_S - 1e-9))
+    command = np.repeat(np.asarray(recording.fin_cmd_deg, dtype=float)[:-1], per)
+    fin = np.asarray(recording.fin_deg, dtype=float)
+    floor = max(_resolution(fin), FIN_RESOLUTION_DEG) ** 2 / 12.0
+    n = fin.size
+
+    def sse(lag: float, play: float) -> float:
+        path = linkage_path(command, float(fin[0]), dt / per, servo, Linkage(lag, play))
+        r = path[::per] - fin
+        return float(r @ r) + n * floor
+
+    def fitted(free: tuple[bool, bool]) -> tuple[float, float, float]:
+        def objective(x: np.ndarray) -> float:
+            lag = abs(float(x[0])) if free[0] else 0.0
+            play = abs(float(x[1])) if free[1] else 0.0
+            return sse(min(lag, 0.5), min(play, 5.0))
+
+        best: tuple[float, float, float] | None = None
+        for start in ((0.02, 0.2), (0.1, 1.0)):
+            res = optimize.minimize(
+                objective, np.array(start), method="Nelder-Mead",
+                options={"xatol": 1e-4, "fatol": 1e-10 * n, "maxiter": 400},
+            )  # fmt: skip
+            lag = min(abs(float(res.x[0])), 0.5) if free[0] else 0.0
+            play = min(abs(float(res.x[1])), 5.0) if free[1] else 0.0
+            if best is None or res.fun < best[2]:
+                best = (lag, play, float(res.fun))
+        assert best is not None
+        return best
+
+    none = sse(0.0, 0.0)
+    lag, play, both = fitted((True, True))
+    lag_only = fitted((True, False))[2]
+    play_only = fitted((False, True))[2]
+    terms = []
+    for name, value, unit, without in (
+        ("servo lag", lag, "s", min(play_only, none)),
+        ("backlash", play, "°", min(lag_only, none)),
+    ):
+        statistic = n * math.log(without / both)
+        p = _boundary_p(statistic)
+        admitted = p < level
+        terms.append(
+            Term(name, value if admitted else 0.0, unit, statistic, p, admitted,
+                 "from the measured fin" if admitted else f"estimate {value:.3g} {unit}")
+        )  # fmt: skip
+    return terms[0], terms[1]
+
+
+def identify_actuation(
+    recording: Recording,
+    options: IdentifyOptions | None = None,
+    *,
+    model: str = "theta",
+    level: float = LEVEL,
+    max_latency_s: float = MAX_LATENCY_S,
+) -> Actuation:
+    """The linkage (from a measured fin column) and the sensors' latency (from the roll
+    response, by maximum likelihood), each admitted at ``level``."""
+    from identification.ml import delay_search, model_inputs
+
+    opts = IdentifyOptions() if options is None else options
+    servo = Servo(rate_limit_dps=opts.servo_rate_dps)
+    terms: list[Term] = []
+    link = Linkage()
+    if recording.fin_deg is not None and recording.fin_cmd_deg is not None:
+        lag, play = fit_linkage(recording, servo, level)
+        terms += [lag, play]
+        link = Linkage(lag.value, play.value)
+    else:
+        for name, unit in (("servo lag", "s"), ("backlash", "°")):
+            terms.append(
+                Term(name, 0.0, unit, 0.0, 1.0, False, "needs a measured fin column (fin_deg)")
+            )
+    inputs = model_inputs(recording, model, opts)
+    step = inputs.grid.step_s
+    found = delay_search(inputs, model, range(round(max_latency_s / step) + 1))
+    p = _boundary_p(found.statistic)
+    latency = found.delay_steps * step
+    dt = float(np.median(np.diff(recording.time_s)))
+    note = f"resolution {step:g} s"
+    if dt > step * 1.5:
+        note = f"a latency below the logging interval ({dt:g} s) cannot be resolved"
+    admitted = p < level
+    terms.append(
+        Term("sensor latency", latency if admitted else 0.0, "s", found.statistic, p, admitted,
+             note if admitted else f"estimate {latency:.3g} s; {note}")
+    )  # fmt: skip
+    return Actuation(link, latency if admitted else 0.0, tuple(terms), level)

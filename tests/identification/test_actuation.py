@@ -1,0 +1,119 @@
+"""The fin's linkage and the sensors' latency: stated by the user, identified from data.
+
+A stated lag, play or latency shapes the fin the model sees; from a measured fin
+column the servo lag and the backlash come out near the truth and stay out where
+the rig has none; the latency comes out within one logging interval and is not
+invented on a rig without one.  ``benchmarks/actuation.py`` measures the rates
+over many seeds; these are single recordings.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from identification.actuation import fit_linkage, identify_actuation
+from identification.compiled import linkage_path
+from identification.model import Linkage, Servo, servo_path
+from identification.pipeline import IdentifyOptions, measurements
+from identification.reference import Effects
+from identification.tunnel import TunnelSpec, run_tunnel
+
+
+def _short(seed: int, effects: Effects, **settings: object) -> TunnelSpec:
+    """A 100-Hz, ~35-s staircase with a 1 % gyro and a measured fin column."""
+    base: dict[str, object] = {
+        "seed": seed,
+        "log_dt": 0.01,
+        "gyro_noise": 1.0,
+        "measured_fin": True,
+        "schedule": "staircase",
+        "steps": 8,
+        "dwell_min": 3.0,
+        "dwell_max": 5.0,
+        "effects": effects,
+    }
+    return TunnelSpec(**{**base, **settings})  # type: ignore[arg-type]
+
+
+def test_without_a_linkage_the_path_is_the_servo_of_eq_23() -> None:
+    command = np.repeat([0.0, 10.0, -5.0, 30.0, 30.0, -40.0], 37)
+    servo = Servo()
+    np.testing.assert_allclose(
+        linkage_path(command, 2.0, 0.01, servo, Linkage()),
+        servo_path(command, 2.0, 0.01, servo),
+        atol=1e-12,
+    )
+    lagged = linkage_path(command, 2.0, 0.01, servo, Linkage(lag_s=0.1))
+    assert lagged[40] < servo_path(command, 2.0, 0.01, servo)[40]  # trails on the rise
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_measured_fin_gives_the_servo_lag_and_backlash_and_none_on_a_direct_rig(
+    seed: int,
+) -> None:
+    """Servo lag within 20 % and backlash within 25 % of the truth; on the paper's rig
+    (the fin is the servo) neither is admitted."""
+    servo = Servo()
+    rec = run_tunnel(_short(seed, Effects(servo_lag_s=0.05, backlash_deg=0.5)))
+    lag, play = fit_linkage(rec, servo)
+    assert lag.admitted and play.admitted
+    assert lag.value == pytest.approx(0.05, rel=0.2)
+    assert play.value == pytest.approx(0.5, rel=0.25)
+    direct = run_tunnel(_short(seed, Effects()))
+    lag, play = fit_linkage(direct, servo)
+    assert not lag.admitted and not play.admitted
+    assert lag.value == play.value == 0.0
+
+
+def test_the_latency_is_found_within_one_logging_interval_and_not_invented() -> None:
+    late = identify_actuation(run_tunnel(_short(1, Effects(latency_s=0.03))))
+    term = late.terms[-1]
+    assert term.name == "sensor latency" and term.admitted
+    assert abs(late.latency_s - 0.03) <= 0.01 + 1e-12
+    assert late.settings()["sensor_latency_s"] == late.latency_s
+    on_time = identify_actuation(run_tunnel(_short(2, Effects())))
+    assert not on_time.terms[-1].admitted and on_time.latency_s == 0.0
+    assert on_time.linkage == Linkage()
+    assert "not admitted" in on_time.lines()[-1]
+
+
+def test_without_a_measured_fin_the_linkage_is_not_looked_for() -> None:
+    with pytest.raises(ValueError, match="measured fin_deg"):
+        fit_linkage(run_tunnel(_short(1, Effects(), measured_fin=False)), Servo())
+
+
+def test_a_stated_linkage_and_latency_shape_the_fin_the_model_sees() -> None:
+    rec = run_tunnel(_short(1, Effects(), measured_fin=False))
+    plain = measurements(rec, IdentifyOptions(noise_runs=0))
+    lagged = measurements(rec, IdentifyOptions(noise_runs=0, servo_lag_s=0.1, backlash_deg=1.0))
+    assert "0.1-s lag and 1° of play" in lagged.theta_source
+    assert np.max(np.abs(lagged.theta_fine - plain.theta_fine)) > 1.0
+    late = measurements(rec, IdentifyOptions(noise_runs=0, sensor_latency_s=0.03))
+    np.testing.assert_array_equal(late.theta_fine[3:], plain.theta_fine[:-3])
+    assert "delayed 0.03 s" in late.theta_source
+    with pytest.raises(ValueError, match="sensor_latency_s"):
+        IdentifyOptions(sensor_latency_s=0.9)
+
+
+def test_identify_actuation_prints_and_writes_each_terms_test(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from identification.recording import save_recording
+    from rocketroll.cli import main
+
+    path = tmp_path / "rig.csv"
+    save_recording(run_tunnel(_short(1, Effects(servo_lag_s=0.05, backlash_deg=0.5))), path)
+    out_json = tmp_path / "fit.json"
+    argv = ["identify", str(path), "--method", "ml", "--actuation", "--json", str(out_json)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "actuation and sensors (each term admitted at p < 0.01):" in out
+    assert "servo lag" in out and "admitted; from the measured fin" in out
+    terms = json.loads(out_json.read_text())["actuation"]
+    assert terms["servo lag"]["admitted"] is True
+    assert terms["servo lag"]["value"] == pytest.approx(0.05, rel=0.2)
+    assert set(terms) == {"servo lag", "backlash", "sensor latency"}
