@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import functools
 import math
 import multiprocessing
@@ -101,13 +102,31 @@ class Rocket:
     params: RollParams
     u_d_deg: FloatArray
     effects: Effects | None = None
+    actuation: Effects | None = None  # a replay's linkage and latency (the env's settings)
+
+
+def stated(effects: Effects, factor: float) -> Effects:
+    """What a user states of the rocket's linkage and sensors: the truth's servo lag,
+    backlash and latency, each off by ``factor``."""
+    return Effects(
+        servo_lag_s=min(effects.servo_lag_s * factor, 0.5),
+        backlash_deg=min(effects.backlash_deg * factor, 5.0),
+        latency_s=min(effects.latency_s * factor, 0.5),
+    )
 
 
 def rockets_of(
-    truth: str, seed: int, methods: Sequence[str], draws: int, reference: bool = False
+    truth: str,
+    seed: int,
+    methods: Sequence[str],
+    draws: int,
+    reference: bool = False,
+    stated_factors: Sequence[float] = (),
 ) -> tuple[Rocket, dict[str, list[Rocket]]]:
     """The true rocket of one recording and, per replay, what it would replay (the true one
-    on the reference integrator where it is outside the model, or ``reference``)."""
+    on the reference integrator where it is outside the model, or ``reference``); with
+    ``stated_factors``, the posterior draws of the recording identified and replayed with
+    the linkage and latency a user states (the truth's, off by each factor)."""
     spec = spec_of(truth, seed)
     rec = run_tunnel(spec)
     if rec.ud_true_deg is None:
@@ -123,6 +142,22 @@ def rockets_of(
             replays[f"{method} posterior"] = [
                 Rocket(found.params, np.asarray(u)) for u in found.sample_posterior(draws, seed)
             ]
+    for factor in stated_factors:  # identified and replayed with what the user states
+        said = stated(spec.effects, factor)
+        options = IdentifyOptions(
+            noise_runs=0,
+            servo_lag_s=said.servo_lag_s,
+            backlash_deg=said.backlash_deg,
+            sensor_latency_s=said.latency_s,
+        )
+        told = Context(rec, options)
+        for method in methods:
+            found = fit(told, method, ["theta"])["theta"]
+            if found.sample_posterior is not None and draws:
+                replays[f"{method} posterior, stated x{factor:g}"] = [
+                    Rocket(found.params, np.asarray(u), actuation=said)
+                    for u in found.sample_posterior(draws, seed)
+                ]
     return true, replays
 
 
@@ -132,6 +167,14 @@ def env_of(config: RollConfig, rocket: Rocket) -> RocketRollEnv:
     bank = TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params)
     if rocket.effects is not None:
         return ReferenceRollEnv(config, bank, rocket.effects)
+    if rocket.actuation is not None:
+        a = rocket.actuation
+        config = dataclasses.replace(
+            config,
+            servo_lag_s=a.servo_lag_s,
+            backlash_deg=a.backlash_deg,
+            sensor_latency_s=a.latency_s,
+        )
     return env_on(config, bank)
 
 
@@ -191,10 +234,11 @@ def recording_rows(
     policies: Sequence[str],
     count: int,
     reference: bool = False,
+    stated_factors: Sequence[float] = (),
 ) -> list[dict[str, object]]:
     """Every score of one recording: per task, controller, replay and metric, the true
     score, the replayed one and their ratio (one CSV row each)."""
-    true, replays = rockets_of(truth, seed, methods, draws, reference)
+    true, replays = rockets_of(truth, seed, methods, draws, reference, stated_factors)
     length = min(r.u_d_deg.size for rs in replays.values() for r in rs)
     length = min(length, true.u_d_deg.size)
     rows: list[dict[str, object]] = []
@@ -325,7 +369,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="fly every true rocket on the independent reference integrator (with no effects "
         "it must score what the environment scores: a check of both)",
     )
+    parser.add_argument(
+        "--stated",
+        default="",
+        metavar="FACTORS",
+        help="also replay the posterior draws with the servo lag, backlash and latency a user "
+        "states: the truth's times each comma-separated factor (e.g. 0.8,1,1.2)",
+    )
     ns = parser.parse_args(argv)
+    try:
+        stated_factors = tuple(float(f) for f in ns.stated.split(",") if f.strip())
+    except ValueError:
+        parser.error(f"--stated: comma-separated numbers, got {ns.stated!r}")
+    if any(not 0.0 <= f <= 10.0 for f in stated_factors):
+        parser.error("--stated: factors in [0, 10]")
     truths = list(dict.fromkeys(ns.truth or DEFAULT_TRUTHS))
     if "all" in truths:
         truths = list(TRUTHS)
@@ -364,6 +421,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             tuple(policies),
             ns.windows,
             ns.reference,
+            stated_factors,
         )
         for truth in truths
         for seed in seeds
@@ -389,7 +447,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"\n{time.perf_counter() - began:.0f} s\n")
     replays_seen = list(dict.fromkeys(k[0] for k in ratios))
     header = (
-        f"{'replay':22s} {'task':12s} {'controller':10s} {'metric':18s} {'ratio':>7s} "
+        f"{'replay':30s} {'task':12s} {'controller':10s} {'metric':18s} {'ratio':>7s} "
         f"{'SD':>6s} {'min':>6s} {'max':>6s}  in floor"
     )
     print("replay score / true score, per recording, averaged over recordings:")
@@ -407,7 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     ok = all(low <= float(np.mean(rs)) <= high for rs in by_truth.values())
                     verdicts[replay].append((f"{task}/{policy}/{name}", ok))
                     print(
-                        f"{replay:22s} {task:12s} {policy:10s} {name:18s} {mean:7.3f} {sd:6.3f} "
+                        f"{replay:30s} {task:12s} {policy:10s} {name:18s} {mean:7.3f} {sd:6.3f} "
                         f"{lo:6.3f} {hi:6.3f}  {'yes' if ok else 'NO'}"
                     )
         print()

@@ -163,6 +163,12 @@ class IdentifyArgs:
         metavar="FLIGHT",
         input=True,
     )
+    actuation: bool = setting(
+        False,
+        "also look for what lies outside the model between command, fin and sensors: a servo "
+        "lag and backlash (from a measured fin column) and a sensor latency (from the roll "
+        "response), each admitted at p < 0.01 (a tunnel run; about 15 s a 100-Hz minute)",
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
@@ -219,8 +225,15 @@ def identify(args: IdentifyArgs) -> int:
         raise UsageError(
             f"--report: the paper's report is of a tunnel run; {args.recording} is a flight"
         )
+    if args.actuation and recording.is_flight:
+        raise UsageError(f"--actuation: looks at a tunnel run; {args.recording} is a flight")
     context = Context(recording, options, together=together)
     fits, refused = _fit_each(context, methods)
+    found = None
+    if args.actuation:
+        from identification.actuation import identify_actuation
+
+        found = identify_actuation(recording, options)
     result = context.paper if "paper" in fits else None
     outputs: dict[str | os.PathLike[str], str | bytes] = {}
     if args.json is not None:
@@ -232,6 +245,8 @@ def identify(args: IdentifyArgs) -> int:
             }
             for method, by_model in fits.items()
         }
+        if found is not None:
+            data["actuation"] = {t.name: asdict(t) for t in found.terms}
         outputs[args.json] = json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n"
     tunnel_fits = {method: f for method, f in fits.items() if not is_flight_method(method)}
     if args.report is not None and tunnel_fits:
@@ -286,6 +301,9 @@ def identify(args: IdentifyArgs) -> int:
     if tunnel or flown:
         print("\nfit adequacy (the model without u_d against the raw rate, the fin in u_d)")
         print(adequacy_table({**tunnel, **flown}))
+    if found is not None:
+        print()
+        print("\n".join(found.lines()))
     if stored:
         print(stored)
     if args.json is not None:
