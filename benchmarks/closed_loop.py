@@ -73,6 +73,7 @@ from disturbances.bank import TraceBank
 from identification.methods import METHODS, Context, fit, tunnel_methods
 from identification.model import RollParams
 from identification.pipeline import IdentifyOptions
+from identification.recording import StatedRig
 from identification.reference import Effects
 from identification.tunnel import run_tunnel
 from rocketroll_common.arrays import FloatArray
@@ -145,10 +146,7 @@ def rockets_of(
     for factor in stated_factors:  # identified and replayed with what the user states
         said = stated(spec.effects, factor)
         options = IdentifyOptions(
-            noise_runs=0,
-            servo_lag_s=said.servo_lag_s,
-            backlash_deg=said.backlash_deg,
-            sensor_latency_s=said.latency_s,
+            noise_runs=0, rig=StatedRig(said.servo_lag_s, said.backlash_deg, said.latency_s)
         )
         told = Context(rec, options)
         for method in methods:

@@ -19,7 +19,7 @@ import numpy as np
 
 from disturbances.rows import TraceRow
 from disturbances.stores import Store
-from identification.model import RollParams
+from identification.model import Rig, RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError
 from rocketroll_physics.flown import interval_means
@@ -163,6 +163,7 @@ class TraceBank:
         self._uids = [t.uid for t in self.traces]
         self._dts = np.array([t.dt_s for t in self.traces])
         self._params = [t.rocket() for t in self.traces]
+        self._rigs = tuple(t.rig for t in self.traces)
         self._sizes = np.array([a.size for a in self._arrays], dtype=np.int64)
         self._plans: dict[float, tuple[np.ndarray, np.ndarray, int]] = {}
         self._flat: tuple[FloatArray, np.ndarray] | None = None
@@ -211,8 +212,10 @@ class TraceBank:
         arrays: Sequence[FloatArray],
         dt_s: float,
         params: RollParams | None = None,
+        rig: Rig | None = None,
     ) -> TraceBank:
-        """A bank of bare arrays (tests, user-made disturbances)."""
+        """A bank of bare arrays (tests, user-made disturbances), of the rocket ``params``
+        (the paper's) on ``rig`` (the model's)."""
         from disturbances.rows import checksum, plain_statistics
         from identification.model import PAPER_THETA, model_of
         from rocketroll_common.arrays import readonly_array
@@ -243,6 +246,7 @@ class TraceBank:
                     source="synthetic",
                     split="train",
                     id=k,
+                    rig=Rig() if rig is None else rig,
                 )
             )
         return cls(traces, "the given arrays")
@@ -267,6 +271,11 @@ class TraceBank:
     def params(self) -> tuple[RollParams, ...]:
         """Each trace's parameters, in bank order."""
         return tuple(self._params)
+
+    @property
+    def rigs(self) -> tuple[Rig, ...]:
+        """Each trace's rig (its identification's linkage and latency), in bank order."""
+        return self._rigs
 
     def samples_for(self, duration_s: float) -> np.ndarray:
         """Samples a window of ``duration_s`` takes in each trace (at least one)."""

@@ -301,6 +301,10 @@ def identify(args: IdentifyArgs) -> int:
     if tunnel or flown:
         print("\nfit adequacy (the model without u_d against the raw rate, the fin in u_d)")
         print(adequacy_table({**tunnel, **flown}))
+    rig = recording.rig_with(options.rig)
+    if not rig.ideal:
+        print(f"\nthe rig assumed (stated: the recording's rig.* lines or the flags): "
+              f"{rig.describe()}")  # fmt: skip
     if found is not None:
         print()
         print("\n".join(found.lines()))

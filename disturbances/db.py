@@ -62,7 +62,7 @@ from disturbances.rows import (
 from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
 from identification.adequacy import VERDICTS
 from identification.methods import METHODS
-from identification.model import MODEL_NAMES, RollParams
+from identification.model import MODEL_NAMES, Rig, RollParams
 from identification.recording import SOURCES, Recording
 from rocketroll_common import __version__
 from rocketroll_common.arrays import FloatArray, readonly_array
@@ -751,7 +751,8 @@ class DisturbanceDB:
         "i.model, i.alpha, i.theta_bar_deg, i.beta_bar_per_s, i.alpha_bar_per_deg_s, t.dt_s, "
         "t.t0_s, t.n_samples, t.checksum, t.mean_deg, t.sd_deg, t.q05_deg, t.q95_deg, "
         "t.normality_p, i.package_version, i.verdict, t.created_at, t.validation, "
-        "i.v_ref_mps, i.rho_ref_kgm3, i.torque_exponent, i.damping_exponent "
+        "i.v_ref_mps, i.rho_ref_kgm3, i.torque_exponent, i.damping_exponent, "
+        "i.options, r.metadata AS recording_metadata "
         "FROM traces t JOIN identifications i ON i.id = t.identification_id "
         "JOIN recordings r ON r.id = i.recording_id LEFT JOIN traces s ON s.id = t.source_trace_id"
     )
@@ -790,6 +791,9 @@ class DisturbanceDB:
                 id=r["id"],
                 recording_id=r["recording_id"],
                 flight_reference=_reference(r),
+                rig=Rig.resolved(
+                    json.loads(r["options"]).get("rig") or {}, json.loads(r["recording_metadata"])
+                ),
             )
         except ChecksumError:
             raise self._corrupt(r["uid"]) from None

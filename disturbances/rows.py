@@ -32,7 +32,7 @@ import dataclasses
 import hashlib
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from types import MappingProxyType
 from typing import Any
 
@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.adequacy import VERDICTS
-from identification.model import RollParams, check_model
+from identification.model import Rig, RollParams, check_model
 from identification.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
@@ -414,6 +414,10 @@ class TraceRow(_Row):
     flight_reference : FlightReference or None
         A flight fit's reference airspeed, density and scaling, where its ``params``
         hold (None: a tunnel fit, at the tunnel's airspeed).
+    rig : Rig
+        The rig its identification assumed: the fin's linkage and the sensors' latency
+        (stated by the recording or the identification's settings; all 0 by default),
+        which a replay flies.
     """
 
     uid: str
@@ -441,6 +445,7 @@ class TraceRow(_Row):
     id: int | None = None
     recording_id: int | None = None
     flight_reference: FlightReference | None = None
+    rig: Rig = field(default_factory=Rig)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:

@@ -26,6 +26,7 @@ often each term is admitted on truths with and without it).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -35,7 +36,7 @@ from scipy import optimize, stats
 from identification.compiled import linkage_path
 from identification.model import Linkage, Servo
 from identification.pipeline import IdentifyOptions
-from identification.recording import Recording
+from identification.recording import Recording, StatedRig
 
 __all__ = ["LEVEL", "MAX_LATENCY_S", "Actuation", "Term", "fit_linkage", "identify_actuation"]
 
@@ -176,6 +177,8 @@ def identify_actuation(
     from identification.ml import delay_search, model_inputs
 
     opts = IdentifyOptions() if options is None else options
+    # What the data show, whatever the user states: the search starts from the model's rig.
+    opts = dataclasses.replace(opts, rig=StatedRig(0.0, 0.0, 0.0))
     servo = Servo(rate_limit_dps=opts.servo_rate_dps)
     terms: list[Term] = []
     link = Linkage()

@@ -26,6 +26,7 @@ import numpy as np
 from identification.recording import (
     Recording,
     RecordingError,
+    StatedRig,
     parse_number,
     read_text,
     validate_samples,
@@ -135,6 +136,7 @@ class ImportSettings:
         "by rocketroll tunnel or flight, not imported)",
     )
     notes: str | None = setting(None, "free-text notes stored in the metadata")
+    rig: StatedRig = setting(default_factory=StatedRig, flatten=True)
     split: Literal["train", "test"] | None = setting(
         None,
         "the database split the recording belongs to, stored in its metadata (default: "
@@ -434,6 +436,7 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         meta["import.site_elevation_m"] = repr(settings.site_elevation)
     if settings.notes:
         meta["notes"] = settings.notes
+    meta.update(settings.rig.metadata())  # what the user states of the rig (format 1.2)
     if settings.split is not None:
         meta["split"] = settings.split
     return Recording(

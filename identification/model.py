@@ -61,8 +61,10 @@ __all__ = [
     "MODEL_NAMES",
     "PAPER_CONSTANT",
     "PAPER_THETA",
+    "RIG_KEYS",
     "DampingModel",
     "Linkage",
+    "Rig",
     "RollParams",
     "Servo",
     "SimResult",
@@ -394,6 +396,80 @@ class Linkage:
             -self.lag_s * math.expm1(-step_s / self.lag_s) / step_s,
             0.5 * self.backlash_deg,
         )
+
+
+@dataclass(frozen=True)
+class Rig:
+    """What a rig adds between the command, the fin and the roll sensors, beyond eq. 23:
+    the fin's :class:`Linkage` (a lag and play behind the servo) and the sensors'
+    latency.  All 0 is the model's rig.  A recording states it (format 1.2's ``rig.*``
+    metadata: :data:`RIG_KEYS`), ``rocketroll identify`` takes it from there or its flags,
+    the database keeps it with each identification and the environment replays it.
+
+    Attributes
+    ----------
+    lag_s, backlash_deg : float
+        The linkage's time constant, s, and play, °.
+    latency_s : float
+        The roll sensors' delay, s.
+    """
+
+    lag_s: float = 0.0
+    backlash_deg: float = 0.0
+    latency_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, most in (("lag_s", 0.5), ("backlash_deg", 5.0), ("latency_s", 0.5)):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0.0 <= value <= most):
+                raise ValueError(f"Rig.{name} must be in [0, {most:g}], got {value!r}")
+
+    @property
+    def linkage(self) -> Linkage:
+        """The fin's linkage."""
+        return Linkage(self.lag_s, self.backlash_deg)
+
+    @property
+    def ideal(self) -> bool:
+        """Whether the rig adds nothing to the model."""
+        return self.linkage.direct and self.latency_s == 0.0
+
+    @classmethod
+    def resolved(cls, given: Mapping[str, Any], metadata: Mapping[str, Any]) -> Rig:
+        """The rig of settings ``given`` (:data:`RIG_KEYS`'s setting names; None or missing:
+        not given) over a recording's ``metadata`` (its ``rig.*`` lines), 0 where neither
+        says."""
+        values = {}
+        for field_name, (setting_name, key) in RIG_KEYS.items():
+            value = given.get(setting_name)
+            if value is None:
+                value = metadata.get(key)
+            values[field_name] = 0.0 if value is None else float(value)
+        return cls(**values)
+
+    def describe(self) -> str:
+        """E.g. ``servo lag 0.05 s, backlash 0.5°, latency 0.03 s``; ``none``."""
+        parts = [
+            f"{w} {v:g}{u}"
+            for w, v, u in (
+                ("servo lag", self.lag_s, " s"),
+                ("backlash", self.backlash_deg, "°"),
+                ("latency", self.latency_s, " s"),
+            )
+            if v
+        ]
+        return ", ".join(parts) or "none"
+
+
+#: :class:`Rig` field -> (the setting that gives it: ``rocketroll identify``'s options and
+#: the environment's, the recording's metadata key that states it).
+RIG_KEYS: Mapping[str, tuple[str, str]] = MappingProxyType(
+    {
+        "lag_s": ("servo_lag_s", "rig.servo_lag_s"),
+        "backlash_deg": ("backlash_deg", "rig.backlash_deg"),
+        "latency_s": ("sensor_latency_s", "rig.sensor_latency_s"),
+    }
+)
 
 
 def linkage_step(

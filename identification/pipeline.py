@@ -15,9 +15,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from identification.model import Linkage, RollParams, check_model, damping
+from identification.model import RollParams, check_model, damping
 from identification.noise import NoiseStudy, noise_study
-from identification.recording import Recording
+from identification.recording import Recording, StatedRig
 from identification.statistics import DisturbanceStatistics, disturbance_statistics
 from identification.steps import (
     PAPER_SERVO,
@@ -138,34 +138,7 @@ class IdentifyOptions:
         unit="s",
     )
     fine_step_s: float = setting(0.01, "δt of the interpolated velocity", gt=0.0, cli=False)
-    servo_lag_s: float = setting(
-        0.0,
-        "your rig's fin lag behind the servo (a bench test's time constant): the fin "
-        "reconstructed from the command lags it (a measured fin column has it already)",
-        flag="--servo-lag",
-        ge=0.0,
-        le=0.5,
-        unit="s",
-        metavar="S",
-    )
-    backlash_deg: float = setting(
-        0.0,
-        "your rig's play between servo and fin, for the fin reconstructed from the command",
-        flag="--backlash",
-        ge=0.0,
-        le=5.0,
-        unit="°",
-        metavar="DEG",
-    )
-    sensor_latency_s: float = setting(
-        0.0,
-        "your roll sensors' delay: the rocket they read is driven by the fin this long before",
-        flag="--sensor-latency",
-        ge=0.0,
-        le=0.5,
-        unit="s",
-        metavar="S",
-    )
+    rig: StatedRig = setting(default_factory=StatedRig, flatten=True)
     ud_interval_s: float = setting(
         0.1, "Δt over which u_d is constant", flag="--ud-interval", gt=0.0, le=600.0, unit="s"
     )
@@ -522,9 +495,9 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
     )
     grid = fine_grid(recording, options.fine_step_s)
     servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=options.servo_rate_dps)
-    link = Linkage(options.servo_lag_s, options.backlash_deg)
-    theta_fine, theta_source = fin_angle_model(recording, grid, servo, link)
-    late = round(options.sensor_latency_s / grid.step_s)
+    rig = recording.rig_with(options.rig)  # stated here, else by the recording
+    theta_fine, theta_source = fin_angle_model(recording, grid, servo, rig.linkage)
+    late = round(rig.latency_s / grid.step_s)
     if late > 0:  # what late sensors read is the rocket the fin drove that long before
         theta_fine = delayed(theta_fine, late)
         theta_source += f", delayed {late * grid.step_s:g} s (the sensors' latency)"

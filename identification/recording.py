@@ -27,6 +27,11 @@ A recording is a UTF-8 CSV file::
   A file with either says ``# format: rocketroll-recording/1.1``; a file
   without them is written as ``rocketroll-recording/1``, byte for byte as
   before, and both are read.
+* Format 1.2 adds the rig's description: ``rig.servo_lag_s``,
+  ``rig.backlash_deg`` and ``rig.sensor_latency_s`` (what the user states of
+  the fin's linkage and the roll sensors' latency, from bench tests or data
+  sheets: :class:`identification.model.Rig`), used by identification and
+  replay.  A file with any of them says ``# format: rocketroll-recording/1.2``.
 * Time strictly increasing and uniformly sampled within
   :data:`SAMPLING_RTOL` of the median interval; at least :data:`MIN_SAMPLES`
   samples; a fin angle that changes by at least :data:`MIN_FIN_CHANGE_DEG`.
@@ -41,17 +46,18 @@ import math
 import os
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.model import RollParams
+from identification.model import Rig, RollParams
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 from rocketroll_common.files import write_atomic
+from rocketroll_common.settings import check, setting
 from rocketroll_common.text import parse_number
 
 __all__ = [
@@ -60,15 +66,18 @@ __all__ = [
     "FORMAT",
     "FORMATS",
     "FORMAT_V1",
+    "FORMAT_V1_2",
     "MAX_ABS",
     "MAX_RATE_DPS",
     "MIN_FIN_CHANGE_DEG",
     "MIN_SAMPLES",
+    "RIG_METADATA",
     "SAMPLING_RTOL",
     "SOURCES",
     "STEADY_AIRSPEED_RTOL",
     "Recording",
     "RecordingError",
+    "StatedRig",
     "load_recording",
     "read_text",
     "save_recording",
@@ -79,8 +88,50 @@ __all__ = [
 FORMAT_V1 = "rocketroll-recording/1"
 #: Format 1.1: format 1 plus the flight columns :data:`FLIGHT_COLUMNS`.
 FORMAT = "rocketroll-recording/1.1"
+#: Format 1.2: format 1.1 plus the rig's description, the ``rig.*`` metadata lines
+#: (:data:`identification.model.RIG_KEYS`): what the user states of the fin's linkage and the
+#: sensors' latency.
+FORMAT_V1_2 = "rocketroll-recording/1.2"
 #: Every format this package reads.
-FORMATS = (FORMAT_V1, FORMAT)
+FORMATS = (FORMAT_V1, FORMAT, FORMAT_V1_2)
+#: The ``rig.*`` metadata keys format 1.2 adds, with their upper bounds.
+RIG_METADATA: Mapping[str, float] = MappingProxyType(
+    {"rig.servo_lag_s": 0.5, "rig.backlash_deg": 5.0, "rig.sensor_latency_s": 0.5}
+)
+
+
+@dataclass(frozen=True)
+class StatedRig:
+    """What a user states of the rig (a bench test's or data sheet's), each None where not
+    stated: the flags of ``rocketroll import-csv`` (stored in the recording's ``rig.*``
+    lines) and ``rocketroll identify`` (over the recording's own)."""
+
+    servo_lag_s: float | None = setting(
+        None, "your rig's fin lag behind the servo (a bench test's time constant)",
+        flag="--servo-lag", ge=0.0, le=RIG_METADATA["rig.servo_lag_s"], unit="s", metavar="S",
+    )  # fmt: skip
+    backlash_deg: float | None = setting(
+        None, "your rig's play between servo and fin",
+        flag="--backlash", ge=0.0, le=RIG_METADATA["rig.backlash_deg"], unit="°", metavar="DEG",
+    )  # fmt: skip
+    sensor_latency_s: float | None = setting(
+        None, "your roll sensors' delay (the rocket they read is the one of this long ago)",
+        flag="--sensor-latency", ge=0.0, le=RIG_METADATA["rig.sensor_latency_s"], unit="s",
+        metavar="S",
+    )  # fmt: skip
+
+    def __post_init__(self) -> None:
+        check(self)
+
+    def metadata(self) -> dict[str, str]:
+        """The ``rig.*`` lines of what is stated."""
+        return {
+            f"rig.{f.name}": repr(float(getattr(self, f.name)))
+            for f in fields(self)
+            if getattr(self, f.name) is not None
+        }
+
+
 SOURCES = ("synthetic", "wind-tunnel", "flight")
 
 #: Column name -> meaning.  Order here is the order in which files are written.
@@ -242,7 +293,7 @@ def validate_samples(
             path, header_line, f"missing column {'; missing column '.join(missing)}"
         )
     flight = [c for c in FLIGHT_COLUMNS if c in columns]
-    if flight and version is not None and version != FORMAT:
+    if flight and version is not None and version not in (FORMAT, FORMAT_V1_2):
         raise RecordingError(
             path,
             header_line,
@@ -406,13 +457,18 @@ def metadata_problem(key: str, value: str) -> str | None:
         return f"metadata 'split' must be 'train' or 'test', not {value!r}"
     if key == "seed" and not (value.isascii() and value.isdigit()):
         return f"metadata 'seed' must be a non-negative integer, not {value!r}"
-    if key.startswith(("truth.", "sensor.")) and key not in TEXT_KEYS:
+    if key.startswith("rig.") and key not in RIG_METADATA:
+        return f"unknown rig metadata {key!r}; known: {', '.join(RIG_METADATA)}"
+    if key.startswith(("truth.", "sensor.", "rig.")) and key not in TEXT_KEYS:
         try:
             number = parse_number(value)
         except ValueError:
             return f"metadata {key!r} must be a number, not {value!r}"
         if not math.isfinite(number):
             return f"metadata {key!r} must be finite, not {value!r}"
+        most = RIG_METADATA.get(key)
+        if most is not None and not 0.0 <= number <= most:
+            return f"metadata {key!r} must be in [0, {most:g}], not {value!r}"
     return None
 
 
@@ -497,8 +553,22 @@ class Recording:
 
     @property
     def format(self) -> str:
-        """The format the file is written in: :data:`FORMAT_V1` unless it has flight columns."""
+        """The format the file is written in: :data:`FORMAT_V1_2` with a rig's description,
+        else :data:`FORMAT` with flight columns, else :data:`FORMAT_V1`."""
+        if any(key in self.metadata for key in RIG_METADATA):
+            return FORMAT_V1_2
         return FORMAT_V1 if self.airspeed_mps is None else FORMAT
+
+    @property
+    def rig(self) -> Rig:
+        """The rig the recording states (its ``rig.*`` lines; all 0 where it states none)."""
+        return Rig.resolved({}, self.metadata)
+
+    def rig_with(self, stated: StatedRig) -> Rig:
+        """The rig with what ``stated`` gives, the recording's own lines for the rest."""
+        return Rig.resolved(
+            {f.name: getattr(stated, f.name) for f in fields(stated)}, self.metadata
+        )
 
     @property
     def is_flight(self) -> bool:
@@ -687,7 +757,15 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         raise RecordingError(
             name,
             meta_lines["format"],
-            f"unsupported format {fmt!r}; this package reads {' and '.join(FORMATS)}",
+            f"unsupported format {fmt!r}; this package reads {', '.join(FORMATS)}",
+        )
+    stated = [key for key in meta if key in RIG_METADATA]
+    if stated and fmt is not None and fmt != FORMAT_V1_2:
+        raise RecordingError(
+            name,
+            meta_lines[stated[0]],
+            f"metadata {stated[0]!r} is format 1.2: the file must say '# format: "
+            f"{FORMAT_V1_2}', not {fmt!r}",
         )
     source = meta.pop("source", None)
     if source is None:

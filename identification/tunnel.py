@@ -74,7 +74,7 @@ from identification.model import (
     Servo,
     simulate,
 )
-from identification.recording import Recording, metadata_items
+from identification.recording import Recording, StatedRig, metadata_items
 from identification.reference import Effects, gust_factor, gust_stream, simulate_reference
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, parse, setting, to_argv
@@ -576,6 +576,11 @@ class TunnelSpec:
         unit="%",
     )
     measured_fin: bool = setting(False, "add the actual (measured) fin angle column fin_deg")
+    state_rig: bool = setting(
+        False,
+        "the recording states its rig as a user who measured it would (format 1.2's rig.* "
+        "lines: the truth's servo lag, backlash and sensor latency)",
+    )
     name: str | None = setting(None, "recording name (default tunnel-<schedule>-seed<N>)")
     split: Literal["train", "test"] | None = setting(
         None,
@@ -833,6 +838,9 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         meta.append(("sensor.gyro_noise_pct", spec.gyro_noise))
     if spec.split is not None:
         meta.append(("split", spec.split))
+    if spec.state_rig:
+        stated = StatedRig(effects.servo_lag_s, effects.backlash_deg, effects.latency_s)
+        meta += list(stated.metadata().items())
     return Recording(
         name=spec.default_name(),
         source="synthetic",

@@ -47,13 +47,13 @@ from numpy.typing import NDArray
 from disturbances.bank import TraceBank
 from identification.compiled import linkage, piece
 from identification.methods import METHODS, has_posterior
-from identification.model import MODEL_NAMES, Linkage, RollParams, Servo
-from identification.reference import Effects
+from identification.model import MODEL_NAMES, RIG_KEYS, Rig, RollParams, Servo
 from rollenv.flight import STORED_PREFIX, FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
     OBSERVATION_NAMES,
     Cfg,
     Cursor,
+    Link,
     Obs,
     Param,
     Scale,
@@ -196,13 +196,16 @@ class RollConfig:
     rate_weight, fin_weight : float
         Reward weights of the roll-rate term (angle task only) and the fin
         travel term.
-    servo_lag_s, backlash_deg : float
+    servo_lag_s, backlash_deg : float or None
         The fin's linkage beyond eq. 23's servo: a first-order lag of the fin
         behind the rate-limited servo (time constant, s) and play between them
         (°, the fin stays put until its drive is half of it away); 0 is none.
-    sensor_latency_s : float
+    sensor_latency_s : float or None
         Delay of the roll sensors (encoder and gyro): they read the rocket as it
-        was this long ago, s; 0 is none.
+        was this long ago, s; 0 is none.  For each of the three, None (the
+        default) is each rocket's own: the rig its identification assumed (the
+        recording's ``rig.*`` or ``rocketroll identify``'s flags;
+        :class:`identification.model.Rig`), none for a rocket without one.
     """
 
     task: str = "angle"
@@ -235,9 +238,9 @@ class RollConfig:
     rate_scale_dps: float = 10.0
     rate_weight: float = 0.1
     fin_weight: float = 0.1
-    servo_lag_s: float = 0.0
-    backlash_deg: float = 0.0
-    sensor_latency_s: float = 0.0
+    servo_lag_s: float | None = None
+    backlash_deg: float | None = None
+    sensor_latency_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.disturbance is None:
@@ -312,9 +315,13 @@ class RollConfig:
         if self.encoder_counts < 0:
             raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
         try:
-            self.actuation  # noqa: B018  (the bounds of Effects: one home for them)
+            self.rig_of(Rig())  # the bounds of Rig: one home for them
         except ValueError as exc:
-            raise ValueError(str(exc).replace("latency_s", "sensor_latency_s")) from None
+            names = {f"Rig.{f}": setting for f, (setting, _) in RIG_KEYS.items()}
+            message = str(exc)
+            for field_name, setting_name in names.items():
+                message = message.replace(field_name, setting_name)
+            raise ValueError(message) from None
         try:
             METHODS.check(self.method)
         except ValueError as exc:
@@ -436,20 +443,14 @@ class RollConfig:
         encoder = self.sensors and self.encoder_counts and self.angle_sensor == "encoder"
         return 360.0 / self.encoder_counts if encoder else 0.0
 
-    @property
-    def actuation(self) -> Effects:
-        """The fin's linkage and the sensors' latency as the reference integrator's
-        :class:`~identification.reference.Effects` (what the kernel adds to eq. 23)."""
-        return Effects(
-            servo_lag_s=self.servo_lag_s,
-            backlash_deg=self.backlash_deg,
-            latency_s=self.sensor_latency_s,
-        )
-
-    @property
-    def linkage(self) -> Linkage:
-        """The fin's linkage behind the servo (:class:`~identification.model.Linkage`)."""
-        return Linkage(self.servo_lag_s, self.backlash_deg)
+    def rig_of(self, own: Rig) -> Rig:
+        """The rig a rocket whose own is ``own`` flies here: each setting given, else its own."""
+        given = {setting: getattr(self, setting) for setting, _ in RIG_KEYS.values()}
+        values = {
+            f: (getattr(own, f) if given[setting] is None else given[setting])
+            for f, (setting, _) in RIG_KEYS.items()
+        }
+        return Rig(**values)
 
     @property
     def servo(self) -> Servo:
@@ -477,10 +478,15 @@ class RollConfig:
         cfg[Cfg.ERROR_MAX] = observation_bounds(self)[0][Obs.ERROR]
         cfg[Cfg.U_PER] = 1.0  # set by RollBatch from the bank's Δt
         cfg[Cfg.ANGLE_GYRO] = 1.0 if self.sensors and self.angle_sensor == "gyro" else 0.0
-        decay, ramp, half = self.linkage.coefficients(self.substep_s)
-        cfg[Cfg.SERVO_DECAY], cfg[Cfg.SERVO_RAMP], cfg[Cfg.BACKLASH_HALF] = decay, ramp, half
-        cfg[Cfg.LATENCY] = self.sensor_latency_s / self.substep_s
         return cfg
+
+    def link_row(self, own: Rig) -> FloatArray:
+        """The kernel's :class:`~rollenv.layout.Link` row of a rocket whose rig is ``own``."""
+        rig = self.rig_of(own)
+        row = np.zeros(len(Link))
+        row[Link.DECAY], row[Link.RAMP], row[Link.HALF] = rig.linkage.coefficients(self.substep_s)
+        row[Link.LATENCY] = rig.latency_s / self.substep_s
+        return row
 
 
 def observation_bounds(config: RollConfig) -> tuple[FloatArray, FloatArray]:
@@ -619,6 +625,7 @@ def _step_envs(
     reward: FloatArray,
     error: FloatArray,
     u_now: FloatArray,
+    link: FloatArray,
     past: FloatArray,
 ) -> None:
     """Advance the envs in ``index`` by one control step.
@@ -633,15 +640,15 @@ def _step_envs(
     sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new state,
     the step plus one, observation, reward, true error and the last ``u_d``.
 
-    With a linkage (:attr:`Cfg.SERVO_DECAY` or :attr:`Cfg.BACKLASH_HALF` above 0)
-    the servo moves at its rate limit towards the command, the fin's drive follows
-    it through the first-order lag (exact for the servo's ramp over the substep)
-    and the fin its drive through the play; the fin moves linearly over each
-    substep as without.
-    With a sensor latency every substep's rate and angle go into the ring
-    ``past[i]`` (row ``g % rows`` for substep ``g`` of the episode) and the sensors
-    read the rocket :attr:`Cfg.LATENCY` substeps ago, linearly between substeps.
-    Either off, the step is the model's and its arithmetic today's.
+    ``link[i]`` is env ``i``'s rig (:class:`~rollenv.layout.Link`).  With a linkage
+    (a decay or half a play above 0) the servo moves at its rate limit towards the
+    command, the fin's drive follows it through the first-order lag (exact for the
+    servo's ramp over the substep) and the fin its drive through the play; the fin
+    moves linearly over each substep as without.  With a sensor latency every
+    substep's rate and angle go into the ring ``past[i]`` (row ``g % rows`` for
+    substep ``g`` of the episode) and the sensors read the rocket that many substeps
+    ago, linearly between substeps.  Either off, the step is the model's and its
+    arithmetic today's.
     """
     n_sub = int(cfg[Cfg.SUBSTEPS])
     h = cfg[Cfg.H]
@@ -651,15 +658,15 @@ def _step_envs(
     u_per = int(cfg[Cfg.U_PER])
     period = int(cfg[Cfg.SETPOINT_PERIOD])
     last_sp = setpoints.shape[1] - 1
-    decay = cfg[Cfg.SERVO_DECAY]
-    ramp = cfg[Cfg.SERVO_RAMP]
-    half = cfg[Cfg.BACKLASH_HALF]
-    linked = decay > 0.0 or half > 0.0
-    delay = cfg[Cfg.LATENCY]
-    late = delay > 0.0
     rows = past.shape[1]
     for k in numba.prange(index.size):
         i = index[k]
+        decay = link[i, Link.DECAY]
+        ramp = link[i, Link.RAMP]
+        half = link[i, Link.HALF]
+        linked = decay > 0.0 or half > 0.0
+        delay = link[i, Link.LATENCY]
+        late = delay > 0.0
         step = cursor[i, Cursor.STEP]
         row = cursor[i, Cursor.SCALE_START] + step * cursor[i, Cursor.SCALE_STRIDE]
         gain = scales[row, Scale.GAIN]
@@ -853,9 +860,12 @@ class RollBatch:
         self.reward = np.zeros(n)
         self.error = np.zeros(n)
         self.u_now = np.zeros(n)
-        # The sensors' ring of past substeps (rate, angle), as deep as their latency needs
-        # (see _step_envs); one unused row without a latency.
-        delay = float(self.cfg[Cfg.LATENCY])
+        # Each trace's rocket's rig as the kernel reads it (Link columns), each env's now;
+        # the sensors' ring of past substeps (rate, angle), as deep as the longest latency
+        # needs (see _step_envs); one unused row without a latency.
+        self.trace_link = np.array([config.link_row(r) for r in bank.rigs])
+        self.link = np.zeros((n, len(Link)))
+        delay = float(self.trace_link[:, Link.LATENCY].max())
         self.past = np.zeros((n, math.ceil(delay) + 2 if delay > 0.0 else 1, 2))
         self.parallel = bool(parallel)
         self._noisy = bool(self.cfg[Cfg.GYRO_ETA] > 0.0)
@@ -919,6 +929,7 @@ class RollBatch:
             starts = np.full(m, window.start, dtype=np.int64)
         self.trace[index] = traces
         self.start[index] = starts
+        self.link[index] = self.trace_link[traces]
         self.u_start[index] = self.u_offsets[traces] + starts
         if cfg.domain_randomization:
             self.params[index] = self._randomized_params(rng, m)
@@ -992,6 +1003,7 @@ class RollBatch:
             self.reward,
             self.error,
             self.u_now,
+            self.link,
             self.past,
         )
 
@@ -1119,6 +1131,7 @@ class RollBatch:
             raise ValueError("copy_env needs two batches over the same bank")
         self.state[index] = source.state[i]
         self.past[index] = source.past[i]
+        self.link[index] = source.link[i]
         self.params[index] = source.params[i]
         self.trace[index] = source.trace[i]
         self.start[index] = source.start[i]

@@ -14,6 +14,8 @@ checks that they agree.
   parameters (a rocket that changes during an episode, e.g. with airspeed);
 * :class:`Cursor` -- columns of :attr:`RollBatch.cursor`: where each env is
   in its episode and in its ``u_d`` and multiplier sequences;
+* :class:`Link` -- columns of :attr:`RollBatch.link <rollenv.core.RollBatch.link>`,
+  each env's rig (the fin's linkage and the sensors' latency);
 * :class:`Cfg` -- the scalars of :meth:`RollConfig.kernel_settings
   <rollenv.core.RollConfig.kernel_settings>`.
 """
@@ -34,6 +36,7 @@ __all__ = [
     "PARAM_FIELDS",
     "Cfg",
     "Cursor",
+    "Link",
     "Obs",
     "Param",
     "Scale",
@@ -151,7 +154,13 @@ class Cfg(IntEnum):
     ERROR_MAX = 15  #: bound of the observed error
     U_PER = 16  #: substeps per u_d sample (set by the bank)
     ANGLE_GYRO = 17  #: 1: the angle is the integrated gyro (flight), 0: the encoder
-    SERVO_DECAY = 18  #: exp(-δt/τ) of the fin's drive lagging the servo (0: no lag)
-    SERVO_RAMP = 19  #: τ·(1 - exp(-δt/τ))/δt, the drive's lag behind a servo ramp (0: no lag)
-    BACKLASH_HALF = 20  #: half the play between drive and fin, ° (0: none)
-    LATENCY = 21  #: the roll sensors' delay, substeps (0: none)
+
+
+class Link(IntEnum):
+    """Columns of :attr:`RollBatch.link <rollenv.core.RollBatch.link>`: each env's rig
+    (:class:`identification.model.Rig`) as the kernel reads it."""
+
+    DECAY = 0  #: exp(-δt/τ) of the fin's drive lagging the servo (0: no lag)
+    RAMP = 1  #: τ·(1 - exp(-δt/τ))/δt, the drive's lag behind a servo ramp (0: no lag)
+    HALF = 2  #: half the play between drive and fin, ° (0: none)
+    LATENCY = 3  #: the roll sensors' delay, substeps (0: none)

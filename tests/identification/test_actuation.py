@@ -17,8 +17,9 @@ import pytest
 
 from identification.actuation import fit_linkage, identify_actuation
 from identification.compiled import linkage_path
-from identification.model import Linkage, Servo, servo_path
+from identification.model import Linkage, Rig, Servo, servo_path
 from identification.pipeline import IdentifyOptions, measurements
+from identification.recording import StatedRig
 from identification.reference import Effects
 from identification.tunnel import TunnelSpec, run_tunnel
 
@@ -89,14 +90,14 @@ def test_without_a_measured_fin_the_linkage_is_not_looked_for() -> None:
 def test_a_stated_linkage_and_latency_shape_the_fin_the_model_sees() -> None:
     rec = run_tunnel(_short(1, Effects(), measured_fin=False))
     plain = measurements(rec, IdentifyOptions(noise_runs=0))
-    lagged = measurements(rec, IdentifyOptions(noise_runs=0, servo_lag_s=0.1, backlash_deg=1.0))
+    lagged = measurements(rec, IdentifyOptions(noise_runs=0, rig=StatedRig(0.1, 1.0)))
     assert "0.1-s lag and 1° of play" in lagged.theta_source
     assert np.max(np.abs(lagged.theta_fine - plain.theta_fine)) > 1.0
-    late = measurements(rec, IdentifyOptions(noise_runs=0, sensor_latency_s=0.03))
+    late = measurements(rec, IdentifyOptions(noise_runs=0, rig=StatedRig(sensor_latency_s=0.03)))
     np.testing.assert_array_equal(late.theta_fine[3:], plain.theta_fine[:-3])
     assert "delayed 0.03 s" in late.theta_source
     with pytest.raises(ValueError, match="sensor_latency_s"):
-        IdentifyOptions(sensor_latency_s=0.9)
+        StatedRig(sensor_latency_s=0.9)
 
 
 def test_identify_actuation_prints_and_writes_each_terms_test(
@@ -117,3 +118,51 @@ def test_identify_actuation_prints_and_writes_each_terms_test(
     assert terms["servo lag"]["admitted"] is True
     assert terms["servo lag"]["value"] == pytest.approx(0.05, rel=0.2)
     assert set(terms) == {"servo lag", "backlash", "sensor latency"}
+
+
+def test_a_recording_states_its_rig_in_format_1_2_and_older_files_still_read(
+    tmp_path: Path,
+) -> None:
+    from identification.recording import (
+        FORMAT_V1,
+        FORMAT_V1_2,
+        RecordingError,
+        load_recording,
+        save_recording,
+    )
+
+    spec = _short(1, Effects(servo_lag_s=0.05, latency_s=0.03), state_rig=True)
+    rec = run_tunnel(spec)
+    assert rec.format == FORMAT_V1_2
+    assert rec.rig == Rig(lag_s=0.05, latency_s=0.03)
+    path = tmp_path / "rig.csv"
+    save_recording(rec, path)
+    text = path.read_text(encoding="utf-8")
+    assert text.startswith(f"# format: {FORMAT_V1_2}\n") and "# rig.servo_lag_s: 0.05\n" in text
+    assert load_recording(path).rig == rec.rig
+    # identify's flags over the recording's lines, each on its own
+    assert rec.rig_with(StatedRig(backlash_deg=1.0)) == Rig(0.05, 1.0, 0.03)
+    plain = run_tunnel(_short(1, Effects()))
+    assert plain.format == FORMAT_V1 and plain.rig == Rig()
+    older = tmp_path / "older.csv"
+    older.write_text(text.replace(FORMAT_V1_2, FORMAT_V1), encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"'rig.servo_lag_s' is format 1\.2"):
+        load_recording(older)
+    wrong = tmp_path / "wrong.csv"
+    wrong.write_text(text.replace("# rig.servo_lag_s: 0.05", "# rig.servo_lag_s: 2"), "utf-8")
+    with pytest.raises(RecordingError, match=r"must be in \[0, 0\.5\]"):
+        load_recording(wrong)
+
+
+def test_import_csv_stores_what_the_user_states_of_the_rig(tmp_path: Path) -> None:
+    from identification.recording import load_recording
+    from rocketroll.cli import main
+
+    source = tmp_path / "log.csv"
+    rows = [f"{(k // 20) % 2 * 10},{k * 0.5}" for k in range(80)]
+    source.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    out = tmp_path / "rec.csv"
+    argv = ["import-csv", str(source), "--out", str(out), "--columns", "fin_cmd,roll"]
+    argv += ["--no-header", "--rate", "10", "--servo-lag", "0.04", "--sensor-latency", "0.02"]
+    assert main(argv) == 0
+    assert load_recording(out).rig == Rig(lag_s=0.04, latency_s=0.02)

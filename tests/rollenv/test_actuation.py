@@ -9,7 +9,6 @@ copy the sensors' past with the state.
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from identification.model import Rig
 from identification.reference import Effects
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
@@ -66,7 +66,9 @@ def test_the_kernel_flies_the_reference_integrators_linkage_and_latency(
         backlash_deg=effects.backlash_deg,
         sensor_latency_s=effects.latency_s,
     )
-    assert kernel.config.actuation == dataclasses.replace(effects)
+    assert kernel.config.rig_of(Rig()) == Rig(
+        effects.servo_lag_s, effects.backlash_deg, effects.latency_s
+    )
     options = {"trace": 0, "start": 0}
     reference.reset(seed=0, options=options)
     kernel.reset(seed=0, options=options)
@@ -152,9 +154,9 @@ def test_a_predictor_copies_the_sensors_past_with_the_state() -> None:
 @pytest.mark.parametrize(
     ("name", "value", "says"),
     [
-        ("servo_lag_s", -0.1, "servo_lag_s: must be in [0, 0.5] s"),
-        ("backlash_deg", 9.0, "backlash_deg: must be in [0, 5] °"),
-        ("sensor_latency_s", 0.7, "sensor_latency_s: must be in [0, 0.5] s"),
+        ("servo_lag_s", -0.1, "servo_lag_s must be in [0, 0.5], got -0.1"),
+        ("backlash_deg", 9.0, "backlash_deg must be in [0, 5], got 9.0"),
+        ("sensor_latency_s", 0.7, "sensor_latency_s must be in [0, 0.5], got 0.7"),
     ],
 )
 def test_linkage_and_latency_out_of_range_are_refused_by_name(
@@ -163,3 +165,60 @@ def test_linkage_and_latency_out_of_range_are_refused_by_name(
     with pytest.raises(ValueError, match=re.escape(says)):
         settings: dict[str, Any] = {name: value}
         RollConfig(**settings)
+
+
+def test_each_rocket_flies_its_own_rig_unless_the_settings_give_one() -> None:
+    """A bank's rocket carries the rig its identification assumed (``TraceBank.rigs``); by
+    default each env flies its rocket's, a setting given overrides it for all, and 0 turns
+    it off -- which is the ideal rocket bit for bit."""
+    from disturbances.bank import TraceBank
+
+    ideal = array_bank()
+    u = ideal.traces[0].samples()
+    rigged = TraceBank.from_arrays(
+        [u], ideal.traces[0].dt_s, ideal.params[0], rig=Rig(0.05, 0.5, 0.03)
+    )
+    options = {"trace": 0, "start": 0}
+    own = RocketRollEnv(bank=rigged, sensors=False)
+    told = _env(servo_lag_s=0.05, backlash_deg=0.5, sensor_latency_s=0.03)
+    off = RocketRollEnv(
+        bank=rigged, sensors=False, servo_lag_s=0.0, backlash_deg=0.0, sensor_latency_s=0.0
+    )
+    plain = _env()
+    for env in (own, told, off, plain):
+        env.reset(seed=0, options=options)
+    for a in _actions(40):
+        obs_own, *_ = own.step(np.array([a]))
+        obs_told, *_ = told.step(np.array([a]))
+        obs_off, *_ = off.step(np.array([a]))
+        obs_plain, *_ = plain.step(np.array([a]))
+        np.testing.assert_array_equal(obs_own, obs_told)
+        np.testing.assert_array_equal(obs_off, obs_plain)
+    assert not np.array_equal(obs_own, obs_plain)
+    assert own.core.link[0].tolist() == told.core.link[0].tolist()
+
+
+def test_a_stated_rig_goes_from_the_recording_through_the_database_into_the_replay(
+    tmp_path: Path,
+) -> None:
+    """The tunnel's recording states its rig (format 1.2); its identification in the
+    database keeps it; an environment replaying that recording flies it (posterior draws
+    and all), unless its settings give another."""
+    from disturbances.db import DisturbanceDB
+    from disturbances.ingest import add_recording
+    from identification.pipeline import IdentifyOptions
+    from identification.tunnel import TunnelSpec, run_tunnel
+
+    effects = Effects(servo_lag_s=0.05, backlash_deg=0.5, latency_s=0.03)
+    rec = run_tunnel(TunnelSpec(seed=3, effects=effects, state_rig=True, split="train"))
+    path = tmp_path / "rig.sqlite"
+    with DisturbanceDB(path, create=True) as db:
+        add_recording(db, rec, IdentifyOptions(noise_runs=0), methods=["ml"], posterior=2)
+    stated = Rig(0.05, 0.5, 0.03)
+    env = RocketRollEnv(db=path, recording=rec.name, disturbance="posterior")
+    assert set(env.bank.rigs) == {stated}
+    env.reset(seed=0)
+    assert env.core.link[0].tolist() == env.config.link_row(stated).tolist()
+    overridden = RocketRollEnv(db=path, recording=rec.name, sensor_latency_s=0.0)
+    overridden.reset(seed=0)
+    assert overridden.core.link[0].tolist() == env.config.link_row(Rig(0.05, 0.5)).tolist()
