@@ -70,10 +70,11 @@ from agents.base import Controller, EpisodeSpec
 from agents.evaluate import HEADLINE, env_on, metrics, run_episode
 from agents.registry import make_controller
 from disturbances.bank import TraceBank
+from identification.actuation import identify_actuation
 from identification.methods import METHODS, Context, fit, tunnel_methods
-from identification.model import RollParams
+from identification.model import Rig, RollParams
 from identification.pipeline import IdentifyOptions
-from identification.recording import StatedRig
+from identification.recording import Recording, StatedRig
 from identification.reference import Effects
 from identification.tunnel import run_tunnel
 from rocketroll_common.arrays import FloatArray
@@ -96,24 +97,40 @@ DEFAULT_TRUTHS = ("paper", "negative", "rising", "staircase-laplace")
 
 @dataclass(frozen=True)
 class Rocket:
-    """One replayable rocket: parameters and a ``u_d`` trace held per 0.1 s; ``effects``
+    """One replayable rocket: parameters and a ``u_d`` trace held per ``dt_s``; ``effects``
     where it is a true rocket outside the model (or checked on the reference integrator),
-    which :class:`_reference_env.ReferenceRollEnv` flies."""
+    which :class:`_reference_env.ReferenceRollEnv` flies; ``rig`` a replay's linkage and
+    latency (the environment's own, as the database would give it)."""
 
     params: RollParams
     u_d_deg: FloatArray
     effects: Effects | None = None
-    actuation: Effects | None = None  # a replay's linkage and latency (the env's settings)
+    rig: Rig | None = None
+    dt_s: float = 0.1
 
 
-def stated(effects: Effects, factor: float) -> Effects:
+def stated(effects: Effects, factor: float) -> Rig:
     """What a user states of the rocket's linkage and sensors: the truth's servo lag,
     backlash and latency, each off by ``factor``."""
-    return Effects(
-        servo_lag_s=min(effects.servo_lag_s * factor, 0.5),
-        backlash_deg=min(effects.backlash_deg * factor, 5.0),
-        latency_s=min(effects.latency_s * factor, 0.5),
+    return Rig(
+        min(effects.servo_lag_s * factor, 0.5),
+        min(effects.backlash_deg * factor, 5.0),
+        min(effects.latency_s * factor, 0.5),
     )
+
+
+def _posterior(rec: Recording, method: str, rig: Rig, draws: int, seed: int) -> list[Rocket] | None:
+    """The posterior draws of ``method`` on ``rec`` identified with the fin ``rig`` shapes,
+    each replayed on that rig (None: the method has no posterior)."""
+    said = StatedRig(rig.lag_s, rig.backlash_deg, rig.latency_s)
+    found = fit(Context(rec, IdentifyOptions(noise_runs=0, rig=said)), method, ["theta"])["theta"]
+    if found.sample_posterior is None or not draws:
+        return None
+    dt = found.disturbance.interval_s
+    return [
+        Rocket(found.params, np.asarray(u), rig=rig, dt_s=dt)
+        for u in found.sample_posterior(draws, seed)
+    ]
 
 
 def rockets_of(
@@ -123,71 +140,69 @@ def rockets_of(
     draws: int,
     reference: bool = False,
     stated_factors: Sequence[float] = (),
+    hz: float | None = None,
+    identified: bool = False,
 ) -> tuple[Rocket, dict[str, list[Rocket]]]:
     """The true rocket of one recording and, per replay, what it would replay (the true one
     on the reference integrator where it is outside the model, or ``reference``); with
     ``stated_factors``, the posterior draws of the recording identified and replayed with
-    the linkage and latency a user states (the truth's, off by each factor)."""
+    the linkage and latency a user states (the truth's, off by each factor); with
+    ``identified``, with what :func:`identification.actuation.identify_actuation` finds.
+    ``hz``: the recording logged at this rate with a 1 % gyro and a measured fin (default:
+    the truth's own, the paper's 10-Hz encoder)."""
     spec = spec_of(truth, seed)
+    if hz is not None:
+        spec = dataclasses.replace(spec, log_dt=1.0 / hz, gyro_noise=1.0, measured_fin=True)
     rec = run_tunnel(spec)
     if rec.ud_true_deg is None:
         raise RuntimeError(f"{truth} seed {seed}: no true u_d")
     effects = spec.effects if (spec.effects.any or reference) else None
-    true = Rocket(spec.params(), np.asarray(rec.ud_true_deg[:-1], dtype=float), effects)
+    u_true = np.asarray(rec.ud_true_deg[:-1], dtype=float)
+    true = Rocket(spec.params(), u_true, effects, dt_s=spec.log_dt)
     context = Context(rec, IdentifyOptions(noise_runs=0))
     replays: dict[str, list[Rocket]] = {}
     for method in methods:
         found = fit(context, method, ["theta"])["theta"]
-        replays[method] = [Rocket(found.params, np.asarray(found.disturbance.u_d_deg))]
+        dt = found.disturbance.interval_s
+        replays[method] = [Rocket(found.params, np.asarray(found.disturbance.u_d_deg), dt_s=dt)]
         if found.sample_posterior is not None and draws:
             replays[f"{method} posterior"] = [
-                Rocket(found.params, np.asarray(u)) for u in found.sample_posterior(draws, seed)
+                Rocket(found.params, np.asarray(u), dt_s=dt)
+                for u in found.sample_posterior(draws, seed)
             ]
-    for factor in stated_factors:  # identified and replayed with what the user states
-        said = stated(spec.effects, factor)
-        options = IdentifyOptions(
-            noise_runs=0, rig=StatedRig(said.servo_lag_s, said.backlash_deg, said.latency_s)
-        )
-        told = Context(rec, options)
+    rigs = {f"stated x{f:g}": stated(spec.effects, f) for f in stated_factors}
+    if identified:
+        rigs["identified"] = identify_actuation(rec).rig
+    for label, rig in rigs.items():  # identified and replayed on the rig stated or found
         for method in methods:
-            found = fit(told, method, ["theta"])["theta"]
-            if found.sample_posterior is not None and draws:
-                replays[f"{method} posterior, stated x{factor:g}"] = [
-                    Rocket(found.params, np.asarray(u), actuation=said)
-                    for u in found.sample_posterior(draws, seed)
-                ]
+            drawn = _posterior(rec, method, rig, draws, seed)
+            if drawn is not None:
+                replays[f"{method} posterior, {label}"] = drawn
     return true, replays
 
 
 def env_of(config: RollConfig, rocket: Rocket) -> RocketRollEnv:
     """The environment of ``config`` replaying one rocket (on the reference integrator, with
     its effects, where it has them)."""
-    bank = TraceBank.from_arrays([rocket.u_d_deg], config.dt_s, rocket.params)
+    bank = TraceBank.from_arrays([rocket.u_d_deg], rocket.dt_s, rocket.params, rig=rocket.rig)
     if rocket.effects is not None:
         return ReferenceRollEnv(config, bank, rocket.effects)
-    if rocket.actuation is not None:
-        a = rocket.actuation
-        config = dataclasses.replace(
-            config,
-            servo_lag_s=a.servo_lag_s,
-            backlash_deg=a.backlash_deg,
-            sensor_latency_s=a.latency_s,
-        )
     return env_on(config, bank)
 
 
 def windows(
     config: RollConfig, true: Rocket, length: int, count: int, seed: int
 ) -> list[EpisodeSpec]:
-    """``count`` episode windows spread over the first ``length`` samples, each with the
-    setpoints the true env draws for it."""
+    """``count`` episode windows spread over the first ``length`` control steps, each with
+    the setpoints the true env draws for it (``start``: in control steps)."""
     env = env_of(config, true)
     uid = env.bank.traces[0].uid
     span = length - config.max_episode_steps - 1
     starts = np.linspace(0, span, count).astype(int)
     specs = []
     for i, start in enumerate(starts.tolist()):
-        env.reset(seed=seed * 1000 + i, options={"trace": uid, "start": start})
+        own = round(start * config.dt_s / true.dt_s)
+        env.reset(seed=seed * 1000 + i, options={"trace": uid, "start": own})
         options = env.replay_options()
         specs.append(EpisodeSpec(i, seed * 1000 + i, uid, start, tuple(options["setpoints"])))
     env.close()
@@ -202,8 +217,9 @@ def score(
     uid = env.bank.traces[0].uid
     totals = dict.fromkeys(SCORES, 0.0)
     for spec in specs:
+        own = round(spec.start * config.dt_s / rocket.dt_s)  # the window in its samples
         history = run_episode(
-            env, controller, EpisodeSpec(spec.index, spec.seed, uid, spec.start, spec.setpoints)
+            env, controller, EpisodeSpec(spec.index, spec.seed, uid, own, spec.setpoints)
         )
         values = metrics(history, config)
         for name in SCORES:
@@ -233,15 +249,20 @@ def recording_rows(
     count: int,
     reference: bool = False,
     stated_factors: Sequence[float] = (),
+    hz: float | None = None,
+    identified: bool = False,
 ) -> list[dict[str, object]]:
     """Every score of one recording: per task, controller, replay and metric, the true
     score, the replayed one and their ratio (one CSV row each)."""
-    true, replays = rockets_of(truth, seed, methods, draws, reference, stated_factors)
-    length = min(r.u_d_deg.size for rs in replays.values() for r in rs)
-    length = min(length, true.u_d_deg.size)
+    true, replays = rockets_of(
+        truth, seed, methods, draws, reference, stated_factors, hz, identified
+    )
+    every = [true, *(r for rs in replays.values() for r in rs)]
+    seconds = min(r.u_d_deg.size * r.dt_s for r in every)
     rows: list[dict[str, object]] = []
     for task in tasks:
         config = _config(task)
+        length = int(seconds / config.dt_s + 1e-9)
         specs = windows(config, true, length, count, seed)
         for policy in policies:
             controller = _controller(task, policy)
@@ -374,7 +395,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="also replay the posterior draws with the servo lag, backlash and latency a user "
         "states: the truth's times each comma-separated factor (e.g. 0.8,1,1.2)",
     )
+    parser.add_argument(
+        "--identified",
+        action="store_true",
+        help="also replay the posterior draws with the servo lag, backlash and latency that "
+        "identify --actuation finds in each recording",
+    )
+    parser.add_argument(
+        "--hz",
+        type=float,
+        default=None,
+        help="log each recording at this rate with a 1 %% gyro and a measured fin column "
+        "(default: the truth's own, the paper's 10-Hz encoder)",
+    )
     ns = parser.parse_args(argv)
+    if ns.hz is not None and not 1.0 <= ns.hz <= 1000.0:
+        parser.error("--hz: a rate in [1, 1000] Hz")
     try:
         stated_factors = tuple(float(f) for f in ns.stated.split(",") if f.strip())
     except ValueError:
@@ -420,6 +456,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns.windows,
             ns.reference,
             stated_factors,
+            ns.hz,
+            ns.identified,
         )
         for truth in truths
         for seed in seeds

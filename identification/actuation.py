@@ -34,7 +34,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from identification.compiled import linkage_path
-from identification.model import Linkage, Servo
+from identification.model import RIG_KEYS, Linkage, Rig, Servo
 from identification.pipeline import IdentifyOptions
 from identification.recording import Recording, StatedRig
 
@@ -75,11 +75,10 @@ class Term:
 
 @dataclass(frozen=True)
 class Actuation:
-    """What :func:`identify_actuation` found: the admitted linkage and latency (0 where a
-    term is not admitted) and every term's test."""
+    """What :func:`identify_actuation` found: the rig of the admitted terms (0 where a term
+    is not admitted) and every term's test."""
 
-    linkage: Linkage
-    latency_s: float
+    rig: Rig
     terms: tuple[Term, ...]
     level: float
 
@@ -88,12 +87,8 @@ class Actuation:
         return [head, *(f"  {t.line()}" for t in self.terms)]
 
     def settings(self) -> dict[str, float]:
-        """The environment's settings that replay it (``RollConfig``'s names)."""
-        return {
-            "servo_lag_s": self.linkage.lag_s,
-            "backlash_deg": self.linkage.backlash_deg,
-            "sensor_latency_s": self.latency_s,
-        }
+        """The settings that state it (``rocketroll identify``'s and the environment's)."""
+        return {setting: getattr(self.rig, f) for f, (setting, _) in RIG_KEYS.items()}
 
 
 def _boundary_p(statistic: float) -> float:
@@ -185,7 +180,7 @@ def identify_actuation(
     if recording.fin_deg is not None and recording.fin_cmd_deg is not None:
         lag, play = fit_linkage(recording, servo, level)
         terms += [lag, play]
-        link = Linkage(lag.value, play.value)
+        link = Linkage(min(lag.value, 0.5), min(play.value, 5.0))
     else:
         for name, unit in (("servo lag", "s"), ("backlash", "°")):
             terms.append(
@@ -205,4 +200,5 @@ def identify_actuation(
         Term("sensor latency", latency if admitted else 0.0, "s", found.statistic, p, admitted,
              note if admitted else f"estimate {latency:.3g} s; {note}")
     )  # fmt: skip
-    return Actuation(link, latency if admitted else 0.0, tuple(terms), level)
+    rig = Rig(link.lag_s, link.backlash_deg, min(latency, 0.5) if admitted else 0.0)
+    return Actuation(rig, tuple(terms), level)

@@ -119,10 +119,12 @@ def test_closed_loop_flies_truths_outside_the_model_and_ranks_the_controllers(
     default_db: Path,
 ) -> None:
     settings = ["--seeds", "2", "--truth", "latency", "--policies", "trim,pid", "--methods", "ml"]
-    settings += ["--tasks", "rate-steps", "--windows", "1", "--draws", "1"]
+    settings += ["--tasks", "rate-steps", "--windows", "1", "--draws", "1", "--stated", "1"]
     out = run_script("closed_loop.py", *settings, db=default_db)
     assert "Ranking agreement on the headline" in out
     assert "  ml posterior: " in out and " pairs against the truth (" in out
+    # identified and replayed with the rig the user states: the latency's flattery gone
+    assert "  ml posterior, stated x1: 6/6 within the floor" in out
 
 
 def test_ml_bias_fits_each_seed_three_ways(default_db: Path) -> None:
