@@ -30,6 +30,22 @@ These figures read the model without it, against the raw measurements:
 * for the paper's method, its assumptions: a steady state in each dwell
   (steady-state R²) and a positive damping ``a_i`` from each step.
 
+Two figures name an effect the model lacks (:attr:`Adequacy.suspected`; they do not
+change the verdict: the fit may still serve, and the remedy is another model):
+
+* **the fin's delay** -- a lag of the fin behind the modelled servo or late sensors
+  leave ``u_d`` a part ``-τ·dθ/dt`` (the model's fin leads the one that acts); in
+  first differences, where the turbulence's slow part cancels, ``Δu_d`` regressed on
+  the change of the fin's rate gives ``τ`` and its z (Newey-West); suspected where
+  the fin acts later than the model by at least :data:`DELAY_MATERIAL_S` at one-sided
+  p < :data:`DELAY_P`: a servo lag or a sensor latency (the latency alone where the fin
+  is measured);
+* **the turbulence's intensity** -- the SD of the log variance of ``u_d`` over
+  :data:`INTENSITY_WINDOW_S` windows, against the median of the same for the fitted
+  turbulence process (stationary; simulated): at :data:`INTENSITY_RATIO` times it or
+  more, the intensity wanders (gusts, regimes), which a stationary turbulence model and
+  its surrogates do not replay.
+
 Each figure feeds the verdict, ``good``, ``weak`` or ``unreliable``, through the
 thresholds below, with the reasons that set it.  They are calibrated on known
 truths (``benchmarks/adequacy.py``: correct fits of the virtual tunnel's rockets
@@ -59,6 +75,8 @@ __all__ = [
     "ModelOnly",
     "adequacy",
     "beyond",
+    "fin_delay",
+    "intensity_ratio",
     "model_only",
     "r_squared",
 ]
@@ -87,6 +105,17 @@ INNOVATION_ACF = 0.05
 ALPHA_REL_SE = (0.25, 0.5)
 #: The paper's steady-state R² below which its dwells did not settle (weak).
 STEADY_STATE_R2 = 0.95
+#: One-sided p below which the fin's delay is suspected ...
+DELAY_P = 0.005
+#: ... where it is at least this long, s.
+DELAY_MATERIAL_S = 0.01
+#: Window of the turbulence's intensity, s.
+INTENSITY_WINDOW_S = 10.0
+#: Dispersion of the windowed log variance, over a stationary process's, from which the
+#: intensity is suspected to wander.
+INTENSITY_RATIO = 1.8
+#: Simulations of the stationary process for the intensity's reference.
+INTENSITY_SIMULATIONS = 64
 
 
 def beyond(value: float, limits: tuple[float, float], above: bool) -> int:
@@ -144,11 +173,16 @@ class Adequacy:
     innovation_acf: float
     verdict: str
     reasons: tuple[str, ...]
+    fin_delay_s: float = math.nan
+    fin_delay_z: float = math.nan
+    intensity_ratio: float = math.nan
+    suspected: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-safe (NaN as None)."""
         out = asdict(self)
         out["reasons"] = list(self.reasons)
+        out["suspected"] = list(self.suspected)
         return {
             k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in out.items()
         }
@@ -214,6 +248,51 @@ def _fin_share(
     if not (np.isfinite(r2) and np.isfinite(wald)):
         return 0.0, 1.0
     return max(r2, 0.0), float(stats.chi2.sf(wald, x.shape[1] - 1))
+
+
+def fin_delay(u: FloatArray, fin: FloatArray, dt_s: float) -> tuple[float, float]:
+    """How much later than the model the fin acts, s, and its z: ``Δu`` (one per interval)
+    regressed on the change of the fin's rate ``Δ(Δθ/Δt)`` with a constant, Newey-West
+    covariance over 10 lags; ``u ≈ −τ·dθ/dt`` gives ``τ = −slope``.  (NaN, NaN) where the
+    fin does not move."""
+    rate = np.diff(fin[: u.size + 1]) / dt_s
+    du, dd = np.diff(u), np.diff(rate)
+    if du.size < 8 or not np.ptp(dd) > 0.0:
+        return math.nan, math.nan
+    x = np.column_stack([np.ones(du.size), dd])
+    q, r = np.linalg.qr(x)
+    r_inv = np.linalg.inv(r)
+    beta = r_inv @ (q.T @ du)
+    resid = du - x @ beta
+    bread = r_inv @ r_inv.T
+    cov = bread @ newey_west_meat(x * resid[:, None], min(10, du.size // 4)) @ bread
+    se = math.sqrt(cov[1, 1]) if cov[1, 1] > 0.0 else math.nan
+    return -float(beta[1]), -float(beta[1]) / se
+
+
+def _log_variance_spread(x: FloatArray, window: int) -> float:
+    """SD of the log variance of ``x`` over consecutive windows of ``window`` samples."""
+    m = x.size // window
+    blocks = x[: m * window].reshape(m, window)
+    return float(np.std(np.log(blocks.var(axis=1) + 1e-300)))
+
+
+def intensity_ratio(u: FloatArray, dt_s: float, ar: FloatArray) -> float:
+    """How much more the intensity of ``u`` wanders than a stationary AR(``ar``) process's:
+    :func:`_log_variance_spread` over :data:`INTENSITY_WINDOW_S` windows against its
+    median over :data:`INTENSITY_SIMULATIONS` simulations of that process (seeded).  NaN
+    for fewer than four windows."""
+    from scipy.signal import lfilter
+
+    window = max(4, round(INTENSITY_WINDOW_S / dt_s))
+    if u.size < 4 * window:
+        return math.nan
+    rng = np.random.default_rng(0)
+    burn = 20 * window
+    noise = rng.standard_normal((INTENSITY_SIMULATIONS, u.size + burn))
+    paths = lfilter([1.0], np.concatenate([[1.0], -np.asarray(ar, dtype=float)]), noise, axis=1)
+    reference = np.median([_log_variance_spread(p[burn:], window) for p in paths])
+    return _log_variance_spread(u - u.mean(), window) / float(reference)
 
 
 @dataclass(frozen=True, eq=False)
@@ -368,6 +447,31 @@ def adequacy(
         ss = metrics.get("steady_state_r2")
         if ss is not None and ss < STEADY_STATE_R2:
             weak.append(f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate")
+    # What the model lacks, named: the fin's delay, the turbulence's wandering intensity.
+    suspected = []
+    delay_s, delay_z = fin_delay(u, fin, dt)
+    one_sided = 0.5 * math.erfc(delay_z / math.sqrt(2.0)) if math.isfinite(delay_z) else 1.0
+    if one_sided < DELAY_P and delay_s >= DELAY_MATERIAL_S:
+        which = (
+            "a sensor latency (the fin is measured)"
+            if rec.fin_deg is not None
+            else "a servo lag or a sensor latency"
+        )
+        suspected.append(
+            f"the fin acts {1000 * delay_s:.0f} ms later than the model (z = {delay_z:.1f}): "
+            f"{which}; state it (identify --servo-lag/--sensor-latency) or measure the fin"
+        )
+    ar = metrics.get("ar")
+    if ar is None:  # an AR(1) of u_d itself where the method fits no turbulence model
+        centred = u - u.mean()
+        ar = [float(centred[1:] @ centred[:-1] / max(float(centred @ centred), 1e-300))]
+    ratio = intensity_ratio(u, dt, np.asarray(ar, dtype=float))
+    if ratio >= INTENSITY_RATIO:
+        suspected.append(
+            f"the turbulence's intensity wanders: its {INTENSITY_WINDOW_S:g}-s variance "
+            f"varies {ratio:.1f}x as much as a stationary turbulence's (gusts, regimes): "
+            "replay the posterior draws, which follow it, not surrogates"
+        )
     verdict = found.verdict
     return Adequacy(
         rate_source=source,
@@ -385,4 +489,8 @@ def adequacy(
         innovation_acf=innovation_acf,
         verdict=verdict,
         reasons=found.reasons,
+        fin_delay_s=delay_s,
+        fin_delay_z=delay_z,
+        intensity_ratio=ratio,
+        suspected=tuple(suspected),
     )

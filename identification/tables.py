@@ -141,6 +141,7 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
                 f"  {a['verdict']}"
             )
             reasons += [f"  {method} {model}: {reason}" for reason in a["reasons"]]
+            reasons += [f"  {method} {model}: suspected: {s}" for s in a.get("suspected") or ()]
     return "\n".join(lines + reasons)
 
 

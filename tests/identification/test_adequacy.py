@@ -8,10 +8,12 @@ where the real one was ten times slower.  Right: the maximum-likelihood fit of e
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from identification.adequacy import VERDICTS, Adequacy, adequacy
@@ -168,3 +170,56 @@ def test_the_fin_share_is_statsmodels_ols_with_newey_west_and_its_wald_test() ->
     expected = float(fitted.wald_test(np.eye(6)[1:], scalar=True).pvalue)
     assert share == pytest.approx(fitted.rsquared, rel=1e-9)
     assert p == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_fins_delay_is_read_off_u_d_in_first_differences() -> None:
+    """A ``u_d`` that holds ``-τ·dθ/dt`` over AR(1) turbulence of SD 9° gives τ back; the
+    turbulence alone gives none (z near 0)."""
+    from scipy.signal import lfilter
+
+    from identification.adequacy import fin_delay
+
+    rng = np.random.default_rng(0)
+    n, dt = 6000, 0.1
+    turbulence = 9.0 * math.sqrt(1 - 0.85**2) * lfilter([1.0], [1.0, -0.85], rng.standard_normal(n))
+    fin = np.repeat(rng.uniform(-20.0, 20.0, n // 50), 50)
+    fin = np.concatenate([fin, fin[-1:]])
+    u = turbulence - 0.05 * np.diff(fin) / dt
+    tau, z = fin_delay(u, fin, dt)
+    assert tau == pytest.approx(0.05, rel=0.2) and z > 4.0
+    tau, z = fin_delay(turbulence, fin, dt)
+    assert abs(z) < 3.0 and abs(tau) < 0.02
+
+
+def test_a_wandering_intensity_is_told_from_a_stationary_one() -> None:
+    from scipy.signal import lfilter
+
+    from identification.adequacy import INTENSITY_RATIO, intensity_ratio
+
+    rng = np.random.default_rng(1)
+    n, dt, ar = 6000, 0.1, 0.85
+    steady = lfilter([1.0], [1.0, -ar], rng.standard_normal(n))
+    assert intensity_ratio(steady, dt, np.array([ar])) < 1.3
+    x = lfilter([1.0], [1.0, -math.exp(-dt / 20.0)], rng.standard_normal(n))
+    swell = np.exp(0.35 * x / x.std())  # the tunnel's gusty truth: 0.5x to 1.8x over ~20 s
+    assert intensity_ratio(steady * swell, dt, np.array([ar])) > INTENSITY_RATIO
+
+
+def test_adequacy_names_the_effects_a_fit_lacks_on_truths_outside_the_model(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The virtual tunnel's gusty truth and all four effects together (the paper's 10-Hz
+    encoder): the wandering intensity is suspected on both, the fin's delay on all four
+    (this seed); on the paper's own truth, neither."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from _truths import spec_of
+
+    said = {}
+    for truth in ("paper", "gusty", "mismatch-all"):
+        rec = run_tunnel(spec_of(truth, 2))
+        found = fit(rec, "ml")["theta"]
+        said[truth] = " ".join(found.metrics["adequacy"]["suspected"])
+    assert said["paper"] == ""
+    assert "intensity wanders" in said["gusty"] and "fin acts" not in said["gusty"]
+    assert "intensity wanders" in said["mismatch-all"]
+    assert "a servo lag or a sensor latency" in said["mismatch-all"]
