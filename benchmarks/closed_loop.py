@@ -72,7 +72,7 @@ from agents.registry import make_controller
 from disturbances.bank import TraceBank
 from identification.actuation import identify_actuation
 from identification.methods import METHODS, Context, fit, tunnel_methods
-from identification.model import Rig, RollParams
+from identification.model import RIG_LIMITS, Rig, RollParams
 from identification.pipeline import IdentifyOptions
 from identification.recording import Recording, StatedRig
 from identification.reference import Effects
@@ -113,9 +113,9 @@ def stated(effects: Effects, factor: float) -> Rig:
     """What a user states of the rocket's linkage and sensors: the truth's servo lag,
     backlash and latency, each off by ``factor``."""
     return Rig(
-        min(effects.servo_lag_s * factor, 0.5),
-        min(effects.backlash_deg * factor, 5.0),
-        min(effects.latency_s * factor, 0.5),
+        min(effects.servo_lag_s * factor, RIG_LIMITS["lag_s"]),
+        min(effects.backlash_deg * factor, RIG_LIMITS["backlash_deg"]),
+        min(effects.latency_s * factor, RIG_LIMITS["latency_s"]),
     )
 
 

@@ -18,7 +18,11 @@ update), this measures:
 * with ``--flight-db DB --flight-recording NAME`` (a flight stored by ``rocketroll db
   add``), ``RocketRollFlight-v0`` flying that stored flight as its rocket (its own
   profile, measured scaling and recorded ``u_d``), single and batched, against the
-  default flight's rows: **target: at least 0.8 x**.
+  default flight's rows: **target: at least 0.8 x**;
+* ``RocketRoll-v0`` with a rig beyond the model (:data:`RIG`: a 50-ms servo lag,
+  0.5° of backlash and 30 ms of sensor latency), single and batched, against the
+  default rows: **target: at least 0.7 x** (with ``--against``, the default rows
+  against the reference show what the rig's code costs a rocket without one).
 
 With ``--against REF`` the RocketRoll rows are also timed in a worktree of
 ``REF`` (e.g. the last landed commit), block by block alternating with this
@@ -41,6 +45,7 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
 import statistics
@@ -64,6 +69,9 @@ FLIGHT_ID = "RocketRollFlight-v0"
 FLIGHT_TARGET = 0.8
 #: Largest slowdown against --against REF that still passes, as a fraction.
 AGAINST_TOLERANCE = 0.05
+#: A rig beyond the model (the environment's settings), and its target against the default.
+RIG: dict[str, Any] = {"servo_lag_s": 0.05, "backlash_deg": 0.5, "sensor_latency_s": 0.03}
+RIG_TARGET = 0.7
 
 
 def _single_runner(env_id: str, steps: int, seed: int, **settings: Any) -> Callable[[], float]:
@@ -171,6 +179,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns.seed,
             discrete=False,
         )
+    rigged = _has_rig()
+    if rigged:
+        rig_single = _single_runner("RocketRoll-v0", ns.single_steps, ns.seed, **RIG)
+        rig_vector = _vector_runner(
+            lambda: gym.make_vec("RocketRoll-v0", num_envs=ns.num_envs, **RIG),
+            ns.vector_steps,
+            ns.seed,
+            discrete=False,
+        )
     pendulum = _single_runner("Pendulum-v1", ns.single_steps, ns.seed)
     cartpole = _vector_runner(
         lambda: CartPoleVectorEnv(num_envs=ns.num_envs), ns.vector_steps, ns.seed, discrete=True
@@ -198,13 +215,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             stored_vector,
             ns.vector_steps * ns.num_envs,
         )
+    if rigged:
+        tasks["RocketRoll-v0, rig (gym.make)"] = (rig_single, ns.single_steps)
+        tasks[f"RocketRoll-v0, rig x {ns.num_envs}"] = (rig_vector, ns.vector_steps * ns.num_envs)
     warm = time.perf_counter()
     for run, _ in tasks.values():  # first calls: numba compile or cache load, page faults
         run()
     warmup = time.perf_counter() - warm
     if serving:
         return serve({name: run for name, (run, _) in tasks.items()})
-    ours = [name for name in tasks if name.lstrip().startswith(("RocketRoll-v0", "same"))]
+    ours = [
+        name
+        for name in tasks
+        if name.lstrip().startswith(("RocketRoll-v0", "same")) and ", rig" not in name
+    ]
     remote, commit = start_against(__file__, words, ns.against)
     rates: dict[str, list[float]] = {name: [] for name in tasks}
     before: dict[str, list[float]] = {name: [] for name in ours}
@@ -265,6 +289,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"single, {stored_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}): "
             f"{'PASS' if ok_stored else 'FAIL'}"
         )
+    ok_rig = True
+    if rigged:
+        rig_single_ratio = med["RocketRoll-v0, rig (gym.make)"] / med[names[0]]
+        rig_vector_ratio = med[f"RocketRoll-v0, rig x {ns.num_envs}"] / vec
+        ok_rig = min(rig_single_ratio, rig_vector_ratio) >= RIG_TARGET
+        print(
+            f"rig (lag, play, latency): / RocketRoll-v0 = {rig_single_ratio:.2f} single, "
+            f"{rig_vector_ratio:.2f} batched (target >= {RIG_TARGET:g}): "
+            f"{'PASS' if ok_rig else 'FAIL'}"
+        )
     ok_against = True
     if remote is not None:
         print(f"\nthis checkout against {ns.against} ({commit[:12]}), same blocks alternating:")
@@ -279,7 +313,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})"
             )
     print("spread: (best - worst) / median over the blocks; a large spread means a busy machine")
-    return 1 if ns.strict and not (ok_single and ok_vector and ok_flight and ok_against) else 0
+    passed = ok_single and ok_vector and ok_flight and ok_rig and ok_against
+    return 1 if ns.strict and not passed else 0
+
+
+def _has_rig() -> bool:
+    """Whether this checkout's environments take a rig (an --against checkout may not)."""
+    from rollenv.core import RollConfig
+
+    return "servo_lag_s" in {f.name for f in dataclasses.fields(RollConfig)}
 
 
 if __name__ == "__main__":

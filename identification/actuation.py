@@ -34,7 +34,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from identification.compiled import linkage_path
-from identification.model import RIG_KEYS, Linkage, Rig, Servo
+from identification.model import RIG_KEYS, RIG_LIMITS, Linkage, Rig, Servo
 from identification.pipeline import IdentifyOptions
 from identification.recording import Recording, StatedRig
 
@@ -46,6 +46,8 @@ LEVEL = 0.01
 MAX_LATENCY_S = 0.1
 #: The linkage is integrated on steps of at most this, s.
 LINK_STEP_S = 0.001
+#: The largest lag and play looked for (a rig's range), s and °.
+MOST_LAG, MOST_PLAY = RIG_LIMITS["lag_s"], RIG_LIMITS["backlash_deg"]
 #: The fin sensor's resolution when the column does not show one, °.
 FIN_RESOLUTION_DEG = 0.01
 
@@ -125,7 +127,7 @@ def fit_linkage(recording: Recording, servo: Servo, level: float = LEVEL) -> tup
         def objective(x: np.ndarray) -> float:
             lag = abs(float(x[0])) if free[0] else 0.0
             play = abs(float(x[1])) if free[1] else 0.0
-            return sse(min(lag, 0.5), min(play, 5.0))
+            return sse(min(lag, MOST_LAG), min(play, MOST_PLAY))
 
         best: tuple[float, float, float] | None = None
         for start in ((0.02, 0.2), (0.1, 1.0)):
@@ -133,8 +135,8 @@ def fit_linkage(recording: Recording, servo: Servo, level: float = LEVEL) -> tup
                 objective, np.array(start), method="Nelder-Mead",
                 options={"xatol": 1e-4, "fatol": 1e-10 * n, "maxiter": 400},
             )  # fmt: skip
-            lag = min(abs(float(res.x[0])), 0.5) if free[0] else 0.0
-            play = min(abs(float(res.x[1])), 5.0) if free[1] else 0.0
+            lag = min(abs(float(res.x[0])), MOST_LAG) if free[0] else 0.0
+            play = min(abs(float(res.x[1])), MOST_PLAY) if free[1] else 0.0
             if best is None or res.fun < best[2]:
                 best = (lag, play, float(res.fun))
         assert best is not None
@@ -180,7 +182,7 @@ def identify_actuation(
     if recording.fin_deg is not None and recording.fin_cmd_deg is not None:
         lag, play = fit_linkage(recording, servo, level)
         terms += [lag, play]
-        link = Linkage(min(lag.value, 0.5), min(play.value, 5.0))
+        link = Linkage(lag.value, play.value)
     else:
         for name, unit in (("servo lag", "s"), ("backlash", "°")):
             terms.append(
@@ -200,5 +202,7 @@ def identify_actuation(
         Term("sensor latency", latency if admitted else 0.0, "s", found.statistic, p, admitted,
              note if admitted else f"estimate {latency:.3g} s; {note}")
     )  # fmt: skip
-    rig = Rig(link.lag_s, link.backlash_deg, min(latency, 0.5) if admitted else 0.0)
+    rig = Rig(
+        link.lag_s, link.backlash_deg, min(latency, RIG_LIMITS["latency_s"]) if admitted else 0.0
+    )
     return Actuation(rig, tuple(terms), level)

@@ -62,6 +62,7 @@ __all__ = [
     "PAPER_CONSTANT",
     "PAPER_THETA",
     "RIG_KEYS",
+    "RIG_LIMITS",
     "DampingModel",
     "Linkage",
     "Rig",
@@ -419,7 +420,7 @@ class Rig:
     latency_s: float = 0.0
 
     def __post_init__(self) -> None:
-        for name, most in (("lag_s", 0.5), ("backlash_deg", 5.0), ("latency_s", 0.5)):
+        for name, most in RIG_LIMITS.items():
             value = getattr(self, name)
             if not (np.isfinite(value) and 0.0 <= value <= most):
                 raise ValueError(f"Rig.{name} must be in [0, {most:g}], got {value!r}")
@@ -461,6 +462,11 @@ class Rig:
         return ", ".join(parts) or "none"
 
 
+#: :class:`Rig` field -> the largest value it takes (a physical range: half a second of lag
+#: or latency, 5° of play).
+RIG_LIMITS: Mapping[str, float] = MappingProxyType(
+    {"lag_s": 0.5, "backlash_deg": 5.0, "latency_s": 0.5}
+)
 #: :class:`Rig` field -> (the setting that gives it: ``rocketroll identify``'s options and
 #: the environment's, the recording's metadata key that states it).
 RIG_KEYS: Mapping[str, tuple[str, str]] = MappingProxyType(

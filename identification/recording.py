@@ -53,7 +53,7 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.model import Rig, RollParams
+from identification.model import RIG_KEYS, RIG_LIMITS, Rig, RollParams
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 from rocketroll_common.files import write_atomic
@@ -96,7 +96,7 @@ FORMAT_V1_2 = "rocketroll-recording/1.2"
 FORMATS = (FORMAT_V1, FORMAT, FORMAT_V1_2)
 #: The ``rig.*`` metadata keys format 1.2 adds, with their upper bounds.
 RIG_METADATA: Mapping[str, float] = MappingProxyType(
-    {"rig.servo_lag_s": 0.5, "rig.backlash_deg": 5.0, "rig.sensor_latency_s": 0.5}
+    {key: RIG_LIMITS[f] for f, (_, key) in RIG_KEYS.items()}
 )
 
 

@@ -38,7 +38,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.model import RollParams
+from identification.model import RIG_LIMITS, RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.settings import check, setting
 
@@ -72,17 +72,19 @@ class Effects:
         0.0,
         "outside the model: a first-order lag of the fin behind the rate-limited servo",
         ge=0.0,
-        le=0.5,
+        le=RIG_LIMITS["lag_s"],
         unit="s",
         flag="--servo-lag",
         metavar="S",
     )
     backlash_deg: float = setting(
-        0.0, "outside the model: play between servo and fin", ge=0.0, le=5.0, unit="°",
+        0.0, "outside the model: play between servo and fin", ge=0.0,
+        le=RIG_LIMITS["backlash_deg"], unit="°",
         flag="--backlash", metavar="DEG",
     )  # fmt: skip
     latency_s: float = setting(
-        0.0, "outside the model: delay of the roll sensors", ge=0.0, le=0.5, unit="s",
+        0.0, "outside the model: delay of the roll sensors", ge=0.0,
+        le=RIG_LIMITS["latency_s"], unit="s",
         flag="--sensor-latency", metavar="S",
     )  # fmt: skip
     quadratic_damping: float = setting(
