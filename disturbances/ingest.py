@@ -64,6 +64,7 @@ from identification.methods import (
     has_posterior,
     traits,
 )
+from identification.model import Rig
 from identification.pipeline import Identification, IdentifyOptions
 from identification.recording import Recording
 from identification.statistics import trace_statistics
@@ -98,7 +99,7 @@ def trace_summary(u_d_deg: np.ndarray) -> dict[str, Any]:
 
 
 def _trace_row(
-    recording: RecordingRow, fitted: ModelFit, created_at: str, version: str
+    recording: RecordingRow, fitted: ModelFit, created_at: str, version: str, rig: Rig
 ) -> TraceRow:
     dist = fitted.disturbance
     u = np.asarray(dist.u_d_deg, dtype=float)
@@ -124,6 +125,7 @@ def _trace_row(
         split=recording.split,
         package_version=version,
         flight_reference=FlightReference.from_metrics(fitted.metrics),
+        rig=rig,
     )
 
 
@@ -338,7 +340,8 @@ def identification_rows(
                     stamp,
                 )
             )
-            trace = _trace_row(recording, fitted, stamp, version)
+            rig = context.recording.rig_with(context.options.rig)
+            trace = _trace_row(recording, fitted, stamp, version, rig)
             traces.append(trace)
             if fitted.sample_posterior is not None:
                 traces += posterior_rows(trace, fitted, posterior, posterior_seed)
@@ -554,7 +557,10 @@ def _store(
 
 
 def _options_key(options: Any) -> str:
-    return json.dumps(dict(options), sort_keys=True)
+    """Options as compared: a setting an older version did not store counts as its
+    default (a database written before it still takes new methods)."""
+    defaults = {k: v for k, v in dataclasses.asdict(IdentifyOptions()).items() if k != "progress"}
+    return json.dumps({**defaults, **dict(options)}, sort_keys=True)
 
 
 def add_surrogates(

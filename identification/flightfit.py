@@ -51,7 +51,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,8 +59,10 @@ from numpy.typing import ArrayLike
 from scipy import optimize
 
 from identification import compiled, statespace
+from identification.compiled import linkage_path
 from identification.methods import ModelFit
 from identification.model import (
+    Rig,
     RollParams,
     Servo,
     SimResult,
@@ -174,6 +176,7 @@ class FlightInputs:
     density: str
     v_ref_mps: float
     rho_ref_kgm3: float
+    rig: Rig = field(default_factory=Rig)
 
     @property
     def n(self) -> int:
@@ -192,8 +195,13 @@ def flight_inputs(
     v_ref_mps: float | None = None,
     rho_ref_kgm3: float = ISA_SEA_LEVEL_DENSITY_KGM3,
     servo_rate_dps: float = Servo().rate_limit_dps,
+    rig: Rig | None = None,
 ) -> FlightInputs:
     """The fin path, the scales and the measurements of a flight recording.
+
+    ``rig`` (default: the recording's own, its ``rig.*`` lines) shapes the fin the model
+    sees as :func:`identification.pipeline.measurements` does for a tunnel run: the
+    commanded fin through its linkage, and the fin delayed by its sensors' latency.
 
     The substep grid follows the recorded timestamps (each sample interval cut
     into :data:`SUBSTEPS` equal parts), so a logger's jitter does not slide the
@@ -210,6 +218,7 @@ def flight_inputs(
     """
     from identification.ml import _quantum
 
+    rig = recording.rig if rig is None else rig
     if recording.airspeed_mps is None:
         raise IdentificationError(
             f"recording {recording.name!r} has no airspeed_mps column: not a flight "
@@ -253,8 +262,14 @@ def flight_inputs(
         assert recording.fin_cmd_deg is not None
         command = np.asarray(recording.fin_cmd_deg)
         servo = Servo(rate_limit_dps=servo_rate_dps)
-        theta = servo_path(np.repeat(command[:-1], SUBSTEPS), float(command[0]), h, servo)
+        held = np.repeat(command[:-1], SUBSTEPS)
+        if rig.linkage.direct:
+            theta = servo_path(held, float(command[0]), h, servo)
+        else:
+            theta = linkage_path(held, float(command[0]), h, servo, rig.linkage)
         rate_limit = servo_rate_dps
+    if rig.latency_s > 0.0:  # late sensors read the rocket the fin drove that long before
+        theta = np.interp(fine - rig.latency_s, fine, theta)
     rate = None if recording.roll_rate_dps is None else np.asarray(recording.roll_rate_dps)
     angle = None if recording.roll_deg is None else np.asarray(recording.roll_deg)
     return FlightInputs(
@@ -272,6 +287,7 @@ def flight_inputs(
         density=source,
         v_ref_mps=v_ref_mps,
         rho_ref_kgm3=rho_ref_kgm3,
+        rig=rig,
     )
 
 
@@ -1327,10 +1343,16 @@ def held_out_prediction(
     split = t0 + HELD_OUT_SPLIT * (t1 - t0)
     try:
         early = flight_inputs(
-            rec.part(t0, split), v_ref_mps=inputs.v_ref_mps, servo_rate_dps=servo_rate_dps
+            rec.part(t0, split),
+            v_ref_mps=inputs.v_ref_mps,
+            servo_rate_dps=servo_rate_dps,
+            rig=inputs.rig,
         )
         late = flight_inputs(
-            rec.part(split, t1 + 1.0), v_ref_mps=inputs.v_ref_mps, servo_rate_dps=servo_rate_dps
+            rec.part(split, t1 + 1.0),
+            v_ref_mps=inputs.v_ref_mps,
+            servo_rate_dps=servo_rate_dps,
+            rig=inputs.rig,
         )
     except (IdentificationError, RecordingError) as exc:
         skipped = {"skipped": f"a part is too short to fit ({exc})"}
@@ -1417,7 +1439,12 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     recordings = [window.part for window in cut]
     v_ref = options.v_ref_mps or mean_airspeed(recordings)
     flights = [
-        flight_inputs(recording, v_ref_mps=v_ref, servo_rate_dps=options.servo_rate_dps)
+        flight_inputs(
+            recording,
+            v_ref_mps=v_ref,
+            servo_rate_dps=options.servo_rate_dps,
+            rig=recording.rig_with(options.rig),
+        )
         for recording in recordings
     ]
     inputs = flights[0]
@@ -1481,6 +1508,7 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "damping_exponent": result.scaling.damping_exponent,
             "servo_rate_dps": options.servo_rate_dps,
             "rate0_dps": float(result.rate_dps[0]),  # the re-simulation's start
+            "rig": dataclasses.asdict(inputs.rig),  # the fin the fit saw (the report's too)
         }
         fits[model] = ModelFit(
             "flight",

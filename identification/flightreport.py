@@ -32,6 +32,7 @@ from identification.flightfit import (
     resimulated,
 )
 from identification.methods import ModelFit
+from identification.model import Rig
 from identification.recording import Recording
 from rocketroll_common.plotting import new_figure, png_bytes
 from rocketroll_physics.scaling import FlightReference
@@ -71,6 +72,7 @@ def render_flight_report(
         fitted,
         v_ref_mps=float(first.trace_settings["v_ref_mps"]),
         servo_rate_dps=float(first.trace_settings["servo_rate_dps"]),
+        rig=Rig(**first.trace_settings.get("rig", {})),
     )
     start = float(recording.time_s[0])
     t_all = np.asarray(recording.time_s) - start

@@ -442,10 +442,17 @@ class Rig:
         says."""
         values = {}
         for field_name, (setting_name, key) in RIG_KEYS.items():
-            value = given.get(setting_name)
+            value, said = given.get(setting_name), setting_name
             if value is None:
-                value = metadata.get(key)
-            values[field_name] = 0.0 if value is None else float(value)
+                value, said = metadata.get(key), f"the recording's {key}"
+            try:
+                number = 0.0 if value is None else float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{said} must be a number, got {value!r}") from None
+            most = RIG_LIMITS[field_name]
+            if not (np.isfinite(number) and 0.0 <= number <= most):
+                raise ValueError(f"{said} must be in [0, {most:g}], got {value!r}")
+            values[field_name] = number
         return cls(**values)
 
     def describe(self) -> str:

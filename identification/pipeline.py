@@ -10,6 +10,7 @@ database stores (:meth:`Identification.to_dict` plus the ``u_d`` traces).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -480,6 +481,7 @@ def delayed(values: FloatArray, steps: int) -> FloatArray:
     readings see it)."""
     if steps == 0:
         return values
+    steps = min(steps, values.size)
     return np.concatenate([np.full(steps, values[0]), values[: values.size - steps]])
 
 
@@ -497,10 +499,13 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
     servo = dataclasses.replace(PAPER_SERVO, rate_limit_dps=options.servo_rate_dps)
     rig = recording.rig_with(options.rig)  # stated here, else by the recording
     theta_fine, theta_source = fin_angle_model(recording, grid, servo, rig.linkage)
-    late = round(rig.latency_s / grid.step_s)
+    late = math.floor(rig.latency_s / grid.step_s + 0.5)  # to the nearest grid step
     if late > 0:  # what late sensors read is the rocket the fin drove that long before
         theta_fine = delayed(theta_fine, late)
-        theta_source += f", delayed {late * grid.step_s:g} s (the sensors' latency)"
+        theta_source += (
+            f", delayed {late * grid.step_s:g} s (the sensors' {rig.latency_s:g} s on the "
+            f"{grid.step_s:g}-s grid)"
+        )
     angle, angle_source = measured_angle(recording)
     velocity_fine = np.interp(grid.time_s, recording.time_s, velocity)
     return Measurements(

@@ -118,7 +118,9 @@ class RollConfig:
         Servo slew-rate limit (eq. 23: 150 °/s) and fin range (±40°).
     sensors : bool
         Sensor model on: encoder quantisation (or the integrated gyro) and
-        gyro noise.  Off: the observation holds the true angle and rate.
+        gyro noise.  Off: the observation holds the true angle and rate (as
+        late as ``sensor_latency_s`` says: the delay is the rig's, not the
+        sensors' noise).
     angle_sensor : str
         Where the measured angle comes from: ``"encoder"`` (the tunnel rig's
         shaft encoder, quantised) or ``"gyro"`` (a flight computer: the gyro's
@@ -664,7 +666,7 @@ def _step_envs(
         decay = link[i, Link.DECAY]
         ramp = link[i, Link.RAMP]
         half = link[i, Link.HALF]
-        linked = decay > 0.0 or half > 0.0
+        linked = ramp > 0.0 or half > 0.0
         delay = link[i, Link.LATENCY]
         late = delay > 0.0
         step = cursor[i, Cursor.STEP]

@@ -165,3 +165,39 @@ def test_import_csv_stores_what_the_user_states_of_the_rig(tmp_path: Path) -> No
     argv += ["--no-header", "--rate", "10", "--servo-lag", "0.04", "--sensor-latency", "0.02"]
     assert main(argv) == 0
     assert load_recording(out).rig == Rig(lag_s=0.04, latency_s=0.02)
+
+
+def test_the_rig_in_memory_is_the_rig_read_back_and_older_databases_take_new_methods(
+    tmp_path: Path,
+) -> None:
+    """The rows made from an identification carry the rig the database reads back; a
+    database whose identification options predate the rig (no ``rig`` key) still takes
+    another method for the same recording; a bad rig line names itself."""
+    import dataclasses
+
+    from disturbances.ingest import _options_key, identification_rows
+    from identification.methods import Context
+
+    rec = run_tunnel(_short(1, Effects(servo_lag_s=0.05), state_rig=True))
+    context = Context(rec, IdentifyOptions(noise_runs=0, rig=StatedRig(sensor_latency_s=0.02)))
+    _, _, traces = identification_rows(context, ["paper"])
+    assert {t.rig for t in traces} == {Rig(lag_s=0.05, latency_s=0.02)}
+    now = {k: v for k, v in dataclasses.asdict(IdentifyOptions()).items() if k != "progress"}
+    older = {k: v for k, v in now.items() if k != "rig"}
+    assert _options_key(older) == _options_key(now)
+    with pytest.raises(ValueError, match=r"the recording's rig.servo_lag_s must be in \[0, 0.5\]"):
+        Rig.resolved({}, {"rig.servo_lag_s": "3"})
+
+
+def test_a_flight_fit_sees_the_fin_its_rig_makes() -> None:
+    from identification.flightfit import flight_inputs
+    from identification.flightlog import FlightLogSpec, run_flight
+
+    rec = run_flight(FlightLogSpec(seed=1))
+    plain = flight_inputs(rec)
+    late = flight_inputs(rec, rig=Rig(latency_s=0.05))
+    lagged = flight_inputs(rec, rig=Rig(lag_s=0.1))
+    assert plain.rig == Rig() and late.rig == Rig(latency_s=0.05)
+    moved = np.flatnonzero(np.abs(np.diff(plain.theta)) > 0)
+    assert moved.size and not np.allclose(late.theta, plain.theta)
+    assert not np.allclose(lagged.theta, plain.theta)
