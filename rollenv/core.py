@@ -508,6 +508,8 @@ def config_fields() -> tuple[str, ...]:
 
 # ----------------------------------------------------------------------------- kernels
 _piece = piece  # the one closed form, compiled (identification.compiled)
+#: The column of ``RollBatch.rig`` where an env's ring of past substeps starts.
+_RING = len(Link)
 _linkage = linkage  # the one servo linkage, compiled (identification.compiled)
 
 
@@ -627,8 +629,7 @@ def _step_envs(
     reward: FloatArray,
     error: FloatArray,
     u_now: FloatArray,
-    link: FloatArray,
-    past: FloatArray,
+    rig: FloatArray,
 ) -> None:
     """Advance the envs in ``index`` by one control step.
 
@@ -642,12 +643,14 @@ def _step_envs(
     sample, ``eps[k]`` the gyro draw for ``index[k]``.  Writes the new state,
     the step plus one, observation, reward, true error and the last ``u_d``.
 
-    ``link[i]`` is env ``i``'s rig (:class:`~rollenv.layout.Link`).  With a linkage
+    ``rig[i]`` is env ``i``'s rig (:class:`~rollenv.layout.Link` columns), then its ring
+    of past substeps (two columns each: rate, angle; one array, so a step passes the
+    kernel one argument for both: its dispatch costs per argument).  With a linkage
     (a decay or half a play above 0) the servo moves at its rate limit towards the
     command, the fin's drive follows it through the first-order lag (exact for the
     servo's ramp over the substep) and the fin its drive through the play; the fin
     moves linearly over each substep as without.  With a sensor latency every
-    substep's rate and angle go into the ring ``past[i]`` (row ``g % rows`` for
+    substep's rate and angle go into the ring (row ``g % rows`` for
     substep ``g`` of the episode) and the sensors read the rocket that many substeps
     ago, linearly between substeps.  Either off, the step is the model's and its
     arithmetic today's.
@@ -660,14 +663,14 @@ def _step_envs(
     u_per = int(cfg[Cfg.U_PER])
     period = int(cfg[Cfg.SETPOINT_PERIOD])
     last_sp = setpoints.shape[1] - 1
-    rows = past.shape[1]
+    rows = (rig.shape[1] - _RING) // 2
     for k in numba.prange(index.size):
         i = index[k]
-        decay = link[i, Link.DECAY]
-        ramp = link[i, Link.RAMP]
-        half = link[i, Link.HALF]
+        decay = rig[i, Link.DECAY]
+        ramp = rig[i, Link.RAMP]
+        half = rig[i, Link.HALF]
         linked = ramp > 0.0 or half > 0.0
-        delay = link[i, Link.LATENCY]
+        delay = rig[i, Link.LATENCY]
         late = delay > 0.0
         step = cursor[i, Cursor.STEP]
         row = cursor[i, Cursor.SCALE_START] + step * cursor[i, Cursor.SCALE_STRIDE]
@@ -708,8 +711,8 @@ def _step_envs(
                 v = e * v + c
                 theta = moved
                 slot = (first + sub + 1) % rows
-                past[i, slot, 0] = v
-                past[i, slot, 1] = phi
+                rig[i, _RING + 2 * slot] = v
+                rig[i, _RING + 2 * slot + 1] = phi
                 continue
             if held > 0 and (moved != theta or u != held_u):
                 e, c, a_, b_ = _piece(
@@ -749,8 +752,8 @@ def _step_envs(
             w = at - g
             s0 = g % rows
             s1 = (g + 1) % rows
-            seen_v = (1.0 - w) * past[i, s0, 0] + w * past[i, s1, 0]
-            seen_phi = (1.0 - w) * past[i, s0, 1] + w * past[i, s1, 1]
+            seen_v = (1.0 - w) * rig[i, _RING + 2 * s0] + w * rig[i, _RING + 2 * s1]
+            seen_phi = (1.0 - w) * rig[i, _RING + 2 * s0 + 1] + w * rig[i, _RING + 2 * s1 + 1]
         if cfg[Cfg.ANGLE_GYRO] > 0.0:  # the flight computer sums the gyro's reading
             state[i, State.GYRO_ANGLE] += n_sub * h * _gyro(seen_v, eps[k], cfg)
         sp = setpoints[i, min((step + 1) // period, last_sp)]
@@ -841,9 +844,9 @@ class RollBatch:
         self.all = np.arange(n, dtype=np.int64)
         self.state = np.zeros((n, len(State)))
         # Where each env is (Cursor columns); step_count, u_start, scale_start and
-        # scale_stride are views of it (_cursor_views; rebuilt when unpickled or copied).
+        # scale_stride are views of it (_cursor_views, once the rig is made below; rebuilt
+        # when unpickled or copied).
         self.cursor = np.zeros((n, len(Cursor)), dtype=np.int64)
-        self._cursor_views()
         self.params = np.zeros((n, len(Param)))
         # Multipliers of the rocket's parameters (Scale columns): row 0 is the constant
         # rocket (all ones, stride 0); in flight rows 1.. are the flight's, shared by every
@@ -866,21 +869,26 @@ class RollBatch:
         # the sensors' ring of past substeps (rate, angle), as deep as the longest latency
         # needs (see _step_envs); one unused row without a latency.
         self.trace_link = np.array([config.link_row(r) for r in bank.rigs])
-        self.link = np.zeros((n, len(Link)))
         delay = float(self.trace_link[:, Link.LATENCY].max())
-        self.past = np.zeros((n, math.ceil(delay) + 2 if delay > 0.0 else 1, 2))
+        rows = math.ceil(delay) + 2 if delay > 0.0 else 1
+        self.rig = np.zeros((n, _RING + 2 * rows))  # link and past are views of it
+        self._cursor_views()
         self.parallel = bool(parallel)
         self._noisy = bool(self.cfg[Cfg.GYRO_ETA] > 0.0)
         self._no_noise = np.zeros(n)
 
-    _VIEWS = ("step_count", "u_start", "scale_start", "scale_stride")
+    _VIEWS = ("step_count", "u_start", "scale_start", "scale_stride", "link", "past")
 
     def _cursor_views(self) -> None:
-        """Name the columns of ``cursor`` (views: the kernel writes ``cursor`` only)."""
+        """Name the columns of ``cursor`` and ``rig`` (views: the kernel writes the arrays):
+        ``link`` each env's :class:`~rollenv.layout.Link` row, ``past`` its ring of past
+        substeps (rows of rate, angle)."""
         self.step_count = self.cursor[:, Cursor.STEP]
         self.u_start = self.cursor[:, Cursor.U_START]
         self.scale_start = self.cursor[:, Cursor.SCALE_START]
         self.scale_stride = self.cursor[:, Cursor.SCALE_STRIDE]
+        self.link = self.rig[:, :_RING]
+        self.past = self.rig[:, _RING:].reshape(self.n, -1, 2)
 
     def __getstate__(self) -> dict[str, Any]:
         # Pickling (and copy.deepcopy) would turn the views into arrays of their own.
@@ -1005,8 +1013,7 @@ class RollBatch:
             self.reward,
             self.error,
             self.u_now,
-            self.link,
-            self.past,
+            self.rig,
         )
 
     def _randomized_params(self, rng: np.random.Generator, m: int) -> FloatArray:
@@ -1132,8 +1139,7 @@ class RollBatch:
         if source.bank is not self.bank:
             raise ValueError("copy_env needs two batches over the same bank")
         self.state[index] = source.state[i]
-        self.past[index] = source.past[i]
-        self.link[index] = source.link[i]
+        self.rig[index] = source.rig[i]
         self.params[index] = source.params[i]
         self.trace[index] = source.trace[i]
         self.start[index] = source.start[i]
