@@ -22,15 +22,12 @@ import numpy as np
 
 from disturbances.bank import TraceBank
 from identification.model import RollParams
-from identification.reference import Effects, advance
+from identification.reference import Effects, advance, fine_steps
 from rollenv.core import RollConfig, observe_kernel, step_reward
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Cfg, Cursor, State
 
 __all__ = ["ReferenceRollEnv"]
-
-#: The reference's step inside one of the environment's substeps, at most, s.
-FINE_STEP_S = 0.001
 
 
 class ReferenceRollEnv(RocketRollEnv):
@@ -47,8 +44,7 @@ class ReferenceRollEnv(RocketRollEnv):
         self.effects = effects
         cfg = self._batch.cfg
         self._sub = int(cfg[Cfg.SUBSTEPS])
-        self._per = max(1, math.ceil(float(cfg[Cfg.H]) / FINE_STEP_S - 1e-9))
-        self._h = float(cfg[Cfg.H]) / self._per
+        self._per, self._h = fine_steps(float(cfg[Cfg.H]))  # the reference's 1-ms steps
         self._delay = effects.latency_s / self._h  # in fine steps
         self._keep = math.ceil(self._delay) + 2
         self._state = np.zeros(5)

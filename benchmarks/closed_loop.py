@@ -122,7 +122,7 @@ def stated(effects: Effects, factor: float) -> Rig:
 def _posterior(rec: Recording, method: str, rig: Rig, draws: int, seed: int) -> list[Rocket] | None:
     """The posterior draws of ``method`` on ``rec`` identified with the fin ``rig`` shapes,
     each replayed on that rig (None: the method has no posterior)."""
-    said = StatedRig(rig.lag_s, rig.backlash_deg, rig.latency_s)
+    said = StatedRig.of(rig)
     found = fit(Context(rec, IdentifyOptions(noise_runs=0, rig=said)), method, ["theta"])["theta"]
     if found.sample_posterior is None or not draws:
         return None

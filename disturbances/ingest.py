@@ -326,6 +326,7 @@ def identification_rows(
     options = {k: v for k, v in dataclasses.asdict(context.options).items() if k != "progress"}
     identifications: list[IdentificationRow] = []
     traces: list[TraceRow] = []
+    rig = context.recording.rig_with(context.options.rig)
     for method in chosen:
         for model, fitted in fit(context, method, traits(method).models).items():
             identifications.append(
@@ -340,7 +341,6 @@ def identification_rows(
                     stamp,
                 )
             )
-            rig = context.recording.rig_with(context.options.rig)
             trace = _trace_row(recording, fitted, stamp, version, rig)
             traces.append(trace)
             if fitted.sample_posterior is not None:

@@ -37,6 +37,7 @@ from identification.compiled import linkage_path
 from identification.model import RIG_KEYS, RIG_LIMITS, Linkage, Rig, Servo
 from identification.pipeline import IdentifyOptions
 from identification.recording import Recording, StatedRig
+from identification.reference import fine_steps
 
 __all__ = ["LEVEL", "MAX_LATENCY_S", "Actuation", "Term", "fit_linkage", "identify_actuation"]
 
@@ -44,8 +45,6 @@ __all__ = ["LEVEL", "MAX_LATENCY_S", "Actuation", "Term", "fit_linkage", "identi
 LEVEL = 0.01
 #: The longest sensor latency looked for, s.
 MAX_LATENCY_S = 0.1
-#: The linkage is integrated on steps of at most this, s.
-LINK_STEP_S = 0.001
 #: The largest lag and play looked for (a rig's range), s and °.
 MOST_LAG, MOST_PLAY = RIG_LIMITS["lag_s"], RIG_LIMITS["backlash_deg"]
 #: The fin sensor's resolution when the column does not show one, °.
@@ -112,7 +111,7 @@ def fit_linkage(recording: Recording, servo: Servo, level: float = LEVEL) -> tup
     if recording.fin_deg is None or recording.fin_cmd_deg is None:
         raise ValueError(f"{recording.name}: needs both fin_cmd_deg and a measured fin_deg")
     dt = float(np.median(np.diff(recording.time_s)))
-    per = max(1, math.ceil(dt / LINK_STEP_S - 1e-9))
+    per, _ = fine_steps(dt)  # the linkage on the reference integrator's 1-ms steps
     command = np.repeat(np.asarray(recording.fin_cmd_deg, dtype=float)[:-1], per)
     fin = np.asarray(recording.fin_deg, dtype=float)
     floor = max(_resolution(fin), FIN_RESOLUTION_DEG) ** 2 / 12.0

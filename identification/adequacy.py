@@ -64,7 +64,7 @@ import numpy as np
 from identification.compiled import interval_maps
 from identification.model import RollParams, Servo, _linear_recurrence, damping
 from identification.pipeline import Measurements
-from identification.statistics import decorrelation_stride, newey_west_meat
+from identification.statistics import decorrelation_stride, ols_newey_west
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
@@ -207,7 +207,7 @@ def _fin_share(
 
     The arithmetic of statsmodels' ``OLS(...).fit(cov_type="HAC")`` and its
     ``wald_test(..., scalar=True)`` (Bartlett weights, no small-sample factor, χ²),
-    written out (:func:`identification.statistics.newey_west_meat`): the results object's
+    written out (:func:`identification.statistics.ols_newey_west`): the results object's
     machinery and the kernel's loop over lags cost more than the regression (p-values
     equal to statsmodels' to 1e-9 relative, tested)."""
     from scipy import stats
@@ -230,17 +230,12 @@ def _fin_share(
     x = design[:, keep]
     if x.shape[1] < 2:
         return 0.0, 1.0
-    q, r = np.linalg.qr(x)
     try:
-        r_inv = np.linalg.inv(r)
+        beta, resid, cov = ols_newey_west(x, u, max(maxlags, 1))
     except np.linalg.LinAlgError:
         return 0.0, 1.0
-    beta = r_inv @ (q.T @ u)
-    resid = u - x @ beta
     centred = u - u.mean()
     r2 = 1.0 - float(resid @ resid) / float(centred @ centred)
-    bread = r_inv @ r_inv.T  # (XᵀX)⁻¹
-    cov = bread @ newey_west_meat(x * resid[:, None], max(maxlags, 1)) @ bread
     try:
         wald = float(beta[1:] @ np.linalg.solve(cov[1:, 1:], beta[1:]))
     except np.linalg.LinAlgError:
@@ -260,12 +255,7 @@ def fin_delay(u: FloatArray, fin: FloatArray, dt_s: float) -> tuple[float, float
     if du.size < 8 or not np.ptp(dd) > 0.0:
         return math.nan, math.nan
     x = np.column_stack([np.ones(du.size), dd])
-    q, r = np.linalg.qr(x)
-    r_inv = np.linalg.inv(r)
-    beta = r_inv @ (q.T @ du)
-    resid = du - x @ beta
-    bread = r_inv @ r_inv.T
-    cov = bread @ newey_west_meat(x * resid[:, None], min(10, du.size // 4)) @ bread
+    beta, _, cov = ols_newey_west(x, du, min(10, du.size // 4))
     se = math.sqrt(cov[1, 1]) if cov[1, 1] > 0.0 else math.nan
     return -float(beta[1]), -float(beta[1]) / se
 

@@ -123,12 +123,17 @@ class StatedRig:
     def __post_init__(self) -> None:
         check(self)
 
+    @classmethod
+    def of(cls, rig: Rig) -> StatedRig:
+        """All of ``rig`` stated."""
+        return cls(**{setting: getattr(rig, f) for f, (setting, _) in RIG_KEYS.items()})
+
     def metadata(self) -> dict[str, str]:
         """The ``rig.*`` lines of what is stated."""
         return {
-            f"rig.{f.name}": repr(float(getattr(self, f.name)))
-            for f in fields(self)
-            if getattr(self, f.name) is not None
+            key: repr(float(getattr(self, setting)))
+            for setting, key in RIG_KEYS.values()
+            if getattr(self, setting) is not None
         }
 
 

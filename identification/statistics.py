@@ -33,6 +33,7 @@ __all__ = [
     "TraceStatistics",
     "decorrelation_stride",
     "newey_west_meat",
+    "ols_newey_west",
     "standard_errors",
     "trace_statistics",
 ]
@@ -84,6 +85,19 @@ def standard_errors(
     return se, {
         f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)
     }
+
+
+def ols_newey_west(x: FloatArray, y: FloatArray, lags: int) -> tuple[FloatArray, ...]:
+    """Least squares of ``y`` on the columns of ``x`` (by QR) with the Newey-West covariance
+    of the coefficients over ``lags`` (Bartlett weights, no small-sample factor: statsmodels'
+    ``OLS(...).fit(cov_type="HAC")``): ``(beta, residuals, covariance)``.  Raises
+    ``numpy.linalg.LinAlgError`` where ``x`` is rank deficient."""
+    q, r = np.linalg.qr(x)
+    r_inv = np.linalg.inv(r)
+    beta = r_inv @ (q.T @ y)
+    resid = y - x @ beta
+    bread = r_inv @ r_inv.T  # (XᵀX)⁻¹
+    return beta, resid, bread @ newey_west_meat(x * resid[:, None], lags) @ bread
 
 
 def decorrelation_stride(x: ArrayLike, threshold: float = DECORRELATION) -> int:

@@ -34,6 +34,7 @@ reproduces it to rounding.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import types
@@ -316,14 +317,7 @@ class RollConfig:
             raise TypeError(f"encoder_counts must be an int, got {self.encoder_counts!r}")
         if self.encoder_counts < 0:
             raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
-        try:
-            self.rig_of(Rig())  # the bounds of Rig: one home for them
-        except ValueError as exc:
-            names = {f"Rig.{f}": setting for f, (setting, _) in RIG_KEYS.items()}
-            message = str(exc)
-            for field_name, setting_name in names.items():
-                message = message.replace(field_name, setting_name)
-            raise ValueError(message) from None
+        Rig.resolved(self._rig_settings(), {})  # the bounds of Rig, named by setting
         try:
             METHODS.check(self.method)
         except ValueError as exc:
@@ -445,14 +439,19 @@ class RollConfig:
         encoder = self.sensors and self.encoder_counts and self.angle_sensor == "encoder"
         return 360.0 / self.encoder_counts if encoder else 0.0
 
+    def _rig_settings(self) -> dict[str, float | None]:
+        """The rig's settings by name (None: each rocket's own)."""
+        return {setting: getattr(self, setting) for setting, _ in RIG_KEYS.values()}
+
     def rig_of(self, own: Rig) -> Rig:
         """The rig a rocket whose own is ``own`` flies here: each setting given, else its own."""
-        given = {setting: getattr(self, setting) for setting, _ in RIG_KEYS.values()}
-        values = {
-            f: (getattr(own, f) if given[setting] is None else given[setting])
-            for f, (setting, _) in RIG_KEYS.items()
-        }
-        return Rig(**values)
+        given = self._rig_settings()
+        chosen: dict[str, float] = {}
+        for f, (setting, _) in RIG_KEYS.items():
+            value = given[setting]
+            if value is not None:
+                chosen[f] = value
+        return dataclasses.replace(own, **chosen)
 
     @property
     def servo(self) -> Servo:
