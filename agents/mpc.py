@@ -26,6 +26,10 @@ by a constrained finite-horizon plan, solved every control step by OSQP:
   or whether the controller was pickled on the way).
   ``benchmarks/mpc_speed.py`` measures the time per step against the 10-ms
   budget and the LQR in the same run.
+* *On the rig* (a servo lag, play, late sensors): the observer's design
+  (:mod:`agents.observer`): the lag's drive one more state of the plan, which
+  starts from where the servo stands; the plan's first command sent through
+  the play.
 * *In flight* (``scheduled``, as the observer controller): the plan predicts
   with each coming step's model -- the nominal rocket carried to that step's
   airspeed and density, the turbulence flown -- and ends on that step's
@@ -217,7 +221,7 @@ class MPCController(ObserverController):
         x0 = state[self.design_states]
         lo, hi = -self._range + shift, self._range + shift
         self._lower[:horizon], self._upper[:horizon] = lo, hi
-        start = fin + shift  # the fin in design coordinates
+        start = fin + shift  # the servo in design coordinates (the fin without a linkage)
         self._lower[horizon] = start - self._step_max
         self._upper[horizon] = start + self._step_max
         self._qp.update(q=self._linear @ x0, l=self._lower, u=self._upper)

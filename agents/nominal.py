@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import Design, FlightView
 from disturbances.bank import TraceBank
-from identification.model import RollParams
+from identification.model import RIG_LIMITS, Rig, RollParams
 
 __all__ = ["NominalModel", "TrimController", "make_trim"]
 
@@ -36,6 +36,9 @@ class NominalModel:
     alpha_bar_per_deg_s : float
         Slope ᾱ of the damping (eq. 48), for controllers that model ``a(θ)``
         away from trim (:mod:`agents.observer`); 0 is constant damping.
+    rig : Rig
+        The servo's linkage and the roll sensors' latency the design expects
+        (:class:`~identification.model.Rig`; the model's ideal rig by default).
     """
 
     a_per_s: float
@@ -43,6 +46,7 @@ class NominalModel:
     theta_bar_deg: float
     source: str = "given"
     alpha_bar_per_deg_s: float = 0.0
+    rig: Rig = field(default_factory=Rig)
 
     def __post_init__(self) -> None:
         for name in ("a_per_s", "alpha"):
@@ -61,7 +65,8 @@ class NominalModel:
     @classmethod
     def from_bank(cls, bank: TraceBank) -> NominalModel:
         """The median identified rocket of ``bank`` (use the *train* split: the test
-        split's parameters are what an evaluation must not have seen)."""
+        split's parameters are what an evaluation must not have seen), with the median of
+        its traces' rigs."""
         if len(bank) == 0:
             raise ValueError(f"{bank.description} has no traces to take a nominal model from")
         p = np.array(
@@ -71,12 +76,15 @@ class NominalModel:
             ]
         )
         a, alpha, theta_bar, alpha_bar = np.median(p, axis=0)
+        rigs = np.array([[getattr(r, name) for name in RIG_LIMITS] for r in bank.rigs])
+        rig = Rig(**dict(zip(RIG_LIMITS, np.median(rigs, axis=0).tolist(), strict=True)))
         return cls(
             float(a),
             float(alpha),
             float(theta_bar),
             f"median of {bank.description}",
             float(alpha_bar),
+            rig,
         )
 
 

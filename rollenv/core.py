@@ -453,6 +453,12 @@ class RollConfig:
                 chosen[f] = value
         return dataclasses.replace(own, **chosen)
 
+    def with_rig(self, rig: Rig) -> RollConfig:
+        """These settings with every rocket flying ``rig`` (its settings all given)."""
+        return dataclasses.replace(
+            self, **{setting: getattr(rig, f) for f, (setting, _) in RIG_KEYS.items()}
+        )
+
     @property
     def servo(self) -> Servo:
         """The servo of eq. 23 with this rate limit and range."""

@@ -30,6 +30,15 @@ run forward in real time:
   disturbance-observer feedforward (about ``-1`` on ``û_d``: cancellation);
   the offset state gives the integral action of an LQI without an integrator
   that can wind up.
+* *On the rig*: the design reads the rig the environment flies
+  (:class:`~identification.model.Rig`: the rockets' own from the database, or
+  the ``servo_lag_s``, ``backlash_deg``, ``sensor_latency_s`` settings).  The
+  filter runs the servo's linkage forward from its own commands and keeps its
+  state at the time the late sensors read (:meth:`RollObserver.present`
+  carries it to now); a lag makes the fin's drive a design state; with play the
+  command is sent half the play beyond the fin's goal
+  (:meth:`ObserverController.through_play`).  On the ideal rig all of it is
+  off and the design is the model's, number for number.
 
 Deployable: it reads the observation and its own configuration only.
 """

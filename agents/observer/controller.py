@@ -4,6 +4,7 @@ design from a train split."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -65,8 +66,15 @@ class ObserverController:
         scales = None if flight is None else flight.scales[:steps]
         speeds = None if flight is None else flight.airspeed_ratio
         self.observer = RollObserver(
-            rocket.params, turbulence, config, scales, None if speeds is None else speeds[:steps]
+            rocket.params,
+            turbulence,
+            config,
+            scales,
+            None if speeds is None else speeds[:steps],
+            rocket.rig,
         )
+        #: Whether the design carries the fin's drive as a state (a servo lag).
+        self._lagged = rocket.rig.lag_s > 0.0
         self.weights = {**DEFAULT_WEIGHTS[config.task], **(weights or {})}
         self._range = config.fin_range_deg
         self._angle = config.task == "angle"
@@ -107,6 +115,12 @@ class ObserverController:
         turbulence's innovation: what a cancelling fin moves per step), shared
         between the fin at the start and the command so a fin at rest keeps
         the exact gain.
+
+        With a servo lag in the rocket's rig the fin's drive is one more state
+        (``x = [..., θ_servo + θ̄, d + θ̄]``): the servo reaches the command and the
+        drive follows it, each column the step's response to its state alone (the
+        drive's exact, the command's by the secant, the servo's the rest of a fin at
+        rest); the play is left out of the design (the filter knows it).
         """
         obs = self.observer
         trim = -self.rocket.theta_bar_deg
@@ -116,20 +130,36 @@ class ObserverController:
             ar, innovation = obs.ar_at(step)
         t_rest, c_rest = obs.step_model(trim, trim, rocket, ar)
         move = max(innovation, 0.1)
-        _, c_moved = obs.step_model(trim, trim + move, rocket, ar)
         m = obs.m
-        n = m + 1
+        n = m + 1 + self._lagged
         a = np.zeros((n, n))
         a[:m, :m] = t_rest
         # The offset is constant, uncontrollable and so not stabilisable: designed as a
         # very slow AR(1) instead, its gain is that of a persistent disturbance.
         a[obs.bias, obs.bias] = OFFSET_POLE
         b = np.zeros((n, 1))
+        if self._lagged:
+            _, c_moved = obs.path_model(
+                obs.fin_path(trim, trim + move, play=False).copy(), rocket, ar
+            )
+            _, c_drive = obs.path_model(
+                obs.fin_path(trim + move, trim, trim, trim + move, play=False).copy(), rocket, ar
+            )
+        else:
+            _, c_moved = obs.step_model(trim, trim + move, rocket, ar)
         for row in (0, 1):  # rate, angle: command share by the secant, the rest on the fin
             to_command = (c_moved[row] - c_rest[row]) / move
             b[row, 0] = to_command
             a[row, m] = t_rest[row, 2] - to_command
+            if self._lagged:
+                a[row, m + 1] = (c_drive[row] - c_rest[row]) / move
+                a[row, m] -= a[row, m + 1]
         b[m, 0] = 1.0
+        if self._lagged:  # the drive after the step: its own share, the command's, the servo's
+            drive = obs.drive_after
+            a[m + 1, m + 1] = (drive(trim, trim, trim + move) - trim) / move
+            b[m + 1, 0] = (drive(trim, trim + move, trim) - trim) / move
+            a[m + 1, m] = 1.0 - a[m + 1, m + 1] - b[m + 1, 0]
         q = np.zeros((n, n))
         w = self.weights
         if self._angle:
@@ -147,8 +177,9 @@ class ObserverController:
 
     @property
     def design_states(self) -> list[int]:
-        """Indices of the design's states in ``[v, ψ, u_d lags, b, θ + θ̄]``."""
-        n = self.observer.m + 1
+        """Indices of the design's states in ``[v, ψ, u_d lags, b, θ + θ̄]`` (and the
+        drive, with a lag)."""
+        n = self.observer.m + 1 + self._lagged
         return [i for i in range(n) if self._angle or i != 1]
 
     def _design(self, rocket: RollParams | None = None, step: int | None = None) -> FloatArray:
@@ -177,7 +208,7 @@ class ObserverController:
         after its update with ``obs``."""
         ob = self.observer
         fin = float(obs[Obs.FIN])
-        x = ob.mean.copy()
+        x = ob.present(fin)
         theta_bar = self.rocket.theta_bar_deg
         if self._angle:
             offset = 0.0
@@ -186,10 +217,13 @@ class ObserverController:
             x[0] -= setpoint
             offset = setpoint / ob.rocket_at(ob.steps - 1).alpha
         shift = theta_bar - offset
+        if self._lagged:
+            return np.append(x, [ob.servo(fin) + shift, ob.drive(fin) + shift]), shift
         return np.append(x, fin + shift), shift
 
     def command(self, state: FloatArray, shift: float, fin: float) -> float:
-        """The fin command of the design's state (LQR), clipped to the fin's range."""
+        """The fin command of the design's state (LQR), clipped to the fin's range (``fin``:
+        where the servo stands, :meth:`RollObserver.servo`)."""
         command = float(self.gain @ state) - shift
         return min(max(command, -self._range), self._range)
 
@@ -215,9 +249,22 @@ class ObserverController:
         state, shift = self.design_state(obs)
         self.follow_schedule()
         fin = float(obs[Obs.FIN])
-        command = self.command(state, shift, fin)
+        command = self.through_play(self.command(state, shift, self.observer.servo(fin)), fin)
         self._last = (fin, command)
         return np.array([command / self._range], dtype=np.float32)
+
+    def through_play(self, command: float, fin: float) -> float:
+        """The servo command that puts the fin at ``command`` through the rig's play: half
+        the play beyond it in the direction the fin must move, where the servo stands when
+        the fin is to stay (the inverse of the play; ``command`` itself without one)."""
+        half = 0.5 * self.rocket.rig.backlash_deg
+        if not half:
+            return command
+        if command > fin:
+            command += half
+        elif command < fin:
+            command -= half
+        return min(max(command, -self._range), self._range)
 
 
 def clone(controller: ObserverController) -> ObserverController:
@@ -229,10 +276,12 @@ def clone(controller: ObserverController) -> ObserverController:
 
 
 def designed_on(bank: TraceBank, config: RollConfig) -> tuple[NominalModel, TurbulenceModel]:
-    """The nominal rocket and the turbulence model a design fits to ``bank``'s traces: in
-    the tunnel's frame, where the model is flown from (a stored flight's own ``u_d``,
+    """The nominal rocket (with the rig the environment flies: its settings over the traces'
+    own, :meth:`RollConfig.rig_of`) and the turbulence model a design fits to ``bank``'s
+    traces: in the tunnel's frame, where the model is flown from (a stored flight's own ``u_d``,
     recorded in flight, is taken there first: :func:`rollenv.flight.tunnel_frame`)."""
     nominal = NominalModel.from_bank(bank)
+    nominal = dataclasses.replace(nominal, rig=config.rig_of(nominal.rig))
     schedule = config.flight_schedule
     if schedule is not None and any(t.flight_reference is not None for t in bank.traces):
         bank = tunnel_frame(bank, schedule)

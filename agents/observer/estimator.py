@@ -14,7 +14,7 @@ from statsmodels.tsa.arima_process import ArmaProcess
 from agents.nominal import NominalModel
 from disturbances.bank import TraceBank
 from identification.ml import MAX_ORDER, interval_maps, roll_transition, stationary_cov
-from identification.model import RollParams
+from identification.model import Rig, RollParams, linkage_step
 from identification.statespace import predict, update
 from rocketroll_common.arrays import FloatArray
 from rollenv.core import RollConfig, wrap_deg
@@ -187,6 +187,15 @@ class RollObserver:
         With ``scales``: the flight's ``V/V_ref`` per step, which the turbulence is flown
         by (:attr:`rollenv.flight.FlightSchedule.airspeed_ratio`; default the gain of
         ``scales``, which it is for the tunnel's rocket by eq. 4-8).
+    rig : Rig, optional
+        The servo's linkage and the sensors' latency the filter expects (default: the
+        model's ideal rig).  With a linkage the filter runs the servo and the fin's
+        drive forward from its own commands (:func:`~identification.model.linkage_step`,
+        the environment's), the fin starting each step where the observation reports
+        it.  With a latency the filter's state is the rocket's when the sensors read it,
+        ``latency_s`` (rounded to a substep) ago: each time update is over the control
+        step that far back, the fin path taken from the commands' history, and
+        :meth:`present` carries the estimate to now over the fin path since.
     """
 
     def __init__(
@@ -196,6 +205,7 @@ class RollObserver:
         config: RollConfig,
         scales: FloatArray | None = None,
         airspeed_ratio: FloatArray | None = None,
+        rig: Rig | None = None,
     ) -> None:
         if abs(turbulence.dt_s - config.dt_s) > 1e-9:
             raise ValueError(
@@ -237,6 +247,12 @@ class RollObserver:
         self._gains = np.zeros((1, self.m))
         self._work = np.zeros((self.m + 1, self.m))
         self._fin = np.zeros(self.per + 1)
+        self.rig = Rig() if rig is None else rig
+        #: Whether a linkage lies between servo and fin; its ``(decay, ramp, half)`` per substep.
+        self.linked = not self.rig.linkage.direct
+        self._link = self.rig.linkage.coefficients(self.h)
+        #: The sensors' latency, substeps.
+        self.delay = round(self.rig.latency_s / self.h)
         self.reset()
 
     def reset(self) -> None:
@@ -245,15 +261,66 @@ class RollObserver:
         self.cov = self._prior_cov.copy()
         self.steps = 0
         self.setpoint_steps = 0
+        #: With a linkage: the servo and the fin's drive now (None: at rest on the first fin).
+        self._servo: tuple[float, float] | None = None
+        #: With a latency: the fin at the last ``per + delay + 1`` substep boundaries, to now.
+        self._fins: FloatArray | None = None
 
     # ---------------------------------------------------------------- filter
-    def fin_path(self, fin_deg: float, command_deg: float) -> FloatArray:
-        """The fin angle at each substep boundary of one control step (the env's servo)."""
+    def fin_path(
+        self,
+        fin_deg: float,
+        command_deg: float,
+        servo_deg: float | None = None,
+        drive_deg: float | None = None,
+        *,
+        play: bool = True,
+    ) -> FloatArray:
+        """The fin angle at each substep boundary of one control step (the env's servo;
+        with a linkage, its servo and drive starting at ``servo_deg`` and ``drive_deg``,
+        default at rest on the fin, the play left out with ``play=False``)."""
         command = min(max(command_deg, -self.fin_range), self.fin_range)
+        if self.linked:
+            return self._linked(fin_deg, command, servo_deg, drive_deg, play)[0]
         reach = self.max_move * np.arange(self.per + 1)
         np.clip(command - fin_deg, -reach, reach, out=self._fin)
         self._fin += fin_deg
         return self._fin
+
+    def _linked(
+        self,
+        fin: float,
+        command: float,
+        servo: float | None = None,
+        drive: float | None = None,
+        play: bool = True,
+    ) -> tuple[FloatArray, float, float]:
+        """The fin path of one control step through the linkage, and the servo and drive
+        at its end."""
+        decay, ramp, half = self._link
+        servo = fin if servo is None else servo
+        drive = fin if drive is None else drive
+        half = half if play else 0.0
+        self._fin[0] = fin
+        for k in range(self.per):
+            servo, drive, fin = linkage_step(
+                servo, drive, fin, command, self.max_move, decay, ramp, half
+            )
+            self._fin[k + 1] = fin
+        return self._fin, servo, drive
+
+    def drive_after(self, servo_deg: float, drive_deg: float, command_deg: float) -> float:
+        """The fin's drive after one control step from ``servo_deg`` and ``drive_deg``
+        towards ``command_deg`` (the linkage's lag alone)."""
+        return self._linked(drive_deg, command_deg, servo_deg, drive_deg, play=False)[2]
+
+    def servo(self, fin_deg: float) -> float:
+        """Where the servo is now (the fin ``fin_deg`` itself without a linkage)."""
+        return fin_deg if self._servo is None else self._servo[0]
+
+    def drive(self, fin_deg: float) -> float:
+        """Where the fin's drive is now (the fin ``fin_deg`` itself without a linkage)."""
+        return fin_deg if self._servo is None else self._servo[1]
 
     def rocket_at(self, step: int) -> RollParams:
         """The filter's rocket at control step ``step`` (the nominal one in the tunnel)."""
@@ -277,8 +344,14 @@ class RollObserver:
     ) -> tuple[FloatArray, FloatArray]:
         """``T``, ``c`` of one control step that starts with the fin at ``fin_deg``
         (under ``rocket`` and turbulence ``ar``; default: the nominal ones)."""
+        return self.path_model(self.fin_path(fin_deg, command_deg), rocket, ar)
+
+    def path_model(
+        self, path: FloatArray, rocket: RollParams | None = None, ar: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """``T``, ``c`` of one control step over the fin ``path`` (:meth:`step_model`)."""
         model = self.rocket if rocket is None else rocket
-        maps = interval_maps(model, self.fin_path(fin_deg, command_deg), self.per, self.h)
+        maps = interval_maps(model, path, self.per, self.h)
         t_roll, c_roll = roll_transition(maps, self.ar if ar is None else ar)
         t = np.zeros((self.m, self.m))
         c = np.zeros(self.m)
@@ -293,9 +366,54 @@ class RollObserver:
         """Time update over the control step just taken (fin at its start, the command)."""
         step = self.steps - 1
         ar, innovation = self.ar_at(step)
-        t, c = self.step_model(fin_deg, command_deg, self.rocket_at(step), ar)
+        if self.linked or self.delay:
+            t, c = self.path_model(self._advance(fin_deg, command_deg), self.rocket_at(step), ar)
+        else:
+            t, c = self.step_model(fin_deg, command_deg, self.rocket_at(step), ar)
         self.state_cov[2, 2] = innovation**2
         predict(self.mean, self.cov, t, c, self.state_cov, self._work)
+
+    def _advance(self, fin_deg: float, command_deg: float) -> FloatArray:
+        """With a linkage or a latency: the fin path of the step just taken (the linkage
+        run on from where it stood), and the path the time update is over (that step's,
+        or, with a latency, the step ``delay`` substeps earlier)."""
+        command = min(max(command_deg, -self.fin_range), self.fin_range)
+        if self.linked:
+            servo, drive = (fin_deg, fin_deg) if self._servo is None else self._servo
+            path, servo, drive = self._linked(fin_deg, command, servo, drive)
+            self._servo = (servo, drive)
+        else:
+            path = self.fin_path(fin_deg, command)
+        if not self.delay:
+            return path
+        if self._fins is None:  # at rest on the first fin before the episode
+            self._fins = np.full(self.per + self.delay + 1, fin_deg)
+        self._fins = np.concatenate([self._fins[self.per : -1], [fin_deg], path[1:]])
+        return self._fins[: self.per + 1]
+
+    def present(self, fin_deg: float) -> FloatArray:
+        """The state's estimate now: the filter's mean, and with a latency carried to now.
+
+        The filter's steps lag the control steps by ``delay`` substeps, so its ``u_d``
+        states are those of ``round(delay / per)`` control steps back: they are carried
+        that many steps ahead by the AR model's mean, and the rate and angle over the last
+        ``delay`` substeps' fin path with ``u_d`` held at the control step just taken's
+        (``fin_deg``, the fin now, is the path before the first step)."""
+        mean = self.mean.copy()
+        if not self.delay:
+            return mean
+        p = self.ar.size
+        lags = mean[2 : 2 + p]
+        ar = self.ar_at(self.steps - 1)[0]
+        for _ in range(round(self.delay / self.per)):
+            lags = np.concatenate([[ar @ lags], lags[:-1]])
+        mean[2 : 2 + p] = lags
+        path = np.full(self.delay + 1, fin_deg) if self._fins is None else self._fins[self.per :]
+        rocket = self.rocket_at(self.steps - 1)
+        e, g, f, a, b, c = interval_maps(rocket, path, self.delay, self.h)[0]
+        u = lags[1] + mean[self.bias]  # the control step just taken's
+        mean[0], mean[1] = e * mean[0] + g * u + f, mean[1] + a * mean[0] + b * u + c
+        return mean
 
     def update(self, obs: NDArray[np.float32]) -> None:
         """Measurement update with one observation (the env's ``Obs`` layout): the gyro,

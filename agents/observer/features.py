@@ -95,7 +95,8 @@ class ObserverFeatures:
             state, shift = controller.state_of(obs)
             controller.follow_schedule()
             fin = float(obs[Obs.FIN])
-            self.base[i] = controller.command(state, shift, fin) / self._range
+            command = controller.command(state, shift, f.servo(fin))
+            self.base[i] = controller.through_play(command, fin) / self._range
         psi = float(f.mean[1]) if self._angle else 0.0
         return np.array([f.mean[0], psi, f.u_d], dtype=np.float32)
 
