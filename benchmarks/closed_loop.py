@@ -34,6 +34,13 @@ agreement**: per replay, the controller pairs it orders against the truth on
 the headline, pairs within each other's 95 % interval over seeds counted as
 ties.
 
+What a user knows of the rig: ``--stated FACTORS`` replays the posterior
+draws identified and replayed on the truth's servo lag, backlash and latency
+off by each factor, ``--identified`` on what ``identify --actuation`` finds
+(with ``--hz``, a 100-Hz log with a measured fin); ``--rig-design`` adds the
+observer and the MPC designed on each of those rigs (rows ``observer+rig``,
+``mpc+rig``), scored on the truth and on that replay.
+
 The oracle's errors are hundredths of a degree, set by rare events (a
 setpoint step whose slew ends just as the settled window begins, a gust
 beyond the fin's reach), so its ratios need many windows and draws: with 4
@@ -45,6 +52,8 @@ Run from the repository root::
     .venv/bin/python benchmarks/closed_loop.py --seeds 10 --jobs 2     # 10 seeds x 4 truths
     .venv/bin/python benchmarks/closed_loop.py --seeds 2 --truth paper --policies pid
     .venv/bin/python benchmarks/closed_loop.py --seeds 3 --truth latency --methods ml
+    .venv/bin/python benchmarks/closed_loop.py --seeds 2 --truth latency --methods ml \
+        --stated 1 --rig-design --policies pid,observer,mpc
 """
 
 from __future__ import annotations
@@ -229,9 +238,15 @@ def score(
 
 
 @functools.cache
-def _controller(task: str, policy: str) -> Controller:
-    """The shipped controller of ``policy`` for ``task`` (made once per process)."""
-    return make_controller(policy, _config(task), TASKS[task][0])
+def _controller(task: str, policy: str, rig: Rig | None = None) -> Controller:
+    """The shipped controller of ``policy`` for ``task`` (made once per process); with
+    ``rig``, designed on it (the observer and the MPC read it)."""
+    config = _config(task)
+    return make_controller(policy, config if rig is None else config.with_rig(rig), TASKS[task][0])
+
+
+#: The controllers that design on a rig, and the name of their rows designed on a replay's.
+RIG_DESIGNS = {"observer": "observer+rig", "mpc": "mpc+rig"}
 
 
 @functools.cache
@@ -251,9 +266,12 @@ def recording_rows(
     stated_factors: Sequence[float] = (),
     hz: float | None = None,
     identified: bool = False,
+    rig_design: bool = False,
 ) -> list[dict[str, object]]:
     """Every score of one recording: per task, controller, replay and metric, the true
-    score, the replayed one and their ratio (one CSV row each)."""
+    score, the replayed one and their ratio (one CSV row each).  With ``rig_design``, each
+    replay on a rig (stated or identified) also scores the observer and the MPC designed on
+    that rig (:data:`RIG_DESIGNS`), on the truth and on the replay."""
     true, replays = rockets_of(
         truth, seed, methods, draws, reference, stated_factors, hz, identified
     )
@@ -264,10 +282,19 @@ def recording_rows(
         config = _config(task)
         length = int(seconds / config.dt_s + 1e-9)
         specs = windows(config, true, length, count, seed)
-        for policy in policies:
-            controller = _controller(task, policy)
+        runs: list[tuple[str, Controller, dict[str, list[Rocket]]]] = [
+            (policy, _controller(task, policy), replays) for policy in policies
+        ]
+        for replay, rockets in replays.items():
+            rig = rockets[0].rig
+            if not rig_design or rig is None or rig.ideal:
+                continue
+            for policy in (p for p in policies if p in RIG_DESIGNS):
+                designed = _controller(task, policy, rig)
+                runs.append((RIG_DESIGNS[policy], designed, {replay: rockets}))
+        for policy, controller, scored in runs:
             base = score(config, controller, true, specs)
-            for replay, rockets in replays.items():
+            for replay, rockets in scored.items():
                 got = [score(config, controller, r, specs) for r in rockets]
                 for name in SCORES:
                     value = float(np.mean([g[name] for g in got]))
@@ -408,6 +435,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="log each recording at this rate with a 1 %% gyro and a measured fin column "
         "(default: the truth's own, the paper's 10-Hz encoder)",
     )
+    parser.add_argument(
+        "--rig-design",
+        action="store_true",
+        help="with --stated or --identified: also score the observer and the MPC designed on "
+        "each replay's rig (rows observer+rig, mpc+rig), on the truth and on that replay",
+    )
     ns = parser.parse_args(argv)
     if ns.hz is not None and not 1.0 <= ns.hz <= 1000.0:
         parser.error("--hz: a rate in [1, 1000] Hz")
@@ -458,6 +491,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             stated_factors,
             ns.hz,
             ns.identified,
+            ns.rig_design,
         )
         for truth in truths
         for seed in seeds
@@ -490,11 +524,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(header)
     print("-" * len(header))
     verdicts: dict[str, list[tuple[str, bool]]] = {r: [] for r in replays_seen}
+    scored = list(dict.fromkeys(k[2] for k in ratios))  # the policies, then the rig designs
     for replay in replays_seen:
         for task in tasks:
-            for policy in policies:
+            for policy in scored:
                 for name in SCORES:
-                    by_truth = ratios[(replay, task, policy, name)]
+                    by_truth = ratios.get((replay, task, policy, name))
+                    if by_truth is None:  # a rig design: only on the replays with a rig
+                        continue
                     mean, sd, lo, hi = summarise([r for rs in by_truth.values() for r in rs])
                     low, high = BOUNDS.get(policy, DEFAULT_BOUNDS)
                     # The floor holds per truth: the ratio averaged over each truth's seeds.
@@ -520,7 +557,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         )
     print()
-    for line in ranking_lines(rows, tasks, policies):
+    for line in ranking_lines(rows, tasks, scored):
         print(line)
     if ns.csv is not None:
         with ns.csv.open("w", newline="") as handle:

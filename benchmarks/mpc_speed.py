@@ -14,6 +14,7 @@ Run from the repository root::
 
     .venv/bin/python benchmarks/mpc_speed.py                  # 10 episodes per task
     .venv/bin/python benchmarks/mpc_speed.py --horizon 40 --strict
+    .venv/bin/python benchmarks/mpc_speed.py --rig            # designed on a rig
 """
 
 from __future__ import annotations
@@ -32,9 +33,12 @@ from rollenv.bank import load_bank, variant_config
 TARGET_MS = 10.0
 
 
-def step_times(env_id: str, policy: str, episodes: int) -> np.ndarray:
-    """Seconds per ``act`` call over the protocol's episodes."""
-    config = variant_config(env_id, {"split": "test"})
+def step_times(
+    env_id: str, policy: str, episodes: int, settings: dict[str, float] | None = None
+) -> np.ndarray:
+    """Seconds per ``act`` call over the protocol's episodes (``settings``: the
+    environment's, e.g. a rig the controllers then design on)."""
+    config = variant_config(env_id, {"split": "test", **(settings or {})})
     bank = load_bank(config, None)
     controller = make_controller(policy, config, env_id)
     env = env_on(config, bank)
@@ -57,15 +61,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=10, help="protocol episodes per task")
     parser.add_argument("--horizon", type=int, default=None, help="MPC horizon (default 20)")
     parser.add_argument("--strict", action="store_true", help="exit 1 if the target is missed")
+    parser.add_argument(
+        "--rig",
+        action="store_true",
+        help="the environment with a servo lag, backlash and latency (50 ms, 0.5°, 30 ms), "
+        "which the observer and the MPC design on (the lag's drive one more state)",
+    )
     args = parser.parse_args(argv)
+    settings = (
+        {"servo_lag_s": 0.05, "backlash_deg": 0.5, "sensor_latency_s": 0.03} if args.rig else {}
+    )
     mpc = "mpc" if args.horizon is None else f"mpc:{args.horizon}"
     missed = False
-    print(f"time per control step, {args.episodes} test episodes per task (ms)")
+    rig = ", the rig of --rig" if args.rig else ""
+    print(f"time per control step, {args.episodes} test episodes per task{rig} (ms)")
     print(f"{'task':<20} {'controller':<10} {'median':>8} {'p99':>8} {'worst':>8} {'steps':>7}")
     for env_id in ("RocketRoll-v0", "RocketRollRate-v0", "RocketRollFlight-v0"):
         medians = {}
         for policy in ("observer", mpc):
-            t = 1e3 * step_times(env_id, policy, args.episodes)
+            t = 1e3 * step_times(env_id, policy, args.episodes, settings)
             medians[policy] = float(np.median(t))
             print(
                 f"{env_id:<20} {policy:<10} {np.median(t):8.3f} {np.percentile(t, 99):8.3f} "
