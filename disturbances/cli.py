@@ -165,9 +165,9 @@ class IdentifyArgs:
     )
     actuation: bool = setting(
         False,
-        "also look for what lies outside the model between command, fin and sensors: a servo "
-        "lag and backlash (from a measured fin column) and a sensor latency (from the roll "
-        "response), each admitted at p < 0.01 (a tunnel run; about 15 s a 100-Hz minute)",
+        "also look for what lies outside the model: a servo lag and backlash (from a measured "
+        "fin column), a sensor latency and a damping growing with the roll rate (from the roll "
+        "response), each admitted at p < 0.01 (a tunnel run; about 30 s a 100-Hz minute)",
     )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 

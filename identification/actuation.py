@@ -1,4 +1,5 @@
-"""The fin's linkage and the sensors' latency, identified where the data can tell them.
+"""The fin's linkage, the sensors' latency and a quadratic damping, identified where the
+data can tell them.
 
 The roll model drives the rocket by the servo of eq. 23 and reads it at once.  A
 real rig adds a lag between servo and fin, play in the linkage and late sensors
@@ -17,7 +18,13 @@ so that a rig inside the model keeps the model:
 * **sensor latency**, from the roll response: the maximum-likelihood fit with the
   fin delayed by each candidate on the fine grid (:func:`identification.ml.delay_search`),
   tested against no delay the same way.  Below one logging interval a latency
-  cannot be resolved, and the answer says so.
+  cannot be resolved, and the answer says so;
+* **quadratic damping**, a damping that grows with the roll rate
+  (``a(θ)·(1 + q·|v|/30 °/s)``), from the roll response with the rig found above: the
+  coefficient's profile likelihood (:func:`identification.ml.quadratic_search`), tested
+  against ``q = 0`` (two-sided: ``q`` may be of either sign), with its 95 % interval,
+  which says how well the recording tells it.  It belongs to the rocket, not the rig:
+  the environment does not fly it yet.
 
 A likelihood ratio assumes white residuals; a fin's residuals are not, so the
 level is a screen, not an exact size (``benchmarks/actuation.py`` measures how
@@ -63,6 +70,9 @@ class Term:
     p_value: float
     admitted: bool
     note: str = ""
+    #: The estimate, admitted or not, and its 95 % interval, where the test gives one.
+    estimate: float | None = None
+    interval: tuple[float, float] | None = None
 
     def line(self) -> str:
         said = "admitted" if self.admitted else "not admitted"
@@ -82,9 +92,11 @@ class Actuation:
     rig: Rig
     terms: tuple[Term, ...]
     level: float
+    #: The admitted quadratic damping coefficient (0: not admitted).
+    quadratic_damping: float = 0.0
 
     def lines(self) -> list[str]:
-        head = f"actuation and sensors (each term admitted at p < {self.level:g}):"
+        head = f"beyond the model (each term admitted at p < {self.level:g}):"
         return [head, *(f"  {t.line()}" for t in self.terms)]
 
     def settings(self) -> dict[str, float]:
@@ -168,9 +180,9 @@ def identify_actuation(
     level: float = LEVEL,
     max_latency_s: float = MAX_LATENCY_S,
 ) -> Actuation:
-    """The linkage (from a measured fin column) and the sensors' latency (from the roll
-    response, by maximum likelihood), each admitted at ``level``."""
-    from identification.ml import delay_search, model_inputs
+    """The linkage (from a measured fin column), the sensors' latency and a quadratic
+    damping (from the roll response, by maximum likelihood), each admitted at ``level``."""
+    from identification.ml import delay_search, model_inputs, quadratic_search
 
     opts = IdentifyOptions() if options is None else options
     # What the data show, whatever the user states: the search starts from the model's rig.
@@ -204,4 +216,15 @@ def identify_actuation(
     rig = Rig(
         link.lag_s, link.backlash_deg, min(latency, RIG_LIMITS["latency_s"]) if admitted else 0.0
     )
-    return Actuation(rig, tuple(terms), level)
+    found_q = quadratic_search(
+        model_inputs(recording, model, dataclasses.replace(opts, rig=StatedRig.of(rig))), model
+    )
+    p = float(stats.chi2.sf(found_q.statistic, 1)) if found_q.statistic > 0.0 else 1.0
+    q, (low, high) = found_q.coefficient, found_q.interval
+    admitted = p < level
+    note = f"95 % interval [{low:.2g}, {high:.2g}], × a(θ) at 30 °/s; not replayed"
+    terms.append(
+        Term("quadratic damping", q if admitted else 0.0, "", found_q.statistic, p, admitted,
+             note if admitted else f"estimate {q:.2g}, {note}", q, (low, high))
+    )  # fmt: skip
+    return Actuation(rig, tuple(terms), level, q if admitted else 0.0)

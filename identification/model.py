@@ -61,6 +61,7 @@ __all__ = [
     "MODEL_NAMES",
     "PAPER_CONSTANT",
     "PAPER_THETA",
+    "QUADRATIC_RATE_DPS",
     "RIG_KEYS",
     "RIG_LIMITS",
     "DampingModel",
@@ -469,6 +470,10 @@ class Rig:
         return ", ".join(parts) or "none"
 
 
+#: The roll rate at which a quadratic damping coefficient ``q`` is the fraction of ``a(θ)``
+#: added (``a(θ)·q·v·|v|/QUADRATIC_RATE_DPS``), °/s: the virtual tunnel's truth and the
+#: maximum-likelihood search (:func:`identification.ml.quadratic_search`) read it.
+QUADRATIC_RATE_DPS = 30.0
 #: :class:`Rig` field -> the largest value it takes (a physical range: half a second of lag
 #: or latency, 5° of play).
 RIG_LIMITS: Mapping[str, float] = MappingProxyType(

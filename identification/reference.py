@@ -38,7 +38,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.model import RIG_LIMITS, RollParams
+from identification.model import QUADRATIC_RATE_DPS, RIG_LIMITS, RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.settings import check, setting
 
@@ -54,8 +54,6 @@ __all__ = [
     "simulate_reference",
 ]
 
-#: The roll rate at which :attr:`Effects.quadratic_damping` is the fraction added, °/s.
-QUADRATIC_RATE_DPS = 30.0
 #: The reference integrator's default step, s.
 FINE_STEP_S = 0.001
 

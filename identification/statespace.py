@@ -40,6 +40,7 @@ IntArray = NDArray[np.intp]
 __all__ = [
     "LinearGaussian",
     "Smoothed",
+    "filtered_means",
     "loglike",
     "predict",
     "simulation_smoother",
@@ -289,6 +290,14 @@ def _smoothed_means(
     for k in range(n - 2, -1, -1):
         out[k] = a_filt[k] + rts[k] @ (out[k + 1] - a_pred[k + 1])
     return out
+
+
+def filtered_means(model: LinearGaussian) -> tuple[FloatArray, FloatArray]:
+    """The predicted and the filtered state means, each ``(n, m)``: the state at each
+    reading given those before it, and given it too."""
+    args = model._args()
+    _, predicted, _, filtered, _, _ = _filter(*args, True)
+    return predicted, filtered
 
 
 def loglike(model: LinearGaussian) -> float:
