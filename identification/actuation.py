@@ -20,11 +20,12 @@ so that a rig inside the model keeps the model:
   tested against no delay the same way.  Below one logging interval a latency
   cannot be resolved, and the answer says so;
 * **quadratic damping**, a damping that grows with the roll rate
-  (``a(θ)·(1 + q·|v|/30 °/s)``), from the roll response with the rig found above: the
-  coefficient's profile likelihood (:func:`identification.ml.quadratic_search`), tested
-  against ``q = 0`` (two-sided: ``q`` may be of either sign), with its 95 % interval,
-  which says how well the recording tells it.  It belongs to the rocket, not the rig:
-  the environment does not fly it yet.
+  (``a(θ)·(1 + q·|v|/v₀)``, ``v₀`` :data:`~identification.model.QUADRATIC_RATE_DPS`),
+  from the roll response with the rig found above: the coefficient's profile likelihood
+  (:func:`identification.ml.quadratic_search`), tested against ``q = 0`` (two-sided:
+  ``q`` may be of either sign), with its 95 % interval, which says how well the
+  recording tells it.  It belongs to the rocket, not the rig: the environment does not
+  fly it yet.
 
 A likelihood ratio assumes white residuals; a fin's residuals are not, so the
 level is a screen, not an exact size (``benchmarks/actuation.py`` measures how
@@ -41,7 +42,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from identification.compiled import linkage_path
-from identification.model import RIG_KEYS, RIG_LIMITS, Linkage, Rig, Servo
+from identification.model import QUADRATIC_RATE_DPS, RIG_KEYS, RIG_LIMITS, Linkage, Rig, Servo
 from identification.pipeline import IdentifyOptions
 from identification.recording import Recording, StatedRig
 from identification.reference import fine_steps
@@ -222,7 +223,9 @@ def identify_actuation(
     p = float(stats.chi2.sf(found_q.statistic, 1)) if found_q.statistic > 0.0 else 1.0
     q, (low, high) = found_q.coefficient, found_q.interval
     admitted = p < level
-    note = f"95 % interval [{low:.2g}, {high:.2g}], × a(θ) at 30 °/s; not replayed"
+    note = (
+        f"95 % interval [{low:.2g}, {high:.2g}], × a(θ) at {QUADRATIC_RATE_DPS:g} °/s; not replayed"
+    )
     terms.append(
         Term("quadratic damping", q if admitted else 0.0, "", found_q.statistic, p, admitted,
              note if admitted else f"estimate {q:.2g}, {note}", q, (low, high))

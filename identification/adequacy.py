@@ -79,6 +79,7 @@ __all__ = [
     "intensity_ratio",
     "model_only",
     "r_squared",
+    "suspects",
 ]
 
 #: The verdicts, best first.
@@ -285,6 +286,37 @@ def intensity_ratio(u: FloatArray, dt_s: float, ar: FloatArray) -> float:
     return _log_variance_spread(u - u.mean(), window) / float(reference)
 
 
+def suspects(
+    u: FloatArray, fin: FloatArray, dt_s: float, fin_measured: bool, ar: FloatArray | None
+) -> tuple[float, float, float, list[str]]:
+    """The figures that name an effect the model lacks (module docstring) and what they
+    suspect: the fin's delay (:func:`fin_delay`, ``fin`` at the readings; with
+    ``fin_measured`` only a sensor latency explains it) and, given the fitted turbulence's
+    AR coefficients ``ar``, its intensity (:func:`intensity_ratio`; NaN without them).
+    Returns ``(delay_s, delay_z, intensity_ratio, suspected)``."""
+    suspected = []
+    delay_s, delay_z = fin_delay(u, fin, dt_s)
+    one_sided = 0.5 * math.erfc(delay_z / math.sqrt(2.0)) if math.isfinite(delay_z) else 1.0
+    if one_sided < DELAY_P and delay_s >= DELAY_MATERIAL_S:
+        which = (
+            "a sensor latency (the fin is measured)"
+            if fin_measured
+            else "a servo lag or a sensor latency"
+        )
+        suspected.append(
+            f"the fin acts {1000 * delay_s:.0f} ms later than the model (z = {delay_z:.1f}): "
+            f"{which}; state it (identify --servo-lag/--sensor-latency) or measure the fin"
+        )
+    ratio = math.nan if ar is None else intensity_ratio(u, dt_s, ar)
+    if ratio >= INTENSITY_RATIO:
+        suspected.append(
+            f"the turbulence's intensity wanders: its {INTENSITY_WINDOW_S:g}-s variance "
+            f"varies {ratio:.1f}x as much as a stationary turbulence's (gusts, regimes): "
+            "replay the posterior draws, which follow it, not surrogates"
+        )
+    return delay_s, delay_z, ratio, suspected
+
+
 @dataclass(frozen=True, eq=False)
 class ModelOnly:
     """A fit's model driven by the fin alone (``u_d = 0``) from the first reading.
@@ -438,30 +470,13 @@ def adequacy(
         if ss is not None and ss < STEADY_STATE_R2:
             weak.append(f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate")
     # What the model lacks, named: the fin's delay, the turbulence's wandering intensity.
-    suspected = []
-    delay_s, delay_z = fin_delay(u, fin, dt)
-    one_sided = 0.5 * math.erfc(delay_z / math.sqrt(2.0)) if math.isfinite(delay_z) else 1.0
-    if one_sided < DELAY_P and delay_s >= DELAY_MATERIAL_S:
-        which = (
-            "a sensor latency (the fin is measured)"
-            if rec.fin_deg is not None
-            else "a servo lag or a sensor latency"
-        )
-        suspected.append(
-            f"the fin acts {1000 * delay_s:.0f} ms later than the model (z = {delay_z:.1f}): "
-            f"{which}; state it (identify --servo-lag/--sensor-latency) or measure the fin"
-        )
     ar = metrics.get("ar")
     if ar is None:  # an AR(1) of u_d itself where the method fits no turbulence model
         centred = u - u.mean()
         ar = [float(centred[1:] @ centred[:-1] / max(float(centred @ centred), 1e-300))]
-    ratio = intensity_ratio(u, dt, np.asarray(ar, dtype=float))
-    if ratio >= INTENSITY_RATIO:
-        suspected.append(
-            f"the turbulence's intensity wanders: its {INTENSITY_WINDOW_S:g}-s variance "
-            f"varies {ratio:.1f}x as much as a stationary turbulence's (gusts, regimes): "
-            "replay the posterior draws, which follow it, not surrogates"
-        )
+    delay_s, delay_z, ratio, suspected = suspects(
+        u, fin, dt, rec.fin_deg is not None, np.asarray(ar, dtype=float)
+    )
     verdict = found.verdict
     return Adequacy(
         rate_source=source,

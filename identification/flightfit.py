@@ -1079,13 +1079,17 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
       scales), ``u_d`` against the fins' range and α's relative standard error, with the
       tunnel's weak and unreliable limits (:data:`~identification.adequacy.RATE_R2`,
       :data:`~identification.adequacy.UD_RANGE`, :data:`~identification.adequacy.ALPHA_REL_SE`);
-    * the optimiser not reporting convergence: weak.
+    * the optimiser not reporting convergence: weak;
+    * the fin acting later than the model (:func:`identification.adequacy.suspects`):
+      suspected, not judged; the turbulence's intensity is not (in flight it changes with
+      the airspeed by the model itself).
 
     Returns the figures the adequacy table prints (``rate_r2``, ``ud_range_fraction``,
     ``alpha_rel_se``; the tunnel's ``ahead_r2`` and ``fin_share`` are None), ``on_bound``,
-    ``verdict`` and ``reasons``, JSON-safe.
+    ``fin_delay_s``, ``fin_delay_z``, ``suspected``, ``verdict`` and ``reasons``,
+    JSON-safe.
     """
-    from identification.adequacy import ALPHA_REL_SE, UD_RANGE, Findings
+    from identification.adequacy import ALPHA_REL_SE, UD_RANGE, Findings, suspects
 
     params, inputs = result.params, result.inputs
     found = Findings()
@@ -1133,6 +1137,11 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         found.check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
     if not result.converged:
         weak.append("the optimiser did not report convergence")
+    fin = np.asarray(inputs.theta[::SUBSTEPS], dtype=float)  # at the readings
+    u = np.asarray(result.u_d_deg, dtype=float)
+    delay_s, delay_z, _, suspected = suspects(
+        u, fin, inputs.dt_s, inputs.rate_limit_dps is None, None
+    )
 
     def safe(value: float) -> float | None:
         return value if math.isfinite(value) else None
@@ -1146,6 +1155,9 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         "ud_range_fraction": p99 / fin_range,
         "alpha_rel_se": safe(rel_se),
         "on_bound": on_bound,
+        "fin_delay_s": safe(delay_s),
+        "fin_delay_z": safe(delay_z),
+        "suspected": suspected,
         "verdict": found.verdict,
         "reasons": list(found.reasons),
     }

@@ -1229,7 +1229,8 @@ def rate_damped(data: _Data, speed: FloatArray, coefficient: float) -> _Data:
     """``data`` with the damping ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` (``q`` the
     ``coefficient``, ``|v|`` the ``speed`` per substep) and the gain divided by the same:
     ``dv/dt = -a(θ)·(v - α·(θ + θ̄ + u_d)) - a(θ)·q·v·|v|/QUADRATIC_RATE_DPS``, with ``|v|``
-    a path given in advance (the linear fit's smoothed rate: its linearisation point)."""
+    a path given in advance (:func:`quadratic_search`'s: the linear fit's filtered and
+    predicted rate, its linearisation point)."""
     if coefficient == 0.0:
         return data
     scale = 1.0 + coefficient * speed / QUADRATIC_RATE_DPS
@@ -1256,6 +1257,9 @@ def quadratic_search(
     share = (np.arange(data.per) + 0.5) / data.per
     speed = np.abs(filtered[:-1, :1] * (1.0 - share) + predicted[1:, :1] * share).ravel()
     mean_speed = float(np.mean(speed))
+    # a damping that stays positive at the fastest roll: q > -QUADRATIC_RATE_DPS / |v|
+    lowest = -0.9 * QUADRATIC_RATE_DPS / max(float(np.max(speed)), 1e-9)
+    bounds = (max(bounds[0], lowest), bounds[1])
     profile: dict[float, float] = {0.0: base.loglike}
 
     def negloglike(c: float) -> float:
@@ -1268,12 +1272,14 @@ def quadratic_search(
             profile[c] = max(-float(result.fun), -_negloglike_natural(damped, warm))
         return -profile[c]
 
+    for end in bounds:  # the profile's ends, which the bounded search does not visit
+        negloglike(end)
     optimize.minimize_scalar(negloglike, bounds=bounds, method="bounded", options={"xatol": 0.005})
     best = max(profile, key=lambda c: profile[c])
     floor = profile[best] - 0.5 * float(stats.chi2.ppf(0.95, 1))
     ends = []
     for end in bounds:
-        if -negloglike(end) >= floor:
+        if end == best or -negloglike(end) >= floor:
             ends.append(end)
         else:
             ends.append(

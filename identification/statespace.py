@@ -296,7 +296,9 @@ def filtered_means(model: LinearGaussian) -> tuple[FloatArray, FloatArray]:
     """The predicted and the filtered state means, each ``(n, m)``: the state at each
     reading given those before it, and given it too."""
     args = model._args()
-    _, predicted, _, filtered, _, _ = _filter(*args, True)
+    ll, predicted, _, filtered, _, _ = _filter(*args, True)
+    if not ll > -np.inf:
+        raise ValueError("the filter met a reading of zero likelihood: no filtered means")
     return predicted, filtered
 
 

@@ -31,7 +31,7 @@ run forward in real time:
   the offset state gives the integral action of an LQI without an integrator
   that can wind up.
 * *On the rig*: the design reads the rig the environment flies
-  (:class:`~identification.model.Rig`: the rockets' own from the database, or
+  (:class:`~identification.model.Rig`: the median of the design split's, or
   the ``servo_lag_s``, ``backlash_deg``, ``sensor_latency_s`` settings).  The
   filter runs the servo's linkage forward from its own commands and keeps its
   state at the time the late sensors read (:meth:`RollObserver.present`

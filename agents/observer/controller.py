@@ -120,7 +120,9 @@ class ObserverController:
         (``x = [..., θ_servo + θ̄, d + θ̄]``): the servo reaches the command and the
         drive follows it, each column the step's response to its state alone (the
         drive's exact, the command's by the secant, the servo's the rest of a fin at
-        rest); the play is left out of the design (the filter knows it).
+        rest).  The play is left out of the design: the filter knows it, the states are
+        read without it (:meth:`design_servo`) and the command is sent through it
+        (:meth:`through_play`).
         """
         obs = self.observer
         trim = -self.rocket.theta_bar_deg
@@ -138,15 +140,10 @@ class ObserverController:
         # very slow AR(1) instead, its gain is that of a persistent disturbance.
         a[obs.bias, obs.bias] = OFFSET_POLE
         b = np.zeros((n, 1))
-        if self._lagged:
-            _, c_moved = obs.path_model(
-                obs.fin_path(trim, trim + move, play=False).copy(), rocket, ar
-            )
-            _, c_drive = obs.path_model(
-                obs.fin_path(trim + move, trim, trim, trim + move, play=False).copy(), rocket, ar
-            )
-        else:
-            _, c_moved = obs.step_model(trim, trim + move, rocket, ar)
+        _, c_moved = obs.path_model(obs.fin_path(trim, trim + move, play=False), rocket, ar)
+        if self._lagged:  # the drive (the fin, without play) away from a servo at rest
+            drive_path = obs.fin_path(trim + move, trim, trim, trim + move, play=False)
+            _, c_drive = obs.path_model(drive_path, rocket, ar)
         for row in (0, 1):  # rate, angle: command share by the secant, the rest on the fin
             to_command = (c_moved[row] - c_rest[row]) / move
             b[row, 0] = to_command
@@ -156,9 +153,9 @@ class ObserverController:
                 a[row, m] -= a[row, m + 1]
         b[m, 0] = 1.0
         if self._lagged:  # the drive after the step: its own share, the command's, the servo's
-            drive = obs.drive_after
-            a[m + 1, m + 1] = (drive(trim, trim, trim + move) - trim) / move
-            b[m + 1, 0] = (drive(trim, trim + move, trim) - trim) / move
+            drive = obs.drive_after  # (servo, drive, command)
+            a[m + 1, m + 1] = (drive(trim, trim + move, trim) - trim) / move
+            b[m + 1, 0] = (drive(trim, trim, trim + move) - trim) / move
             a[m + 1, m] = 1.0 - a[m + 1, m + 1] - b[m + 1, 0]
         q = np.zeros((n, n))
         w = self.weights
@@ -218,8 +215,15 @@ class ObserverController:
             offset = setpoint / ob.rocket_at(ob.steps - 1).alpha
         shift = theta_bar - offset
         if self._lagged:
-            return np.append(x, [ob.servo(fin) + shift, ob.drive(fin) + shift]), shift
+            return np.append(x, [self.design_servo(fin) + shift, fin + shift]), shift
         return np.append(x, fin + shift), shift
+
+    def design_servo(self, fin: float) -> float:
+        """Where the servo stands as the design, which leaves the play out, reads it: moved
+        by the play's offset (the drive's from the fin ``fin``), so that the drive is the
+        fin; the fin itself without a lag."""
+        ob = self.observer
+        return ob.servo(fin) - (ob.drive(fin) - fin)
 
     def command(self, state: FloatArray, shift: float, fin: float) -> float:
         """The fin command of the design's state (LQR), clipped to the fin's range (``fin``:
@@ -249,14 +253,19 @@ class ObserverController:
         state, shift = self.design_state(obs)
         self.follow_schedule()
         fin = float(obs[Obs.FIN])
-        command = self.through_play(self.command(state, shift, self.observer.servo(fin)), fin)
+        command = self.fin_command(state, shift, fin)
         self._last = (fin, command)
         return np.array([command / self._range], dtype=np.float32)
 
+    def fin_command(self, state: FloatArray, shift: float, fin: float) -> float:
+        """The servo's command, ° (the fin at ``fin``): the design's (:meth:`command`, from
+        where the design reads the servo) through the play (:meth:`through_play`)."""
+        return self.through_play(self.command(state, shift, self.design_servo(fin)), fin)
+
     def through_play(self, command: float, fin: float) -> float:
-        """The servo command that puts the fin at ``command`` through the rig's play: half
-        the play beyond it in the direction the fin must move, where the servo stands when
-        the fin is to stay (the inverse of the play; ``command`` itself without one)."""
+        """The servo command that puts the fin, now at ``fin``, at ``command`` through the
+        rig's play: half the play beyond it in the direction the fin must move (the inverse
+        of the play; ``command`` itself where the fin is to stay, or without play)."""
         half = 0.5 * self.rocket.rig.backlash_deg
         if not half:
             return command

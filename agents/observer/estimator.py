@@ -404,15 +404,16 @@ class RollObserver:
             return mean
         p = self.ar.size
         lags = mean[2 : 2 + p]
-        ar = self.ar_at(self.steps - 1)[0]
+        last = self.steps - 2  # the control step just taken (its update counted)
+        ar = self.ar_at(last)[0]
         for _ in range(round(self.delay / self.per)):
             lags = np.concatenate([[ar @ lags], lags[:-1]])
         mean[2 : 2 + p] = lags
         path = np.full(self.delay + 1, fin_deg) if self._fins is None else self._fins[self.per :]
-        rocket = self.rocket_at(self.steps - 1)
-        e, g, f, a, b, c = interval_maps(rocket, path, self.delay, self.h)[0]
+        e, g, f, a, b, c = interval_maps(self.rocket_at(last), path, self.delay, self.h)[0]
         u = lags[1] + mean[self.bias]  # the control step just taken's
         mean[0], mean[1] = e * mean[0] + g * u + f, mean[1] + a * mean[0] + b * u + c
+        mean[1] = wrap_deg(mean[1])
         return mean
 
     def update(self, obs: NDArray[np.float32]) -> None:

@@ -94,11 +94,10 @@ class ObserverFeatures:
             controller = self.controllers[i]
             state, shift = controller.state_of(obs)
             controller.follow_schedule()
-            fin = float(obs[Obs.FIN])
-            command = controller.command(state, shift, f.servo(fin))
-            self.base[i] = controller.through_play(command, fin) / self._range
-        psi = float(f.mean[1]) if self._angle else 0.0
-        return np.array([f.mean[0], psi, f.u_d], dtype=np.float32)
+            self.base[i] = controller.fin_command(state, shift, float(obs[Obs.FIN])) / self._range
+        now = f.present(float(obs[Obs.FIN]))
+        psi = float(now[1]) if self._angle else 0.0
+        return np.array([now[0], psi, f.u_d], dtype=np.float32)
 
     def record(self, obs: NDArray[np.float32], actions: NDArray[np.float32]) -> NDArray[np.float32]:
         """The step each env is about to take, from the policy's ``actions``: the fin it

@@ -10,7 +10,7 @@ from agents.base import FlightView
 from agents.evaluate import HEADLINE, env_on, evaluate, protocol_episodes
 from agents.mpc import MPCController
 from agents.nominal import NominalModel
-from agents.observer import ObserverController, designed_on
+from agents.observer import ObserverController, TurbulenceModel, designed_on
 from agents.registry import make_controller
 from disturbances.bank import TraceBank
 from identification.model import Rig, RollParams
@@ -108,15 +108,45 @@ def test_designing_on_the_rig_beats_the_ideal_design_on_it(env_id, kind, default
     assert score["rig"] < 0.9 * score["ideal"]
 
 
-def test_on_the_ideal_rig_the_design_is_the_models(default_db):
-    """An env without a rig: the design has no drive state, the filter no linkage or
-    delay, and the controller the registry makes is the one designed on ``Rig()``."""
-    config, built = _designed(ObserverController, "RocketRoll-v0", {}, Rig())
-    made = make_controller("observer", config, "RocketRoll-v0")
-    assert isinstance(made, ObserverController)
+#: The LQR gains of the pinned design below, as the code before the rig computed them.
+PINNED_GAINS = {
+    "RocketRoll-v0": [-2.2069169846948045, -8.46443678234786, -0.5580691421475463,
+                      -0.07126178221764741, -0.7281472958727938, 0.271803656517234],
+    "RocketRollRate-v0": [-4.7527165381780065, 0.0, -0.9792719508972946,
+                          -0.057937940336966004, -1.0820242634334987, -0.08204335535091688],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("env_id", sorted(PINNED_GAINS))
+def test_on_the_ideal_rig_the_design_is_the_models(env_id):
+    """Without a rig the filter runs no linkage and no delay, the design has no drive
+    state, and its gains are the ones the code before the rig computed (pinned)."""
+    nominal = NominalModel(2.3, 0.66, 4.5, "pinned", -0.027)
+    turbulence = TurbulenceModel(np.array([0.6, 0.2]), 6.5, 1.0, 0.01, 0.1)
+    made = ObserverController(variant_config(env_id, {}), nominal, turbulence)
     assert not made.observer.linked and made.observer.delay == 0
-    assert made.gain.size == made.observer.m + 1
-    np.testing.assert_array_equal(made.gain, built.gain)
+    np.testing.assert_allclose(made.gain, PINNED_GAINS[env_id], rtol=1e-9, atol=1e-12)
+
+
+def test_the_lagged_designs_drive_row_is_the_linkages():
+    """The drive after a step, as the design predicts it, is the linkage's: exactly for
+    a drive displaced with the servo and the command at rest (the lag is linear), and
+    for a command moved by the design's secant move."""
+    nominal = NominalModel(2.3, 0.66, 4.5, "pinned", -0.027, Rig(lag_s=0.05))
+    turbulence = TurbulenceModel(np.array([0.6, 0.2]), 6.5, 1.0, 0.01, 0.1)
+    controller = ObserverController(variant_config("RocketRoll-v0", {}), nominal, turbulence)
+    a, b, *_ = controller.design_model()
+    m = controller.observer.m
+    trim = -nominal.theta_bar_deg
+    drive_after = controller.observer.drive_after  # (servo, drive, command)
+    for d in (-2.0, 0.5, 3.0):
+        expected = drive_after(trim, trim + d, trim) - trim
+        assert a[m + 1, m + 1] * d == pytest.approx(expected, rel=1e-9)
+    assert a[m + 1, m + 1] == pytest.approx(np.exp(-0.1 / 0.05), rel=1e-9)
+    move = turbulence.innovation_sd
+    expected = drive_after(trim, trim, trim + move) - trim
+    assert b[m + 1, 0] * move == pytest.approx(expected, rel=1e-9)
+    assert a[m + 1, m] + a[m + 1, m + 1] + b[m + 1, 0] == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("env_id", ["RocketRoll-v0", "RocketRollRate-v0"])
