@@ -93,8 +93,6 @@ class Actuation:
     rig: Rig
     terms: tuple[Term, ...]
     level: float
-    #: The admitted quadratic damping coefficient (0: not admitted).
-    quadratic_damping: float = 0.0
 
     def lines(self) -> list[str]:
         head = f"beyond the model (each term admitted at p < {self.level:g}):"
@@ -220,7 +218,7 @@ def identify_actuation(
     found_q = quadratic_search(
         model_inputs(recording, model, dataclasses.replace(opts, rig=StatedRig.of(rig))), model
     )
-    p = float(stats.chi2.sf(found_q.statistic, 1)) if found_q.statistic > 0.0 else 1.0
+    p = float(stats.chi2.sf(found_q.statistic, 1))
     q, (low, high) = found_q.coefficient, found_q.interval
     admitted = p < level
     note = (
@@ -230,4 +228,4 @@ def identify_actuation(
         Term("quadratic damping", q if admitted else 0.0, "", found_q.statistic, p, admitted,
              note if admitted else f"estimate {q:.2g}, {note}", q, (low, high))
     )  # fmt: skip
-    return Actuation(rig, tuple(terms), level, q if admitted else 0.0)
+    return Actuation(rig, tuple(terms), level)

@@ -1279,7 +1279,7 @@ def quadratic_search(
     floor = profile[best] - 0.5 * float(stats.chi2.ppf(0.95, 1))
     ends = []
     for end in bounds:
-        if end == best or -negloglike(end) >= floor:
+        if -negloglike(end) >= floor:
             ends.append(end)
         else:
             ends.append(

@@ -279,9 +279,9 @@ class RollObserver:
         """The fin angle at each substep boundary of one control step (the env's servo;
         with a linkage, its servo and drive starting at ``servo_deg`` and ``drive_deg``,
         default at rest on the fin, the play left out with ``play=False``)."""
-        command = min(max(command_deg, -self.fin_range), self.fin_range)
         if self.linked:
-            return self._linked(fin_deg, command, servo_deg, drive_deg, play)[0]
+            return self._linked(fin_deg, command_deg, servo_deg, drive_deg, play)[0]
+        command = min(max(command_deg, -self.fin_range), self.fin_range)
         reach = self.max_move * np.arange(self.per + 1)
         np.clip(command - fin_deg, -reach, reach, out=self._fin)
         self._fin += fin_deg
@@ -295,9 +295,10 @@ class RollObserver:
         drive: float | None = None,
         play: bool = True,
     ) -> tuple[FloatArray, float, float]:
-        """The fin path of one control step through the linkage, and the servo and drive
-        at its end."""
+        """The fin path of one control step through the linkage towards ``command``
+        (within the fin's range), and the servo and drive at its end."""
         decay, ramp, half = self._link
+        command = min(max(command, -self.fin_range), self.fin_range)
         servo = fin if servo is None else servo
         drive = fin if drive is None else drive
         half = half if play else 0.0
@@ -377,13 +378,11 @@ class RollObserver:
         """With a linkage or a latency: the fin path of the step just taken (the linkage
         run on from where it stood), and the path the time update is over (that step's,
         or, with a latency, the step ``delay`` substeps earlier)."""
-        command = min(max(command_deg, -self.fin_range), self.fin_range)
         if self.linked:
-            servo, drive = (fin_deg, fin_deg) if self._servo is None else self._servo
-            path, servo, drive = self._linked(fin_deg, command, servo, drive)
+            path, servo, drive = self._linked(fin_deg, command_deg, *(self._servo or (None, None)))
             self._servo = (servo, drive)
         else:
-            path = self.fin_path(fin_deg, command)
+            path = self.fin_path(fin_deg, command_deg)
         if not self.delay:
             return path
         if self._fins is None:  # at rest on the first fin before the episode
