@@ -194,10 +194,11 @@ def identify_actuation(
         terms += [lag, play]
         link = Linkage(lag.value, play.value)
     else:
+        lacking = "a measured fin column (fin_deg)" if recording.fin_deg is None else ""
+        if recording.fin_cmd_deg is None:
+            lacking += (" and " if lacking else "") + "the command it followed (fin_cmd_deg)"
         for name, unit in (("servo lag", "s"), ("backlash", "°")):
-            terms.append(
-                Term(name, 0.0, unit, 0.0, 1.0, False, "needs a measured fin column (fin_deg)")
-            )
+            terms.append(Term(name, 0.0, unit, 0.0, 1.0, False, f"needs {lacking}"))
     inputs = model_inputs(recording, model, opts)
     step = inputs.grid.step_s
     found = delay_search(inputs, model, range(round(max_latency_s / step) + 1))
