@@ -55,6 +55,14 @@ TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
         "outside the model: quadratic damping, 15 % more at 30 °/s",
         {"effects": Effects(quadratic_damping=0.15)},
     ),
+    "quadratic-1.5x": (
+        "outside the model: quadratic damping, 22.5 % more at 30 °/s (1.5x the quadratic truth)",
+        {"effects": Effects(quadratic_damping=0.225)},
+    ),
+    "quadratic-strong": (
+        "outside the model: quadratic damping, 50 % more at 30 °/s",
+        {"effects": Effects(quadratic_damping=0.5)},
+    ),
     "latency": (
         "outside the model: 30 ms of sensor latency",
         {"effects": Effects(latency_s=0.03)},

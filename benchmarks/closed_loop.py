@@ -39,7 +39,9 @@ draws identified and replayed on the truth's servo lag, backlash and latency
 off by each factor, ``--identified`` on what ``identify --actuation`` finds
 (with ``--hz``, a 100-Hz log with a measured fin); ``--rig-design`` adds the
 observer and the MPC designed on each of those rigs (rows ``observer+rig``,
-``mpc+rig``), scored on the truth and on that replay.
+``mpc+rig``), scored on the truth and on that replay.  ``--fit-quadratic-damping`` adds
+the posterior draws identified with a damping growing with the roll rate searched (the
+replay ``... q searched`` carries it where the test admits it) and says where it did.
 
 The oracle's errors are hundredths of a degree, set by rare events (a
 setpoint step whose slew ends just as the settled window begins, a gust
@@ -54,6 +56,8 @@ Run from the repository root::
     .venv/bin/python benchmarks/closed_loop.py --seeds 3 --truth latency --methods ml
     .venv/bin/python benchmarks/closed_loop.py --seeds 2 --truth latency --methods ml \
         --stated 1 --rig-design --policies pid,observer,mpc
+    .venv/bin/python benchmarks/closed_loop.py --seeds 2 --truth quadratic-strong \
+        --methods ml --fit-quadratic-damping --policies pid,observer
 """
 
 from __future__ import annotations
@@ -128,11 +132,14 @@ def stated(effects: Effects, factor: float) -> Rig:
     )
 
 
-def _posterior(rec: Recording, method: str, rig: Rig, draws: int, seed: int) -> list[Rocket] | None:
-    """The posterior draws of ``method`` on ``rec`` identified with the fin ``rig`` shapes,
-    each replayed on that rig (None: the method has no posterior)."""
-    said = StatedRig.of(rig)
-    found = fit(Context(rec, IdentifyOptions(noise_runs=0, rig=said)), method, ["theta"])["theta"]
+def _posterior(
+    rec: Recording, method: str, rig: Rig, draws: int, seed: int, quadratic: bool = False
+) -> list[Rocket] | None:
+    """The posterior draws of ``method`` on ``rec`` identified with the fin ``rig`` shapes
+    (and ``quadratic``: the quadratic damping searched), each replayed on that rig (None:
+    the method has no posterior)."""
+    options = IdentifyOptions(noise_runs=0, rig=StatedRig.of(rig), fit_quadratic_damping=quadratic)
+    found = fit(Context(rec, options), method, ["theta"])["theta"]
     if found.sample_posterior is None or not draws:
         return None
     dt = found.disturbance.interval_s
@@ -151,6 +158,7 @@ def rockets_of(
     stated_factors: Sequence[float] = (),
     hz: float | None = None,
     identified: bool = False,
+    quadratic: bool = False,
 ) -> tuple[Rocket, dict[str, list[Rocket]]]:
     """The true rocket of one recording and, per replay, what it would replay (the true one
     on the reference integrator where it is outside the model, or ``reference``); with
@@ -158,7 +166,9 @@ def rockets_of(
     the linkage and latency a user states (the truth's, off by each factor); with
     ``identified``, with what :func:`identification.actuation.identify_actuation` finds.
     ``hz``: the recording logged at this rate with a 1 % gyro and a measured fin (default:
-    the truth's own, the paper's 10-Hz encoder)."""
+    the truth's own, the paper's 10-Hz encoder); ``quadratic``: also the posterior draws
+    identified with the quadratic damping searched (``identify --fit-quadratic-damping``:
+    the replay carries it where it is admitted)."""
     spec = spec_of(truth, seed)
     if hz is not None:
         spec = dataclasses.replace(spec, log_dt=1.0 / hz, gyro_noise=1.0, measured_fin=True)
@@ -187,6 +197,10 @@ def rockets_of(
             drawn = _posterior(rec, method, rig, draws, seed)
             if drawn is not None:
                 replays[f"{method} posterior, {label}"] = drawn
+    for method in methods if quadratic else ():
+        drawn = _posterior(rec, method, Rig(), draws, seed, quadratic=True)
+        if drawn is not None:
+            replays[f"{method} posterior, q searched"] = drawn
     return true, replays
 
 
@@ -267,13 +281,14 @@ def recording_rows(
     hz: float | None = None,
     identified: bool = False,
     rig_design: bool = False,
+    quadratic: bool = False,
 ) -> list[dict[str, object]]:
     """Every score of one recording: per task, controller, replay and metric, the true
     score, the replayed one and their ratio (one CSV row each).  With ``rig_design``, each
     replay on a rig (stated or identified) also scores the observer and the MPC designed on
     that rig (:data:`RIG_DESIGNS`), on the truth and on the replay."""
     true, replays = rockets_of(
-        truth, seed, methods, draws, reference, stated_factors, hz, identified
+        truth, seed, methods, draws, reference, stated_factors, hz, identified, quadratic
     )
     every = [true, *(r for rs in replays.values() for r in rs)]
     seconds = min(r.u_d_deg.size * r.dt_s for r in every)
@@ -309,6 +324,7 @@ def recording_rows(
                             "true": base[name],
                             "replayed": value,
                             "ratio": value / base[name],
+                            "quadratic_damping": rockets[0].params.quadratic_damping,
                         }
                     )
     return rows
@@ -363,6 +379,27 @@ def ranking_lines(
         lines.append(
             f"  {replay}: {against} of {pairs} pairs against the truth ({ties} ties)"
             + (f": {', '.join(cells)}" if cells else "")
+        )
+    return lines
+
+
+def quadratic_lines(rows: Sequence[dict[str, object]]) -> list[str]:
+    """Per replay and truth: the recordings whose identification kept a quadratic damping,
+    and the coefficients it kept."""
+    kept: dict[tuple[str, str], dict[int, float]] = {}
+    for row in rows:
+        if not str(row["replay"]).endswith("q searched"):
+            continue
+        key = (str(row["replay"]), str(row["truth"]))
+        seed, q = row["seed"], row["quadratic_damping"]
+        assert isinstance(seed, int) and isinstance(q, float)
+        kept.setdefault(key, {})[seed] = q
+    lines = ["Quadratic damping kept in the replay (admitted at p < 0.01), per truth:"]
+    for (replay, truth), by_seed in kept.items():
+        values = [q for q in by_seed.values() if q != 0.0]
+        lines.append(
+            f"  {replay}, {truth}: {len(values)} of {len(by_seed)} recordings"
+            + (f" (q = {', '.join(f'{q:.3g}' for q in sorted(values))})" if values else "")
         )
     return lines
 
@@ -441,6 +478,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="with --stated or --identified: also score the observer and the MPC designed on "
         "each replay's rig (rows observer+rig, mpc+rig), on the truth and on that replay",
     )
+    parser.add_argument(
+        "--fit-quadratic-damping",
+        action="store_true",
+        help="also replay the posterior draws identified with a damping growing with the roll "
+        "rate searched, carried where it is admitted (identify --fit-quadratic-damping)",
+    )
     ns = parser.parse_args(argv)
     if ns.hz is not None and not 1.0 <= ns.hz <= 1000.0:
         parser.error("--hz: a rate in [1, 1000] Hz")
@@ -492,6 +535,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns.hz,
             ns.identified,
             ns.rig_design,
+            ns.fit_quadratic_damping,
         )
         for truth in truths
         for seed in seeds
@@ -559,6 +603,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print()
     for line in ranking_lines(rows, tasks, scored):
         print(line)
+    if ns.fit_quadratic_damping:
+        print()
+        for line in quadratic_lines(rows):
+            print(line)
     if ns.csv is not None:
         with ns.csv.open("w", newline="") as handle:
             writer = csv.DictWriter(handle, fieldnames=list(rows[0]))

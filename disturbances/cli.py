@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
 from identification.methods import METHODS, default_methods, has_posterior, traits
-from identification.model import MODEL_NAMES
+from identification.model import MODEL_NAMES, QUADRATIC_RATE_DPS
 from identification.pipeline import IdentifyOptions
 from identification.recording import SOURCES
 from rocketroll_common.errors import UsageError
@@ -573,6 +573,12 @@ def show(args: ShowArgs) -> int:
             f"a = {p.beta_bar_per_s:.4f} 1/s"
             if p.is_constant_damping
             else f"ᾱ = {p.alpha_bar_per_deg_s:.4f} 1/(s·°), β̄ = {p.beta_bar_per_s:.4f} 1/s"
+        )
+        + (
+            f", quadratic damping q = {p.quadratic_damping:.3g} (× a(θ) at "
+            f"{QUADRATIC_RATE_DPS:g} °/s)"
+            if p.quadratic_damping
+            else ""
         ),
     ]
     if trace.validation is not None:

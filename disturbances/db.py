@@ -112,7 +112,11 @@ def _blob(values: FloatArray) -> bytes:
 def _params(row: sqlite3.Row) -> RollParams:
     """The roll parameters of an ``identifications`` row (or a join holding its columns)."""
     return RollParams(
-        row["alpha"], row["theta_bar_deg"], row["beta_bar_per_s"], row["alpha_bar_per_deg_s"]
+        row["alpha"],
+        row["theta_bar_deg"],
+        row["beta_bar_per_s"],
+        row["alpha_bar_per_deg_s"],
+        row["quadratic_damping"],
     )
 
 
@@ -575,9 +579,9 @@ class DisturbanceDB:
         p = row.params
         cur = conn.execute(
             "INSERT INTO identifications (recording_id, method, model, alpha, theta_bar_deg, "
-            "beta_bar_per_s, alpha_bar_per_deg_s, metrics, options, package_version, created_at, "
-            "verdict, v_ref_mps, rho_ref_kgm3, torque_exponent, damping_exponent) "
-            "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            "beta_bar_per_s, alpha_bar_per_deg_s, quadratic_damping, metrics, options, "
+            "package_version, created_at, verdict, v_ref_mps, rho_ref_kgm3, torque_exponent, "
+            "damping_exponent) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 recording_id,
                 row.method,
@@ -586,6 +590,7 @@ class DisturbanceDB:
                 p.theta_bar_deg,
                 p.beta_bar_per_s,
                 p.alpha_bar_per_deg_s,
+                p.quadratic_damping,
                 json.dumps(dict(row.metrics), allow_nan=False),
                 json.dumps(dict(row.options), allow_nan=False),
                 row.package_version,
@@ -748,7 +753,8 @@ class DisturbanceDB:
         "SELECT t.id, t.uid, t.kind, s.uid AS source_uid, t.seed, t.settings, "
         "r.id AS recording_id, r.name AS recording, r.content_hash AS recording_hash, r.source, "
         "r.split, i.method, "
-        "i.model, i.alpha, i.theta_bar_deg, i.beta_bar_per_s, i.alpha_bar_per_deg_s, t.dt_s, "
+        "i.model, i.alpha, i.theta_bar_deg, i.beta_bar_per_s, i.alpha_bar_per_deg_s, "
+        "i.quadratic_damping, t.dt_s, "
         "t.t0_s, t.n_samples, t.checksum, t.mean_deg, t.sd_deg, t.q05_deg, t.q95_deg, "
         "t.normality_p, i.package_version, i.verdict, t.created_at, t.validation, "
         "i.v_ref_mps, i.rho_ref_kgm3, i.torque_exponent, i.damping_exponent, "

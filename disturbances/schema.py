@@ -3,7 +3,10 @@
 Version :data:`SCHEMA_VERSION` is written to ``PRAGMA user_version``; the
 file is marked with ``PRAGMA application_id`` :data:`APPLICATION_ID`.
 
-Version 4 (this one) stores flights: a flight method's identification holds its
+Version 5 (this one) stores each identification's ``quadratic_damping``: the growth of its
+damping with the roll rate (:attr:`identification.model.RollParams.quadratic_damping`; 0,
+the paper's linear roll, for every identification before and every one that does not
+search the term).  Version 4 stores flights: a flight method's identification holds its
 parameters at a reference airspeed and density with the airspeed scaling it measured
 (``v_ref_mps``, ``rho_ref_kgm3``, ``torque_exponent``, ``damping_exponent``:
 :class:`rocketroll_physics.scaling.FlightReference`; NULL for the tunnel's, which hold at
@@ -34,7 +37,7 @@ from pathlib import Path
 __all__ = ["APPLICATION_ID", "SCHEMA", "SCHEMA_VERSION", "TABLES", "backup_path", "migrate"]
 
 #: Version of the schema this package writes and reads.
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 #: ``PRAGMA application_id`` of a rocketroll disturbance database ("RRDB").
 APPLICATION_ID = 0x52524442
 
@@ -63,6 +66,7 @@ CREATE TABLE identifications (
     theta_bar_deg       REAL NOT NULL,
     beta_bar_per_s      REAL NOT NULL,
     alpha_bar_per_deg_s REAL NOT NULL,
+    quadratic_damping   REAL NOT NULL DEFAULT 0,
     metrics             TEXT NOT NULL,
     options             TEXT NOT NULL,
     package_version     TEXT NOT NULL,
@@ -83,8 +87,12 @@ _FLIGHT_COLUMNS = (
     "    damping_exponent    REAL,\n"
     "    CHECK ((v_ref_mps IS NULL) = (torque_exponent IS NULL)),\n"
 )
+#: The quadratic damping's line of the identifications table (version 5).
+_QUADRATIC_COLUMN = "    quadratic_damping   REAL NOT NULL DEFAULT 0,\n"
+#: The identifications table of version 4 (before its quadratic damping), what 3 -> 4 makes.
+_IDENTIFICATIONS_V4 = _IDENTIFICATIONS.replace(_QUADRATIC_COLUMN, "")
 #: The identifications table of version 2 (before its ``verdict``), what 1 -> 2 makes.
-_IDENTIFICATIONS_V2 = _IDENTIFICATIONS.replace(_FLIGHT_COLUMNS, "").replace(
+_IDENTIFICATIONS_V2 = _IDENTIFICATIONS_V4.replace(_FLIGHT_COLUMNS, "").replace(
     "    verdict             TEXT,\n", ""
 )
 _TRACES = """
@@ -163,6 +171,14 @@ def _migrate_2_to_3(conn: sqlite3.Connection) -> None:
 def _migrate_3_to_4(conn: sqlite3.Connection) -> None:
     """Version 3 -> 4: the flight reference of an identification (none is stored before:
     version 3 refused flights), with its checks, by rebuilding the table."""
+    _rebuild(conn, "identifications", _IDENTIFICATIONS_V4)
+    conn.execute(_INDEXES[2])
+
+
+def _migrate_4_to_5(conn: sqlite3.Connection) -> None:
+    """Version 4 -> 5: each identification's quadratic damping, 0 for every one stored
+    before (none searched the term), by rebuilding the table: its columns then stand where
+    a new database's do."""
     _rebuild(conn, "identifications", _IDENTIFICATIONS)
     conn.execute(_INDEXES[2])
 
@@ -172,6 +188,7 @@ MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {
     1: _migrate_1_to_2,
     2: _migrate_2_to_3,
     3: _migrate_3_to_4,
+    4: _migrate_4_to_5,
 }
 
 

@@ -42,15 +42,23 @@ import numpy as np
 from scipy import optimize, stats
 
 from identification.compiled import linkage_path
-from identification.model import QUADRATIC_RATE_DPS, RIG_KEYS, RIG_LIMITS, Linkage, Rig, Servo
+from identification.model import (
+    QUADRATIC_RATE_DPS,
+    RIG_KEYS,
+    RIG_LIMITS,
+    TERM_LEVEL,
+    Linkage,
+    Rig,
+    Servo,
+)
 from identification.pipeline import IdentifyOptions
 from identification.recording import Recording, StatedRig
 from identification.reference import fine_steps
 
 __all__ = ["LEVEL", "MAX_LATENCY_S", "Actuation", "Term", "fit_linkage", "identify_actuation"]
 
-#: The level at which each term is admitted.
-LEVEL = 0.01
+#: The level at which each term is admitted (:data:`identification.model.TERM_LEVEL`).
+LEVEL = TERM_LEVEL
 #: The longest sensor latency looked for, s.
 MAX_LATENCY_S = 0.1
 #: The largest lag and play looked for (a rig's range), s and °.
@@ -219,11 +227,12 @@ def identify_actuation(
     found_q = quadratic_search(
         model_inputs(recording, model, dataclasses.replace(opts, rig=StatedRig.of(rig))), model
     )
-    p = float(stats.chi2.sf(found_q.statistic, 1))
+    p = found_q.p
     q, (low, high) = found_q.coefficient, found_q.interval
     admitted = p < level
     note = (
-        f"95 % interval [{low:.2g}, {high:.2g}], × a(θ) at {QUADRATIC_RATE_DPS:g} °/s; not replayed"
+        f"95 % interval [{low:.2g}, {high:.2g}], × a(θ) at {QUADRATIC_RATE_DPS:g} °/s; "
+        "identify --fit-quadratic-damping stores it for the replay"
     )
     terms.append(
         Term("quadratic damping", q if admitted else 0.0, "", found_q.statistic, p, admitted,

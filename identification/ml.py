@@ -54,7 +54,7 @@ from scipy import linalg, optimize, stats
 
 from identification.compiled import _UNSCALED, _interval_maps, interval_maps
 from identification.methods import Context, ModelFit, resimulation_metrics
-from identification.model import QUADRATIC_RATE_DPS, RollParams, check_model
+from identification.model import QUADRATIC_RATE_DPS, TERM_LEVEL, RollParams, check_model
 from identification.pipeline import (
     IdentifyOptions,
     Measurements,
@@ -88,6 +88,7 @@ __all__ = [
     "ml_method",
     "posterior_given",
     "posterior_traces",
+    "quadratic_fit",
     "quadratic_search",
     "rate_damped",
     "roll_transition",
@@ -1218,11 +1219,32 @@ class QuadraticSearch:
     loglike_quadratic: float
     profile: dict[float, float]
     interval: tuple[float, float]
+    #: ``|v|`` per substep, the linear fit's filtered and predicted rate (:func:`rate_damped`).
+    speed: FloatArray = field(default_factory=lambda: _UNSCALED, repr=False)
 
     @property
     def statistic(self) -> float:
         """The likelihood-ratio statistic of the quadratic term against none (0 at none)."""
         return max(2.0 * (self.loglike_quadratic - self.loglike_linear), 0.0)
+
+    @property
+    def p(self) -> float:
+        """The likelihood-ratio test's p-value (χ² with one degree of freedom: two-sided,
+        ``q = 0`` inside the search's bounds)."""
+        return float(stats.chi2.sf(self.statistic, 1))
+
+    def summary(self, level: float = TERM_LEVEL) -> dict[str, Any]:
+        """The search as a fit's metrics: the estimate, its interval, the test and whether
+        the term is admitted at ``level``."""
+        return {
+            "estimate": self.coefficient,
+            "interval": list(self.interval),
+            "statistic": self.statistic,
+            "p": self.p,
+            "level": level,
+            "admitted": self.p < level,
+            "rate_dps": QUADRATIC_RATE_DPS,
+        }
 
 
 def rate_damped(data: _Data, speed: FloatArray, coefficient: float) -> _Data:
@@ -1238,7 +1260,11 @@ def rate_damped(data: _Data, speed: FloatArray, coefficient: float) -> _Data:
 
 
 def quadratic_search(
-    inputs: Measurements, model: str, bounds: tuple[float, float] = (-0.3, 1.0)
+    inputs: Measurements,
+    model: str,
+    bounds: tuple[float, float] = (-0.3, 1.0),
+    *,
+    search: _Search | None = None,
 ) -> QuadraticSearch:
     """The quadratic damping coefficient within ``bounds`` that best describes the roll
     (:func:`rate_damped`): its profile likelihood, every parameter refitted at each ``q``
@@ -1248,9 +1274,11 @@ def quadratic_search(
     ``|v|`` along each interval is what the linear fit knew before that interval's
     reading, from its filtered rate at the interval's start to its prediction at the end:
     the smoothed rate would know the reading, and with it the turbulence the term is
-    judged against (on the paper's in-model truth it found q ≈ -0.1 at LR 30-80)."""
-    data = _prepare(inputs)
-    search = _Search(data, inputs)
+    judged against (on the paper's in-model truth it found q ≈ -0.1 at LR 30-80).
+    ``search`` is the linear fits' of ``inputs`` where the caller has them."""
+    if search is None:
+        search = _Search(_prepare(inputs), inputs)
+    data = search.data
     base = _fit(search, model)
     nat = search.order(model, base.ar.size)[1]
     predicted, filtered = filtered_means(base._state_space)
@@ -1286,7 +1314,33 @@ def quadratic_search(
                 optimize.brentq(lambda c: -negloglike(c) - floor, *sorted((best, end)), xtol=0.005)
             )
     return QuadraticSearch(
-        best, base.loglike, profile[best], dict(sorted(profile.items())), (ends[0], ends[1])
+        float(best),
+        base.loglike,
+        profile[best],
+        dict(sorted(profile.items())),
+        (ends[0], ends[1]),
+        readonly_array(speed),
+    )
+
+
+def quadratic_fit(
+    inputs: Measurements, model: str, found: QuadraticSearch, base: MLFit | None = None
+) -> MLFit:
+    """The fit with the quadratic damping ``found``: every parameter and the turbulence's
+    AR order refitted with the damping ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` along the
+    search's ``|v|`` (:func:`rate_damped`), its posterior ``u_d`` that rocket's, its
+    parameters carrying ``q`` (the environment replays it at each substep's own rate).
+    At ``q = 0`` the linear fit ``base`` where given."""
+    q = found.coefficient
+    if q == 0.0 and base is not None:
+        return base
+    damped = rate_damped(_prepare(inputs), np.asarray(found.speed), q)
+    fitted = _fit(_Search(damped, inputs), model)
+    return dataclasses.replace(
+        fitted,
+        params=dataclasses.replace(fitted.params, quadratic_damping=q),
+        n_params=fitted.n_params + 1,
+        aic=fitted.aic + 2.0,
     )
 
 
@@ -1349,6 +1403,12 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     fits = []
     for model in models:
         found = _fit(search, model)
+        beyond: dict[str, Any] = {}
+        if context.options.fit_quadratic_damping:
+            term = quadratic_search(inputs, model, search=search)
+            beyond["quadratic_damping"] = term.summary()
+            if term.p < TERM_LEVEL:
+                found = quadratic_fit(inputs, model, term, found)
         dist = found.disturbance()
         resim = resimulate(
             dist,
@@ -1383,6 +1443,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "converged": found.converged,
             "posterior_sd_mean_deg": float(np.mean(found.u_d_sd_deg)),
             "innovations": innovation_checks(found),
+            **beyond,
         }
         settings = {"interval_s": found.interval_s, "estimate": "posterior mean (RTS smoother)"}
         fits.append(

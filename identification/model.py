@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
@@ -56,6 +56,15 @@ from identification import paper
 
 FloatArray = NDArray[np.float64]
 
+#: The roll rate at which a quadratic damping coefficient ``q`` is the fraction of ``a(θ)``
+#: added (``a(θ)·q·v·|v|/QUADRATIC_RATE_DPS``), °/s: the virtual tunnel's truth, the
+#: maximum-likelihood search (:func:`identification.ml.quadratic_search`) and the
+#: environment's kernel read it.
+QUADRATIC_RATE_DPS = 30.0
+#: The level at which a term beyond the paper's model (a servo's lag and play, a latency,
+#: the quadratic damping) is admitted by its likelihood-ratio test.
+TERM_LEVEL = 0.01
+
 __all__ = [
     "MODELS",
     "MODEL_NAMES",
@@ -64,6 +73,7 @@ __all__ = [
     "QUADRATIC_RATE_DPS",
     "RIG_KEYS",
     "RIG_LIMITS",
+    "TERM_LEVEL",
     "DampingModel",
     "Linkage",
     "Rig",
@@ -75,6 +85,7 @@ __all__ = [
     "linkage_step",
     "model_of",
     "piece_coefficients",
+    "quadratic_steady_rate",
     "roll_coefficients",
     "roll_step",
     "servo_path",
@@ -99,15 +110,27 @@ class RollParams:
     alpha_bar_per_deg_s : float
         Slope ᾱ of the damping versus ``|θ + θ̄|``, 1/(s·°) (eq. 48).
         Zero gives the constant-damping model.
+    quadratic_damping : float
+        The damping's growth with the roll rate beyond the paper's model: the fraction
+        ``q`` of ``a(θ)`` added at :data:`QUADRATIC_RATE_DPS`, the damping being
+        ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` (0: the paper's linear roll, eq. 23).
+        Identified by :func:`identification.ml.quadratic_search` where the data admit it.
     """
 
     alpha: float
     theta_bar_deg: float
     beta_bar_per_s: float
     alpha_bar_per_deg_s: float = 0.0
+    quadratic_damping: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("alpha", "theta_bar_deg", "beta_bar_per_s", "alpha_bar_per_deg_s"):
+        for name in (
+            "alpha",
+            "theta_bar_deg",
+            "beta_bar_per_s",
+            "alpha_bar_per_deg_s",
+            "quadratic_damping",
+        ):
             value = getattr(self, name)
             if not np.isfinite(value):
                 raise ValueError(f"RollParams.{name} must be finite, got {value!r}")
@@ -155,9 +178,11 @@ class RollParams:
         return damping(self, theta_deg)
 
     def steady_rate(self, theta_deg: ArrayLike, u_d_deg: ArrayLike = 0.0) -> FloatArray:
-        """Steady roll rate α·(θ + θ̄ + u_d), °/s, for a held fin angle (eq. 16, 36)."""
+        """Steady roll rate α·(θ + θ̄ + u_d), °/s, for a held fin angle (eq. 16, 36); with a
+        quadratic damping the root ``v`` of ``v·(1 + q·|v|/v₀) = α·(θ + θ̄ + u_d)``."""
         theta = np.asarray(theta_deg, dtype=float)
-        return self.alpha * (theta + self.theta_bar_deg + np.asarray(u_d_deg, dtype=float))
+        linear = self.alpha * (theta + self.theta_bar_deg + np.asarray(u_d_deg, dtype=float))
+        return quadratic_steady_rate(linear, self.quadratic_damping)
 
     def scaled(self, gain: float, damping: float) -> RollParams:
         """The rocket at another airspeed and density: ``α`` times ``gain``, ``ᾱ`` and ``β̄``
@@ -167,11 +192,26 @@ class RollParams:
             self.theta_bar_deg,
             self.beta_bar_per_s * damping,
             self.alpha_bar_per_deg_s * damping,
+            self.quadratic_damping,
         )
 
     def with_constant_damping(self, a_per_s: float) -> RollParams:
         """The same α and θ̄ with constant damping ``a`` (eq. 29)."""
-        return RollParams(self.alpha, self.theta_bar_deg, a_per_s, 0.0)
+        return RollParams(self.alpha, self.theta_bar_deg, a_per_s, 0.0, self.quadratic_damping)
+
+
+def quadratic_steady_rate(linear_dps: ArrayLike, quadratic: ArrayLike) -> FloatArray:
+    """The steady roll rate of a rocket whose linear steady rate is ``linear_dps`` (°/s)
+    and whose damping grows by ``quadratic`` of itself at :data:`QUADRATIC_RATE_DPS`
+    (either may be an array): the root of ``v·(1 + q·|v|/v₀) = linear`` of the same sign,
+    ``linear`` itself at ``q = 0`` (to the bit).  A negative ``q`` has the root only while
+    ``4·|q|·|linear| < v₀``, beyond which the damping would vanish: the rate is then held
+    at ``v₀/(2·|q|)``."""
+    linear = np.asarray(linear_dps, dtype=float)
+    k = np.asarray(quadratic, dtype=float) / QUADRATIC_RATE_DPS
+    size = np.abs(linear)
+    disc = np.maximum(1.0 + 4.0 * k * size, 0.0)
+    return np.asarray(np.sign(linear) * (2.0 * size / (1.0 + np.sqrt(disc))))
 
 
 #: The paper's θ-dependent rocket: α, β from eq. 17 and ᾱ, β̄ from eq. 48 (eq. 49).
@@ -470,10 +510,6 @@ class Rig:
         return ", ".join(parts) or "none"
 
 
-#: The roll rate at which a quadratic damping coefficient ``q`` is the fraction of ``a(θ)``
-#: added (``a(θ)·q·v·|v|/QUADRATIC_RATE_DPS``), °/s: the virtual tunnel's truth and the
-#: maximum-likelihood search (:func:`identification.ml.quadratic_search`) read it.
-QUADRATIC_RATE_DPS = 30.0
 #: :class:`Rig` field -> the largest value it takes (a physical range: half a second of lag
 #: or latency, 5° of play).
 RIG_LIMITS: Mapping[str, float] = MappingProxyType(
@@ -651,7 +687,10 @@ def roll_coefficients(
     All inputs broadcast; ``h_s`` is a scalar.  ``gain`` and ``damping``
     multiply ``α`` and the damping ``a(θ)`` (both ᾱ and β̄) piece by piece:
     the rocket at another airspeed and density (eq. 4-8,
-    :func:`rocketroll_physics.scaling.roll_scales`).
+    :func:`rocketroll_physics.scaling.roll_scales`).  The coefficients are the linear
+    roll's: a quadratic damping (:attr:`RollParams.quadratic_damping`) enters through
+    ``gain`` and ``damping`` at the rate the caller knows (:func:`simulate`, the
+    environment's kernel).
 
     Returns
     -------
@@ -837,21 +876,20 @@ def simulate(
     ]
 
     rate_limit = None if servo is None else servo.rate_limit_dps
-    e, c, big_a, big_b = roll_coefficients(
-        params,
-        theta[:-1],
-        theta[1:],
-        u_fine,
-        h,
-        rate_limit,
-        gain=scales[0],
-        damping=scales[1],
-    )
     if rate0_dps is None:
         v0 = float(params.steady_rate(theta[0], u_d[0]) * np.ravel(scales[0])[0])
     else:
         v0 = float(rate0_dps)
-    rate = _linear_recurrence(e, c, v0)
+
+    def path(gain: FloatArray, damping: FloatArray) -> tuple[FloatArray, ...]:
+        e, c, big_a, big_b = roll_coefficients(
+            params, theta[:-1], theta[1:], u_fine, h, rate_limit, gain=gain, damping=damping
+        )
+        return _linear_recurrence(e, c, v0), big_a, big_b
+
+    rate, big_a, big_b = path(scales[0], scales[1])
+    if params.quadratic_damping != 0.0:
+        rate, big_a, big_b = _rate_damped_path(path, rate, scales, params.quadratic_damping)
     angle = np.empty_like(rate)
     angle[0] = angle0_deg
     np.cumsum(big_a * rate[:-1] + big_b, out=angle[1:])
@@ -860,6 +898,42 @@ def simulate(
     grid = slice(None, None, substeps)
     time = t0_s + dt_s * np.arange(n + 1, dtype=float)
     return SimResult(time_s=time, fin_deg=theta[grid], rate_dps=rate[grid], angle_deg=angle[grid])
+
+
+#: :func:`simulate`'s quadratic damping: the most passes over the path, and the change in
+#: the damping's factor below which the path has settled.
+_QUADRATIC_PASSES, _QUADRATIC_SETTLED = 500, 1e-12
+
+
+def _rate_damped_path(
+    path: Callable[[FloatArray, FloatArray], tuple[FloatArray, ...]],
+    rate: FloatArray,
+    scales: list[FloatArray],
+    quadratic: float,
+) -> tuple[FloatArray, ...]:
+    """The roll with each substep's damping ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` at its
+    starting rate and the gain divided by the same (the environment's kernel steps it so,
+    substep after substep): the linear path's factors from ``rate``, the path again with
+    them, until the factors settle (each pass a whole vectorised path; the roll's damping
+    makes it a contraction wherever the damping stays positive)."""
+    k = quadratic / QUADRATIC_RATE_DPS
+    grow = np.ones(rate.size - 1)
+    for _ in range(_QUADRATIC_PASSES):
+        new = 1.0 + k * np.abs(rate[:-1])
+        if np.any(new <= 0.0):
+            raise ValueError(
+                f"quadratic_damping {quadratic:g}: the damping vanishes at "
+                f"{float(np.max(np.abs(rate))):.3g} °/s"
+            )
+        settled = float(np.max(np.abs(new - grow))) < _QUADRATIC_SETTLED
+        grow = new
+        out = path(scales[0] / grow, scales[1] * grow)
+        rate = out[0]
+        if settled:
+            return out
+    raise ValueError(
+        f"quadratic_damping {quadratic:g}: the roll did not settle in {_QUADRATIC_PASSES} passes"
+    )
 
 
 def _per_substep(name: str, value: ArrayLike, n: int, substeps: int) -> FloatArray:

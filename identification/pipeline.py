@@ -89,6 +89,10 @@ class IdentifyOptions:
         (:func:`identification.steps.smoothing_width`).
     fine_step_s : float
         δt of the interpolated velocity (§2.7.1; 0.01 s = 100 Hz).
+    fit_quadratic_damping : bool
+        The ``ml`` method also searches a damping growing with the roll rate
+        (:func:`identification.ml.quadratic_search`) and keeps the term where its
+        likelihood-ratio test admits it at :data:`identification.model.TERM_LEVEL`.
     ud_interval_s : float
         Δt over which ``u_d`` is constant (§2.7.1; 0.1 s).
     noise_levels_pct : tuple of float
@@ -140,6 +144,12 @@ class IdentifyOptions:
     )
     fine_step_s: float = setting(0.01, "δt of the interpolated velocity", gt=0.0, cli=False)
     rig: StatedRig = setting(default_factory=StatedRig, flatten=True)
+    fit_quadratic_damping: bool = setting(
+        False,
+        "the ml method also searches a damping that grows with the roll rate "
+        "(a(θ)·(1 + q·|v|/30 °/s)) and keeps it, refitting the rest, where a likelihood-ratio "
+        "test admits it at 1 %: the database stores q and the environment replays it",
+    )
     ud_interval_s: float = setting(
         0.1, "Δt over which u_d is constant", flag="--ud-interval", gt=0.0, le=600.0, unit="s"
     )

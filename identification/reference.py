@@ -260,13 +260,19 @@ STATE_COLUMNS = ("servo_deg", "drive_deg", "fin_deg", "rate_dps", "angle_deg")
 
 
 def rocket_tuple(params: RollParams, effects: Effects) -> tuple[float, ...]:
-    """The numbers :func:`_accel` reads: the rocket and its quadratic damping."""
+    """The numbers :func:`_accel` reads: the rocket and its quadratic damping (the rocket's
+    own, or the effects' for a truth whose parameters are the linear model's; not both)."""
+    if params.quadratic_damping and effects.quadratic_damping:
+        raise ValueError(
+            "the quadratic damping is stated twice: the rocket's "
+            f"{params.quadratic_damping:g} and the effects' {effects.quadratic_damping:g}"
+        )
     return (
         params.alpha,
         params.theta_bar_deg,
         params.beta_bar_per_s,
         params.alpha_bar_per_deg_s,
-        effects.quadratic_damping,
+        effects.quadratic_damping or params.quadratic_damping,
     )
 
 

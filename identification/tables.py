@@ -115,7 +115,27 @@ def methods_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
                 f"{p.beta_bar_per_s:>13.4f}{p.alpha_bar_per_deg_s:>12.4f}"
                 f"{_blank(rate, '.3f'):>14}{_blank(angle, '.3f'):>13}"
             )
-    return "\n".join(lines)
+    return "\n".join(lines + _beyond_lines(fits))
+
+
+def _beyond_lines(fits: Mapping[str, Mapping[str, ModelFit]]) -> list[str]:
+    """Below the parameters: each searched quadratic damping, kept in the fit or not."""
+    lines = []
+    for method, by_model in fits.items():
+        for model, f in by_model.items():
+            term = f.metrics.get("quadratic_damping")
+            if not term:
+                continue
+            low, high = term["interval"]
+            kept = (
+                "kept in the fit" if term["admitted"] else f"not admitted at p < {term['level']:g}"
+            )
+            lines.append(
+                f"  {method} {model}: quadratic damping q = {term['estimate']:.3g} "
+                f"(95 % [{low:.2g}, {high:.2g}], × a(θ) at {term['rate_dps']:g} °/s; "
+                f"LR {term['statistic']:.1f}, p = {term['p']:.2g}): {kept}"
+            )
+    return lines
 
 
 def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:

@@ -48,7 +48,15 @@ from numpy.typing import NDArray
 from disturbances.bank import TraceBank
 from identification.compiled import linkage, piece
 from identification.methods import METHODS, has_posterior
-from identification.model import MODEL_NAMES, RIG_KEYS, Rig, RollParams, Servo
+from identification.model import (
+    MODEL_NAMES,
+    QUADRATIC_RATE_DPS,
+    RIG_KEYS,
+    Rig,
+    RollParams,
+    Servo,
+    quadratic_steady_rate,
+)
 from rollenv.flight import STORED_PREFIX, FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
     OBSERVATION_NAMES,
@@ -657,8 +665,10 @@ def _step_envs(
     moves linearly over each substep as without.  With a sensor latency every
     substep's rate and angle go into the ring (row ``g % rows`` for
     substep ``g`` of the episode) and the sensors read the rocket that many substeps
-    ago, linearly between substeps.  Either off, the step is the model's and its
-    arithmetic today's.
+    ago, linearly between substeps.  With a quadratic damping (``Param.QUADRATIC``) each
+    substep's damping is ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` at its starting rate
+    (the gain divided by the same factor), no substeps merged.  All three off, the step is
+    the model's and its arithmetic today's.
     """
     n_sub = int(cfg[Cfg.SUBSTEPS])
     h = cfg[Cfg.H]
@@ -685,6 +695,8 @@ def _step_envs(
         theta_bar = params[i, Param.THETA_BAR]
         beta_bar = params[i, Param.BETA_BAR] * damp
         alpha_bar = params[i, Param.ALPHA_BAR] * damp
+        quadratic = params[i, Param.QUADRATIC] / QUADRATIC_RATE_DPS
+        stepwise = late or quadratic != 0.0  # each substep its own: none merged
         v = state[i, State.RATE]
         phi = state[i, State.ANGLE]
         theta = state[i, State.FIN]
@@ -710,14 +722,20 @@ def _step_envs(
                 )
             else:
                 moved = theta + min(max(command - theta, -max_move), max_move)
-            if late:  # every substep's roll kept for the sensors: none merged
-                e, c, a_, b_ = _piece(alpha, theta_bar, beta_bar, alpha_bar, theta, moved, u, h)
+            if stepwise:
+                # the damping at the substep's start rate (1 without a quadratic term: the
+                # linear step to the bit), the gain divided by it (a·α unchanged)
+                grow = 1.0 + quadratic * abs(v)
+                e, c, a_, b_ = _piece(
+                    alpha / grow, theta_bar, beta_bar * grow, alpha_bar * grow, theta, moved, u, h
+                )
                 phi = phi + a_ * v + b_
                 v = e * v + c
                 theta = moved
-                slot = (first + sub + 1) % rows
-                rig[i, _RING + 2 * slot] = v
-                rig[i, _RING + 2 * slot + 1] = phi
+                if late:  # every substep's roll kept for the sensors
+                    slot = (first + sub + 1) % rows
+                    rig[i, _RING + 2 * slot] = v
+                    rig[i, _RING + 2 * slot + 1] = phi
                 continue
             if held > 0 and (moved != theta or u != held_u):
                 e, c, a_, b_ = _piece(
@@ -978,8 +996,9 @@ class RollBatch:
         if rate_dps is None and cfg.flight is not None:  # off the launch rail: not rolling
             self.state[index, State.RATE] = 0.0
         elif rate_dps is None:  # the steady rate for the initial fin angle (eq. 16, 36)
-            self.state[index, State.RATE] = (
-                p[:, Param.ALPHA] * gain * (fin + p[:, Param.THETA_BAR] + u0)
+            self.state[index, State.RATE] = quadratic_steady_rate(
+                p[:, Param.ALPHA] * gain * (fin + p[:, Param.THETA_BAR] + u0),
+                p[:, Param.QUADRATIC],
             )
         else:
             self.state[index, State.RATE] = float(rate_dps)

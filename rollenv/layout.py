@@ -86,6 +86,7 @@ class Param(IntEnum):
     THETA_BAR = 1  #: asymmetry θ̄, °
     BETA_BAR = 2  #: damping offset β̄ (or the constant a), 1/s
     ALPHA_BAR = 3  #: damping slope ᾱ, 1/(s·°)
+    QUADRATIC = 4  #: the damping's growth with the roll rate q (a fraction of a(θ) at 30 °/s)
 
 
 #: The :class:`~identification.model.RollParams` field of each :class:`Param` column.
@@ -95,6 +96,7 @@ PARAM_FIELDS: Mapping[Param, str] = MappingProxyType(
         Param.THETA_BAR: "theta_bar_deg",
         Param.BETA_BAR: "beta_bar_per_s",
         Param.ALPHA_BAR: "alpha_bar_per_deg_s",
+        Param.QUADRATIC: "quadratic_damping",
     }
 )
 

@@ -214,6 +214,7 @@ def test_list_json(small_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
         assert item["split"] == "train" and item["recording"] == SEED0
         assert set(item["params"]) == {
             "alpha", "theta_bar_deg", "beta_bar_per_s", "alpha_bar_per_deg_s",
+            "quadratic_damping",
         }  # fmt: skip
         assert item["dt_s"] == pytest.approx(0.1) and item["n_samples"] > 600
     kinds = sorted(item["kind"] for item in data)

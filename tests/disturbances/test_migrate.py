@@ -103,25 +103,27 @@ def test_opening_upgrades_in_place_keeping_every_row_and_a_backup(
 ) -> None:
     before, original = raw(v1), digest(v1)
     with DisturbanceDB(v1, create=False) as db:
-        assert db.schema_version == SCHEMA_VERSION == 4
+        assert db.schema_version == SCHEMA_VERSION == 5
         listed = db.traces()
         for row in listed:
             db.trace(row.uid)  # every checksum still holds
     err = capfd.readouterr().err
     backup = Path(f"{v1}.schema1.bak")
     assert err.count("\n") == 1
-    assert f"upgraded {v1} from schema 1 to 4" in err and str(backup) in err
+    assert f"upgraded {v1} from schema 1 to 5" in err and str(backup) in err
     assert digest(v1) != original
     assert raw(backup) == before  # the old database, kept as it was (SQLite's online backup)
     after = raw(v1)
-    assert after["version"] == 4 and after["integrity"] == "ok"
+    assert after["version"] == 5 and after["integrity"] == "ok"
     assert not any("method IN" in sql or "model IN" in sql for sql in after["checks"])
     for table in ("info", "recordings", "traces"):
         assert after[table] == before[table], table  # same rows, same row ids
-    # the fits of version 1 were not assessed (their verdict is NULL) and are the tunnel's
-    # (no flight reference: v_ref, ρ_ref, n, m NULL)
+    # the fits of version 1 searched no quadratic damping (0, after ᾱ), were not assessed
+    # (their verdict is NULL) and are the tunnel's (no flight reference: v_ref, ρ_ref, n, m NULL)
     nulls = (None,) * 5
-    assert after["identifications"] == [(*r, *nulls) for r in before["identifications"]]
+    assert after["identifications"] == [
+        (*r[:8], 0.0, *r[8:], *nulls) for r in before["identifications"]
+    ]
     # The upgraded file has exactly the tables, columns, keys and indexes of a new one.
     with DisturbanceDB(v1.parent / "fresh.sqlite"):
         pass
@@ -153,7 +155,7 @@ def test_rocketroll_db_migrate_and_commands_on_an_old_file(
 ) -> None:
     assert rocketroll(["db", "migrate", "--db", str(v1)]) == 0
     out, err = capsys.readouterr()
-    assert "upgraded" in err and "schema version 4" in out
+    assert "upgraded" in err and "schema version 5" in out
     assert rocketroll(["db", "migrate", "--db", str(v1)]) == 0
     out, err = capsys.readouterr()
     assert err == "" and "up to date" in out
@@ -227,7 +229,7 @@ def test_a_migration_that_fails_half_way_is_one_error_and_leaves_the_old_file(
         raise sqlite3.OperationalError("database or disk is full")
 
     monkeypatch.setattr(schema, "_rebuild", full_disk)
-    with pytest.raises(DatabaseError, match=rf"{v1}: upgrading schema 1 to 4 failed: .*full"):
+    with pytest.raises(DatabaseError, match=rf"{v1}: upgrading schema 1 to 5 failed: .*full"):
         DisturbanceDB(v1, create=False)
     assert rows(raw(v1)) == rows(before) and raw(v1)["version"] == 1
     assert Path(f"{v1}.schema1.bak").is_file()  # kept, as the message's notice would say
@@ -246,7 +248,7 @@ def test_db_migrate_without_db_upgrades_the_default_database_a_user_added_to(
     monkeypatch.setenv("ROCKETROLL_DB", str(v1))  # origin "user": upgraded, never rebuilt
     assert rocketroll(["db", "migrate"]) == 0
     out, err = capsys.readouterr()
-    assert "upgraded" in err and f"{v1}: schema version 4" in out
+    assert "upgraded" in err and f"{v1}: schema version 5" in out
     assert len(raw(v1)["traces"]) == 12
 
 
@@ -282,7 +284,7 @@ def test_processes_opening_an_old_file_at_once_upgrade_it_once(v1: Path, tmp_pat
     go.touch()
     results = [proc.communicate(timeout=120) for proc in procs]
     assert [proc.returncode for proc in procs] == [0, 0, 0, 0], results
-    assert [out for out, _ in results] == ["4 12\n"] * 4
+    assert [out for out, _ in results] == ["5 12\n"] * 4
     notices = [err for _, err in results if "upgraded" in err]
     assert len(notices) == 1, results  # one process upgraded it; the others found it done
     assert sorted(p.name for p in tmp_path.glob("*.bak")) == ["old.sqlite.schema1.bak"]
@@ -316,7 +318,7 @@ def test_a_migration_killed_half_way_leaves_the_old_file(v1: Path) -> None:
     after = raw(v1)  # SQLite rolls the unfinished transaction back on the next open
     assert after == before
     with DisturbanceDB(v1, create=False) as db:  # and the next open migrates it
-        assert db.schema_version == 4
+        assert db.schema_version == 5
         assert len(db.traces()) == 12
     assert raw(v1)["integrity"] == "ok"
 

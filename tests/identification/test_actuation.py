@@ -208,21 +208,15 @@ def test_a_flight_fit_sees_the_fin_its_rig_makes() -> None:
     assert not np.allclose(lagged.theta, plain.theta)
 
 
-def test_a_quadratic_damping_is_found_where_the_record_tells_it_and_not_invented() -> None:
-    """The paper's 573-s schedule at 10 Hz: a damping 50 % stronger at 30 °/s is found,
-    its 95 % interval covering the truth and not 0; on the paper's rocket the interval
-    covers 0 and the term is not admitted."""
+def test_a_quadratic_damping_is_not_invented_on_the_papers_rocket() -> None:
+    """The paper's 573-s schedule at 10 Hz on the paper's linear rocket: the profile
+    interval covers 0 and the term is not admitted (where it is present, the database's
+    chain finds it: ``tests/rollenv/test_actuation.py``)."""
     from identification.ml import model_inputs, quadratic_search
 
     options = IdentifyOptions(noise_runs=0)
-    grown = quadratic_search(
-        model_inputs(run_tunnel(TunnelSpec(seed=0, effects=Effects(quadratic_damping=0.5))),
-                     "theta", options), "theta",
-    )  # fmt: skip
-    low, high = grown.interval
-    assert 0.0 < low < 0.5 < high
-    assert grown.statistic > 6.63  # admitted at 1 % (two-sided)
     plain = quadratic_search(
         model_inputs(run_tunnel(TunnelSpec(seed=0)), "theta", options), "theta"
     )
     assert plain.interval[0] < 0.0 < plain.interval[1] and plain.statistic < 6.63
+    assert plain.p > 0.01 and not plain.summary()["admitted"]
