@@ -19,9 +19,10 @@ update), this measures:
   add``), ``RocketRollFlight-v0`` flying that stored flight as its rocket (its own
   profile, measured scaling and recorded ``u_d``), single and batched, against the
   default flight's rows: **target: at least 0.8 x**;
-* ``RocketRoll-v0`` with a rig beyond the model (:data:`RIG`: a 50-ms servo lag,
-  0.5° of backlash and 30 ms of sensor latency), single and batched, against the
-  default rows: **target: at least 0.7 x** (with ``--against``, the default rows
+* ``RocketRoll-v0`` with a rig beyond the model (:data:`RIG`: a 50-ms servo lag, 0.5° of
+  backlash and 30 ms of sensor latency), and with every term on (the rig and each
+  rocket's quadratic damping :data:`QUADRATIC`), single and batched, against the default
+  rows: **target: at least 0.7 x** (with ``--against``, the default rows
   against the reference show what the rig's code costs a rocket without one).
 
 With ``--against REF`` the RocketRoll rows are also timed in a worktree of
@@ -46,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import os
 import platform
 import statistics
@@ -71,6 +73,8 @@ FLIGHT_TARGET = 0.8
 AGAINST_TOLERANCE = 0.05
 #: A rig beyond the model (the environment's settings), and its target against the default.
 RIG: dict[str, Any] = {"servo_lag_s": 0.05, "backlash_deg": 0.5, "sensor_latency_s": 0.03}
+#: The quadratic damping each rocket of the rig's rows carries (15 % more at 30 °/s).
+QUADRATIC = 0.15
 RIG_TARGET = 0.7
 
 
@@ -180,14 +184,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             discrete=False,
         )
     rigged = _has_rig()
+    rig_rows: dict[str, dict[str, Any]] = {}
     if rigged:
-        rig_single = _single_runner("RocketRoll-v0", ns.single_steps, ns.seed, **RIG)
-        rig_vector = _vector_runner(
-            lambda: gym.make_vec("RocketRoll-v0", num_envs=ns.num_envs, **RIG),
-            ns.vector_steps,
-            ns.seed,
-            discrete=False,
+        rig_rows = {"rig": RIG, "rig, q": {**RIG, "bank": _quadratic_bank()}}
+    rig_runners = {
+        label: (
+            _single_runner("RocketRoll-v0", ns.single_steps, ns.seed, **settings),
+            _vector_runner(
+                functools.partial(gym.make_vec, "RocketRoll-v0", num_envs=ns.num_envs, **settings),
+                ns.vector_steps,
+                ns.seed,
+                discrete=False,
+            ),
         )
+        for label, settings in rig_rows.items()
+    }
     pendulum = _single_runner("Pendulum-v1", ns.single_steps, ns.seed)
     cartpole = _vector_runner(
         lambda: CartPoleVectorEnv(num_envs=ns.num_envs), ns.vector_steps, ns.seed, discrete=True
@@ -216,8 +227,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns.vector_steps * ns.num_envs,
         )
     if rigged:
-        tasks["RocketRoll-v0, rig (gym.make)"] = (rig_single, ns.single_steps)
-        tasks[f"RocketRoll-v0, rig x {ns.num_envs}"] = (rig_vector, ns.vector_steps * ns.num_envs)
+        for label, (rig_single, rig_vector) in rig_runners.items():
+            tasks[f"RocketRoll-v0, {label} (gym.make)"] = (rig_single, ns.single_steps)
+            tasks[f"RocketRoll-v0, {label} x {ns.num_envs}"] = (
+                rig_vector,
+                ns.vector_steps * ns.num_envs,
+            )
     warm = time.perf_counter()
     for run, _ in tasks.values():  # first calls: numba compile or cache load, page faults
         run()
@@ -290,14 +305,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{'PASS' if ok_stored else 'FAIL'}"
         )
     ok_rig = True
-    if rigged:
-        rig_single_ratio = med["RocketRoll-v0, rig (gym.make)"] / med[names[0]]
-        rig_vector_ratio = med[f"RocketRoll-v0, rig x {ns.num_envs}"] / vec
-        ok_rig = min(rig_single_ratio, rig_vector_ratio) >= RIG_TARGET
+    words_of = {"rig": "lag, play, latency", "rig, q": "and each rocket's quadratic damping"}
+    for label in rig_runners:
+        rig_single_ratio = med[f"RocketRoll-v0, {label} (gym.make)"] / med[names[0]]
+        rig_vector_ratio = med[f"RocketRoll-v0, {label} x {ns.num_envs}"] / vec
+        ok = min(rig_single_ratio, rig_vector_ratio) >= RIG_TARGET
+        ok_rig = ok_rig and ok
         print(
-            f"rig (lag, play, latency): / RocketRoll-v0 = {rig_single_ratio:.2f} single, "
+            f"{label} ({words_of[label]}): / RocketRoll-v0 = {rig_single_ratio:.2f} single, "
             f"{rig_vector_ratio:.2f} batched (target >= {RIG_TARGET:g}): "
-            f"{'PASS' if ok_rig else 'FAIL'}"
+            f"{'PASS' if ok else 'FAIL'}"
         )
     ok_against = True
     if remote is not None:
@@ -317,11 +334,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 1 if ns.strict and not passed else 0
 
 
+def _quadratic_bank() -> Any:
+    """The default environment's bank, every rocket's damping growing by :data:`QUADRATIC`."""
+    from disturbances.bank import TraceBank
+
+    bank = gym.make("RocketRoll-v0").unwrapped.bank  # type: ignore[attr-defined]
+    traces = [
+        dataclasses.replace(t, params=dataclasses.replace(t.params, quadratic_damping=QUADRATIC))
+        for t in bank.traces
+    ]
+    return TraceBank(traces, f"{bank.description}, q = {QUADRATIC:g}")
+
+
 def _has_rig() -> bool:
-    """Whether this checkout's environments take a rig (an --against checkout may not)."""
+    """Whether this checkout's environments take a rig and a rocket's quadratic damping (an
+    --against checkout may not)."""
+    from identification.model import RollParams
     from rollenv.core import RollConfig
 
-    return "servo_lag_s" in {f.name for f in dataclasses.fields(RollConfig)}
+    return "servo_lag_s" in {f.name for f in dataclasses.fields(RollConfig)} and (
+        "quadratic_damping" in {f.name for f in dataclasses.fields(RollParams)}
+    )
 
 
 if __name__ == "__main__":

@@ -526,6 +526,42 @@ _RING = len(Link)
 _linkage = linkage  # the one servo linkage, compiled (identification.compiled)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _roll(
+    v: float,
+    phi: float,
+    alpha: float,
+    theta_bar: float,
+    beta_bar: float,
+    alpha_bar: float,
+    quadratic: float,
+    theta0: float,
+    theta1: float,
+    u: float,
+    h: float,
+    held: int,
+) -> tuple[float, float]:
+    """The rate and angle after ``h`` with the fin from ``theta0`` to ``theta1`` and ``u``
+    held (``held`` substeps merged into it, or 1).  With a quadratic damping (``quadratic``
+    the coefficient over :data:`~identification.model.QUADRATIC_RATE_DPS`) the damping is
+    ``a(θ)·(1 + q·|v|/v₀)`` at the start rate, the gain divided by the same; over a merged
+    run of held substeps at the mean of the start's and that step's end's |v| (a second
+    pass: the run may be a whole control step).  Without it, the exact linear piece."""
+    if quadratic == 0.0:
+        e, c, a_, b_ = _piece(alpha, theta_bar, beta_bar, alpha_bar, theta0, theta1, u, h)
+        return e * v + c, phi + a_ * v + b_
+    grow = 1.0 + quadratic * abs(v)
+    e, c, a_, b_ = _piece(
+        alpha / grow, theta_bar, beta_bar * grow, alpha_bar * grow, theta0, theta1, u, h
+    )
+    if held > 1:
+        grow = 1.0 + 0.5 * quadratic * (abs(v) + abs(e * v + c))
+        e, c, a_, b_ = _piece(
+            alpha / grow, theta_bar, beta_bar * grow, alpha_bar * grow, theta0, theta1, u, h
+        )
+    return e * v + c, phi + a_ * v + b_
+
+
 def wrap_deg(angle_deg: Any) -> Any:
     """An angle or angle difference wrapped to [-180°, 180°): the one wrap of the kernel
     (compiled), the observer and the renderer.
@@ -662,13 +698,15 @@ def _step_envs(
     (a decay or half a play above 0) the servo moves at its rate limit towards the
     command, the fin's drive follows it through the first-order lag (exact for the
     servo's ramp over the substep) and the fin its drive through the play; the fin
-    moves linearly over each substep as without.  With a sensor latency every
-    substep's rate and angle go into the ring (row ``g % rows`` for
-    substep ``g`` of the episode) and the sensors read the rocket that many substeps
-    ago, linearly between substeps.  With a quadratic damping (``Param.QUADRATIC``) each
-    substep's damping is ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` at its starting rate
-    (the gain divided by the same factor), no substeps merged.  All three off, the step is
-    the model's and its arithmetic today's.
+    moves linearly over each substep as without.  With a sensor latency the sensors
+    read the rocket that many substeps ago, linearly between substeps: the rate and angle
+    at the two substep boundaries each step reads (the same two of every step, mod the
+    substeps per step; every boundary with a quadratic damping) go into the ring (row
+    ``g % rows`` for boundary ``g`` of the episode), a run of held substeps applied there.
+    With a quadratic damping (``Param.QUADRATIC``) the damping is
+    ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)``, the gain divided by the same factor, at each
+    moving substep's starting rate and over a held run at the mean of its ends'
+    (:func:`_roll`).  All three off, the step is the model's and its arithmetic today's.
     """
     n_sub = int(cfg[Cfg.SUBSTEPS])
     h = cfg[Cfg.H]
@@ -696,7 +734,9 @@ def _step_envs(
         beta_bar = params[i, Param.BETA_BAR] * damp
         alpha_bar = params[i, Param.ALPHA_BAR] * damp
         quadratic = params[i, Param.QUADRATIC] / QUADRATIC_RATE_DPS
-        stepwise = late or quadratic != 0.0  # each substep its own: none merged
+        # With a latency the sensors read the boundaries ``floor(n_sub - delay)`` and the
+        # next of every step (mod n_sub): those go into the ring, a held run applied there.
+        read_at = math.floor(n_sub - delay) % n_sub
         v = state[i, State.RATE]
         phi = state[i, State.ANGLE]
         theta = state[i, State.FIN]
@@ -722,42 +762,28 @@ def _step_envs(
                 )
             else:
                 moved = theta + min(max(command - theta, -max_move), max_move)
-            if stepwise:
-                # the damping at the substep's start rate (1 without a quadratic term: the
-                # linear step to the bit), the gain divided by it (a·α unchanged)
-                grow = 1.0 + quadratic * abs(v)
-                e, c, a_, b_ = _piece(
-                    alpha / grow, theta_bar, beta_bar * grow, alpha_bar * grow, theta, moved, u, h
-                )
-                phi = phi + a_ * v + b_
-                v = e * v + c
-                theta = moved
-                if late:  # every substep's roll kept for the sensors
-                    slot = (first + sub + 1) % rows
-                    rig[i, _RING + 2 * slot] = v
-                    rig[i, _RING + 2 * slot + 1] = phi
-                continue
             if held > 0 and (moved != theta or u != held_u):
-                e, c, a_, b_ = _piece(
-                    alpha, theta_bar, beta_bar, alpha_bar, theta, theta, held_u, held * h
-                )
-                phi = phi + a_ * v + b_
-                v = e * v + c
+                v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
+                               theta, theta, held_u, held * h, held)  # fmt: skip
                 held = 0
             if moved == theta:
                 held += 1
                 held_u = u
-                continue
-            e, c, a_, b_ = _piece(alpha, theta_bar, beta_bar, alpha_bar, theta, moved, u, h)
-            phi = phi + a_ * v + b_
-            v = e * v + c
-            theta = moved
+            else:
+                v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
+                               theta, moved, u, h, 1)  # fmt: skip
+                theta = moved
+            if late and (sub + 1 - read_at) % n_sub <= 1:  # the roll the sensors will read
+                if held > 0:
+                    v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
+                                   theta, theta, held_u, held * h, held)  # fmt: skip
+                    held = 0
+                slot = (first + sub + 1) % rows
+                rig[i, _RING + 2 * slot] = v
+                rig[i, _RING + 2 * slot + 1] = phi
         if held > 0:
-            e, c, a_, b_ = _piece(
-                alpha, theta_bar, beta_bar, alpha_bar, theta, theta, held_u, held * h
-            )
-            phi = phi + a_ * v + b_
-            v = e * v + c
+            v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
+                           theta, theta, held_u, held * h, held)  # fmt: skip
         travel = abs(theta - previous_theta)
         state[i, State.RATE] = v
         state[i, State.ANGLE] = phi
