@@ -1,0 +1,76 @@
+"""Does the oracle bound every deployable controller?  The whole protocol, per task.
+
+The five tasks (angle with setpoint steps and held at zero, rate with setpoint steps in
+the tunnel; angle and rate in flight), each deployable controller the registry runs there
+by default (PID -- scheduled in flight --, the tunnel-gain PID in flight, the observer,
+the MPC, the committed PPO where there is one) and the oracle (perfect preview of
+``u_d``, the true rocket: :mod:`agents.oracle`) on the protocol's episodes (test split,
+``--episodes``, ``--seed``): each one's headline (regulation RMS, mean over the episodes)
+and the oracle's ratio to it.  Verdict: the oracle at or below every one within
+``--tolerance`` (its plan is the best of a grid, not a proven optimum); the test suite
+checks the same on three episodes per task (``tests/agents/test_oracle_bound.py``).
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/oracle_bound.py                 # 20 episodes per task
+    .venv/bin/python benchmarks/oracle_bound.py --episodes 5 --task flight-angle
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Sequence
+
+from tqdm.auto import tqdm
+
+from agents.bounds import TASKS, bound_rows
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="benchmarks/oracle_bound.py",
+        description="The oracle's headline against every deployable controller's, per task.",
+    )
+    parser.add_argument("--episodes", type=int, default=20, help="protocol episodes (20)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--task", action="append", choices=list(TASKS), help="a task (repeat; default: all)"
+    )
+    parser.add_argument(
+        "--tolerance", type=float, default=0.05, help="the oracle's allowed excess (0.05)"
+    )
+    parser.add_argument("--strict", action="store_true", help="exit 1 if the bound fails")
+    ns = parser.parse_args(argv)
+    if ns.episodes < 1 or not 0.0 <= ns.tolerance < 1.0:
+        parser.error("--episodes must be >= 1 and --tolerance in [0, 1)")
+    tasks = ns.task or list(TASKS)
+    began = time.perf_counter()
+    with tqdm(desc="controllers", unit="run", leave=False) as bar:
+
+        def tick(what: str) -> None:
+            bar.set_postfix_str(what)
+            bar.update()
+
+        rows = bound_rows(tasks, ns.episodes, ns.seed, progress=tick)
+    print(f"{len(tasks)} tasks, {ns.episodes} episodes each, seed {ns.seed}: "
+          f"{time.perf_counter() - began:.0f} s\n")  # fmt: skip
+    print(f"{'task':14s} {'controller':12s} {'headline':>9s} {'oracle / it':>12s}")
+    failed = []
+    for row in rows:
+        print(f"{row.task:14s} {'oracle':12s} {row.oracle:9.3f}")
+        for name, value in row.others.items():
+            ratio = row.ratios[name]
+            print(f"{'':14s} {name:12s} {value:9.3f} {ratio:12.3f}")
+            if ratio > 1.0 + ns.tolerance:
+                failed.append(f"{row.task}/{name}")
+    print(
+        f"\nverdict: the oracle at or below every deployable controller within "
+        f"{100 * ns.tolerance:g} % on every task: "
+        + ("PASS" if not failed else f"FAIL ({', '.join(failed)})")
+    )
+    return 1 if ns.strict and failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
