@@ -25,7 +25,7 @@ from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
 from identification.methods import METHODS, default_methods, has_posterior, traits
 from identification.model import MODEL_NAMES, QUADRATIC_RATE_DPS
 from identification.pipeline import IdentifyOptions
-from identification.recording import SOURCES
+from identification.recording import SOURCES, Recording
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 
@@ -67,6 +67,20 @@ def _methods_help(text: str, flight: bool = False) -> Callable[[], str]:
 
 def _default_methods() -> list[str]:
     return list(default_methods())
+
+
+def _check_quadratic(options: IdentifyOptions, methods: list[str], recording: Recording) -> None:
+    """``--fit-quadratic-damping`` where a method runs that searches it: ml, on a tunnel run."""
+    if not options.fit_quadratic_damping:
+        return
+    if recording.is_flight:
+        raise UsageError("--fit-quadratic-damping: searched in a tunnel run's ml fit; "
+                         f"{recording.name} is a flight")  # fmt: skip
+    if "ml" not in methods:
+        raise UsageError(
+            f"--fit-quadratic-damping: the ml method searches the term; the methods run are "
+            f"{', '.join(methods)} (add --method ml)"
+        )
 
 
 def _check_posterior_methods(methods: list[str]) -> None:
@@ -227,6 +241,7 @@ def identify(args: IdentifyArgs) -> int:
         )
     if args.actuation and recording.is_flight:
         raise UsageError(f"--actuation: looks at a tunnel run; {args.recording} is a flight")
+    _check_quadratic(options, methods, recording)
     context = Context(recording, options, together=together)
     fits, refused = _fit_each(context, methods)
     found = None
@@ -679,6 +694,7 @@ def add(args: AddArgs) -> int:
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
     methods = args.method or list(default_methods(recording))
+    _check_quadratic(options, methods, recording)
     if args.posterior:
         _check_posterior_methods(methods)
     if args.split is not None:

@@ -1334,13 +1334,16 @@ def quadratic_fit(
     q = found.coefficient
     if q == 0.0 and base is not None:
         return base
+    if np.size(found.speed) == 0:
+        raise ValueError("the quadratic search carries no |v| path to refit along")
     damped = rate_damped(_prepare(inputs), np.asarray(found.speed), q)
     fitted = _fit(_Search(damped, inputs), model)
-    return dataclasses.replace(
+    return dataclasses.replace(  # q is one parameter more, in every order's AIC too
         fitted,
         params=dataclasses.replace(fitted.params, quadratic_damping=q),
         n_params=fitted.n_params + 1,
         aic=fitted.aic + 2.0,
+        orders={k: v + 2.0 for k, v in fitted.orders.items()},
     )
 
 

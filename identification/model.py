@@ -61,6 +61,10 @@ FloatArray = NDArray[np.float64]
 #: maximum-likelihood search (:func:`identification.ml.quadratic_search`) and the
 #: environment's kernel read it.
 QUADRATIC_RATE_DPS = 30.0
+#: The least the quadratic damping's factor ``1 + q·|v|/QUADRATIC_RATE_DPS`` may fall to (a
+#: negative ``q`` at a rate beyond its data would otherwise leave the rocket undamped):
+#: the environment's kernel and :func:`simulate` hold it there.
+QUADRATIC_FLOOR = 0.1
 #: The level at which a term beyond the paper's model (a servo's lag and play, a latency,
 #: the quadratic damping) is admitted by its likelihood-ratio test.
 TERM_LEVEL = 0.01
@@ -70,6 +74,7 @@ __all__ = [
     "MODEL_NAMES",
     "PAPER_CONSTANT",
     "PAPER_THETA",
+    "QUADRATIC_FLOOR",
     "QUADRATIC_RATE_DPS",
     "RIG_KEYS",
     "RIG_LIMITS",
@@ -209,7 +214,8 @@ def quadratic_steady_rate(linear_dps: ArrayLike, quadratic: ArrayLike) -> FloatA
     at ``v₀/(2·|q|)``."""
     linear = np.asarray(linear_dps, dtype=float)
     k = np.asarray(quadratic, dtype=float) / QUADRATIC_RATE_DPS
-    size = np.abs(linear)
+    # beyond the largest steady rate of a negative q, 1/(4·|k|), the largest: v₀/(2·|q|)
+    size = np.minimum(np.abs(linear), np.where(k < 0.0, 0.25 / np.maximum(-k, 1e-300), np.inf))
     disc = np.maximum(1.0 + 4.0 * k * size, 0.0)
     return np.asarray(np.sign(linear) * (2.0 * size / (1.0 + np.sqrt(disc))))
 
@@ -876,8 +882,12 @@ def simulate(
     ]
 
     rate_limit = None if servo is None else servo.rate_limit_dps
-    if rate0_dps is None:
-        v0 = float(params.steady_rate(theta[0], u_d[0]) * np.ravel(scales[0])[0])
+    if rate0_dps is None:  # the steady rate of the rocket at the first substep's gain
+        gain0 = float(np.ravel(scales[0])[0])
+        v0 = float(quadratic_steady_rate(
+            gain0 * params.alpha * (theta[0] + params.theta_bar_deg + u_d[0]),
+            params.quadratic_damping,
+        ))  # fmt: skip
     else:
         v0 = float(rate0_dps)
 
@@ -912,19 +922,15 @@ def _rate_damped_path(
     quadratic: float,
 ) -> tuple[FloatArray, ...]:
     """The roll with each substep's damping ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` at its
-    starting rate and the gain divided by the same (the environment's kernel steps it so,
-    substep after substep): the linear path's factors from ``rate``, the path again with
-    them, until the factors settle (each pass a whole vectorised path; the roll's damping
-    makes it a contraction wherever the damping stays positive)."""
+    starting rate (held at or above :data:`QUADRATIC_FLOOR`) and the gain divided by the
+    same: the linear path's factors from ``rate``, the path again with them, until the
+    factors settle (each pass a whole vectorised path; the roll's damping makes it a
+    contraction wherever the damping stays positive).  The environment's kernel damps a
+    moving substep so and a run of held substeps at the mean of its ends' rates."""
     k = quadratic / QUADRATIC_RATE_DPS
     grow = np.ones(rate.size - 1)
     for _ in range(_QUADRATIC_PASSES):
-        new = 1.0 + k * np.abs(rate[:-1])
-        if np.any(new <= 0.0):
-            raise ValueError(
-                f"quadratic_damping {quadratic:g}: the damping vanishes at "
-                f"{float(np.max(np.abs(rate))):.3g} °/s"
-            )
+        new = np.maximum(1.0 + k * np.abs(rate[:-1]), QUADRATIC_FLOOR)
         settled = float(np.max(np.abs(new - grow))) < _QUADRATIC_SETTLED
         grow = new
         out = path(scales[0] / grow, scales[1] * grow)

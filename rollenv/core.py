@@ -50,6 +50,7 @@ from identification.compiled import linkage, piece
 from identification.methods import METHODS, has_posterior
 from identification.model import (
     MODEL_NAMES,
+    QUADRATIC_FLOOR,
     QUADRATIC_RATE_DPS,
     RIG_KEYS,
     Rig,
@@ -544,18 +545,19 @@ def _roll(
     """The rate and angle after ``h`` with the fin from ``theta0`` to ``theta1`` and ``u``
     held (``held`` substeps merged into it, or 1).  With a quadratic damping (``quadratic``
     the coefficient over :data:`~identification.model.QUADRATIC_RATE_DPS`) the damping is
-    ``a(θ)·(1 + q·|v|/v₀)`` at the start rate, the gain divided by the same; over a merged
+    ``a(θ)·(1 + q·|v|/v₀)`` at the start rate (the factor held at or above
+    :data:`~identification.model.QUADRATIC_FLOOR`), the gain divided by the same; over a merged
     run of held substeps at the mean of the start's and that step's end's |v| (a second
     pass: the run may be a whole control step).  Without it, the exact linear piece."""
     if quadratic == 0.0:
         e, c, a_, b_ = _piece(alpha, theta_bar, beta_bar, alpha_bar, theta0, theta1, u, h)
         return e * v + c, phi + a_ * v + b_
-    grow = 1.0 + quadratic * abs(v)
+    grow = max(1.0 + quadratic * abs(v), QUADRATIC_FLOOR)
     e, c, a_, b_ = _piece(
         alpha / grow, theta_bar, beta_bar * grow, alpha_bar * grow, theta0, theta1, u, h
     )
     if held > 1:
-        grow = 1.0 + 0.5 * quadratic * (abs(v) + abs(e * v + c))
+        grow = max(1.0 + 0.5 * quadratic * (abs(v) + abs(e * v + c)), QUADRATIC_FLOOR)
         e, c, a_, b_ = _piece(
             alpha / grow, theta_bar, beta_bar * grow, alpha_bar * grow, theta0, theta1, u, h
         )
@@ -701,8 +703,9 @@ def _step_envs(
     moves linearly over each substep as without.  With a sensor latency the sensors
     read the rocket that many substeps ago, linearly between substeps: the rate and angle
     at the two substep boundaries each step reads (the same two of every step, mod the
-    substeps per step; every boundary with a quadratic damping) go into the ring (row
-    ``g % rows`` for boundary ``g`` of the episode), a run of held substeps applied there.
+    substeps per step) go into the ring (row ``g % rows`` for boundary ``g`` of the
+    episode), a run of held substeps applied there (with a quadratic damping, read off the
+    run, which goes on whole: the sensors' latency never changes the rocket).
     With a quadratic damping (``Param.QUADRATIC``) the damping is
     ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)``, the gain divided by the same factor, at each
     moving substep's starting rate and over a held run at the mean of its ends'
@@ -774,13 +777,20 @@ def _step_envs(
                                theta, moved, u, h, 1)  # fmt: skip
                 theta = moved
             if late and (sub + 1 - read_at) % n_sub <= 1:  # the roll the sensors will read
-                if held > 0:
+                seen_v, seen_phi = v, phi
+                if held > 0 and quadratic == 0.0:  # the held run applied here: exact
                     v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
                                    theta, theta, held_u, held * h, held)  # fmt: skip
+                    seen_v, seen_phi = v, phi
                     held = 0
+                elif held > 0:  # read off the run, which goes on whole (its damping its own)
+                    seen_v, seen_phi = _roll(
+                        v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
+                        theta, theta, held_u, held * h, held,
+                    )  # fmt: skip
                 slot = (first + sub + 1) % rows
-                rig[i, _RING + 2 * slot] = v
-                rig[i, _RING + 2 * slot + 1] = phi
+                rig[i, _RING + 2 * slot] = seen_v
+                rig[i, _RING + 2 * slot + 1] = seen_phi
         if held > 0:
             v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
                            theta, theta, held_u, held * h, held)  # fmt: skip
@@ -1073,12 +1083,18 @@ class RollBatch:
         again (the corners of the box can be rockets that do not exist).
         """
         span = self.param_high - self.param_low
-        out = self.param_low + rng.uniform(size=(m, len(Param))) * span
+        # the quadratic damping drawn only where the bank's rockets differ in it (the draws
+        # of a bank of linear rockets as they were before it existed)
+        drawn = len(Param) if span[Param.QUADRATIC] > 0.0 else int(Param.QUADRATIC)
+        out = self.param_low + np.zeros((m, len(Param)))
+        out[:, :drawn] += rng.uniform(size=(m, drawn)) * span[:drawn]
         for _ in range(_MAX_REDRAWS):
             bad = np.flatnonzero(_min_damping(out, self.config.fin_range_deg) <= 0.0)
             if bad.size == 0:
                 return out
-            out[bad] = self.param_low + rng.uniform(size=(bad.size, len(Param))) * span
+            out[bad, :drawn] = (
+                self.param_low[:drawn] + rng.uniform(size=(bad.size, drawn)) * span[:drawn]
+            )
         raise RuntimeError("domain randomisation found no damped rocket in the parameter box")
 
     def _gyro_draws(self, rng: np.random.Generator, m: int) -> FloatArray:

@@ -639,3 +639,17 @@ def test_build_over_a_file_that_is_not_a_database_is_refused_even_with_force(
     for force in ([], ["--force"]):
         fails(["db", "build", "--db", str(path), *force], capsys, str(path), "not an SQLite")
     assert path.read_text() == "not a database\n"
+
+
+def test_fit_quadratic_damping_without_ml_is_one_clear_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The term is searched by the ml method only: asked for without it, identify and
+    db add say so, and write nothing."""
+    path = bundled_path(NEW)
+    fails(["identify", str(path), "--method", "paper", "--fit-quadratic-damping"], capsys,
+          "--fit-quadratic-damping", "add --method ml")  # fmt: skip
+    db = tmp_path / "q.sqlite"
+    fails(["db", "add", str(path), "--db", str(db), "--method", "paper",
+           "--fit-quadratic-damping"], capsys, "--fit-quadratic-damping")  # fmt: skip
+    assert not db.exists()

@@ -16,6 +16,8 @@ times below the paper's rate MAE of 0.1 °/s.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -263,3 +265,22 @@ def test_params_validation() -> None:
         Servo(rate_limit_dps=0.0)
     assert PAPER_THETA.beta_dps == pytest.approx(2.8856)
     assert PAPER_THETA.theta_bar_deg == pytest.approx(4.3788, abs=1e-4)  # paper eq. 46: 4.38°
+
+
+def test_the_quadratic_steady_rate_is_the_root_and_its_bound() -> None:
+    """``v·(1 + q·|v|/30) = α·x``: the root of the same sign, the linear rate itself at
+    q = 0 (to the bit); beyond a negative q's largest steady rate, that rate
+    (``v₀/(2·|q|)``); :func:`simulate` starts a rocket at its own gain's steady rate."""
+    from identification.model import QUADRATIC_RATE_DPS, quadratic_steady_rate, simulate
+
+    linear = np.array([-40.0, -2.0, 0.0, 3.0, 25.0])
+    assert np.array_equal(quadratic_steady_rate(linear, 0.0), linear)
+    for q in (0.15, 1.0, -0.1):  # -0.1: steady rates up to 75 °/s of linear
+        v = quadratic_steady_rate(linear, q)
+        grown = v * (1 + q * np.abs(v) / QUADRATIC_RATE_DPS)
+        np.testing.assert_allclose(grown, linear, atol=1e-9)
+    assert quadratic_steady_rate(100.0, -0.3) == pytest.approx(QUADRATIC_RATE_DPS / 0.6)
+    assert quadratic_steady_rate(-100.0, -0.3) == pytest.approx(-QUADRATIC_RATE_DPS / 0.6)
+    rocket = dataclasses.replace(PAPER_THETA, quadratic_damping=1.0)
+    held = simulate(rocket, 0.1, np.full(50, 10.0), gain=3.0)
+    assert held.rate_dps[0] == pytest.approx(held.rate_dps[-1], abs=1e-6)

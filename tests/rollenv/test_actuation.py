@@ -306,3 +306,29 @@ def test_an_identified_quadratic_damping_goes_through_the_database_into_the_repl
     env = RocketRollEnv(db=path, recording=rec.name, model="theta", disturbance="posterior")
     env.reset(seed=0)
     assert env.core.roll_params(0).quadratic_damping == term["estimate"]
+
+
+def test_with_a_quadratic_damping_the_latency_changes_what_is_read_not_the_rocket() -> None:
+    """The sensors' latency splits no held run of a rocket with a quadratic damping (whose
+    merged run is damped at its own mean rate): the rocket flies the same to the bit with
+    and without it; a negative q beyond its data keeps the damping's factor at its floor
+    and the roll finite at full fin."""
+    rng = np.random.default_rng(2)
+    actions = np.repeat(rng.uniform(-1, 1, 30), 10).astype(np.float32)
+    for q in (0.5, -0.2):
+        runs = []
+        for latency in (0.0, 0.03, 0.25):
+            env = RocketRollEnv(bank=_quadratic_bank(q), sensors=False, task="rate",
+                                sensor_latency_s=latency)  # fmt: skip
+            env.reset(seed=0, options={"trace": 1, "start": 5})
+            states = []
+            for a in actions:
+                env.step(np.array([a]))
+                states.append(env.core.state[0, :2].copy())
+            runs.append(states)
+        assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[0], runs[2])
+    runaway = RocketRollEnv(bank=_quadratic_bank(-0.3), sensors=False, task="rate")
+    runaway.reset(seed=0, options={"trace": 0, "start": 0})
+    for _ in range(100):
+        runaway.step(np.array([1.0]))
+    assert np.isfinite(runaway.core.state).all()
