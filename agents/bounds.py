@@ -1,10 +1,12 @@
-"""Whether the oracle bounds every deployable controller, task by task.
+"""Whether the oracle and the causal limit bound every deployable controller, task by task.
 
 The five tasks of the evaluation (:data:`TASKS`: angle with setpoint steps and held at
 zero, rate with setpoint steps, in the tunnel; angle and rate in flight), each
 deployable controller (:func:`deployable`: the registry's defaults that run on the task
-without an argument, less the floor and the bound) and the oracle, on the same protocol
-episodes: :func:`bound_rows` gives each one's headline and the oracle's ratio to it.
+without an argument, less the floor and the bounds), the oracle (perfect preview of
+``u_d``) and the causal oracle (the future of ``u_d`` predicted: :mod:`agents.oracle`) on
+the same protocol episodes: :func:`bound_rows` gives each one's headline, the bounds'
+ratios to it and where it sits between the PID and the causal limit.
 The test suite runs it on a few episodes, ``benchmarks/oracle_bound.py`` on the whole
 protocol.
 """
@@ -31,7 +33,7 @@ TASKS: dict[str, tuple[str, dict[str, object]]] = {
     "flight-rate": ("RocketRollFlightRate-v0", {}),
 }
 #: The default rows that are not controllers a rocket could fly: the floor and the bound.
-NOT_DEPLOYABLE = ("trim", "oracle")
+NOT_DEPLOYABLE = ("trim", "oracle", "causal-oracle")
 
 
 def deployable(env_id: str) -> list[str]:
@@ -41,16 +43,29 @@ def deployable(env_id: str) -> list[str]:
 
 @dataclass(frozen=True)
 class BoundRow:
-    """One task's headlines (regulation RMS, mean over the episodes) and the oracle's."""
+    """One task's headlines (regulation RMS, mean over the episodes): the oracle's, the
+    causal oracle's and each deployable controller's."""
 
     task: str
     oracle: float
+    causal: float
     others: dict[str, float]
 
     @property
     def ratios(self) -> dict[str, float]:
         """The oracle's headline over each deployable controller's."""
         return {name: self.oracle / value for name, value in self.others.items()}
+
+    @property
+    def causal_ratios(self) -> dict[str, float]:
+        """The causal oracle's headline over each deployable controller's."""
+        return {name: self.causal / value for name, value in self.others.items()}
+
+    def gap_closed(self, name: str) -> float:
+        """How much of the way from the PID to the causal limit controller ``name`` goes
+        (0: the PID's score, 1: the limit's; below 0: worse than the PID)."""
+        pid = self.others["pid"]
+        return (pid - self.others[name]) / (pid - self.causal)
 
 
 def bound_rows(
@@ -69,10 +84,10 @@ def bound_rows(
         bank = load_bank(config, None)
         specs = protocol_episodes(config, episodes, seed, bank=bank)
         scores = {}
-        for policy in [*deployable(env_id), "oracle"]:
+        for policy in [*deployable(env_id), "oracle", "causal-oracle"]:
             if progress is not None:
                 progress(f"{task}: {policy}")
             found = evaluate(config, make_controller(policy, config, env_id), specs, bank=bank)
             scores[policy] = float(np.mean([e[HEADLINE] for e in found.episodes]))
-        rows.append(BoundRow(task, scores.pop("oracle"), scores))
+        rows.append(BoundRow(task, scores.pop("oracle"), scores.pop("causal-oracle"), scores))
     return rows

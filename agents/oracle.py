@@ -6,7 +6,8 @@ this servo could achieve against this turbulence at all.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,9 +17,21 @@ from agents.nominal import NominalModel
 from agents.pid import PIDGains
 from rollenv.core import RollBatch, RollConfig
 from rollenv.env import RocketRollEnv
-from rollenv.layout import State
+from rollenv.layout import Cfg, Cursor, State
 
-__all__ = ["DEFAULT_HORIZON", "DEFAULT_TAIL_BANDWIDTH", "OracleController", "make_oracle", "regime"]
+__all__ = [
+    "CAUSAL_HORIZON",
+    "CAUSAL_TAIL_BANDWIDTH",
+    "DEFAULT_HORIZON",
+    "DEFAULT_TAIL_BANDWIDTH",
+    "ARTurbulence",
+    "CausalOracleController",
+    "OracleController",
+    "design_turbulence",
+    "make_causal_oracle",
+    "make_oracle",
+    "regime",
+]
 
 #: Planning horizon (steps) and the bandwidth (rad/s) of the loop that finishes each
 #: plan after its first step (None: the first move is held), per regime (the task, in the
@@ -181,28 +194,42 @@ class OracleController:
         """Minus the predicted reward summed over the horizon, per candidate first move ``w``."""
         p = self._predictor
         assert p is not None
-        m = w.size
-        index = p.all[:m]
+        index = p.all[: w.size]
         p.copy_env(core, 0, index)
+        return self._rollout(core, index, w, np.broadcast_to(u[:, None], (u.size, w.size)))
+
+    def _rollout(
+        self,
+        core: RollBatch,
+        index: NDArray[np.int64],
+        w: NDArray[np.float64],
+        u: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Minus the reward the predictors ``index`` (copies of ``core``'s env) collect over
+        ``u``'s steps, predictor ``k`` moving to ``w[k]`` first and cancelling ``u[j, k]``
+        (action units) at step ``j``; the tail, where there is one, closes the plan."""
+        p = self._predictor
+        assert p is not None
+        m = index.size
         setpoint = core.setpoint_of(0)
-        p.setpoints[:m] = setpoint  # the current setpoint held: no preview of the schedule
+        p.setpoints[index] = setpoint  # the current setpoint held: no preview of the schedule
         command = np.zeros(p.n)
         total = np.zeros(m)
         g = self.tail
         fin_range = self.config.fin_range_deg
         for j, u_j in enumerate(u):
             if j == 0 or g is None:
-                command[:m] = np.clip(w - u_j, -1.0, 1.0)
+                command[index] = np.clip(w - u_j, -1.0, 1.0)
             else:  # the tail: the disturbance cancelled, the rocket's own loop on its true state
-                rate = p.state[:m, State.RATE]
+                rate = p.state[index, State.RATE]
                 if self._angle:
-                    error = p.error[:m]
+                    error = p.error[index]
                     fin = g.trim_deg + g.kp * error - g.kd * rate
                 else:
                     fin = g.trim_deg + g.k_ff * setpoint + g.kp * (setpoint - rate)
-                command[:m] = np.clip(fin / fin_range - u_j, -1.0, 1.0)
+                command[index] = np.clip(fin / fin_range - u_j, -1.0, 1.0)
             p.step(command, self._rng, index)
-            total -= p.reward[:m]
+            total -= p.reward[index]
         return total
 
 
@@ -210,3 +237,257 @@ def make_oracle(design: Design) -> OracleController:
     """``--policy oracle``: the bound, on the environment's own settings."""
     design.no_argument("oracle")
     return OracleController(design.config)
+
+
+@dataclass(frozen=True)
+class ARTurbulence:
+    """``u_d`` as an autoregressive process on its sample grid: ``u_t - mean =
+    Σ ar[i]·(u_{t-1-i} - mean) + sd·ε_t`` -- the causal oracle's model of the future.
+
+    Attributes
+    ----------
+    mean : float
+        Mean of ``u_d``, °.
+    ar : ndarray
+        The AR coefficients (order = size).
+    sd : float
+        SD of the innovation ``sd·ε``, °.
+    """
+
+    mean: float
+    ar: NDArray[np.float64]
+    sd: float
+
+    @classmethod
+    def fit(cls, traces: Sequence[NDArray[np.float64]], order: int = 2) -> ARTurbulence:
+        """Yule-Walker estimates over ``traces`` (each at least ``order + 2`` samples): the
+        autocovariances pooled over the traces, about their pooled mean."""
+        from statsmodels.regression.linear_model import yule_walker
+
+        kept = [np.asarray(t, dtype=float) for t in traces if np.size(t) >= order + 2]
+        if not kept:
+            raise ValueError(f"no u_d trace of at least {order + 2} samples to fit")
+        mean = float(np.mean(np.concatenate(kept)))
+        # One series of the traces end to end (a junction per trace: negligible against
+        # the thousands of samples each holds).
+        rho, sigma = yule_walker(
+            np.concatenate(kept) - mean, order=order, demean=False, result_object=False
+        )
+        return cls(mean, np.asarray(rho, dtype=float), float(sigma))
+
+    def paths(
+        self, history: NDArray[np.float64], samples: int, count: int, rng: np.random.Generator
+    ) -> NDArray[np.float64]:
+        """``count`` futures of ``samples`` samples each, shape ``(count, samples)``: column 0
+        the last of ``history`` (the sample now, known), the rest drawn given it and the
+        samples before it (the process's start before the first of ``history``)."""
+        p = self.ar.size
+        past = np.full(p, self.mean) if history.size == 0 else np.asarray(history, dtype=float)
+        if past.size < p:
+            past = np.concatenate([np.full(p - past.size, past[0]), past])
+        out = np.empty((count, samples + p - 1))
+        out[:, :p] = past[-p:] - self.mean
+        shocks = self.sd * rng.standard_normal((count, samples - 1))
+        for t in range(p, samples + p - 1):
+            out[:, t] = out[:, t - p : t][:, ::-1] @ self.ar + shocks[:, t - p]
+        return out[:, p - 1 :] + self.mean
+
+    def predictions(self, drawn: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Each sample after the first of :meth:`paths`'s futures ``drawn``, predicted one
+        step ahead from the samples before it (the first standing for those before it),
+        shape ``(count, samples - 1)``."""
+        p = self.ar.size
+        lead = np.repeat(drawn[:, :1], p - 1, axis=1)
+        series = np.concatenate([lead, drawn], axis=1) - self.mean
+        out = np.zeros((drawn.shape[0], drawn.shape[1] - 1))
+        for i, a in enumerate(self.ar):  # u_t from u_{t-1-i}
+            out += a * series[:, p - 1 - i : series.shape[1] - 1 - i]
+        return out + self.mean
+
+
+class CausalOracleController(OracleController):
+    """The best a causal controller can do: the oracle's planner, with the true rocket, the
+    true state and the ``u_d`` sample now in effect known, and the future of ``u_d`` not
+    known but drawn from a turbulence model identified on the design split
+    (:class:`ARTurbulence`, AR(``order``) fitted to the train split's traces as the
+    environment replays them).
+
+    At every step each candidate first move is simulated over the future of ``u_d`` the
+    model predicts from the samples so far (its mean: certainty equivalence), or over
+    ``scenarios`` futures drawn from it (common random numbers: drawn once per step); each
+    sample is cancelled as well as the controller could when it acts (its prediction from
+    the samples before it: the sample in effect is not measured until it is past), the
+    tail's loop closed on that future's state; the move with the least mean cost over the
+    futures is sent.  The plan respects the servo's rate and range limits in every scenario.
+    Like the oracle's it is the best of a grid, not a proven optimum: a score a causal
+    controller with perfect information reaches, so the limit itself lies at or below it;
+    it is a bound on the deployable controllers only where it scores below them, which
+    ``benchmarks/oracle_bound.py`` and a test check.
+
+    Parameters
+    ----------
+    config : RollConfig
+        The environment's settings.
+    horizon, grid, refine, tail_omega :
+        As :class:`OracleController`'s (defaults: :data:`CAUSAL_HORIZON`,
+        :data:`CAUSAL_TAIL_BANDWIDTH`).
+    scenarios : int
+        Futures drawn per step; 0 (default): the mean future alone.
+    knows_now : bool
+        Measure the sample in effect over the coming step too (a step's preview of the
+        sampled process: a more generous limit).
+    order : int
+        The turbulence model's AR order.
+    turbulence : ARTurbulence, optional
+        The model (default: fitted to the train split's traces).
+    seed : int
+        Seed of the futures.
+    """
+
+    name = "causal oracle"
+
+    def __init__(
+        self,
+        config: RollConfig,
+        horizon: int | None = None,
+        grid: int = 41,
+        refine: int = 21,
+        tail_omega: float | str | None = "default",
+        *,
+        scenarios: int = 0,
+        order: int = 2,
+        turbulence: ARTurbulence | None = None,
+        seed: int = 0,
+        knows_now: bool = False,
+    ) -> None:
+        if scenarios < 0:
+            raise ValueError(f"scenarios must be >= 0, got {scenarios}")
+        if horizon is None:
+            horizon = CAUSAL_HORIZON[regime(config)]
+        if tail_omega == "default":
+            tail_omega = CAUSAL_TAIL_BANDWIDTH[regime(config)]
+        super().__init__(config, horizon, grid, refine, tail_omega=tail_omega)
+        turbulence = design_turbulence(config, order) if turbulence is None else turbulence
+        if scenarios == 0:  # the mean future alone: certainty equivalence
+            turbulence = replace(turbulence, sd=0.0)
+        self.scenarios = max(int(scenarios), 1)
+        self.turbulence = turbulence
+        self._seed = int(seed)
+        self.knows_now = bool(knows_now)
+        self._scratch = 0  # where the futures go in the predictors' u_d samples
+
+    def reset(self, env: RocketRollEnv) -> None:
+        """Predictors for ``env``'s bank: every candidate in every future, and room in their
+        ``u_d`` samples for the futures."""
+        core = env.core
+        if self._predictor is None or self._bank_id != id(core.bank):
+            n = max(self._grid, self._refine) * self.scenarios
+            p = RollBatch(self._planning, core.bank, n)
+            self._scratch = p.u_flat.size
+            room = self.scenarios * self._samples_needed(core)
+            p.u_flat = np.concatenate([p.u_flat, np.zeros(room)])  # its own array
+            self._predictor = p
+            self._bank_id = id(core.bank)
+        self._place_tail(core)
+
+    def _samples_needed(self, core: RollBatch) -> int:
+        """``u_d`` samples one plan reads (from the sample now), at most."""
+        per = int(core.cfg[Cfg.U_PER])
+        return (self.horizon * self.config.substeps) // per + 2
+
+    def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
+        """The first command of the best plan in expectation over the futures."""
+        core = env.core
+        if self._predictor is None or int(core.step_count[0]) == 0:
+            self.reset(env)
+        elif core.scale_stride[0] and self.tail_omega is not None:
+            self._place_tail(core)
+        step = int(core.step_count[0])
+        horizon = min(self.horizon, self._max_steps - step)
+        per = int(core.cfg[Cfg.U_PER])
+        scale = float(core.cfg[Cfg.U_SCALE])
+        fin_range = self.config.fin_range_deg
+        now = int(core.u_start[0]) + (step * self.config.substeps) // per
+        known = now if self.knows_now else now - 1  # the last sample the controller has
+        begins = int(core.u_offsets[core.trace[0]])
+        order = self.turbulence.ar.size
+        history = scale * core.u_flat[max(begins, known - order + 1) : known + 1]
+        rng = np.random.default_rng([self._seed, step])
+        need = self._samples_needed(core)
+        drawn = self.turbulence.paths(history, need + 1, self.scenarios, rng)
+        # From the sample now on: known (the first) or drawn (all); each cancelled when it
+        # acts as well as the controller can by then: itself where it is measured, else
+        # its prediction from the samples before it.
+        future = drawn[:, :need] if self.knows_now else drawn[:, 1:]
+        cancel = future if self.knows_now else self.turbulence.predictions(drawn)[:, :need]
+        p = self._predictor
+        assert p is not None
+        for k in range(self.scenarios):  # scenario k's future in its own room
+            at = self._scratch + k * need
+            p.u_flat[at : at + need] = future[k] / scale
+        offsets = ((step + np.arange(horizon)) * self.config.substeps) // per - (
+            step * self.config.substeps
+        ) // per
+        u_steps = cancel[:, offsets].T / fin_range  # (horizon, scenarios), action units
+        u_now = float(u_steps[0, 0])  # the same in every future: what is known now
+        reach = 1.0 + float(np.max(np.abs(u_steps)))
+        coarse = np.linspace(-reach, reach, self._grid)
+        best = float(coarse[int(np.argmin(self._expected(core, coarse, u_steps, need)))])
+        cell = coarse[1] - coarse[0]
+        fine = np.linspace(best - cell, best + cell, self._refine)
+        w = float(fine[int(np.argmin(self._expected(core, fine, u_steps, need)))])
+        return np.array([min(max(w - u_now, -1.0), 1.0)], dtype=np.float32)
+
+    def _expected(
+        self, core: RollBatch, w: NDArray[np.float64], u_steps: NDArray[np.float64], need: int
+    ) -> NDArray[np.float64]:
+        """Each candidate's cost, the mean over the futures (predictor ``c·K + k``: candidate
+        ``c`` in future ``k``)."""
+        p = self._predictor
+        assert p is not None
+        k_count = self.scenarios
+        index = p.all[: w.size * k_count]
+        p.copy_env(core, 0, index)
+        first = (int(core.step_count[0]) * self.config.substeps) // int(core.cfg[Cfg.U_PER])
+        room = self._scratch + np.tile(np.arange(k_count) * need, w.size)
+        p.cursor[index, Cursor.U_START] = room - first  # each reads its future from the now
+        cost = self._rollout(core, index, np.repeat(w, k_count), np.tile(u_steps, (1, w.size)))
+        return cost.reshape(w.size, k_count).mean(axis=1)
+
+
+#: The causal oracle's horizon (steps) and tail bandwidth (rad/s; None: the move held) per
+#: regime, picked on 8 train-split protocol episodes (regulation RMS) with the mean future:
+#: angle 0.347° over 30 steps (15, 8: 0.359, 0.404; 32 drawn futures over 15 steps 0.370,
+#: 64 over 8 0.331); rate 1.087 °/s holding over 2 (a tail of 4 rad/s over 5 or 10: 1.115,
+#: 1.116; 32 futures 1.105); flight angle 0.448° holding over 2 (32 futures 0.456); flight
+#: rate 3.60 °/s over 10 with a tail of 4 rad/s (holding over 1, 2, 3, 5: 3.90, 3.83, 3.84,
+#: 3.94; 32 futures over 5: 3.94).  The observer's on the same episodes: 0.433°, 1.103 °/s,
+#: 1.446°, 3.667 °/s.
+CAUSAL_HORIZON = {"angle": 30, "rate": 2, "flight angle": 2, "flight rate": 10}
+CAUSAL_TAIL_BANDWIDTH: dict[str, float | None] = {
+    "angle": 2.0,
+    "rate": None,
+    "flight angle": None,
+    "flight rate": 4.0,
+}
+
+
+def design_turbulence(config: RollConfig, order: int = 2) -> ARTurbulence:
+    """The turbulence model a causal controller may know: AR(``order``) fitted to the
+    traces of ``config``'s environment on its design (train) split, as it replays them."""
+    from rollenv.bank import load_bank
+
+    design = replace(config, split="train")
+    batch = RollBatch(design, load_bank(design, None), 1)
+    ends = [*batch.u_offsets[1:].tolist(), batch.u_flat.size]
+    scale = float(batch.cfg[Cfg.U_SCALE])
+    traces = [
+        scale * batch.u_flat[a:b] for a, b in zip(batch.u_offsets.tolist(), ends, strict=True)
+    ]
+    return ARTurbulence.fit(traces, order)
+
+
+def make_causal_oracle(design: Design) -> CausalOracleController:
+    """``--policy causal-oracle``: the causal limit, on the environment's own settings."""
+    design.no_argument("causal-oracle")
+    return CausalOracleController(design.config)

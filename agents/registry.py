@@ -207,3 +207,10 @@ register_controller(
     summary="perfect preview of u_d on the true rocket (a bound, not deployable)",
     default=True,
 )
+register_controller(
+    "causal-oracle",
+    "agents.oracle:make_causal_oracle",
+    summary="the true rocket and state and the u_d now, its future drawn from the design "
+    "split's turbulence model (the causal limit, not deployable)",
+    default=True,
+)
