@@ -54,7 +54,7 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll env ascent --plot $(DEMO)/flight-profile.png
 	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
 		--policy trim --policy pid --policy pid-tunnel --policy observer --policy mpc \
-		--policy oracle --out $(DEMO)/eval-flight
+		--policy oracle --policy causal-oracle --out $(DEMO)/eval-flight
 	$(BIN)/rocketroll record-flight --seed 0 --out $(DEMO)/flight-seed0.csv
 	$(BIN)/rocketroll identify $(DEMO)/flight-seed0.csv --json $(DEMO)/flight-seed0.json \
 		--report $(DEMO)/flight-seed0-report

@@ -75,8 +75,11 @@ CONDITIONS: dict[str, dict[str, Any]] = {
 
 
 def _default_policy() -> list[str]:
-    """Every default controller but trim (which has nothing to be robust about)."""
-    return [p for p in default_policies() if p != "trim"]
+    """Every default controller but trim (which has nothing to be robust about) and the
+    causal limit."""
+    # the causal limit's turbulence model is the design split's: in another world it is
+    # not that world's limit
+    return [p for p in default_policies() if p not in ("trim", "causal-oracle")]
 
 
 @dataclass(frozen=True)

@@ -72,7 +72,7 @@ def test_the_identification_table_of_the_bundled_reconstruction() -> None:
 
 
 #: The flight table's controllers (results/evaluation.md, In flight).
-FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "mpc", "oracle")
+FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "mpc", "oracle", "causal-oracle")
 
 
 @pytest.mark.parametrize(
@@ -85,7 +85,7 @@ def test_the_evaluation_tables(
 ) -> None:
     """`make demo`'s tables, 20 held-out episodes, seed 0, every default controller (in
     flight: trim, the scheduled PID, the tunnel's PID, the scheduled observer and MPC, and
-    the oracle)."""
+    the two bounds)."""
     policies = [f"--policy={p}" for p in FLIGHT_POLICIES] if "Flight" in env_id else []
     words = ["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0", *policies]
     assert rocketroll(words) == 0
@@ -313,7 +313,7 @@ def test_the_front_page_is_short_and_its_headline_table_is_the_results_tables() 
         or line.startswith("| rate, ")
         or line.startswith("| flight angle")
     }
-    columns = ("trim", "PID", "observer", "MPC", "PPO", "oracle")
+    columns = ("trim", "PID", "observer", "MPC", "PPO", "oracle", "causal oracle")
     lines = RESULTS.splitlines()
     starts = [k for k, line in enumerate(lines) if line.startswith("| trim |")]
     for task, start in zip(headline, starts, strict=True):
