@@ -6,7 +6,7 @@ this servo could achieve against this turbulence at all.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -180,13 +180,19 @@ class OracleController:
             self._place_tail(core)  # a rocket that changes during the episode
         horizon = min(self.horizon, self._max_steps - int(core.step_count[0]))
         u = core.u_ahead(0, horizon) / self.config.fin_range_deg  # in action units
-        reach = 1.0 + float(np.max(np.abs(u)))
+        w = self._best_move(lambda w: self._costs(core, w, u), 1.0 + float(np.max(np.abs(u))))
+        return np.array([min(max(w - u[0], -1.0), 1.0)], dtype=np.float32)
+
+    def _best_move(
+        self, costs: Callable[[NDArray[np.float64]], NDArray[np.float64]], reach: float
+    ) -> float:
+        """The first move of least cost: on a grid over ``±reach``, then a finer one
+        spanning a coarse cell either side of the coarse best."""
         coarse = np.linspace(-reach, reach, self._grid)
-        best = float(coarse[int(np.argmin(self._costs(core, coarse, u)))])
+        best = float(coarse[int(np.argmin(costs(coarse)))])
         cell = coarse[1] - coarse[0]
         fine = np.linspace(best - cell, best + cell, self._refine)
-        w = float(fine[int(np.argmin(self._costs(core, fine, u)))])
-        return np.array([min(max(w - u[0], -1.0), 1.0)], dtype=np.float32)
+        return float(fine[int(np.argmin(costs(fine)))])
 
     def _costs(
         self, core: RollBatch, w: NDArray[np.float64], u: NDArray[np.float64]
@@ -431,11 +437,7 @@ class CausalOracleController(OracleController):
         u_steps = cancel[:, offsets].T / fin_range  # (horizon, scenarios), action units
         u_now = float(u_steps[0, 0])  # the same in every future: what is known now
         reach = 1.0 + float(np.max(np.abs(u_steps)))
-        coarse = np.linspace(-reach, reach, self._grid)
-        best = float(coarse[int(np.argmin(self._expected(core, coarse, u_steps, need)))])
-        cell = coarse[1] - coarse[0]
-        fine = np.linspace(best - cell, best + cell, self._refine)
-        w = float(fine[int(np.argmin(self._expected(core, fine, u_steps, need)))])
+        w = self._best_move(lambda w: self._expected(core, w, u_steps, need), reach)
         return np.array([min(max(w - u_now, -1.0), 1.0)], dtype=np.float32)
 
     def _expected(
