@@ -12,9 +12,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import Design
+from agents.base import Design, train_bank
 from agents.nominal import NominalModel
 from agents.pid import PIDGains
+from disturbances.bank import TraceBank
 from rollenv.core import RollBatch, RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Cfg, Cursor, State
@@ -474,22 +475,25 @@ CAUSAL_TAIL_BANDWIDTH: dict[str, float | None] = {
 }
 
 
-def design_turbulence(config: RollConfig, order: int = 2) -> ARTurbulence:
+def design_turbulence(
+    config: RollConfig, order: int = 2, bank: TraceBank | None = None
+) -> ARTurbulence:
     """The turbulence model a causal controller may know: AR(``order``) fitted to the
-    traces of ``config``'s environment on its design (train) split, as it replays them."""
-    from rollenv.bank import load_bank
-
+    design's traces (``bank``, default the train split of the default database:
+    :func:`agents.base.train_bank`) as ``config``'s environment replays them (flown, in
+    flight; on its control grid)."""
     design = replace(config, split="train")
-    batch = RollBatch(design, load_bank(design, None), 1)
-    ends = [*batch.u_offsets[1:].tolist(), batch.u_flat.size]
-    scale = float(batch.cfg[Cfg.U_SCALE])
-    traces = [
-        scale * batch.u_flat[a:b] for a, b in zip(batch.u_offsets.tolist(), ends, strict=True)
-    ]
-    return ARTurbulence.fit(traces, order)
+    traces = train_bank(config, None) if bank is None else bank
+    flat, offsets = design.flights(traces).on_grid(config.dt_s, config.substep_s).concatenated()
+    ends = [*offsets[1:].tolist(), flat.size]
+    scale = float(design.kernel_settings()[Cfg.U_SCALE])
+    return ARTurbulence.fit(
+        [scale * flat[a:b] for a, b in zip(offsets.tolist(), ends, strict=True)], order
+    )
 
 
 def make_causal_oracle(design: Design) -> CausalOracleController:
     """``--policy causal-oracle``: the causal limit, on the environment's own settings."""
     design.no_argument("causal-oracle")
-    return CausalOracleController(design.config)
+    turbulence = design_turbulence(design.config, bank=design.train_bank)
+    return CausalOracleController(design.config, turbulence=turbulence)

@@ -25,9 +25,9 @@ def config(env_id: str = "RocketRoll-v0", **settings) -> RollConfig:
 
 
 def deployable() -> list[str]:
-    """Every registered controller but the oracle (the one that sees the truth: checked
-    below, and each of these is checked not to)."""
-    return [name for name in CONTROLLERS.names() if name != "oracle"]
+    """Every registered controller but the two bounds (the oracle and the causal limit,
+    which see the truth: checked below, and each of these is checked not to)."""
+    return [name for name in CONTROLLERS.names() if name not in ("oracle", "causal-oracle")]
 
 
 #: Tiny runs of the learned controllers that have no committed policy (seconds each); PPO
@@ -119,9 +119,10 @@ def test_every_deployable_controller_runs_on_the_flight_view(name, env_id, tiny_
     assert np.all(np.isfinite(rollout.command_deg))
 
 
-def test_the_oracle_alone_gets_the_environment(default_db):
+def test_the_bounds_alone_get_the_environment(default_db):
     cfg = config(split="test")
-    assert getattr(make_controller("oracle", cfg, "RocketRoll-v0"), "sees_truth", False)
+    for bound in ("oracle", "causal-oracle"):
+        assert getattr(make_controller(bound, cfg, "RocketRoll-v0"), "sees_truth", False)
 
 
 # ------------------------------------------------------------- holding a setpoint
