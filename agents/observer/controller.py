@@ -33,13 +33,16 @@ DEFAULT_WEIGHTS: dict[str, dict[str, float]] = {
     "angle": {"rate": 0.01, "move": 0.005},
     "rate": {"rate": 1.0, "move": 0.003},
 }
-#: The weights in flight (scheduled), chosen on 20 train flights of each task: angle move
-#: 0.005 / 0.2 / 1 / 3 / 10 / 30 / 100 gave 2.72° / 2.21 / 1.56 / 1.43 / 1.61 / 1.83 / 2.14
-#: at 142 / 89 / 29 / 13 / 5.5 / 3.5 / 2.1 °/s of fin travel (at 0.005 the fins chatter at
-#: the servo's rate limit: the rocket answers a fin 12x more strongly at top speed); rate
-#: move 0.003 / 0.1 / 1 / 3 gave 3.70 / 3.72 / 3.82 / 3.93 °/s: the tunnel's weight stays.
+#: The weights in flight (scheduled), chosen on 20 train flights of each task as in the
+#: tunnel: angle move 3 / 0.3 / 0.03 / 0.01 / 0.003 / 0.001 / 0.0003 gave 1.45° / 1.20 /
+#: 1.09 / 1.06 / 1.05 / 1.047 / 1.049 at 3.5 / 6.6 / 11 / 13 / 16 / 18 / 20 °/s of fin travel
+#: (the PID 1.24° at 21 °/s).  Before the filter read the summed gyro as the noisy angle it
+#: is (:attr:`~agents.observer.estimator.RollObserver.summed`) it took it for an exact one,
+#: and a light move weight let the gyro's noise chatter the fins: 0.005 / 1 / 3 gave 2.72°
+#: / 1.56 / 1.43 at 142 / 29 / 13 °/s.  Rate move 0.003 / 0.1 / 1 / 3 gave 3.70 / 3.72 /
+#: 3.82 / 3.93 °/s: the tunnel's weight stays.
 FLIGHT_WEIGHTS: dict[str, dict[str, float]] = {
-    "angle": {"rate": 0.01, "move": 3.0},
+    "angle": {"rate": 0.01, "move": 0.001},
     "rate": {"rate": 1.0, "move": 0.003},
 }
 

@@ -222,6 +222,9 @@ class RollObserver:
         self.angle_task = config.task == "angle"
         self.count = config.encoder_resolution_deg if config.sensors else 0.0
         self.gyro_var = (config.gyro_noise_pct / 100.0) ** 2 if config.sensors else 0.0
+        #: Whether the angle is the flight computer's sum of the gyro's readings: exact at
+        #: launch, its error then a random walk of the gyro's noise (:attr:`walk`).
+        self.summed = config.angle_sensor == "gyro"
         # At least two lags, so the last step's u_d is a state (an AR(1) gets a zero a_2).
         self.ar = np.pad(turbulence.ar, (0, max(0, 2 - turbulence.order)))
         self._flown: tuple[FloatArray, FloatArray] | None = None
@@ -261,6 +264,8 @@ class RollObserver:
         self.cov = self._prior_cov.copy()
         self.steps = 0
         self.setpoint_steps = 0
+        #: The variance of the summed gyro's error so far, °² (0 at launch; flight only).
+        self.walk = 0.0
         #: With a linkage: the servo and the fin's drive now (None: at rest on the first fin).
         self._servo: tuple[float, float] | None = None
         #: With a latency: the fin at the last ``per + delay + 1`` substep boundaries, to now.
@@ -417,7 +422,11 @@ class RollObserver:
 
     def update(self, obs: NDArray[np.float32]) -> None:
         """Measurement update with one observation (the env's ``Obs`` layout): the gyro,
-        then (angle task) the encoder."""
+        then (angle task) the encoder, or in flight the summed gyro."""
+        if self.summed:  # the step's reading of the gyro, summed: its noise in the angle
+            self.walk += (
+                (self.per * self.h) ** 2 * self.gyro_var * (self.mean[0] ** 2 + self.cov[0, 0])
+            )
         self._y[0] = float(obs[Obs.RATE])
         self._var[0] = self.gyro_var * (self.mean[0] ** 2 + self.cov[0, 0]) + _VAR_FLOOR
         update(self.mean, self.cov, self._y, self._gyro, self._var, self._gains)
@@ -441,6 +450,16 @@ class RollObserver:
         q = self.count
         m, var = self.mean[1], self.cov[1, 1]
         lo = m + float(wrap_deg(reading - m))
+        if self.summed:  # the summed gyro: the angle plus the walk of its noise so far
+            noise = max(self.walk, _VAR_FLOOR)
+            if math.erfc(abs(lo - m) / math.sqrt(2.0 * (var + noise))) < _JUMP_MASS:
+                if self.steps > 0:  # a reading the prior cannot have made: a setpoint step
+                    self.setpoint_steps += 1
+                self.cov[1, 1] += _DIFFUSE
+                var = self.cov[1, 1]
+            gain = var / (var + noise)
+            self._update_angle(m + gain * (lo - m), var * noise / (var + noise))
+            return
         if q <= 0.0:  # no quantisation: an (almost) exact reading
             self._update_angle(lo, 0.0)
             return

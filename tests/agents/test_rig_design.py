@@ -184,12 +184,14 @@ def test_the_command_takes_up_the_play(default_db):
     assert direct.through_play(3.0, 1.0) == 3.0
 
 
-def test_in_flight_the_design_on_the_play_takes_it_up(default_db):
-    """In flight the fin's moves are small (the scheduled weights keep them so) and the play
-    eats them: the design that knows the play scores better than the one that does not
-    (``benchmarks/rig_control.py``: 1.46° against 1.64° at 0.75° of play, 20 episodes)."""
-    env_id, settings = "RocketRollFlight-v0", {"backlash_deg": 0.75}
+def test_in_flight_the_design_on_the_rig_takes_back_what_the_ideal_design_loses(default_db):
+    """In flight, with all three effects (50 ms of lag, 0.5° of play, 30 ms of latency), the
+    scheduled observer designed on the rig holds the angle at less than half the ideal
+    design's error (``benchmarks/rig_control.py --env-ids RocketRollFlight-v0``, 20
+    episodes: 0.97° against 3.18°; the play alone costs either design 1-3 %)."""
+    env_id = "RocketRollFlight-v0"
+    settings = {"servo_lag_s": 0.05, "backlash_deg": 0.5, "sensor_latency_s": 0.03}
     config, rigged = _designed(ObserverController, env_id, settings, None)
     _, ideal = _designed(ObserverController, env_id, settings, Rig())
     on_rig, on_ideal = _headlines(config, rigged, ideal)
-    assert on_rig < 0.95 * on_ideal
+    assert on_rig < 0.5 * on_ideal
