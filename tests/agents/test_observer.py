@@ -347,6 +347,7 @@ def test_in_flight_the_observer_beats_the_pid_reading_the_summed_gyro_as_noisy(d
     cfg = config("RocketRollFlight-v0", split="test")
     specs = protocol_episodes(cfg, episodes=6, seed=0)
     observer = make_controller("observer", cfg, "RocketRollFlight-v0")
+    assert isinstance(observer, ObserverController)
     assert observer.observer.summed and observer.observer.walk == 0.0
     scores = [
         evaluate(cfg, c, specs).aggregate["regulation_rms_error"]["mean"]
@@ -355,7 +356,7 @@ def test_in_flight_the_observer_beats_the_pid_reading_the_summed_gyro_as_noisy(d
     assert scores[0] < 0.95 * scores[1]
     assert observer.observer.walk > 0.0  # the last flight's sum carried its noise
     tunnel = make_controller("observer", config("RocketRoll-v0", split="test"), "RocketRoll-v0")
-    assert not tunnel.observer.summed
+    assert isinstance(tunnel, ObserverController) and not tunnel.observer.summed
 
 
 def test_in_flight_the_observer_features_are_the_scheduled_controllers(default_db):
