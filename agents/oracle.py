@@ -174,15 +174,19 @@ class OracleController:
 
     def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
         """The first command of the best plan from ``env``'s true state."""
+        core, horizon = self._ready(env)
+        u = core.u_ahead(0, horizon) / self.config.fin_range_deg  # in action units
+        w = self._best_move(lambda w: self._costs(core, w, u), 1.0 + float(np.max(np.abs(u))))
+        return np.array([min(max(w - u[0], -1.0), 1.0)], dtype=np.float32)
+
+    def _ready(self, env: RocketRollEnv) -> tuple[RollBatch, int]:
+        """``env``'s batch, the predictors ready for its step, and the horizon left."""
         core = env.core
         if self._predictor is None or int(core.step_count[0]) == 0:
             self.reset(env)
         elif core.scale_stride[0] and self.tail_omega is not None:
             self._place_tail(core)  # a rocket that changes during the episode
-        horizon = min(self.horizon, self._max_steps - int(core.step_count[0]))
-        u = core.u_ahead(0, horizon) / self.config.fin_range_deg  # in action units
-        w = self._best_move(lambda w: self._costs(core, w, u), 1.0 + float(np.max(np.abs(u))))
-        return np.array([min(max(w - u[0], -1.0), 1.0)], dtype=np.float32)
+        return core, min(self.horizon, self._max_steps - int(core.step_count[0]))
 
     def _best_move(
         self, costs: Callable[[NDArray[np.float64]], NDArray[np.float64]], reach: float
@@ -404,13 +408,8 @@ class CausalOracleController(OracleController):
 
     def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
         """The first command of the best plan in expectation over the futures."""
-        core = env.core
-        if self._predictor is None or int(core.step_count[0]) == 0:
-            self.reset(env)
-        elif core.scale_stride[0] and self.tail_omega is not None:
-            self._place_tail(core)
+        core, horizon = self._ready(env)
         step = int(core.step_count[0])
-        horizon = min(self.horizon, self._max_steps - step)
         per = int(core.cfg[Cfg.U_PER])
         scale = float(core.cfg[Cfg.U_SCALE])
         fin_range = self.config.fin_range_deg

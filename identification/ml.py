@@ -54,7 +54,13 @@ from scipy import linalg, optimize, stats
 
 from identification.compiled import _UNSCALED, _interval_maps, interval_maps
 from identification.methods import Context, ModelFit, resimulation_metrics
-from identification.model import QUADRATIC_RATE_DPS, TERM_LEVEL, RollParams, check_model
+from identification.model import (
+    QUADRATIC_RATE_DPS,
+    TERM_LEVEL,
+    RollParams,
+    check_model,
+    quadratic_growth,
+)
 from identification.pipeline import (
     IdentifyOptions,
     Measurements,
@@ -1255,7 +1261,7 @@ def rate_damped(data: _Data, speed: FloatArray, coefficient: float) -> _Data:
     predicted rate, its linearisation point)."""
     if coefficient == 0.0:
         return data
-    scale = 1.0 + coefficient * speed / QUADRATIC_RATE_DPS
+    scale = quadratic_growth(speed, coefficient)
     return dataclasses.replace(data, gain_scale=1.0 / scale, damping_scale=scale)
 
 
@@ -1294,7 +1300,7 @@ def quadratic_search(
         if c not in profile:
             damped = rate_damped(data, speed, c)
             # the linear fit's parameters, its gain given back the rate's mean damping
-            gain = 1.0 + c * mean_speed / QUADRATIC_RATE_DPS
+            gain = float(quadratic_growth(mean_speed, c))
             warm = {**nat, "alpha": nat["alpha"] * gain}
             result = _minimize(damped, _layout(damped, model, base.ar.size, nat), warm)
             profile[c] = max(-float(result.fun), -_negloglike_natural(damped, warm))

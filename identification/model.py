@@ -90,6 +90,7 @@ __all__ = [
     "linkage_step",
     "model_of",
     "piece_coefficients",
+    "quadratic_growth",
     "quadratic_steady_rate",
     "roll_coefficients",
     "roll_step",
@@ -203,6 +204,14 @@ class RollParams:
     def with_constant_damping(self, a_per_s: float) -> RollParams:
         """The same α and θ̄ with constant damping ``a`` (eq. 29)."""
         return RollParams(self.alpha, self.theta_bar_deg, a_per_s, 0.0, self.quadratic_damping)
+
+
+def quadratic_growth(speed_dps: ArrayLike, quadratic: float) -> FloatArray:
+    """The factor ``1 + q·|v|/QUADRATIC_RATE_DPS`` on a rocket's damping (its gain divided
+    by it) at roll speed ``speed_dps`` (``|v|``, °/s), held at or above
+    :data:`QUADRATIC_FLOOR`; the environment's kernel computes the same per substep."""
+    speed = np.asarray(speed_dps, dtype=float)
+    return np.maximum(1.0 + quadratic * speed / QUADRATIC_RATE_DPS, QUADRATIC_FLOOR)
 
 
 def quadratic_steady_rate(linear_dps: ArrayLike, quadratic: ArrayLike) -> FloatArray:
@@ -927,10 +936,9 @@ def _rate_damped_path(
     factors settle (each pass a whole vectorised path; the roll's damping makes it a
     contraction wherever the damping stays positive).  The environment's kernel damps a
     moving substep so and a run of held substeps at the mean of its ends' rates."""
-    k = quadratic / QUADRATIC_RATE_DPS
     grow = np.ones(rate.size - 1)
     for _ in range(_QUADRATIC_PASSES):
-        new = np.maximum(1.0 + k * np.abs(rate[:-1]), QUADRATIC_FLOOR)
+        new = quadratic_growth(np.abs(rate[:-1]), quadratic)
         settled = float(np.max(np.abs(new - grow))) < _QUADRATIC_SETTLED
         grow = new
         out = path(scales[0] / grow, scales[1] * grow)

@@ -778,16 +778,13 @@ def _step_envs(
                 theta = moved
             if late and (sub + 1 - read_at) % n_sub <= 1:  # the roll the sensors will read
                 seen_v, seen_phi = v, phi
-                if held > 0 and quadratic == 0.0:  # the held run applied here: exact
-                    v, phi = _roll(v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
-                                   theta, theta, held_u, held * h, held)  # fmt: skip
-                    seen_v, seen_phi = v, phi
-                    held = 0
-                elif held > 0:  # read off the run, which goes on whole (its damping its own)
+                if held > 0:  # the held run so far, read off
                     seen_v, seen_phi = _roll(
                         v, phi, alpha, theta_bar, beta_bar, alpha_bar, quadratic,
                         theta, theta, held_u, held * h, held,
                     )  # fmt: skip
+                    if quadratic == 0.0:  # a linear run splits exactly: applied here
+                        v, phi, held = seen_v, seen_phi, 0
                 slot = (first + sub + 1) % rows
                 rig[i, _RING + 2 * slot] = seen_v
                 rig[i, _RING + 2 * slot + 1] = seen_phi

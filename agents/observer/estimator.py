@@ -423,12 +423,11 @@ class RollObserver:
     def update(self, obs: NDArray[np.float32]) -> None:
         """Measurement update with one observation (the env's ``Obs`` layout): the gyro,
         then (angle task) the encoder, or in flight the summed gyro."""
+        noise = self.gyro_var * (self.mean[0] ** 2 + self.cov[0, 0])  # the gyro's, °²/s²
         if self.summed:  # the step's reading of the gyro, summed: its noise in the angle
-            self.walk += (
-                (self.per * self.h) ** 2 * self.gyro_var * (self.mean[0] ** 2 + self.cov[0, 0])
-            )
+            self.walk += (self.per * self.h) ** 2 * noise
         self._y[0] = float(obs[Obs.RATE])
-        self._var[0] = self.gyro_var * (self.mean[0] ** 2 + self.cov[0, 0]) + _VAR_FLOOR
+        self._var[0] = noise + _VAR_FLOOR
         update(self.mean, self.cov, self._y, self._gyro, self._var, self._gains)
         if self.angle_task:
             self._encoder(-float(obs[Obs.ERROR]))
