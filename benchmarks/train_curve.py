@@ -46,16 +46,23 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.learned import LearnedController, ObservationNormalizer
 from agents.registry import make_controller
-from agents.train import algorithm_arguments, load_hyperparameters, make_env, normalization_record
+from agents.train import (
+    algorithm_arguments,
+    load_hyperparameters,
+    make_env,
+    normalization_record,
+    observation_names,
+)
 from rollenv.bank import load_bank, variant_config
 
 
 class Scorer(BaseCallback):
     """Every ``every`` env-steps: the clock stops, the policy is scored on the protocol."""
 
-    def __init__(self, every: int, score: Any, normalize: Any, task: str) -> None:
+    def __init__(self, every: int, score: Any, normalize: Any, task: str, history: int) -> None:
         super().__init__()
         self.every, self.score, self.normalize, self.task = every, score, normalize, task
+        self.history = history
         self.next = every
         self.paused = 0.0
         self.began = 0.0
@@ -70,9 +77,14 @@ class Scorer(BaseCallback):
         self.next += self.every
         stopped = time.perf_counter()
         wall = stopped - self.began - self.paused
-        settings = {"algorithm": "ppo", "env_settings": {"task": self.task}}
+        settings = {
+            "algorithm": "ppo",
+            "env_settings": {"task": self.task},
+            "hyperparameters": {"history": self.history},
+        }
         record = normalization_record(self.normalize)
-        controller = LearnedController(self.model, ObservationNormalizer(record), settings)
+        size = len(observation_names(self.history))
+        controller = LearnedController(self.model, ObservationNormalizer(record, size), settings)
         self.curve.append((wall, self.num_timesteps, self.score(controller)))
         self.model.policy.set_training_mode(True)
         self.paused += time.perf_counter() - stopped
@@ -138,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             torch.set_num_threads(recipe.threads)
             _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
             model = PPO(hp.policy, venv, seed=seed, device="cpu", **algorithm_arguments(hp))
-            scorer = Scorer(args.eval_every, score, normalize, config.task)
+            scorer = Scorer(args.eval_every, score, normalize, config.task, hp.history)
             began = time.perf_counter()
             model.learn(total_timesteps=steps, callback=scorer)
             train_s = time.perf_counter() - began - scorer.paused
