@@ -128,33 +128,48 @@ class LearnedController:
         self.chain = ActorChain.from_policy(model.policy)
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> LearnedController:
-        """The controller of the training output directory ``path``.
+    def load(
+        cls, path: str | os.PathLike[str], checkpoint: str | os.PathLike[str] | None = None
+    ) -> LearnedController:
+        """The controller of the training output directory ``path``; with ``checkpoint``
+        (one of the run's ``checkpoints/<algo>_<N>_steps.zip``), that checkpoint's model
+        and observation normalisation instead of the final ones (a learning curve:
+        ``benchmarks/run_curve.py``).
 
         Raises
         ------
         FileNotFoundError
-            ``model.zip`` or ``normalize.json`` is missing.
+            ``model.zip`` or ``normalize.json`` (the checkpoint or its ``VecNormalize``
+            statistics) is missing.
         """
         from agents.train import algorithm_class, observation_names
 
         folder = Path(path)
-        model_file = folder / "model.zip"
-        norm_file = folder / "normalize.json"
-        for required in (model_file, norm_file):
-            if not required.is_file():
-                raise FileNotFoundError(f"{required}: not found (a `rocketroll train` output?)")
         settings_file = folder / "settings.json"
         settings: dict[str, Any] = (
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
+        algorithm = str(settings.get("algorithm", "ppo"))
         history, observer, _ = _layout(settings)
-        size = len(observation_names(history, observer, _flight_clock(settings)))
-        record = json.loads(norm_file.read_text(encoding="utf-8"))
+        clock = _flight_clock(settings)
+        if checkpoint is None:
+            model_file = folder / "model.zip"
+            norm_file = folder / "normalize.json"
+            for required in (model_file, norm_file):
+                if not required.is_file():
+                    raise FileNotFoundError(f"{required}: not found (a `rocketroll train` output?)")
+            record = json.loads(norm_file.read_text(encoding="utf-8"))
+        else:
+            from agents.train.checkpoints import checkpoint_normalization
+
+            model_file = Path(checkpoint)
+            if not model_file.is_file():
+                raise FileNotFoundError(f"{model_file}: not found")
+            record = checkpoint_normalization(model_file, algorithm, history, observer, clock)
+        size = len(observation_names(history, observer, clock))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
         custom = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
-        algorithm = str(settings.get("algorithm", "ppo"))
         model = algorithm_class(algorithm).load(model_file, device="cpu", custom_objects=custom)
         return cls(model, normalizer, settings)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -170,10 +171,10 @@ def test_train_speed_names_a_bad_recipe(default_db: Path) -> None:
 
 
 def test_train_curve_scores_each_seed_and_the_median(default_db: Path, tmp_path: Path) -> None:
-    small = tmp_path / "small.yml"
+    small = tmp_path / "small.yml"  # with a history: the scorer reads the wider observation
     small.write_text(
         "RocketRoll-v0:\n  n_envs: 4\n  n_steps: 64\n  batch_size: 64\n  n_epochs: 1\n"
-        "  normalize: true\n"
+        "  normalize: true\n  history: 2\n"
     )
     png = tmp_path / "curve.png"
     out = run_script(
@@ -187,6 +188,47 @@ def test_train_curve_scores_each_seed_and_the_median(default_db: Path, tmp_path:
     median = next(line for line in out.splitlines() if "tiny, median of 2" in line)
     assert median.count("/2)") == 2  # seeds that reached each reference, of 2
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_curve_scores_each_checkpoint_of_finished_runs(
+    default_db: Path, tmp_path: Path
+) -> None:
+    small = tmp_path / "small.yml"
+    small.write_text(
+        "RocketRoll-v0:\n  n_envs: 4\n  n_steps: 64\n  batch_size: 64\n  n_epochs: 1\n"
+        "  normalize: true\n  history: 2\n"
+    )
+    runs = []
+    for seed in (0, 1):
+        out = tmp_path / f"seed{seed}"
+        done = subprocess.run(
+            [
+                sys.executable, "-m", "agents.train", "--hyperparams", str(small),
+                "--timesteps", "768", "--seed", str(seed), "--out", str(out),
+                "--eval-freq", "0", "--eval-episodes", "1", "--checkpoint-freq", "256",
+                "--no-progress-bar",
+            ],
+            cwd=REPO, capture_output=True, text=True, check=False,
+            env={**os.environ, "PYTHONPATH": str(REPO), "ROCKETROLL_DB": str(default_db)},
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr[-3000:]
+        runs += ["--run", f"tiny={out}"]
+    png = tmp_path / "curve.png"
+    out_text = run_script(
+        "run_curve.py", *runs, "--episodes", "2", "--split", "train", "--png", str(png),
+        db=default_db,
+    )  # fmt: skip
+    rows = [line for line in out_text.splitlines() if line.startswith("| tiny (")]
+    assert len(rows) == 2
+    # checkpoints at 256 and 512 env-steps, then the final model (768; its own checkpoint
+    # at 768 is the final model and shown once)
+    assert all(r.count(" M: ") == 3 and "0.000768 M" in r for r in rows)
+    assert re.search(
+        r"tiny: median of 2 run\(s\) .* below the PID \(\d+\.\d+\) in [012]/2", out_text
+    )
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    bad = run_benchmark("run_curve.py", "--run", f"tiny={tmp_path}", db=default_db)
+    assert bad.returncode == 2 and "settings.json not found" in bad.stderr
 
 
 def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_truth(

@@ -43,6 +43,31 @@ def _checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> 
     return path
 
 
+def _statistics_file(checkpoint: Path, algo: str) -> Path:
+    """The ``VecNormalize`` statistics of ``checkpoint``: the checkpoint's own, or a finished
+    run's ``vecnormalize.pkl`` beside its ``model.zip`` (neither may exist)."""
+    stats = _normalization_file(checkpoint, algo)
+    return stats if stats.is_file() else checkpoint.with_name(VECNORMALIZE_FILE)
+
+
+def checkpoint_normalization(
+    checkpoint: Path, algo: str, history: int, observer: bool, flight_clock: bool
+) -> dict[str, Any]:
+    """The observation normalisation ``checkpoint`` was trained with, as ``normalize.json``
+    holds a finished run's (:func:`agents.train.envs.normalization_record`); off when no
+    statistics are beside it."""
+    import pickle
+
+    from agents.train.envs import normalization_record
+
+    stats = _statistics_file(Path(checkpoint), algo)
+    saved = None
+    if stats.is_file():
+        with stats.open("rb") as handle:
+            saved = pickle.load(handle)
+    return normalization_record(saved, history, observer, flight_clock)
+
+
 def checkpoint_callback(**settings: Any) -> Any:
     """SB3's ``CheckpointCallback`` (``settings`` its arguments) whose periodic saves a
     Ctrl-C does not cut short: it is held until the files are whole, then stops the run,
@@ -76,9 +101,7 @@ def _resume(
             f"--resume {checkpoint}: {algo.upper()} goes on from a checkpoint with its replay "
             f"buffer beside it ({buffer.name}); a finished run's model.zip has none"
         )
-    stats = _normalization_file(checkpoint, algo)
-    if not stats.is_file():
-        stats = checkpoint.with_name(VECNORMALIZE_FILE)
+    stats = _statistics_file(checkpoint, algo)
     if normalize is None and stats.is_file():
         raise UsageError(
             f"--resume {checkpoint}: it was trained with VecNormalize ({stats.name} is beside "

@@ -162,6 +162,24 @@ def test_normalize_json_is_the_training_statistics(run):
     np.testing.assert_array_equal(normalizer(obs), expected)
 
 
+def test_a_checkpoint_acts_as_the_model_of_its_step(run):
+    """``LearnedController.load(run, checkpoint)`` (learning curves): the last checkpoint is
+    the final model with the final statistics, acting alike; an earlier one acts otherwise."""
+    from agents.learned import LearnedController
+
+    out, _ = run
+    final = LearnedController.load(out)
+    last = LearnedController.load(out, out / "checkpoints" / "ppo_256_steps.zip")
+    early = LearnedController.load(out, out / "checkpoints" / "ppo_128_steps.zip")
+    np.testing.assert_array_equal(last.normalizer.mean, final.normalizer.mean)
+    obs = np.random.default_rng(1).normal(0.0, 20.0, size=(50, 4)).astype(np.float32)
+    acted = [np.concatenate([c.predict(o) for o in obs]) for c in (final, last, early)]
+    np.testing.assert_array_equal(acted[1], acted[0])
+    assert not np.array_equal(acted[2], acted[0])
+    with pytest.raises(FileNotFoundError, match=r"ppo_9_steps\.zip"):
+        LearnedController.load(out, out / "checkpoints" / "ppo_9_steps.zip")
+
+
 def _resume(run_folder: Path, small_db: Path, checkpoint: str, timesteps: int, out: Path) -> str:
     hyperparams = run_folder.parent / "tiny.yml"
     argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]

@@ -1,0 +1,184 @@
+"""Learning curves of finished training runs: each checkpoint scored on the evaluation protocol.
+
+``rocketroll train ... --checkpoint-freq N`` saves the model and its observation
+normalisation every ``N`` env-steps under ``RUN/checkpoints/``.  This scores every
+checkpoint of every ``--run LABEL=DIR`` (and the run's final model) on the protocol's
+headline (test split, or ``--split train`` to choose between recipes; ``--episodes``
+episodes, ``--seed``; :mod:`agents.evaluate`), with
+the PID and the observer measured in the same run as references.  Runs sharing a label
+are seeds of one recipe.  Training never saw these scores: a run's committed model is its
+final one.
+
+It prints one row per run (the headline at each checkpoint) and per label the median
+over its runs at each checkpoint, and how many runs end below the PID; ``--png`` draws
+headline against env-steps, every run.  Exit status 0 whatever the numbers; 2 for a run
+folder without ``settings.json`` or with another env id than the first's.
+
+Run from the repository root::
+
+    .venv/bin/python benchmarks/run_curve.py \\
+        --run ppo=runs/seeds/RocketRoll-v0/ppo/seed0 --run ppo=runs/seeds/RocketRoll-v0/ppo/seed1 \\
+        --png build/run-curve.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import statistics
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from agents.evaluate import evaluate, headline_scores, protocol_episodes
+from agents.learned import LearnedController
+from agents.registry import make_controller
+from rollenv.bank import load_bank, variant_config
+
+_STEPS = re.compile(r"_(\d+)_steps\.zip$")
+
+
+def checkpoints(run: Path, algorithm: str) -> list[tuple[int, Path | None]]:
+    """``(env-steps, checkpoint)`` of ``run`` in order, the final model last (``None``)."""
+    found = []
+    for path in (run / "checkpoints").glob(f"{algorithm}_*_steps.zip"):
+        match = _STEPS.search(path.name)
+        if match:
+            found.append((int(match.group(1)), path))
+    found.sort()
+    settings = json.loads((run / "settings.json").read_text(encoding="utf-8"))
+    final = int(settings.get("env_steps") or (found[-1][0] if found else 0))
+    # a checkpoint within 1 % of the end is the final model to the rollout: shown once
+    return [(n, p) for n, p in found if n < 0.99 * final] + [(final, None)]
+
+
+def _runs(items: Sequence[str]) -> list[tuple[str, Path, dict[str, Any]]]:
+    runs = []
+    for item in items:
+        label, sep, folder = item.partition("=")
+        if not sep or not label or not folder:
+            print(f"run_curve.py: error: --run {item}: expected LABEL=DIR", file=sys.stderr)
+            raise SystemExit(2)
+        path = Path(folder)
+        settings_file = path / "settings.json"
+        if not settings_file.is_file():
+            print(f"run_curve.py: error: --run {item}: {settings_file} not found", file=sys.stderr)
+            raise SystemExit(2)
+        runs.append((label, path, json.loads(settings_file.read_text(encoding="utf-8"))))
+    env_ids = {settings.get("env_id") for _, _, settings in runs}
+    if len(env_ids) != 1:
+        print(f"run_curve.py: error: the runs are of several env ids: {env_ids}", file=sys.stderr)
+        raise SystemExit(2)
+    return runs
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--run", action="append", required=True, metavar="LABEL=DIR", help="a finished run"
+    )
+    parser.add_argument("--episodes", type=int, default=20, help="protocol episodes per score")
+    parser.add_argument("--seed", type=int, default=0, help="protocol seed (0)")
+    parser.add_argument(
+        "--split",
+        choices=("test", "train"),
+        default="test",
+        help="the split whose episodes score (test; train to choose between recipes)",
+    )
+    parser.add_argument("--png", type=Path, help="write the curves here")
+    args = parser.parse_args(argv)
+    runs = _runs(args.run)
+    env_id = str(runs[0][2]["env_id"])
+
+    config = variant_config(env_id, {"split": args.split})
+    bank = load_bank(config, None)
+    specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
+
+    def score(controller: Any) -> float:
+        return float(headline_scores(evaluate(config, controller, specs, bank=bank)).mean())
+
+    unit = "°" if config.task == "angle" else "°/s"
+    references = {
+        name: score(make_controller(name, config, env_id)) for name in ("pid", "observer")
+    }
+    print(f"{env_id}: headline on {args.episodes} {args.split} episodes (seed {args.seed})")
+    for name, value in references.items():
+        print(f"  {name:<9} {value:.2f} {unit}")
+
+    curves: list[tuple[str, Path, list[tuple[int, float]]]] = []
+    work = [
+        (label, run, s, checkpoints(run, str(s.get("algorithm", "ppo")))) for label, run, s in runs
+    ]
+    with tqdm(total=sum(len(w[3]) for w in work), unit="model", leave=False) as bar:
+        for label, run, _, points in work:
+            curve = []
+            for steps, checkpoint in points:
+                curve.append((steps, score(LearnedController.load(run, checkpoint))))
+                bar.update()
+            curves.append((label, run, curve))
+
+    print()
+    print(f"| run | headline ({unit}) at each checkpoint, env-steps |")
+    print("|---|---|")
+    for label, run, curve in curves:
+        cells = ", ".join(f"{n / 1e6:g} M: {h:.2f}" for n, h in curve)
+        print(f"| {label} ({run}) | {cells} |")
+    print()
+    labels = list(dict.fromkeys(label for label, _, _ in curves))
+    for label in labels:
+        mine = [curve for lab, _, curve in curves if lab == label]
+        length = min(len(c) for c in mine)
+        medians = [
+            (statistics.median(c[k][0] for c in mine), statistics.median(c[k][1] for c in mine))
+            for k in range(length)
+        ]
+        below = sum(c[-1][1] < references["pid"] for c in mine)
+        cells = ", ".join(f"{n / 1e6:g} M: {h:.2f}" for n, h in medians)
+        print(
+            f"{label}: median of {len(mine)} run(s) {cells} {unit}; final model below the PID "
+            f"({references['pid']:.2f}) in {below}/{len(mine)}"
+        )
+
+    if args.png is not None:
+        from rocketroll_common.plotting import new_figure, png_bytes
+
+        fig = new_figure(figsize=(7.5, 4.5))
+        ax = fig.subplots()
+        colors = {label: f"C{i}" for i, label in enumerate(labels)}
+        shown: set[str] = set()
+        for label, _, curve in curves:
+            data = np.array(curve, dtype=float)
+            ax.plot(
+                data[:, 0] / 1e6,
+                data[:, 1],
+                marker="o",
+                ms=3,
+                lw=1,
+                color=colors[label],
+                alpha=0.8,
+                label=None
+                if label in shown
+                else f"{label} ({sum(c[0] == label for c in curves)} runs)",
+            )
+            shown.add(label)
+        for (name, value), style in zip(references.items(), (":", "--"), strict=True):
+            ax.axhline(value, color="black", ls=style, lw=1, label=f"{name} {value:.2f} {unit}")
+        ax.set_yscale("log")
+        ax.set_xlabel("training env-steps (millions)")
+        ax.set_ylabel(f"headline: regulation RMS ({unit})")
+        ax.set_title(f"{env_id}: checkpoints on {args.episodes} {args.split} episodes")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        args.png.parent.mkdir(parents=True, exist_ok=True)
+        args.png.write_bytes(png_bytes(fig))
+        print(f"wrote {args.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
