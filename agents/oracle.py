@@ -170,7 +170,9 @@ class OracleController:
             "the episode's true rocket",
         )
         if self.tail_omega is not None:
-            self.tail = PIDGains.place(rocket, self.config.task, float(self.tail_omega))
+            self.tail = PIDGains.place(
+                rocket, self.config.task, float(self.tail_omega), own_damping=False
+            )
 
     def act(self, obs: NDArray[np.float32], env: RocketRollEnv) -> NDArray[np.float32]:
         """The first command of the best plan from ``env``'s true state."""

@@ -95,8 +95,15 @@ class PIDGains:
         omega: float | None = None,
         zeta: float = 1.0,
         tf_s: float = 0.0,
+        *,
+        own_damping: bool = True,
     ) -> PIDGains:
         """Gains that put the closed-loop poles of the linearised rocket at ``-ω``.
+
+        ``own_damping`` (default): where the rocket is faster than the design its rate
+        gain is held at 0 (below); False places it as the algebra gives, negative there --
+        for a planner's tail on the exact rocket (:mod:`agents.oracle`), which has no
+        sample-and-hold, delay or noise for it to amplify.
 
         Notes
         -----
@@ -164,7 +171,8 @@ class PIDGains:
             raise ValueError(f"tf_s must be >= 0 (s), got {tf_s!r}")
         a, alpha = model.a_per_s, model.alpha
         if task == "angle":
-            kd = max(((1 + 2 * zeta) * w / a - 1) / alpha, 0.0)
+            kd = ((1 + 2 * zeta) * w / a - 1) / alpha
+            kd = max(kd, 0.0) if own_damping else kd
             kp = (1 + 2 * zeta) * w * w / (a * alpha)
             ki = w**3 / (a * alpha)
             k_ff = 0.0
@@ -172,7 +180,8 @@ class PIDGains:
             tt = math.sqrt(ti * max(kd / kp, 0.0)) or ti
         else:
             kd = 0.0
-            kp = max((2 * zeta * w / a - 1) / alpha, 0.0)
+            kp = (2 * zeta * w / a - 1) / alpha
+            kp = max(kp, 0.0) if own_damping else kp
             ki = w * w / (a * alpha)
             k_ff = 1.0 / alpha
             tt = abs(kp) / ki or 1.0 / w

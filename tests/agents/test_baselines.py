@@ -68,6 +68,9 @@ def test_a_rocket_faster_than_the_design_keeps_its_own_damping(task):
         assert g.kp == 0.0 and g.ki == pytest.approx(omega**2 / (a * alpha))
         loop = [1, a, a * alpha * g.ki]
     assert np.all(np.roots(loop).real < 0)  # the loop left is stable
+    # a planner's tail on the exact rocket (the oracle's) keeps the algebra's negative gain
+    placed = PIDGains.place(NOMINAL, task, omega, own_damping=False)
+    assert (placed.kd if task == "angle" else placed.kp) < 0
     # just inside the design's reach the gain is positive and placed as before
     inside = PIDGains.place(NOMINAL, task, 0.55 * a)
     assert (inside.kd if task == "angle" else inside.kp) > 0
