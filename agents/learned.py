@@ -112,6 +112,9 @@ class LearnedController:
         #: The policy's action is a residual on the observer controller's command, × this.
         self.residual = residual
         self.features: ObserverFeatures | None = None
+        #: The policy's action is a change of the last fin command, × this
+        #: (:class:`agents.vecenv.VecIncremental`); 0: the action is the command.
+        self.incremental = float((settings.get("hyperparameters") or {}).get("incremental") or 0)
         #: The policy reads the flight's phase (:class:`agents.memory.FlightClock`), made
         #: from the environment's flight at :meth:`reset`.
         self.needs_clock = _flight_clock(settings)
@@ -226,6 +229,11 @@ class LearnedController:
             self.history.push(seen_now, action.reshape(1, -1))
         if self.features is not None:  # the command applied (a residual adds the base)
             return self.features.record(raw, action).reshape(1)
+        if self.incremental:
+            from agents.vecenv import commands
+
+            last = raw[:, Obs.COMMAND] / env.config.fin_range_deg
+            return commands(last, action, self.incremental).reshape(1)
         return action
 
     def _action(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:

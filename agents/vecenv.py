@@ -30,6 +30,7 @@ from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, stored_flight_config, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
+from rollenv.layout import Obs
 
 __all__ = [
     "ENV_ATTRIBUTES",
@@ -37,7 +38,9 @@ __all__ = [
     "StepReturn",
     "VecFlightClock",
     "VecHistory",
+    "VecIncremental",
     "VecObserver",
+    "commands",
 ]
 
 #: What ``step`` and ``step_wait`` return: observations, rewards, dones, infos.
@@ -397,6 +400,45 @@ class VecObserver(VecEnvWrapper):
             out[i] = self._with(i, obs[i])
         self._last = obs
         return out, rewards, dones, infos
+
+
+class VecIncremental(VecEnvWrapper):
+    """An SB3 ``VecEnv`` whose action is a change of the fin command: the env below gets
+    ``clip(c + scale·a, -1, 1)``, ``c`` the last command (the observation's
+    ``Obs.COMMAND``, °, over ``fin_range_deg``), ``a`` the policy's action.  Holding
+    the fin is then the action 0, whatever the angle it holds: a policy need not reproduce
+    its own last command to hold it.  ``scale`` 0.375 is the servo's 15° a control step
+    over the 40° range."""
+
+    def __init__(self, venv: VecEnv, scale: float, fin_range_deg: float) -> None:
+        super().__init__(venv)
+        self.scale = float(scale)
+        self.fin_range = float(fin_range_deg)
+        self._command = np.zeros(venv.num_envs, dtype=np.float64)
+
+    def _remember(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        self._command = np.asarray(obs, dtype=np.float64)[:, Obs.COMMAND] / self.fin_range
+        return obs
+
+    def reset(self) -> NDArray[np.float32]:
+        return self._remember(np.asarray(self.venv.reset(), dtype=np.float32))
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self.venv.step_async(commands(self._command, actions, self.scale))
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        return self._remember(np.asarray(obs, dtype=np.float32)), rewards, dones, infos
+
+
+def commands(last: NDArray[Any], actions: NDArray[Any], scale: float) -> NDArray[np.float32]:
+    """``clip(last + scale·actions, -1, 1)`` as float32 of ``actions``' shape: the fin
+    commands of incremental actions (:class:`VecIncremental`, the acting controller)."""
+    actions = np.asarray(actions, dtype=np.float64)
+    moved = np.asarray(last, dtype=np.float64).reshape(-1, 1) + scale * actions.reshape(
+        len(actions), -1
+    )
+    return np.clip(moved, -1.0, 1.0).astype(np.float32).reshape(actions.shape)
 
 
 class VecFlightClock(VecEnvWrapper):

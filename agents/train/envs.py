@@ -53,6 +53,10 @@ def make_env(
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
+    if hp.incremental:
+        from agents.vecenv import VecIncremental
+
+        env = VecIncremental(env, hp.incremental, adapter.config.fin_range_deg)
     if hp.observer:
         from agents.base import design_bank
         from agents.observer import ObserverFeatures

@@ -30,7 +30,9 @@ ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 #: (true: the observer's estimate ``[v̂, ψ̂, û_d]`` in the observation,
 #: :class:`agents.observer.ObserverFeatures`, designed on the train split), ``residual``
 #: (a scale in (0, 1]: the action is a residual added to the observer controller's command,
-#: × the scale; implies ``observer``), ``flight_clock`` (true, on a flight variant: the
+#: × the scale; implies ``observer``), ``incremental`` (a scale in (0, 1]: the action is
+#: a change of the last fin command, × the scale, :class:`agents.vecenv.VecIncremental`),
+#: ``flight_clock`` (true, on a flight variant: the
 #: flight's gain and damping multipliers at the coming control step in the observation,
 #: :class:`agents.memory.FlightClock`), and for the off-policy algorithms the exploration
 #: noise (``noise_type: normal``, ``noise_std``) as
@@ -44,6 +46,7 @@ SCRIPT_KEYS = (
     "history",
     "observer",
     "residual",
+    "incremental",
     "flight_clock",
     "noise_type",
     "noise_std",
@@ -127,6 +130,9 @@ class Hyperparameters:
     residual : float
         0, or the scale of the action as a residual on the observer controller's
         command (:class:`agents.observer.ObserverFeatures`).
+    incremental : float
+        0, or the scale of the action as a change of the last fin command
+        (:class:`agents.vecenv.VecIncremental`).
     flight_clock : bool
         The flight's phase in the observation (:class:`agents.memory.FlightClock`).
     """
@@ -144,6 +150,7 @@ class Hyperparameters:
     noise: tuple[str, float] | None = None
     observer: bool = False
     residual: float = 0.0
+    incremental: float = 0.0
     flight_clock: bool = False
 
 
@@ -179,6 +186,9 @@ class HyperparameterEntry(BaseModel):
     residual: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = Field(
         0.0, description="0, or the scale of the action as a residual on the observer controller"
     )
+    incremental: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = Field(
+        0.0, description="0, or the scale of the action as a change of the last fin command"
+    )
     flight_clock: Annotated[bool, Field(strict=True)] = Field(
         False, description="the flight's phase in the observation (a flight variant)"
     )
@@ -189,7 +199,7 @@ class HyperparameterEntry(BaseModel):
         None, description="its standard deviation (a fraction of the action range)"
     )
 
-    @field_validator("residual", "noise_std", mode="before")
+    @field_validator("residual", "incremental", "noise_std", mode="before")
     @classmethod
     def _a_number(cls, value: Any) -> Any:
         if isinstance(value, int) and not isinstance(value, bool):
@@ -202,6 +212,11 @@ class HyperparameterEntry(BaseModel):
             raise ValueError(
                 "residual acts on the observer controller, whose estimate the policy reads: "
                 "observer: false contradicts it"
+            )
+        if self.incremental and (self.residual or self.observer):
+            raise ValueError(
+                "incremental moves the fin from its last command; with the observer's "
+                "estimate or a residual on its controller it is not supported"
             )
         return self
 
@@ -301,6 +316,7 @@ def load_hyperparameters(
         noise=noise,
         observer=observer,
         residual=float(entry.residual),
+        incremental=float(entry.incremental),
         flight_clock=entry.flight_clock,
     )
 

@@ -328,6 +328,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("observer estimate", "in the observation" if hp.observer else "off"),
         *((("residual", f"x {hp.residual:g} on the observer's command"),) if hp.residual else ()),
         *(
+            (("incremental", f"x {hp.incremental:g}: a change of the last command"),)
+            if hp.incremental
+            else ()
+        ),
+        *(
             (("flight clock", "the flight's gain and damping in the observation"),)
             if hp.flight_clock
             else ()
@@ -432,6 +437,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 **({"history": hp.history} if hp.history else {}),
                 **({"observer": True} if hp.observer else {}),
                 **({"residual": hp.residual} if hp.residual else {}),
+                **({"incremental": hp.incremental} if hp.incremental else {}),
                 **({"flight_clock": True} if hp.flight_clock else {}),
                 **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.algo_kwargs,

@@ -433,6 +433,49 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
         raw = stack.unnormalize_obs(seen)[0, :4]
 
 
+def test_an_incremental_policy_moves_the_fin_from_its_last_command(small_db, tmp_path):
+    """``incremental: S``: the env gets the last command plus S × the policy's action; the
+    acting controller sends, step by step, the command the training stack applied."""
+    from agents.train import load_hyperparameters, make_env
+    from agents.vecenv import commands
+    from rollenv.layout import Obs
+
+    hyperparams = tmp_path / "inc.yml"
+    text = TINY.replace("  n_timesteps: 256\n", "  n_timesteps: 128\n")
+    hyperparams.write_text(text + "  history: 2\n  incremental: 0.375\n", encoding="utf-8")
+    out = tmp_path / "run"
+    argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
+    argv += ["--eval-freq", "0", "--eval-episodes", "1", "--checkpoint-freq", "0"]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert run_command(COMMAND, [*argv, "--no-progress-bar"], "rocketroll train ppo") == 0
+    controller = LearnedController.load(out)
+    assert controller.incremental == 0.375
+    hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
+    _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
+    stored = json.loads((out / "normalize.json").read_text())
+    normalize.obs_rms.mean = np.array(stored["mean"])
+    normalize.obs_rms.var = np.array(stored["var"])
+    seen = stack.reset()
+    raw = stack.unnormalize_obs(seen)[0, :4]
+    view = FlightView(RocketRollEnv(bank=array_bank()))
+    controller.reset(view)
+    moved = []
+    for _ in range(30):
+        action, _ = controller.model.predict(seen, deterministic=True)
+        expected = np.clip(raw[Obs.COMMAND] / 40.0 + 0.375 * action.reshape(1), -1, 1)
+        sent = controller.act(raw, view)
+        np.testing.assert_allclose(sent, expected, rtol=0, atol=1e-6)
+        seen, _, _, _ = stack.step(action.reshape(1, 1))
+        raw = stack.unnormalize_obs(seen)[0, :4]
+        np.testing.assert_allclose(raw[Obs.COMMAND], 40.0 * sent[0], atol=1e-3)  # applied
+        moved.append(abs(float(sent[0]) - float(expected[0] - 0.375 * action.reshape(1)[0])))
+    assert max(moved) > 0  # the actions moved the fin
+    np.testing.assert_array_equal(
+        commands(np.array([0.9, -0.5]), np.array([[1.0], [0.2]]), 0.375),
+        np.array([[1.0], [-0.425]], dtype=np.float32),
+    )
+
+
 def test_a_policy_is_loaded_only_under_its_own_algorithm(run, tmp_path, default_db):
     from agents.registry import make_controller
     from rollenv.bank import variant_config
@@ -628,6 +671,8 @@ def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, smal
         ("  residual: 1.5\n", "residual: Input should be less than or equal to 1"),
         ("  residual: yes\n", "residual: Input should be a valid number, got True"),
         ("  residual: 0.2\n  observer: false\n", "observer: false contradicts it"),
+        ("  incremental: 2\n", "incremental: Input should be less than or equal to 1"),
+        ("  incremental: 0.3\n  observer: true\n", "incremental moves the fin from its last"),
     ],
 )
 def test_bad_residual_settings_are_named(extra, message, tmp_path):
