@@ -44,6 +44,7 @@ demo: $(VENV)/.installed
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRoll-v0/ppo/seed$(s)) \
 		$(foreach s,0 1 2 3 4,--run ppo-zero=ppo:agents/policies/seeds/RocketRoll-v0/ppo-zero/seed$(s)) \
 		$(foreach s,0 1 2 3 4,--run ppo-residual=ppo:agents/policies/seeds/RocketRoll-v0/ppo-residual/seed$(s)) \
+		$(foreach s,0 1 2 3 4,--run ppo-memory=ppo:agents/policies/seeds/RocketRoll-v0/ppo-memory/seed$(s)) \
 		--out $(DEMO)/seeds-angle
 	$(BIN)/rocketroll seeds --env-id RocketRollRate-v0 --run ppo:agents/policies/RocketRollRate-v0 \
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRollRate-v0/ppo/seed$(s)) \

@@ -183,15 +183,19 @@ def test_the_seed_statistics_and_robustness_tables(
     env_id: str, default_db: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """`make demo`'s seed statistics (five committed runs each of PPO and of PPO trained at
-    a zero setpoint and as a residual on the observer / SAC) and robustness tables, as the
-    results page prints them (about a minute per task)."""
+    a zero setpoint, as a residual on the observer and with memory / SAC) and robustness
+    tables, as the results page prints them (about a minute per task)."""
     seeds = f"agents/policies/seeds/{env_id}"
     runs = ["--run", f"ppo:agents/policies/{env_id}"]
     for seed in range(1, 5):
         runs += ["--run", f"ppo:{seeds}/ppo/seed{seed}"]
     others = ["sac:{}/sac/seed{}"]
     if env_id == "RocketRoll-v0":
-        others = ["ppo-zero=ppo:{}/ppo-zero/seed{}", "ppo-residual=ppo:{}/ppo-residual/seed{}"]
+        others = [
+            "ppo-zero=ppo:{}/ppo-zero/seed{}",
+            "ppo-residual=ppo:{}/ppo-residual/seed{}",
+            "ppo-memory=ppo:{}/ppo-memory/seed{}",
+        ]
     for other in others:
         runs += [w for seed in range(5) for w in ("--run", other.format(seeds, seed))]
     for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
