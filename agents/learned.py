@@ -169,6 +169,16 @@ class LearnedController:
             if not model_file.is_file():
                 raise FileNotFoundError(f"{model_file}: not found")
             record = checkpoint_normalization(model_file, algorithm, history, observer, clock)
+            trained_normalized = (settings.get("hyperparameters") or {}).get("normalize")
+            normalized = isinstance(trained_normalized, dict) and trained_normalized.get(
+                "norm_obs", True
+            )
+            if normalized and not record["norm_obs"]:
+                stats = model_file.name.replace(f"{algorithm}_", f"{algorithm}_vecnormalize_", 1)
+                raise FileNotFoundError(
+                    f"{model_file}: its VecNormalize statistics ({Path(stats).stem}.pkl, "
+                    "beside it) are not found; the run normalised its observations"
+                )
         size = len(observation_names(history, observer, clock))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
@@ -232,7 +242,7 @@ class LearnedController:
         if self.incremental:
             from agents.vecenv import commands
 
-            last = raw[:, Obs.COMMAND] / env.config.fin_range_deg
+            last = raw[:, Obs.COMMAND].astype(np.float64) / env.config.fin_range_deg
             return commands(last, action, self.incremental).reshape(1)
         return action
 
@@ -244,7 +254,8 @@ class LearnedController:
 
     def predict(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches),
-        for a policy without history."""
+        for a policy without history; the policy's action, which for an incremental or
+        residual policy is not yet the command :meth:`act` returns."""
         return self._predict(np.asarray(obs, dtype=np.float32).reshape(1, self._dim))
 
     def _predict(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:

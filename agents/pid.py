@@ -256,7 +256,8 @@ class PIDController:
         """Gains scheduled on the flight's dynamic pressure: at each control step the gains
         placed on ``model`` carried to that step's airspeed and density (``a·damping``,
         ``α·gain``, the env's own multipliers, :mod:`rollenv.flight`), so the closed-loop
-        poles stay at ``-ω`` from 50 km/h to 600 km/h.
+        poles stay at ``-ω`` from 50 km/h to 600 km/h -- except where the flying rocket is
+        faster than the design, whose rate gain is then held at 0 (:meth:`PIDGains.place`).
 
         The controller counts its control steps from ``reset``: a flight computer with a
         launch detector reading the nominal flight's schedule by time since launch.

@@ -4,15 +4,17 @@
 normalisation every ``N`` env-steps under ``RUN/checkpoints/``.  This scores every
 checkpoint of every ``--run LABEL=DIR`` (and the run's final model) on the protocol's
 headline (test split, or ``--split train`` to choose between recipes; ``--episodes``
-episodes, ``--seed``; :mod:`agents.evaluate`), with
-the PID and the observer measured in the same run as references.  Runs sharing a label
-are seeds of one recipe.  Training never saw these scores: a run's committed model is its
-final one.
+episodes, ``--seed``; on the default database or ``$ROCKETROLL_DB``, whichever database
+the runs trained on; :mod:`agents.evaluate`), with the PID and the observer measured in
+the same run as references.  Runs sharing a label are seeds of one recipe.  Training
+never saw these scores: a run's committed model is its final one.
 
-It prints one row per run (the headline at each checkpoint) and per label the median
-over its runs at each checkpoint, and how many runs end below the PID; ``--png`` draws
-headline against env-steps, every run.  Exit status 0 whatever the numbers; 2 for a run
-folder without ``settings.json`` or with another env id than the first's.
+It prints one row per run (the headline at each checkpoint) and per label the median over
+its runs at the env-steps where they all have a checkpoint and of their final models, and
+how many runs end below the PID; ``--png`` draws headline against env-steps, every run.
+Exit status 0 whatever the numbers; 2, naming it, for a run folder without
+``settings.json`` (with a known env id) or ``model.zip``, or with another env id than the
+first's.
 
 Run from the repository root::
 
@@ -30,11 +32,12 @@ import statistics
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 from tqdm.auto import tqdm
 
+from agents.base import design_bank
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.learned import LearnedController
 from agents.registry import make_controller
@@ -53,28 +56,60 @@ def checkpoints(run: Path, algorithm: str) -> list[tuple[int, Path | None]]:
     found.sort()
     settings = json.loads((run / "settings.json").read_text(encoding="utf-8"))
     final = int(settings.get("env_steps") or (found[-1][0] if found else 0))
-    # a checkpoint within 1 % of the end is the final model to the rollout: shown once
+    # a checkpoint within 1 % of the end is the final model but for the last update(s):
+    # the end is shown once, as the final model
     return [(n, p) for n, p in found if n < 0.99 * final] + [(final, None)]
 
 
+def _refuse(message: str) -> NoReturn:
+    print(f"run_curve.py: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def _runs(items: Sequence[str]) -> list[tuple[str, Path, dict[str, Any]]]:
+    """The runs named, each checked whole before anything is scored (exit 2 naming it)."""
+    from rollenv import variant_ids
+
     runs = []
     for item in items:
         label, sep, folder = item.partition("=")
         if not sep or not label or not folder:
-            print(f"run_curve.py: error: --run {item}: expected LABEL=DIR", file=sys.stderr)
-            raise SystemExit(2)
+            _refuse(f"--run {item}: expected LABEL=DIR")
         path = Path(folder)
         settings_file = path / "settings.json"
-        if not settings_file.is_file():
-            print(f"run_curve.py: error: --run {item}: {settings_file} not found", file=sys.stderr)
-            raise SystemExit(2)
-        runs.append((label, path, json.loads(settings_file.read_text(encoding="utf-8"))))
-    env_ids = {settings.get("env_id") for _, _, settings in runs}
+        for required in (settings_file, path / "model.zip"):
+            if not required.is_file():
+                _refuse(f"--run {item}: {required} not found (a `rocketroll train` output?)")
+        try:
+            settings = json.loads(settings_file.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            _refuse(f"--run {item}: {settings_file}: not JSON ({exc})")
+        if not isinstance(settings, dict) or settings.get("env_id") not in variant_ids():
+            _refuse(f"--run {item}: {settings_file}: no known env_id")
+        runs.append((label, path, settings))
+    env_ids = {settings["env_id"] for _, _, settings in runs}
     if len(env_ids) != 1:
-        print(f"run_curve.py: error: the runs are of several env ids: {env_ids}", file=sys.stderr)
-        raise SystemExit(2)
+        _refuse(f"the runs are of several env ids: {', '.join(sorted(env_ids))}")
     return runs
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return value
+
+
+def _controller(run: Path, checkpoint: Path | None, config: Any) -> LearnedController:
+    """The run's model at ``checkpoint`` (None: the final one), its observer (where it reads
+    one) designed on the train split as ``--policy`` designs it."""
+    learned = LearnedController.load(run, checkpoint)
+    if learned.needs_observer:
+        learned.attach_observer(config, design_bank(config, None))
+    return learned
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -82,7 +117,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--run", action="append", required=True, metavar="LABEL=DIR", help="a finished run"
     )
-    parser.add_argument("--episodes", type=int, default=20, help="protocol episodes per score")
+    parser.add_argument(
+        "--episodes", type=_positive, default=20, help="protocol episodes per score"
+    )
     parser.add_argument("--seed", type=int, default=0, help="protocol seed (0)")
     parser.add_argument(
         "--split",
@@ -118,7 +155,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for label, run, _, points in work:
             curve = []
             for steps, checkpoint in points:
-                curve.append((steps, score(LearnedController.load(run, checkpoint))))
+                curve.append((steps, score(_controller(run, checkpoint, config))))
                 bar.update()
             curves.append((label, run, curve))
 
@@ -132,16 +169,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     labels = list(dict.fromkeys(label for label, _, _ in curves))
     for label in labels:
         mine = [curve for lab, _, curve in curves if lab == label]
-        length = min(len(c) for c in mine)
+        # checkpoints at the env-steps every run has (their own ends apart), then the ends
+        common = set.intersection(*({n for n, _ in c[:-1]} for c in mine))
         medians = [
-            (statistics.median(c[k][0] for c in mine), statistics.median(c[k][1] for c in mine))
-            for k in range(length)
+            (n, statistics.median(h for c in mine for m, h in c[:-1] if m == n))
+            for n in sorted(common)
         ]
+        final = statistics.median(c[-1][1] for c in mine)
+        ends = ", ".join(sorted({f"{c[-1][0] / 1e6:g} M" for c in mine}))
         below = sum(c[-1][1] < references["pid"] for c in mine)
-        cells = ", ".join(f"{n / 1e6:g} M: {h:.2f}" for n, h in medians)
+        cells = "".join(f"{n / 1e6:g} M: {h:.2f}, " for n, h in medians)
         print(
-            f"{label}: median of {len(mine)} run(s) {cells} {unit}; final model below the PID "
-            f"({references['pid']:.2f}) in {below}/{len(mine)}"
+            f"{label}: median of {len(mine)} run(s) {cells}final ({ends}): {final:.2f} {unit}; "
+            f"final model below the PID ({references['pid']:.2f}) in {below}/{len(mine)}"
         )
 
     if args.png is not None:

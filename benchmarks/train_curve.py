@@ -59,10 +59,10 @@ from rollenv.bank import load_bank, variant_config
 class Scorer(BaseCallback):
     """Every ``every`` env-steps: the clock stops, the policy is scored on the protocol."""
 
-    def __init__(self, every: int, score: Any, normalize: Any, task: str, history: int) -> None:
+    def __init__(self, every: int, score: Any, normalize: Any, task: str, hp: Any) -> None:
         super().__init__()
         self.every, self.score, self.normalize, self.task = every, score, normalize, task
-        self.history = history
+        self.hp = hp
         self.next = every
         self.paused = 0.0
         self.began = 0.0
@@ -77,13 +77,18 @@ class Scorer(BaseCallback):
         self.next += self.every
         stopped = time.perf_counter()
         wall = stopped - self.began - self.paused
+        hp = self.hp
         settings = {
             "algorithm": "ppo",
             "env_settings": {"task": self.task},
-            "hyperparameters": {"history": self.history},
+            "hyperparameters": {
+                "history": hp.history,
+                "incremental": hp.incremental,
+                "flight_clock": hp.flight_clock,
+            },
         }
-        record = normalization_record(self.normalize)
-        size = len(observation_names(self.history))
+        record = normalization_record(self.normalize, hp.history, False, hp.flight_clock)
+        size = len(observation_names(hp.history, False, hp.flight_clock))
         controller = LearnedController(self.model, ObservationNormalizer(record, size), settings)
         self.curve.append((wall, self.num_timesteps, self.score(controller)))
         self.model.policy.set_training_mode(True)
@@ -121,6 +126,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     recipes = [parse_recipe(item, args.torch_threads) for item in args.recipe or DEFAULT_RECIPES]
+    for recipe in recipes:
+        hp = load_hyperparameters(recipe.path, args.env_id)
+        if hp.observer:
+            parser.error(
+                f"--recipe {recipe.label}: a policy that reads the observer is not scored here "
+                "(train it and score its checkpoints with benchmarks/run_curve.py)"
+            )
 
     config = variant_config(args.env_id, {"split": "test"})
     bank = load_bank(config, None)
@@ -150,7 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             torch.set_num_threads(recipe.threads)
             _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
             model = PPO(hp.policy, venv, seed=seed, device="cpu", **algorithm_arguments(hp))
-            scorer = Scorer(args.eval_every, score, normalize, config.task, hp.history)
+            scorer = Scorer(args.eval_every, score, normalize, config.task, hp)
             began = time.perf_counter()
             model.learn(total_timesteps=steps, callback=scorer)
             train_s = time.perf_counter() - began - scorer.paused

@@ -251,7 +251,7 @@ def test_the_scheduled_pid_places_each_steps_gains_on_the_flying_rocket(train_mo
         )
     assert schedule.scales[211, 0] < 0.1 < 1 < schedule.scales[150, 0]  # both regimes tried
     # above V_ref the loop gain a·α·k_p (the closed loop's s coefficient) is the same at
-    # every step: the poles stay put
+    # every step (the angle loop's k_p is never clamped; its k_d is, where a > 3ω)
     loop = [
         train_model.a_per_s * d * train_model.alpha * g * pid.schedule[k].kp
         for k, (g, d) in enumerate(schedule.scales)

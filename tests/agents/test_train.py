@@ -163,8 +163,10 @@ def test_normalize_json_is_the_training_statistics(run):
 
 
 def test_a_checkpoint_acts_as_the_model_of_its_step(run):
-    """``LearnedController.load(run, checkpoint)`` (learning curves): the last checkpoint is
-    the final model with the final statistics, acting alike; an earlier one acts otherwise."""
+    """``LearnedController.load(run, checkpoint)`` (learning curves): the last checkpoint
+    acts as the final model with the final statistics (here because the recipe's ``lin_``
+    learning rate is 0 at the last update, which follows that checkpoint); an earlier one
+    acts otherwise."""
     from agents.learned import LearnedController
 
     out, _ = run
@@ -178,6 +180,13 @@ def test_a_checkpoint_acts_as_the_model_of_its_step(run):
     assert not np.array_equal(acted[2], acted[0])
     with pytest.raises(FileNotFoundError, match=r"ppo_9_steps\.zip"):
         LearnedController.load(out, out / "checkpoints" / "ppo_9_steps.zip")
+    # a checkpoint copied without its statistics is refused, not scored unnormalised
+    alone = out.parent / "alone"
+    alone.mkdir()
+    shutil.copy(out / "settings.json", alone)
+    shutil.copy(out / "checkpoints" / "ppo_128_steps.zip", alone)
+    with pytest.raises(FileNotFoundError, match=r"ppo_vecnormalize_128_steps\.pkl"):
+        LearnedController.load(alone, alone / "ppo_128_steps.zip")
 
 
 def _resume(run_folder: Path, small_db: Path, checkpoint: str, timesteps: int, out: Path) -> str:
