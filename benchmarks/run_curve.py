@@ -34,7 +34,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-import numpy as np
+from _curves import write_curves
 from tqdm.auto import tqdm
 
 from agents.base import design_bank
@@ -185,37 +185,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
 
     if args.png is not None:
-        from rocketroll_common.plotting import new_figure, png_bytes
-
-        fig = new_figure(figsize=(7.5, 4.5))
-        ax = fig.subplots()
-        colors = {label: f"C{i}" for i, label in enumerate(labels)}
-        shown: set[str] = set()
-        for label, _, curve in curves:
-            data = np.array(curve, dtype=float)
-            ax.plot(
-                data[:, 0] / 1e6,
-                data[:, 1],
-                marker="o",
-                ms=3,
-                lw=1,
-                color=colors[label],
-                alpha=0.8,
-                label=None
-                if label in shown
-                else f"{label} ({sum(c[0] == label for c in curves)} runs)",
-            )
-            shown.add(label)
-        for (name, value), style in zip(references.items(), (":", "--"), strict=True):
-            ax.axhline(value, color="black", ls=style, lw=1, label=f"{name} {value:.2f} {unit}")
-        ax.set_yscale("log")
-        ax.set_xlabel("training env-steps (millions)")
-        ax.set_ylabel(f"headline: regulation RMS ({unit})")
-        ax.set_title(f"{env_id}: checkpoints on {args.episodes} {args.split} episodes")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-        args.png.parent.mkdir(parents=True, exist_ok=True)
-        args.png.write_bytes(png_bytes(fig))
+        write_curves(
+            args.png,
+            [(label, [n / 1e6 for n, _ in c], [h for _, h in c]) for label, _, c in curves],
+            references,
+            unit=unit,
+            xlabel="training env-steps (millions)",
+            title=f"{env_id}: checkpoints on {args.episodes} {args.split} episodes",
+        )
         print(f"wrote {args.png}")
     return 0
 

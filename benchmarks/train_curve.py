@@ -37,8 +37,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
+from _curves import write_curves
 from _recipes import DEFAULT_RECIPES, parse_recipe
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
@@ -209,36 +209,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{rate:,.0f} | {cells} | {best_median:.2f} |"
             )
     if args.png is not None:
-        from rocketroll_common.plotting import new_figure, png_bytes
-
-        fig = new_figure(figsize=(7.5, 4.5))
-        ax = fig.subplots()
-        colors = {r.label: f"C{i}" for i, r in enumerate(recipes)}
-        for (label, seed), curve in curves.items():
-            data = np.array(curve)
-            first = seed == args.seeds[0]
-            ax.plot(
-                data[:, 0],
-                data[:, 2],
-                marker="o",
-                ms=2.5,
-                lw=1,
-                color=colors[label],
-                alpha=0.8,
-                label=f"{label} ({len(args.seeds)} seed(s))" if first else None,
-            )
-        for (name, value), style in zip(references.items(), ("--", ":"), strict=False):
-            ax.axhline(value, color="black", ls=style, lw=1, label=f"{name} {value:.2f} {unit}")
-        ax.set_yscale("log")
-        ax.set_xlabel(f"training wall time (s, scoring not counted; {os.cpu_count()} cores)")
-        ax.set_ylabel(f"headline: regulation RMS ({unit})")
         seeds = ", ".join(map(str, args.seeds))
-        ax.set_title(f"{args.env_id}: PPO learning curves against wall time (seeds {seeds})")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(frameon=False, fontsize=8)
-        fig.tight_layout()
-        args.png.parent.mkdir(parents=True, exist_ok=True)
-        args.png.write_bytes(png_bytes(fig, dpi=110))
+        write_curves(
+            args.png,
+            [
+                (label, [c[0] for c in curve], [c[2] for c in curve])
+                for (label, _), curve in curves.items()
+            ],
+            references,
+            unit=unit,
+            xlabel=f"training wall time (s, scoring not counted; {os.cpu_count()} cores)",
+            title=f"{args.env_id}: PPO learning curves against wall time (seeds {seeds})",
+        )
         print(f"wrote {args.png}")
     return 0
 
