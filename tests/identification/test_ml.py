@@ -331,7 +331,9 @@ def test_the_band_carries_the_parameters_uncertainty_on_a_short_record() -> None
         )
         assert np.all(found.u_d_sd_deg >= plug_in.u_d_sd_deg - 1e-9)
         assert np.mean(found.u_d_sd_deg) > 1.2 * np.mean(plug_in.u_d_sd_deg)
-        assert np.array_equal(found.u_d_mean_deg, plug_in.u_d_mean_deg)  # the mean is kept
+        # the mean is kept (to the last bits only where numpy's loops round both smoothers'
+        # sums alike: with AVX-512 they differ by ~1e-11°)
+        np.testing.assert_allclose(found.u_d_mean_deg, plug_in.u_d_mean_deg, rtol=0, atol=1e-9)
         assert set(found.correlations) >= {"alpha~theta_bar", "alpha_bar~beta_bar_per_s"}
         assert all(-1.0 <= r <= 1.0 for r in found.correlations.values())
         assert rec.ud_true_deg is not None
