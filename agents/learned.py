@@ -168,17 +168,15 @@ class LearnedController:
             model_file = Path(checkpoint)
             if not model_file.is_file():
                 raise FileNotFoundError(f"{model_file}: not found")
-            record = checkpoint_normalization(model_file, algorithm, history, observer, clock)
-            trained_normalized = (settings.get("hyperparameters") or {}).get("normalize")
-            normalized = isinstance(trained_normalized, dict) and trained_normalized.get(
-                "norm_obs", True
+            trained = (settings.get("hyperparameters") or {}).get("normalize")
+            record = checkpoint_normalization(
+                model_file,
+                algorithm,
+                history,
+                observer,
+                clock,
+                required=isinstance(trained, dict) and bool(trained.get("norm_obs", True)),
             )
-            if normalized and not record["norm_obs"]:
-                stats = model_file.name.replace(f"{algorithm}_", f"{algorithm}_vecnormalize_", 1)
-                raise FileNotFoundError(
-                    f"{model_file}: its VecNormalize statistics ({Path(stats).stem}.pkl, "
-                    "beside it) are not found; the run normalised its observations"
-                )
         size = len(observation_names(history, observer, clock))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.

@@ -51,20 +51,34 @@ def _statistics_file(checkpoint: Path, algo: str) -> Path:
 
 
 def checkpoint_normalization(
-    checkpoint: Path, algo: str, history: int, observer: bool, flight_clock: bool
+    checkpoint: Path,
+    algo: str,
+    history: int,
+    observer: bool,
+    flight_clock: bool,
+    *,
+    required: bool = False,
 ) -> dict[str, Any]:
     """The observation normalisation ``checkpoint`` was trained with, as ``normalize.json``
     holds a finished run's (:func:`agents.train.envs.normalization_record`); off when no
-    statistics are beside it."""
+    statistics are beside it, unless ``required`` (the run normalised its observations):
+    then ``FileNotFoundError`` naming them."""
     import pickle
 
     from agents.train.envs import normalization_record
 
-    stats = _statistics_file(Path(checkpoint), algo)
+    checkpoint = Path(checkpoint)
+    stats = _statistics_file(checkpoint, algo)
     saved = None
     if stats.is_file():
         with stats.open("rb") as handle:
             saved = pickle.load(handle)
+    elif required:
+        raise FileNotFoundError(
+            f"{checkpoint}: its VecNormalize statistics "
+            f"({_normalization_file(checkpoint, algo).name}, beside it) are not found; the run "
+            "normalised its observations"
+        )
     return normalization_record(saved, history, observer, flight_clock)
 
 
