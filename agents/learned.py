@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from agents.actor import ActorChain
 from agents.base import Design, FlightView
-from agents.memory import FlightClock, History
+from agents.memory import ErrorIntegral, FlightClock, History
 from agents.observer import ObserverFeatures
 from agents.registry import COMMITTED, shipped_path
 from disturbances.bank import TraceBank
@@ -119,8 +119,13 @@ class LearnedController:
         #: from the environment's flight at :meth:`reset`.
         self.needs_clock = _flight_clock(settings)
         self.clock: FlightClock | None = None
+        #: The policy reads the observed error's leaky integral: its time constant (s) and
+        #: clip (:class:`agents.memory.ErrorIntegral`), made at :meth:`reset`; 0: it does not.
+        self.integral_s, self.integral_clip = _integral(settings)
+        self.integral: ErrorIntegral | None = None
         width = len(Obs) + (ObserverFeatures.SIZE if observer else 0)
         width += FlightClock.SIZE if self.needs_clock else 0
+        width += ErrorIntegral.SIZE if self.integral_s else 0
         self.history: History | None = None
         if k:
             self.history = History(1, width, 1, k)
@@ -155,6 +160,7 @@ class LearnedController:
         algorithm = str(settings.get("algorithm", "ppo"))
         history, observer, _ = _layout(settings)
         clock = _flight_clock(settings)
+        integral = bool(_integral(settings)[0])
         if checkpoint is None:
             model_file = folder / "model.zip"
             norm_file = folder / "normalize.json"
@@ -175,9 +181,10 @@ class LearnedController:
                 history,
                 observer,
                 clock,
+                integral=integral,
                 required=isinstance(trained, dict) and bool(trained.get("norm_obs", True)),
             )
-        size = len(observation_names(history, observer, clock))
+        size = len(observation_names(history, observer, clock, integral))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
         custom = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
@@ -208,6 +215,8 @@ class LearnedController:
                     "variant (RocketRollFlight-v0, ...), not the tunnel"
                 )
             self.clock = FlightClock(schedule.scales[: env.config.max_episode_steps])
+        if self.integral_s:
+            self.integral = ErrorIntegral(env.config.dt_s, self.integral_s, self.integral_clip)
         if self.history is not None:
             self.history.clear()
         if self.features is not None:
@@ -229,6 +238,10 @@ class LearnedController:
                 raise RuntimeError("reset(env) first: the flight's phase comes from its flight")
             seen = np.concatenate([seen, self.clock.values()], axis=1)
             self.clock.advance()
+        if self.integral_s:
+            if self.integral is None:
+                raise RuntimeError("reset(env) first: the error's integral starts with it")
+            seen = np.concatenate([seen, self.integral.add(raw)], axis=1)
         if self.history is not None:
             seen_now = seen
             seen = self.history.augment(seen_now)
@@ -264,6 +277,14 @@ class LearnedController:
 def _flight_clock(settings: dict[str, Any]) -> bool:
     """Whether the run's policy reads the flight's phase (``flight_clock``)."""
     return bool((settings.get("hyperparameters") or {}).get("flight_clock", False))
+
+
+def _integral(settings: dict[str, Any]) -> tuple[float, float | None]:
+    """The time constant (s; 0: none) and clip of the observed error's integral the run's
+    policy reads (``integral``, ``integral_clip``)."""
+    hyper = settings.get("hyperparameters") or {}
+    clip = hyper.get("integral_clip")
+    return float(hyper.get("integral", 0.0) or 0.0), None if clip is None else float(clip)
 
 
 def _layout(settings: dict[str, Any]) -> tuple[int, bool, float]:

@@ -9,18 +9,22 @@ episode's start).  :class:`History` keeps that window for a batch of
 environments; :class:`agents.vecenv.VecHistory` wraps an SB3 ``VecEnv`` with it for
 training,
 and :class:`agents.learned.LearnedController` keeps one of its own when acting, so the
-policy sees the same vector in training and in the evaluation.
+policy sees the same vector in training and in the evaluation.  :class:`ErrorIntegral`
+is the PID's own memory made of the same history: a leaky sum of the observed error.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-__all__ = ["FlightClock", "History", "history_space"]
+from rollenv.layout import Obs
+
+__all__ = ["ErrorIntegral", "FlightClock", "History", "history_space"]
 
 Float32Array = NDArray[np.float32]
 
@@ -107,3 +111,60 @@ class FlightClock:
         """The multipliers of ``rows``' coming control step (held after the last), (n, 2)."""
         index = np.minimum(self._step[rows], self._table.shape[0] - 1)
         return np.asarray(self._table[index], dtype=np.float32).reshape(-1, self.SIZE)
+
+
+class ErrorIntegral:
+    """A leaky integral of the observed tracking error, for a policy: the memory a PID's
+    integral term carries, made of the observation history alone (no model of the rocket).
+
+    ``I_t = exp(-dt/τ)·I_{t-1} + dt·clip(e_t, -c, c)``, ``e_t`` the observation's
+    tracking error (``Obs.ERROR``: ° on the angle task, °/s on the rate task), zero before
+    the episode.  A memoryless policy (or one with a short window) sees only whole encoder
+    counts and the trim it needs is the episode's own; the integral says how long the
+    error has sat on one side.  The clip ``c`` keeps a slew's large errors from winding
+    it up (conditional integration, as a PID's anti-windup).
+
+    Parameters
+    ----------
+    dt_s : float
+        The control step, s.
+    time_s : float
+        The leak's time constant τ, s (``math.inf``: no leak).
+    clip : float or None
+        The largest error magnitude integrated (None: no clip).
+    n : int
+        Environments.
+
+    >>> integral = ErrorIntegral(dt_s=0.5, time_s=math.inf, clip=2.0, n=2)
+    >>> integral.add(np.array([[1.0, 0, 0, 0], [5.0, 0, 0, 0]])).ravel().tolist()
+    [0.5, 1.0]
+    >>> integral.clear(1)
+    >>> integral.add(np.array([[1.0, 0, 0, 0], [-1.0, 0, 0, 0]])).ravel().tolist()
+    [1.0, -0.5]
+    """
+
+    SIZE = 1
+    NAMES = ("error_integral",)
+
+    def __init__(self, dt_s: float, time_s: float, clip: float | None = None, n: int = 1) -> None:
+        if not dt_s > 0 or not time_s > 0:
+            raise ValueError(f"dt_s and time_s must be > 0, got {dt_s} and {time_s}")
+        if clip is not None and not clip > 0:
+            raise ValueError(f"clip must be > 0 or None, got {clip}")
+        self.dt = float(dt_s)
+        self.decay = math.exp(-self.dt / float(time_s))
+        self.clip = None if clip is None else float(clip)
+        self._value = np.zeros(n, dtype=np.float64)
+
+    def clear(self, rows: Any = slice(None)) -> None:
+        """Zero the integral of ``rows`` (all by default): a new episode."""
+        self._value[rows] = 0.0
+
+    def add(self, obs: NDArray[Any], rows: slice = slice(None)) -> Float32Array:
+        """Integrate the observations ``obs`` of ``rows`` (one row each) and return the
+        integrals, float32 of shape ``(rows, 1)``."""
+        error = np.asarray(obs, dtype=np.float64).reshape(-1, obs.shape[-1])[:, Obs.ERROR]
+        if self.clip is not None:
+            error = np.clip(error, -self.clip, self.clip)
+        self._value[rows] = self.decay * self._value[rows] + self.dt * error
+        return self._value[rows].astype(np.float32).reshape(-1, self.SIZE)

@@ -25,7 +25,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvWrapper,
 )
 
-from agents.memory import FlightClock, History, history_space
+from agents.memory import ErrorIntegral, FlightClock, History, history_space
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, stored_flight_config, variant_config
 from rollenv.core import RollBatch
@@ -36,6 +36,7 @@ __all__ = [
     "ENV_ATTRIBUTES",
     "RollVecEnv",
     "StepReturn",
+    "VecErrorIntegral",
     "VecFlightClock",
     "VecHistory",
     "VecIncremental",
@@ -478,3 +479,41 @@ class VecFlightClock(VecEnvWrapper):
             self.clock.clear(i)
         obs = np.asarray(obs, dtype=np.float32)
         return np.concatenate([obs, self.clock.values()], axis=1), rewards, dones, infos
+
+
+class VecErrorIntegral(VecEnvWrapper):
+    """An SB3 ``VecEnv`` whose observations carry the leaky integral of their tracking error
+    (:class:`agents.memory.ErrorIntegral`) after the values below; each env's integral
+    starts from zero with its episode."""
+
+    def __init__(self, venv: VecEnv, integral: ErrorIntegral) -> None:
+        assert isinstance(venv.observation_space, spaces.Box)
+        space = venv.observation_space
+        big = np.full(ErrorIntegral.SIZE, np.float32(1e6))
+        observation_space = spaces.Box(
+            np.concatenate([space.low, -big]).astype(np.float32),
+            np.concatenate([space.high, big]).astype(np.float32),
+            dtype=np.float32,
+        )
+        super().__init__(venv, observation_space=observation_space)
+        self.integral = integral
+
+    def reset(self) -> NDArray[np.float32]:
+        obs = np.asarray(self.venv.reset(), dtype=np.float32)
+        self.integral.clear()
+        return np.concatenate([obs, self.integral.add(obs)], axis=1)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        obs = np.asarray(obs, dtype=np.float32)
+        for i in np.flatnonzero(dones).tolist():
+            terminal = infos[i].get("terminal_observation")
+            if terminal is not None:
+                last = np.asarray(terminal, dtype=np.float32).reshape(1, -1)
+                ended = self.integral.add(last, slice(i, i + 1))
+                infos[i]["terminal_observation"] = np.concatenate([last, ended], axis=1)[0]
+            self.integral.clear(i)
+        return np.concatenate([obs, self.integral.add(obs)], axis=1), rewards, dones, infos

@@ -85,10 +85,13 @@ class Scorer(BaseCallback):
                 "history": hp.history,
                 "incremental": hp.incremental,
                 "flight_clock": hp.flight_clock,
+                "integral": hp.integral,
+                "integral_clip": hp.integral_clip,
             },
         }
-        record = normalization_record(self.normalize, hp.history, False, hp.flight_clock)
-        size = len(observation_names(hp.history, False, hp.flight_clock))
+        integral = bool(hp.integral)
+        record = normalization_record(self.normalize, hp.history, False, hp.flight_clock, integral)
+        size = len(observation_names(hp.history, False, hp.flight_clock, integral))
         controller = LearnedController(self.model, ObservationNormalizer(record, size), settings)
         self.curve.append((wall, self.num_timesteps, self.score(controller)))
         self.model.policy.set_training_mode(True)

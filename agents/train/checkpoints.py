@@ -57,6 +57,7 @@ def checkpoint_normalization(
     observer: bool,
     flight_clock: bool,
     *,
+    integral: bool = False,
     required: bool = False,
 ) -> dict[str, Any]:
     """The observation normalisation ``checkpoint`` was trained with, as ``normalize.json``
@@ -79,7 +80,7 @@ def checkpoint_normalization(
             f"({_normalization_file(checkpoint, algo).name}, beside it) are not found; the run "
             "normalised its observations"
         )
-    return normalization_record(saved, history, observer, flight_clock)
+    return normalization_record(saved, history, observer, flight_clock, integral)
 
 
 def checkpoint_callback(**settings: Any) -> Any:

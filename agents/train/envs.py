@@ -81,6 +81,12 @@ def make_env(
         if schedule is None:
             raise UsageError(f"{hp.source}, {hp.env_id}: flight_clock needs a flight")
         env = VecFlightClock(env, schedule.scales[: adapter.config.max_episode_steps])
+    if hp.integral:
+        from agents.memory import ErrorIntegral
+        from agents.vecenv import VecErrorIntegral
+
+        integral = ErrorIntegral(adapter.config.dt_s, hp.integral, hp.integral_clip, n_envs)
+        env = VecErrorIntegral(env, integral)
     if hp.history:
         from agents.vecenv import VecHistory
 
@@ -99,10 +105,11 @@ def make_env(
 
 # ----------------------------------------------------------------------------- outputs
 def observation_names(
-    history: int = 0, observer: bool = False, flight_clock: bool = False
+    history: int = 0, observer: bool = False, flight_clock: bool = False, integral: bool = False
 ) -> list[str]:
     """The names of the policy's observation: the env's, the observer's estimate, the
-    flight's phase, then the history (``name@t-k``, and ``action@t-k``).
+    flight's phase, the error's integral, then the history (``name@t-k``, and
+    ``action@t-k``).
 
     Examples
     --------
@@ -111,20 +118,25 @@ def observation_names(
     >>> len(observation_names(2, observer=True))  # (4 + 3) x 3 + 2
     23
     """
-    from agents.memory import FlightClock
+    from agents.memory import ErrorIntegral, FlightClock
     from rollenv.layout import OBSERVATION_NAMES
 
     now = [*OBSERVATION_NAMES, *(("v_hat_dps", "psi_hat_deg", "u_d_hat_deg") if observer else ())]
     now += list(FlightClock.NAMES) if flight_clock else []
+    now += list(ErrorIntegral.NAMES) if integral else []
     past = [f"{name}@t-{k}" for k in range(1, history + 1) for name in now]
     return now + past + [f"action@t-{k}" for k in range(1, history + 1)]
 
 
 def normalization_record(
-    venv: Any, history: int = 0, observer: bool = False, flight_clock: bool = False
+    venv: Any,
+    history: int = 0,
+    observer: bool = False,
+    flight_clock: bool = False,
+    integral: bool = False,
 ) -> dict[str, Any]:
     """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
-    names = observation_names(history, observer, flight_clock)
+    names = observation_names(history, observer, flight_clock, integral)
     if venv is None or not venv.norm_obs:
         return {"norm_obs": False, "observation_names": names}
     rms = venv.obs_rms

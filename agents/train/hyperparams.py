@@ -34,7 +34,9 @@ ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 #: a change of the last fin command, × the scale, :class:`agents.vecenv.VecIncremental`),
 #: ``flight_clock`` (true, on a flight variant: the
 #: flight's gain and damping multipliers at the coming control step in the observation,
-#: :class:`agents.memory.FlightClock`), and for the off-policy algorithms the exploration
+#: :class:`agents.memory.FlightClock`), ``integral`` (a time constant, s: the leaky
+#: integral of the observed error in the observation, :class:`agents.memory.ErrorIntegral`,
+#: its integrand clipped at ``integral_clip``), and for the off-policy algorithms the exploration
 #: noise (``noise_type: normal``, ``noise_std``) as
 #: rl-baselines3-zoo writes it.
 SCRIPT_KEYS = (
@@ -48,6 +50,8 @@ SCRIPT_KEYS = (
     "residual",
     "incremental",
     "flight_clock",
+    "integral",
+    "integral_clip",
     "noise_type",
     "noise_std",
 )
@@ -135,6 +139,11 @@ class Hyperparameters:
         (:class:`agents.vecenv.VecIncremental`).
     flight_clock : bool
         The flight's phase in the observation (:class:`agents.memory.FlightClock`).
+    integral : float
+        0, or the time constant (s) of the observed error's leaky integral in the
+        observation (:class:`agents.memory.ErrorIntegral`).
+    integral_clip : float or None
+        The largest error magnitude that integral integrates (None: no clip).
     """
 
     env_id: str
@@ -152,6 +161,8 @@ class Hyperparameters:
     residual: float = 0.0
     incremental: float = 0.0
     flight_clock: bool = False
+    integral: float = 0.0
+    integral_clip: float | None = None
 
 
 # ------------------------------------------------------------------------ hyperparameters
@@ -192,6 +203,14 @@ class HyperparameterEntry(BaseModel):
     flight_clock: Annotated[bool, Field(strict=True)] = Field(
         False, description="the flight's phase in the observation (a flight variant)"
     )
+    integral: Annotated[float, Field(strict=True, ge=0.0)] = Field(
+        0.0,
+        description="0, or the time constant (s) of the observed error's leaky integral in "
+        "the observation",
+    )
+    integral_clip: Annotated[float, Field(strict=True, gt=0.0)] | None = Field(
+        None, description="the largest error magnitude the integral integrates (none: no clip)"
+    )
     noise_type: Literal["normal"] | None = Field(
         None, description="exploration noise of SAC and TD3"
     )
@@ -199,7 +218,9 @@ class HyperparameterEntry(BaseModel):
         None, description="its standard deviation (a fraction of the action range)"
     )
 
-    @field_validator("residual", "incremental", "noise_std", mode="before")
+    @field_validator(
+        "residual", "incremental", "integral", "integral_clip", "noise_std", mode="before"
+    )
     @classmethod
     def _a_number(cls, value: Any) -> Any:
         if isinstance(value, int) and not isinstance(value, bool):
@@ -218,6 +239,8 @@ class HyperparameterEntry(BaseModel):
                 "incremental moves the fin from its last command; with the observer's "
                 "estimate or a residual on its controller it is not supported"
             )
+        if self.integral_clip is not None and not self.integral:
+            raise ValueError("integral_clip clips the error's integral: give integral too")
         return self
 
 
@@ -318,6 +341,8 @@ def load_hyperparameters(
         residual=float(entry.residual),
         incremental=float(entry.incremental),
         flight_clock=entry.flight_clock,
+        integral=float(entry.integral),
+        integral_clip=None if entry.integral_clip is None else float(entry.integral_clip),
     )
 
 

@@ -227,7 +227,7 @@ def _check_size(
             f"{steps // args.checkpoint_freq:,} checkpoints, more than {MAX_CHECKPOINTS}: give "
             f"at least --checkpoint-freq {-(-steps // MAX_CHECKPOINTS):,}, or 0 for none"
         )
-    width = len(observation_names(hp.history, hp.observer, hp.flight_clock)) + 1
+    width = len(observation_names(hp.history, hp.observer, hp.flight_clock, bool(hp.integral))) + 1
     if algo == "ppo":  # SB3's rollout buffer: observation, action and six float32s a step
         n_steps = int(kwargs.get("n_steps", 2048))
         need, what = 4 * n_steps * n_envs * (width + 6), f"--envs {n_envs} x n_steps {n_steps}"
@@ -337,6 +337,19 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             if hp.flight_clock
             else ()
         ),
+        *(
+            (
+                (
+                    "error integral",
+                    f"in the observation, time constant {hp.integral:g} s, integrand clipped at "
+                    f"{hp.integral_clip:g}"
+                    if hp.integral_clip is not None
+                    else f"in the observation, time constant {hp.integral:g} s",
+                ),
+            )
+            if hp.integral
+            else ()
+        ),
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.algo_kwargs[k]) for k in hp.algo_kwargs),
         ("env_kwargs", hp.env_kwargs or "-"),
@@ -413,7 +426,9 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     # The result: the final model and its observation statistics (as JSON, and as SB3's
     # VecNormalize pickle for `VecNormalize.load`).
     model.save(out / "model.zip")
-    norm_record = normalization_record(normalize, hp.history, hp.observer, hp.flight_clock)
+    norm_record = normalization_record(
+        normalize, hp.history, hp.observer, hp.flight_clock, bool(hp.integral)
+    )
     (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
     if normalize is not None:
         from stable_baselines3.common.vec_env import sync_envs_normalization
@@ -439,6 +454,8 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 **({"residual": hp.residual} if hp.residual else {}),
                 **({"incremental": hp.incremental} if hp.incremental else {}),
                 **({"flight_clock": True} if hp.flight_clock else {}),
+                **({"integral": hp.integral} if hp.integral else {}),
+                **({"integral_clip": hp.integral_clip} if hp.integral_clip is not None else {}),
                 **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.algo_kwargs,
             }

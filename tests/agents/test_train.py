@@ -485,6 +485,61 @@ def test_an_incremental_policy_moves_the_fin_from_its_last_command(small_db, tmp
     )
 
 
+def test_an_integral_policy_reads_the_leaky_integral_of_its_observed_error(small_db, tmp_path):
+    """``integral: τ`` (``integral_clip: c``): the observation carries
+    ``I_t = exp(-dt/τ) I_{t-1} + dt clip(e_t, ±c)``; the acting controller rebuilds it from
+    the observations alone, step by step, and acts as model.predict does on the training
+    stack, across the end of an episode."""
+    import math
+
+    from agents.train import load_hyperparameters, make_env
+
+    hyperparams = tmp_path / "int.yml"
+    text = TINY.replace("  n_timesteps: 256\n", "  n_timesteps: 128\n")
+    extra = "  history: 1\n  integral: 2.0\n  integral_clip: 3.0\n"
+    hyperparams.write_text(text + extra, encoding="utf-8")
+    out = tmp_path / "run"
+    argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
+    argv += ["--eval-freq", "0", "--eval-episodes", "1", "--checkpoint-freq", "0"]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert run_command(COMMAND, [*argv, "--no-progress-bar"], "rocketroll train ppo") == 0
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["hyperparameters"]["integral"] == 2.0
+    assert settings["hyperparameters"]["integral_clip"] == 3.0
+    names = json.loads((out / "normalize.json").read_text())["observation_names"]
+    assert names[4] == "error_integral" and names[9] == "error_integral@t-1"
+    controller = LearnedController.load(out)
+    assert (controller.integral_s, controller.integral_clip) == (2.0, 3.0)
+    hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
+    options = {"episode_s": 2.0}  # 20 steps: the loop crosses into a second episode
+    hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **options})
+    adapter, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
+    stored = json.loads((out / "normalize.json").read_text())
+    normalize.obs_rms.mean = np.array(stored["mean"])
+    normalize.obs_rms.var = np.array(stored["var"])
+    dt = adapter.config.dt_s
+    seen = stack.reset()
+    env = RocketRollEnv(bank=array_bank(), episode_s=2.0)
+    view = FlightView(env)
+    controller.reset(view)
+    integral, clipped, ends = 0.0, 0, 0
+    for _ in range(30):
+        raw_all = stack.unnormalize_obs(seen)[0]
+        error = float(raw_all[Obs.ERROR])
+        clipped += abs(error) > 3.0
+        integral = math.exp(-dt / 2.0) * integral + dt * float(np.clip(error, -3.0, 3.0))
+        np.testing.assert_allclose(raw_all[4], integral, rtol=1e-5, atol=1e-5)
+        expected, _ = controller.model.predict(seen, deterministic=True)
+        action = controller.act(raw_all[:4], view)
+        np.testing.assert_allclose(action, expected.reshape(1), rtol=0, atol=1e-6)
+        seen, _, dones, _ = stack.step(action.reshape(1, 1))
+        if dones[0]:  # a new episode: the integral and the controller start afresh
+            ends += 1
+            integral = 0.0
+            controller.reset(view)
+    assert ends == 1 and clipped > 0  # both the reset and the clip were exercised
+
+
 def test_a_policy_is_loaded_only_under_its_own_algorithm(run, tmp_path, default_db):
     from agents.registry import make_controller
     from rollenv.bank import variant_config
@@ -682,6 +737,8 @@ def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, smal
         ("  residual: 0.2\n  observer: false\n", "observer: false contradicts it"),
         ("  incremental: 2\n", "incremental: Input should be less than or equal to 1"),
         ("  incremental: 0.3\n  observer: true\n", "incremental moves the fin from its last"),
+        ("  integral_clip: 3\n", "integral_clip clips the error's integral: give integral"),
+        ("  integral: -1\n", "integral: Input should be greater than or equal to 0"),
     ],
 )
 def test_bad_residual_settings_are_named(extra, message, tmp_path):
