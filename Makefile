@@ -80,8 +80,10 @@ lint: $(VENV)/.installed-dev
 typecheck: $(VENV)/.installed-dev
 	$(BIN)/mypy
 
+# On every core (pytest-xdist); --dist loadfile keeps a module's tests, and the fixtures they
+# share, on one worker.
 pytest: $(VENV)/.installed-dev
-	$(BIN)/pytest
+	$(BIN)/pytest -n auto --dist loadfile
 
 # Another machine's numerics (docs/results/reproducibility.md): OpenBLAS's AVX kernel, numpy
 # without its SIMD loops, numba compiling for a generic x86-64, torch's unvectorised
