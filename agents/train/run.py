@@ -319,7 +319,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("out", out),
         ("hyperparams", hp.source),
         ("torch threads", args.torch_threads),
-        ("eval", f"{args.eval_episodes} test-split episodes every {args.eval_freq:,} steps"),
+        (
+            "eval",
+            f"{args.eval_episodes} test-split episodes "
+            + (f"every {args.eval_freq:,} steps" if args.eval_freq else "at the end"),
+        ),
         ("checkpoints", f"every {args.checkpoint_freq:,} steps" if args.checkpoint_freq else "off"),
         ("resume", args.resume if args.resume is not None else "-"),
         ("policy", hp.policy),

@@ -501,8 +501,11 @@ def test_an_integral_policy_reads_the_leaky_integral_of_its_observed_error(small
     out = tmp_path / "run"
     argv = ["--hyperparams", str(hyperparams), "--db", str(small_db), "--out", str(out)]
     argv += ["--eval-freq", "0", "--eval-episodes", "1", "--checkpoint-freq", "0"]
-    with contextlib.redirect_stdout(io.StringIO()):
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
         assert run_command(COMMAND, [*argv, "--no-progress-bar"], "rocketroll train ppo") == 0
+    assert "in the observation, time constant 2 s, integrand clipped at 3" in printed.getvalue()
+    assert "1 test-split episodes at the end" in printed.getvalue()  # --eval-freq 0
     settings = json.loads((out / "settings.json").read_text())
     assert settings["hyperparameters"]["integral"] == 2.0
     assert settings["hyperparameters"]["integral_clip"] == 3.0
