@@ -265,7 +265,8 @@ class LearnedController:
 
     def predict(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches),
-        for a policy without history; the policy's action, which for an incremental or
+        for a policy that reads the observation alone (no history, observer estimate, flight
+        phase or error integral); the policy's action, which for an incremental or
         residual policy is not yet the command :meth:`act` returns."""
         return self._predict(np.asarray(obs, dtype=np.float32).reshape(1, self._dim))
 

@@ -11,6 +11,7 @@ import csv
 import dataclasses
 import json
 import os
+import shutil
 import signal
 import stat
 import subprocess
@@ -495,11 +496,23 @@ def test_every_package_is_typed_and_licensed() -> None:
     assert 'license = "MIT"' in text and "license = {" not in text
 
 
+#: What a build of the source tree leaves out of its copy: environments, outputs, caches.
+_NOT_SOURCE = shutil.ignore_patterns(
+    ".git", ".venv", "build", "runs", "*.egg-info", "__pycache__", ".*_cache", ".hypothesis"
+)
+
+
 def _built(kind: str, folder: Path) -> Path:
-    """The package built as ``kind`` (``sdist`` or ``wheel``) into ``folder`` by `build`."""
+    """The package built as ``kind`` (``sdist`` or ``wheel``) into ``folder`` by `build`,
+    from a copy of the source tree: setuptools writes ``build/`` and ``*.egg-info`` beside
+    the sources, and an ``egg-info`` half written in the repository would be read as the
+    installed package's metadata by the tests running beside this one."""
     pytest.importorskip("build", reason=f"the {kind} is built with `build` (dev extra)")
+    source = folder / "source"
+    shutil.copytree(REPO, source, ignore=_NOT_SOURCE)
+    out = folder / "dist"
     done = subprocess.run(
-        [sys.executable, "-m", "build", f"--{kind}", "--outdir", str(folder), str(REPO)],
+        [sys.executable, "-m", "build", f"--{kind}", "--outdir", str(out), str(source)],
         capture_output=True,
         text=True,
         timeout=600,
@@ -507,7 +520,7 @@ def _built(kind: str, folder: Path) -> Path:
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "deprecated" not in done.stderr.lower()
-    (built,) = folder.glob("*.tar.gz" if kind == "sdist" else "*.whl")
+    (built,) = out.glob("*.tar.gz" if kind == "sdist" else "*.whl")
     return built
 
 

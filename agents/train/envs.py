@@ -19,9 +19,10 @@ def make_env(
     db: str | os.PathLike[str] | None = None,
     training: bool = True,
 ) -> tuple[Any, Any, Any]:
-    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``, with
-    ``VecObserver`` and ``VecHistory`` over the adapter when the entry asks for
-    ``observer`` and ``history``.
+    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``, with, from
+    the adapter up, ``VecIncremental``, ``VecObserver``, ``VecFlightClock``,
+    ``VecErrorIntegral`` and ``VecHistory`` when the entry asks for ``incremental``,
+    ``observer``, ``flight_clock``, ``integral`` and ``history``.
 
     The monitor is inside, so it records the raw returns whatever
     ``VecNormalize`` does to rewards.  ``training=False`` (evaluation):

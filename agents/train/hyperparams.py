@@ -203,12 +203,12 @@ class HyperparameterEntry(BaseModel):
     flight_clock: Annotated[bool, Field(strict=True)] = Field(
         False, description="the flight's phase in the observation (a flight variant)"
     )
-    integral: Annotated[float, Field(strict=True, ge=0.0)] = Field(
+    integral: Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)] = Field(
         0.0,
         description="0, or the time constant (s) of the observed error's leaky integral in "
         "the observation",
     )
-    integral_clip: Annotated[float, Field(strict=True, gt=0.0)] | None = Field(
+    integral_clip: Annotated[float, Field(strict=True, gt=0.0, allow_inf_nan=False)] | None = Field(
         None, description="the largest error magnitude the integral integrates (none: no clip)"
     )
     noise_type: Literal["normal"] | None = Field(
@@ -240,7 +240,7 @@ class HyperparameterEntry(BaseModel):
                 "estimate or a residual on its controller it is not supported"
             )
         if self.integral_clip is not None and not self.integral:
-            raise ValueError("integral_clip clips the error's integral: give integral too")
+            raise ValueError("integral_clip clips the error the integral sums: give integral too")
         return self
 
 

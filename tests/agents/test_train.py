@@ -740,8 +740,9 @@ def test_a_residual_policy_of_zero_is_the_observer_controller(residual_run, smal
         ("  residual: 0.2\n  observer: false\n", "observer: false contradicts it"),
         ("  incremental: 2\n", "incremental: Input should be less than or equal to 1"),
         ("  incremental: 0.3\n  observer: true\n", "incremental moves the fin from its last"),
-        ("  integral_clip: 3\n", "integral_clip clips the error's integral: give integral"),
+        ("  integral_clip: 3\n", "integral_clip clips the error the integral sums: give integral"),
         ("  integral: -1\n", "integral: Input should be greater than or equal to 0"),
+        ("  integral: .inf\n", "integral: Input should be a finite number"),
     ],
 )
 def test_bad_residual_settings_are_named(extra, message, tmp_path):
