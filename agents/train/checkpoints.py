@@ -122,7 +122,16 @@ def _resume(
             f"--resume {checkpoint}: it was trained with VecNormalize ({stats.name} is beside "
             "it) but the hyperparameters say normalize: false"
         )
-    model = algorithm_class(algo).load(checkpoint, env=train_env, device=device)
+    try:
+        model = algorithm_class(algo).load(checkpoint, env=train_env, device=device)
+    except ValueError as exc:
+        if "spaces do not match" not in str(exc):
+            raise
+        raise UsageError(
+            f"--resume {checkpoint}: it was trained on another observation or action than the "
+            "hyperparameters make (history, observer, residual, flight_clock, integral must "
+            "be those it was trained with)"
+        ) from exc
     if normalize is not None:
         if not stats.is_file():
             raise UsageError(

@@ -362,11 +362,11 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     print(f"{ALGORITHMS[algo]} on {args.env_id}")
     _print_table(rows)
 
+    if args.resume is not None:  # refused before the output folder is made
+        model = _resume(args.resume, train_env, normalize, algo_kwargs["device"], algo)
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval").mkdir(exist_ok=True)
-    if args.resume is not None:
-        model = _resume(args.resume, train_env, normalize, algo_kwargs["device"], algo)
-    else:
+    if args.resume is None:
         if hp.noise is not None:
             from stable_baselines3.common.noise import NormalActionNoise
 

@@ -238,6 +238,13 @@ def test_a_finished_run_resumes_from_its_model_and_vecnormalize(run, small_db, t
     args = Args(hyperparams=plain, db=str(small_db), resume=run[0] / "model.zip", out=tmp_path)
     with pytest.raises(UsageError, match=r"trained with VecNormalize .* normalize: false"):
         train(dataclasses.replace(args, out=tmp_path / "x", timesteps=320))
+    assert not (tmp_path / "x").exists()  # nothing written
+    other = tmp_path / "other.yml"
+    other.write_text(TINY + "  history: 1\n  integral: 2.0\n", encoding="utf-8")
+    args = dataclasses.replace(args, hyperparams=other, out=tmp_path / "y", timesteps=320)
+    with pytest.raises(UsageError, match=r"trained on another observation or action than"):
+        train(args)
+    assert not (tmp_path / "y").exists()  # nothing written
 
 
 def test_controller_acts_like_predict_within_the_action_space(run):
