@@ -231,6 +231,20 @@ def test_run_curve_scores_each_checkpoint_of_finished_runs(
     assert bad.returncode == 2 and "settings.json not found" in bad.stderr
 
 
+def test_recurrent_probe_scores_an_lstm_policy_as_it_trains(default_db: Path) -> None:
+    pytest.importorskip("sb3_contrib", reason="the probe trains sb3-contrib's RecurrentPPO")
+    out = run_script(
+        "recurrent_probe.py", "--timesteps", "512", "--envs", "4", "--n-steps", "64",
+        "--batch", "128", "--every", "256", "--episodes", "2", db=default_db,
+    )  # fmt: skip
+    assert re.search(r"PID \d+\.\d+ °", out)
+    (row,) = [line for line in out.splitlines() if line.startswith("| 0 |")]
+    assert row.count(" M: ") == 2 and "0.000512 M" in row
+    bad = run_benchmark("recurrent_probe.py", "--envs", "3", "--n-steps", "5", db=default_db)
+    assert bad.returncode == 2 and "is not a multiple of --batch 2048" in bad.stderr
+    assert bad.stderr.count("\n") == 1
+
+
 def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_truth(
     default_db: Path, tmp_path: Path
 ) -> None:
