@@ -208,7 +208,9 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     interrupts the child once -- the child ignores a second interrupt, such as
     a terminal's Ctrl-C that reached it too -- and gives it :data:`_GRACE_S`
     seconds to clean up before it is killed; if this process dies, the child
-    is ended too.
+    is ended too.  A child interrupted on its own (a Ctrl-C this process's
+    main thread did not see: the kernel may hand a process's signal to any of
+    its threads) raises ``KeyboardInterrupt`` here too, once it has cleaned up.
     """
     env = None if is_pinned() else pinned_environment()
     if env is None:
@@ -230,6 +232,8 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
             if child is not None and child.poll() is None:
                 _stop(child)
         if not answer.exists():
+            if returncode == 130:  # interrupted while this process was not (see _child)
+                raise KeyboardInterrupt
             raise RuntimeError(
                 f"the pinned computation of {function.__qualname__} ended with exit code "
                 f"{returncode} and no result"

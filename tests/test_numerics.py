@@ -189,6 +189,19 @@ def _gone(pid: int) -> bool:
 
 
 @pinnable
+def test_an_interrupt_of_the_child_alone_interrupts_the_caller(tmp_path: Path) -> None:
+    """A Ctrl-C that reached the child but not the waiting caller's main thread (the kernel
+    may give a process's signal to another of its threads) still interrupts the call."""
+    proc, child = _parent(tmp_path)
+    os.kill(child, signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    assert out.strip() == "interrupted"
+    assert (tmp_path / "cleaned").read_text() == "yes"
+    assert _gone(child)
+    assert not list(tmp_path.glob("rocketroll-pinned-*"))
+
+
+@pinnable
 def test_ctrl_c_interrupts_the_child_once_and_it_cleans_up(tmp_path: Path) -> None:
     proc, child = _parent(tmp_path)
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C at a terminal: to the whole job
