@@ -309,6 +309,16 @@ def _same_arguments(a: dict[str, Any], b: dict[str, Any]) -> bool:
     return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
 
 
+def _widened(space: gym.Space[Any], low: NDArray[Any], high: NDArray[Any]) -> spaces.Box:
+    """The observation space ``space`` (a ``Box``) with values in ``[low, high]`` after its own."""
+    assert isinstance(space, spaces.Box)
+    return spaces.Box(
+        np.concatenate([space.low, low]).astype(np.float32),
+        np.concatenate([space.high, high]).astype(np.float32),
+        dtype=np.float32,
+    )
+
+
 class VecHistory(VecEnvWrapper):
     """An SB3 ``VecEnv`` whose observations carry ``k`` steps of history (:class:`History`).
 
@@ -361,14 +371,8 @@ class VecObserver(VecEnvWrapper):
     plus the residual the policy chose."""
 
     def __init__(self, venv: VecEnv, features: Any) -> None:
-        assert isinstance(venv.observation_space, spaces.Box)
-        space = venv.observation_space
         big = np.full(features.SIZE, np.float32(1e6))
-        observation_space = spaces.Box(
-            np.concatenate([space.low, -big]).astype(np.float32),
-            np.concatenate([space.high, big]).astype(np.float32),
-            dtype=np.float32,
-        )
+        observation_space = _widened(venv.observation_space, -big, big)
         super().__init__(venv, observation_space=observation_space)
         self.features = features
         self._size = int(observation_space.shape[0])
@@ -448,15 +452,9 @@ class VecFlightClock(VecEnvWrapper):
     control step) after the values below; each env's clock restarts with its episode."""
 
     def __init__(self, venv: VecEnv, scales: NDArray[Any]) -> None:
-        assert isinstance(venv.observation_space, spaces.Box)
-        space = venv.observation_space
         big = np.full(FlightClock.SIZE, np.float32(1e3))
-        observation_space = spaces.Box(
-            np.concatenate([space.low, np.zeros(FlightClock.SIZE, np.float32)]).astype(np.float32),
-            np.concatenate([space.high, big]).astype(np.float32),
-            dtype=np.float32,
-        )
-        super().__init__(venv, observation_space=observation_space)
+        zero = np.zeros(FlightClock.SIZE, np.float32)
+        super().__init__(venv, observation_space=_widened(venv.observation_space, zero, big))
         self.clock = FlightClock(scales, venv.num_envs)
 
     def reset(self) -> NDArray[np.float32]:
@@ -487,15 +485,8 @@ class VecErrorIntegral(VecEnvWrapper):
     starts from zero with its episode."""
 
     def __init__(self, venv: VecEnv, integral: ErrorIntegral) -> None:
-        assert isinstance(venv.observation_space, spaces.Box)
-        space = venv.observation_space
         big = np.full(ErrorIntegral.SIZE, np.float32(1e6))
-        observation_space = spaces.Box(
-            np.concatenate([space.low, -big]).astype(np.float32),
-            np.concatenate([space.high, big]).astype(np.float32),
-            dtype=np.float32,
-        )
-        super().__init__(venv, observation_space=observation_space)
+        super().__init__(venv, observation_space=_widened(venv.observation_space, -big, big))
         self.integral = integral
 
     def reset(self) -> NDArray[np.float32]:

@@ -211,6 +211,14 @@ def _memory_bytes() -> int | None:
         return None
 
 
+def _integral_line(hp: Hyperparameters) -> str:
+    """The error integral of ``hp`` as the run's table shows it."""
+    line = f"in the observation, time constant {hp.integral:g} s"
+    if hp.integral_clip is not None:
+        line += f", integrand clipped at {hp.integral_clip:g}"
+    return line
+
+
 def _check_size(
     args: Args,
     hp: Hyperparameters,
@@ -341,19 +349,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             if hp.flight_clock
             else ()
         ),
-        *(
-            (
-                (
-                    "error integral",
-                    f"in the observation, time constant {hp.integral:g} s, integrand clipped at "
-                    f"{hp.integral_clip:g}"
-                    if hp.integral_clip is not None
-                    else f"in the observation, time constant {hp.integral:g} s",
-                ),
-            )
-            if hp.integral
-            else ()
-        ),
+        *((("error integral", _integral_line(hp)),) if hp.integral else ()),
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.algo_kwargs[k]) for k in hp.algo_kwargs),
         ("env_kwargs", hp.env_kwargs or "-"),

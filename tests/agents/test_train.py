@@ -58,6 +58,14 @@ RocketRoll-v0:
 """
 
 
+def _use_statistics(normalize: Any, run: Path) -> None:
+    """Give a held-out stack's frozen ``VecNormalize`` the observation statistics the run
+    ``run`` ended with (its ``normalize.json``): what the policy saw in training."""
+    stored = json.loads((run / "normalize.json").read_text())
+    normalize.obs_rms.mean = np.array(stored["mean"])
+    normalize.obs_rms.var = np.array(stored["var"])
+
+
 def main(argv: list[str]) -> int:
     """``python -m agents.train ARGV`` in this process."""
     with mock.patch.object(sys, "argv", ["python -m agents.train", *argv]):
@@ -432,9 +440,7 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
     # The training stack, one env, frozen statistics: what the policy saw in training.
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0", algo)
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
-    stored = json.loads((out / "normalize.json").read_text())
-    normalize.obs_rms.mean = np.array(stored["mean"])
-    normalize.obs_rms.var = np.array(stored["var"])
+    _use_statistics(normalize, out)
     seen = stack.reset()
     width = 4 + (3 if observer else 0)  # the observation (and the observer's estimate)
     assert seen.shape == (1, width * 4 + 3)  # it, 3 past ones, 3 past actions
@@ -468,9 +474,7 @@ def test_an_incremental_policy_moves_the_fin_from_its_last_command(small_db, tmp
     assert controller.incremental == 0.375
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
-    stored = json.loads((out / "normalize.json").read_text())
-    normalize.obs_rms.mean = np.array(stored["mean"])
-    normalize.obs_rms.var = np.array(stored["var"])
+    _use_statistics(normalize, out)
     seen = stack.reset()
     raw = stack.unnormalize_obs(seen)[0, :4]
     view = FlightView(RocketRollEnv(bank=array_bank()))
@@ -524,9 +528,7 @@ def test_an_integral_policy_reads_the_leaky_integral_of_its_observed_error(small
     options = {"episode_s": 2.0}  # 20 steps: the loop crosses into a second episode
     hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **options})
     adapter, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
-    stored = json.loads((out / "normalize.json").read_text())
-    normalize.obs_rms.mean = np.array(stored["mean"])
-    normalize.obs_rms.var = np.array(stored["var"])
+    _use_statistics(normalize, out)
     dt = adapter.config.dt_s
     seen = stack.reset()
     env = RocketRollEnv(bank=array_bank(), episode_s=2.0)
@@ -686,9 +688,7 @@ def test_a_residual_policy_adds_its_action_to_the_observer_controllers(residual_
     assert hp.observer and hp.residual == 0.25
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
     assert isinstance(stack.venv.venv.features, ObserverFeatures)
-    stored = json.loads((out / "normalize.json").read_text())
-    normalize.obs_rms.mean = np.array(stored["mean"])
-    normalize.obs_rms.var = np.array(stored["var"])
+    _use_statistics(normalize, out)
     seen = stack.reset()
     assert seen.shape == (1, 7)
     raw = stack.unnormalize_obs(seen)[0, :4].astype(np.float32)
@@ -784,9 +784,7 @@ def test_a_flight_policy_reads_the_flights_phase_as_in_training(tmp_path, defaul
     assert controller.needs_clock
     hp = load_hyperparameters(hyperparams, "RocketRollFlight-v0", "ppo")
     adapter, stack, normalize = make_env(hp, 1, 5, split="test", db=default_db, training=False)
-    stored = json.loads((out / "normalize.json").read_text())
-    normalize.obs_rms.mean = np.array(stored["mean"])
-    normalize.obs_rms.var = np.array(stored["var"])
+    _use_statistics(normalize, out)
     schedule = adapter.config.flight_schedule
     seen = stack.reset()
     env = gym.make("RocketRollFlight-v0").unwrapped
