@@ -81,13 +81,7 @@ class Scorer(BaseCallback):
         settings = {
             "algorithm": "ppo",
             "env_settings": {"task": self.task},
-            "hyperparameters": {
-                "history": hp.history,
-                "incremental": hp.incremental,
-                "flight_clock": hp.flight_clock,
-                "integral": hp.integral,
-                "integral_clip": hp.integral_clip,
-            },
+            "hyperparameters": hp.layout(),
         }
         integral = bool(hp.integral)
         record = normalization_record(self.normalize, hp.history, False, hp.flight_clock, integral)

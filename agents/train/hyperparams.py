@@ -164,6 +164,21 @@ class Hyperparameters:
     integral: float = 0.0
     integral_clip: float | None = None
 
+    def layout(self) -> dict[str, Any]:
+        """What the policy reads and sends beyond the env's observation and action (the keys
+        set: ``history``, ``observer``, ``residual``, ``incremental``, ``flight_clock``,
+        ``integral``, ``integral_clip``), as ``settings.json`` records them and
+        :class:`agents.learned.LearnedController` rebuilds the policy's observation."""
+        return {
+            **({"history": self.history} if self.history else {}),
+            **({"observer": True} if self.observer else {}),
+            **({"residual": self.residual} if self.residual else {}),
+            **({"incremental": self.incremental} if self.incremental else {}),
+            **({"flight_clock": True} if self.flight_clock else {}),
+            **({"integral": self.integral} if self.integral else {}),
+            **({"integral_clip": self.integral_clip} if self.integral_clip is not None else {}),
+        }
+
 
 # ------------------------------------------------------------------------ hyperparameters
 class HyperparameterEntry(BaseModel):
