@@ -40,11 +40,12 @@ demo: $(VENV)/.installed
 	$(BIN)/rocketroll env rollout --policy random --episodes 2 --frames $(DEMO)/env-random.png
 	$(BIN)/rocketroll eval --env-id RocketRoll-v0 --episodes 20 --seed 0 --out $(DEMO)/eval-angle
 	$(BIN)/rocketroll eval --env-id RocketRollRate-v0 --episodes 20 --seed 0 --out $(DEMO)/eval-rate
-	$(BIN)/rocketroll seeds --env-id RocketRoll-v0 --run ppo:agents/policies/RocketRoll-v0 \
-		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRoll-v0/ppo/seed$(s)) \
+	$(BIN)/rocketroll seeds --env-id RocketRoll-v0 \
+		$(foreach s,0 1 2 3 4,--run ppo:agents/policies/seeds/RocketRoll-v0/ppo/seed$(s)) \
 		$(foreach s,0 1 2 3 4,--run ppo-zero=ppo:agents/policies/seeds/RocketRoll-v0/ppo-zero/seed$(s)) \
 		$(foreach s,0 1 2 3 4,--run ppo-residual=ppo:agents/policies/seeds/RocketRoll-v0/ppo-residual/seed$(s)) \
-		$(foreach s,0 1 2 3 4,--run ppo-memory=ppo:agents/policies/seeds/RocketRoll-v0/ppo-memory/seed$(s)) \
+		--run ppo-memory=ppo:agents/policies/RocketRoll-v0 \
+		$(foreach s,1 2 3 4,--run ppo-memory=ppo:agents/policies/seeds/RocketRoll-v0/ppo-memory/seed$(s)) \
 		--out $(DEMO)/seeds-angle
 	$(BIN)/rocketroll seeds --env-id RocketRollRate-v0 --run ppo:agents/policies/RocketRollRate-v0 \
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRollRate-v0/ppo/seed$(s)) \
@@ -94,8 +95,9 @@ VARIED := OPENBLAS_CORETYPE=Sandybridge \
 	NUMBA_CPU_NAME=generic ATEN_CPU_CAPABILITY=default MKL_CBWR=COMPATIBLE \
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 
+# One module, so its tests are spread over the cores one by one (--dist load).
 pytest-varied: $(VENV)/.installed-dev
-	env $(VARIED) $(BIN)/pytest -p no:cacheprovider tests/test_figures.py
+	env $(VARIED) $(BIN)/pytest -p no:cacheprovider -n auto --dist load tests/test_figures.py
 
 # The documentation site into build/site, strict: a broken link or anchor, a page outside the
 # navigation or a docstring the API reference cannot read fails the build. No network.
