@@ -109,19 +109,22 @@ def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[st
 
 
 # ------------------------------------------------------------------ slow: the committed policies
-def _retrain(env_id: str, out: Path) -> dict[str, Any]:
-    """The committed policy's recorded training command, run again into ``out``."""
+def _retrain(env_id: str, out: Path, timesteps: int | None = None) -> dict[str, Any]:
+    """The committed policy's recorded training command, run again into ``out`` (with
+    ``timesteps``: its first ``timesteps`` env-steps)."""
     from agents.learned import COMMITTED
-    from agents.train import DEFAULT_HYPERPARAMS, Args, train
+    from agents.train import HYPERPARAMS_DIR, Args, train
 
     recorded = json.loads((COMMITTED / env_id / "settings.json").read_text(encoding="utf-8"))
     args = recorded["args"]
     return train(
         Args(
             env_id=env_id,
+            timesteps=timesteps,
             seed=args["seed"],
             out=out,
-            hyperparams=DEFAULT_HYPERPARAMS,
+            # The recipe file it names, from this checkout (it recorded the path it was given).
+            hyperparams=HYPERPARAMS_DIR / Path(args["hyperparams"]).name,
             eval_freq=args["eval_freq"],
             eval_episodes=args["eval_episodes"],
             eval_seed=args["eval_seed"],
@@ -134,14 +137,15 @@ def _retrain(env_id: str, out: Path) -> dict[str, Any]:
 
 @pytest.mark.slow
 def test_the_angle_recipe_trains_the_same_bits_twice(default_db: Path, tmp_path: Path) -> None:
-    """Train and evaluate (guides), Training PPO: the committed angle policy's command, run twice,
-    trains the same weights and statistics bit for bit (2 x about 70 s, one torch thread).
-    Across machines it does not: torch's kernels differ between processors."""
+    """Train and evaluate (guides), Training PPO: the committed angle policy's command, run twice
+    for its first 0.5 M env-steps, trains the same weights and statistics bit for bit (2 x
+    about 70 s, one torch thread).  Across machines it does not: torch's kernels differ
+    between processors."""
     from stable_baselines3 import PPO
 
-    first = _retrain("RocketRoll-v0", tmp_path / "a")
-    second = _retrain("RocketRoll-v0", tmp_path / "b")
-    assert first["env_steps"] == second["env_steps"] == 1_003_520
+    first = _retrain("RocketRoll-v0", tmp_path / "a", timesteps=500_000)
+    second = _retrain("RocketRoll-v0", tmp_path / "b", timesteps=500_000)
+    assert first["env_steps"] == second["env_steps"] == 503_808  # whole rollouts of 16 x 256
     weights = [
         PPO.load(tmp_path / run / "model.zip", device="cpu").policy.state_dict()
         for run in ("a", "b")
@@ -186,18 +190,25 @@ def test_the_seed_statistics_and_robustness_tables(
     a zero setpoint, as a residual on the observer and with memory / SAC) and robustness
     tables, as the results page prints them (about a minute per task)."""
     seeds = f"agents/policies/seeds/{env_id}"
-    runs = ["--run", f"ppo:agents/policies/{env_id}"]
-    for seed in range(1, 5):
-        runs += ["--run", f"ppo:{seeds}/ppo/seed{seed}"]
-    others = ["sac:{}/sac/seed{}"]
+    # Each learner's five runs; the committed policy is its learner's seed 0.
+    learners = {"ppo": "ppo:{}/ppo/seed{}", "sac": "sac:{}/sac/seed{}"}
+    committed = "ppo"
     if env_id == "RocketRoll-v0":
-        others = [
-            "ppo-zero=ppo:{}/ppo-zero/seed{}",
-            "ppo-residual=ppo:{}/ppo-residual/seed{}",
-            "ppo-memory=ppo:{}/ppo-memory/seed{}",
-        ]
-    for other in others:
-        runs += [w for seed in range(5) for w in ("--run", other.format(seeds, seed))]
+        learners = {
+            "ppo": "ppo:{}/ppo/seed{}",
+            "ppo-zero": "ppo-zero=ppo:{}/ppo-zero/seed{}",
+            "ppo-residual": "ppo-residual=ppo:{}/ppo-residual/seed{}",
+            "ppo-memory": "ppo-memory=ppo:{}/ppo-memory/seed{}",
+        }
+        committed = "ppo-memory"
+    runs = []
+    for name, run in learners.items():
+        for seed in range(5):
+            if name == committed and seed == 0:
+                label = "" if name == "ppo" else f"{name}="
+                runs += ["--run", f"{label}ppo:agents/policies/{env_id}"]
+            else:
+                runs += ["--run", run.format(seeds, seed)]
     for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
         assert rocketroll(argv) == 0
         printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]

@@ -77,13 +77,15 @@ def test_the_committed_policy_acts_through_the_chain() -> None:
     assert controller.chain is not None
 
 
-#: The committed angle policy's actions on fixed observations, hashed: the chain's, torch's.
+#: The committed angle policy's actions on fixed inputs (observation and history), hashed: the
+#: chain's, torch's.
 _ACTIONS = """
 import hashlib, numpy as np
 from agents.learned import LearnedController
 from agents.registry import COMMITTED
 c = LearnedController.load(COMMITTED / "RocketRoll-v0")
-obs = np.random.default_rng(0).normal(0.0, 30.0, size=(500, 4)).astype(np.float32)
+width = c.model.observation_space.shape[0]
+obs = np.random.default_rng(0).normal(0.0, 30.0, size=(500, width)).astype(np.float32)
 chain = np.concatenate([c.chain(c.normalizer(o[None])) for o in obs])
 torch = np.concatenate([c.predict(o) for o in obs])
 print(hashlib.sha256(chain.tobytes()).hexdigest(), hashlib.sha256(torch.tobytes()).hexdigest())
