@@ -639,6 +639,8 @@ def test_the_vector_env_renders_one_frame_per_env() -> None:
 
 # ------------------------------------------------------------------ 12. pytest -m slow
 def test_the_slow_marker_selects_tests() -> None:
+    """`-m slow` selects the committed policies' retraining (collected from their module
+    alone: the whole suite's collection imports every package, about 15 s)."""
     done = subprocess.run(
         [
             sys.executable,
@@ -650,6 +652,7 @@ def test_the_slow_marker_selects_tests() -> None:
             "slow",
             "-p",
             "no:cacheprovider",
+            "tests/test_figures.py",
         ],
         cwd=REPO,
         capture_output=True,
@@ -658,7 +661,10 @@ def test_the_slow_marker_selects_tests() -> None:
         check=False,
     )
     collected = [line for line in done.stdout.splitlines() if "::" in line]
-    assert len(collected) >= 2, done.stdout[-2000:]
+    assert any("test_the_angle_recipe_trains_the_same_bits_twice" in c for c in collected), (
+        done.stdout[-2000:]
+    )
+    assert not any("test_the_evaluation_tables" in c for c in collected), done.stdout[-2000:]
 
 
 def test_ctrl_c_inside_a_compiled_call_is_an_interrupt_not_a_traceback(
