@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from agents.actor import ActorChain
 from agents.base import Design, FlightView
-from agents.memory import ErrorIntegral, FlightClock, History
+from agents.memory import ErrorIntegral, FlightClock, History, PolicyLayout
 from agents.observer import ObserverFeatures
 from agents.registry import COMMITTED, shipped_path
 from disturbances.bank import TraceBank
@@ -106,29 +106,30 @@ class LearnedController:
         self.name = self.algorithm.upper()
         env_settings = settings.get("env_settings") or {}
         self.task: str | None = env_settings.get("task")
-        k, observer, residual = _layout(settings)
+        #: What the policy reads and sends beyond the observation and the command.
+        self.layout = layout = PolicyLayout.from_settings(settings)
         #: The policy reads the observer's estimate: :meth:`attach_observer` before acting.
-        self.needs_observer = observer
+        self.needs_observer = layout.observer
         #: The policy's action is a residual on the observer controller's command, × this.
-        self.residual = residual
+        self.residual = layout.residual
         self.features: ObserverFeatures | None = None
         #: The policy's action is a change of the last fin command, × this
         #: (:class:`agents.vecenv.VecIncremental`); 0: the action is the command.
-        self.incremental = float((settings.get("hyperparameters") or {}).get("incremental") or 0)
+        self.incremental = layout.incremental
         #: The policy reads the flight's phase (:class:`agents.memory.FlightClock`), made
         #: from the environment's flight at :meth:`reset`.
-        self.needs_clock = _flight_clock(settings)
+        self.needs_clock = layout.flight_clock
         self.clock: FlightClock | None = None
         #: The policy reads the observed error's leaky integral: its time constant (s) and
         #: clip (:class:`agents.memory.ErrorIntegral`), made at :meth:`reset`; 0: it does not.
-        self.integral_s, self.integral_clip = _integral(settings)
+        self.integral_s, self.integral_clip = layout.integral, layout.integral_clip
         self.integral: ErrorIntegral | None = None
-        width = len(Obs) + (ObserverFeatures.SIZE if observer else 0)
+        width = len(Obs) + (ObserverFeatures.SIZE if layout.observer else 0)
         width += FlightClock.SIZE if self.needs_clock else 0
         width += ErrorIntegral.SIZE if self.integral_s else 0
         self.history: History | None = None
-        if k:
-            self.history = History(1, width, 1, k)
+        if layout.history:
+            self.history = History(1, width, 1, layout.history)
         self._dim = int(np.prod(model.observation_space.shape))
         model.policy.set_training_mode(False)
         #: The actor's layers, evaluated alike on every processor (None: torch acts); a copy
@@ -158,9 +159,7 @@ class LearnedController:
             json.loads(settings_file.read_text(encoding="utf-8")) if settings_file.is_file() else {}
         )
         algorithm = str(settings.get("algorithm", "ppo"))
-        history, observer, _ = _layout(settings)
-        clock = _flight_clock(settings)
-        integral = bool(_integral(settings)[0])
+        layout = PolicyLayout.from_settings(settings)
         if checkpoint is None:
             model_file = folder / "model.zip"
             norm_file = folder / "normalize.json"
@@ -178,13 +177,10 @@ class LearnedController:
             record = checkpoint_normalization(
                 model_file,
                 algorithm,
-                history,
-                observer,
-                clock,
-                integral=integral,
+                layout,
                 required=isinstance(trained, dict) and bool(trained.get("norm_obs", True)),
             )
-        size = len(observation_names(history, observer, clock, integral))
+        size = len(observation_names(layout))
         normalizer = ObservationNormalizer(record, size)
         # Schedules are pickled closures; acting needs none of them.
         custom = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
@@ -273,28 +269,6 @@ class LearnedController:
     def _predict(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
         action, _ = self.model.predict(self.normalizer(seen), deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(1)
-
-
-def _flight_clock(settings: dict[str, Any]) -> bool:
-    """Whether the run's policy reads the flight's phase (``flight_clock``)."""
-    return bool((settings.get("hyperparameters") or {}).get("flight_clock", False))
-
-
-def _integral(settings: dict[str, Any]) -> tuple[float, float | None]:
-    """The time constant (s; 0: none) and clip of the observed error's integral the run's
-    policy reads (``integral``, ``integral_clip``)."""
-    hyper = settings.get("hyperparameters") or {}
-    clip = hyper.get("integral_clip")
-    return float(hyper.get("integral", 0.0) or 0.0), None if clip is None else float(clip)
-
-
-def _layout(settings: dict[str, Any]) -> tuple[int, bool, float]:
-    """Steps of history, whether the observer's estimate is observed, and the residual's
-    scale (0: the action is the command), from a run's ``settings.json``."""
-    hyper = settings.get("hyperparameters") or {}
-    residual = float(hyper.get("residual", 0.0) or 0.0)
-    observer = bool(hyper.get("observer", False)) or residual > 0
-    return int(hyper.get("history", 0) or 0), observer, residual
 
 
 def _zero(_: float) -> float:

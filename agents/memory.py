@@ -11,11 +11,15 @@ training,
 and :class:`agents.learned.LearnedController` keeps one of its own when acting, so the
 policy sees the same vector in training and in the evaluation.  :class:`ErrorIntegral`
 is the PID's own memory made of the same history: a leaky sum of the observed error.
+:class:`PolicyLayout` records which of these (and the observer's estimate, a residual or an
+incremental action) a trained policy reads and sends.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -24,7 +28,7 @@ from numpy.typing import NDArray
 
 from rollenv.layout import Obs
 
-__all__ = ["ErrorIntegral", "FlightClock", "History", "history_space"]
+__all__ = ["ErrorIntegral", "FlightClock", "History", "PolicyLayout", "history_space"]
 
 Float32Array = NDArray[np.float32]
 
@@ -168,3 +172,67 @@ class ErrorIntegral:
             error = np.clip(error, -self.clip, self.clip)
         self._value[rows] = self.decay * self._value[rows] + self.dt * error
         return self._value[rows].astype(np.float32).reshape(-1, self.SIZE)
+
+
+@dataclass(frozen=True)
+class PolicyLayout:
+    """What a trained policy reads and sends beyond the env's observation and action.
+
+    Training writes it into ``settings.json``'s ``hyperparameters`` (:meth:`record`, from
+    :meth:`agents.train.Hyperparameters.layout`); :class:`agents.learned.LearnedController`
+    reads it back (:meth:`from_settings`) to rebuild the policy's observation and command.
+
+    Attributes
+    ----------
+    history : int
+        Steps of past observations and actions beside the observation (:class:`History`).
+    observer : bool
+        The observer's estimate in the observation (implied by ``residual``).
+    residual : float
+        0, or the scale of the action as a residual on the observer controller's command.
+    incremental : float
+        0, or the scale of the action as a change of the last fin command.
+    flight_clock : bool
+        The flight's phase in the observation (:class:`FlightClock`).
+    integral : float
+        0, or the time constant (s) of the observed error's leaky integral
+        (:class:`ErrorIntegral`) in the observation.
+    integral_clip : float or None
+        The largest error magnitude that integral integrates (None: no clip).
+    """
+
+    history: int = 0
+    observer: bool = False
+    residual: float = 0.0
+    incremental: float = 0.0
+    flight_clock: bool = False
+    integral: float = 0.0
+    integral_clip: float | None = None
+
+    def record(self) -> dict[str, Any]:
+        """The keys ``settings.json`` records, those set only."""
+        return {
+            **({"history": self.history} if self.history else {}),
+            **({"observer": True} if self.observer else {}),
+            **({"residual": self.residual} if self.residual else {}),
+            **({"incremental": self.incremental} if self.incremental else {}),
+            **({"flight_clock": True} if self.flight_clock else {}),
+            **({"integral": self.integral} if self.integral else {}),
+            **({"integral_clip": self.integral_clip} if self.integral_clip is not None else {}),
+        }
+
+    @classmethod
+    def from_settings(cls, settings: Mapping[str, Any]) -> PolicyLayout:
+        """The layout a run's ``settings.json`` records (absent keys: not used)."""
+        hyper = settings.get("hyperparameters") or {}
+        residual = float(hyper.get("residual") or 0.0)
+        clip = hyper.get("integral_clip")
+        return cls(
+            history=int(hyper.get("history") or 0),
+            observer=bool(hyper.get("observer", False)) or residual > 0,
+            residual=residual,
+            incremental=float(hyper.get("incremental") or 0.0),
+            flight_clock=bool(hyper.get("flight_clock", False)),
+            integral=float(hyper.get("integral") or 0.0),
+            integral_clip=None if clip is None else float(clip),
+        )

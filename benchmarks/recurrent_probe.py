@@ -142,9 +142,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         hp = load_hyperparameters(args.hyperparams, args.env_id)
     except UsageError as exc:
         _refuse(str(exc))
-    if hp.observer or hp.incremental or hp.flight_clock or hp.integral:
+    if hp.layout.observer or hp.layout.incremental or hp.layout.flight_clock or hp.layout.integral:
         _refuse(f"--hyperparams {args.hyperparams}: the probe takes a recipe of history alone")
-    hp = dataclasses.replace(hp, history=0)
+    hp = dataclasses.replace(hp, layout=dataclasses.replace(hp.layout, history=0))
     torch.set_num_threads(args.torch_threads)
 
     config = variant_config(args.env_id, {"split": args.split})

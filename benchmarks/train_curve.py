@@ -81,11 +81,10 @@ class Scorer(BaseCallback):
         settings = {
             "algorithm": "ppo",
             "env_settings": {"task": self.task},
-            "hyperparameters": hp.layout(),
+            "hyperparameters": hp.layout.record(),
         }
-        integral = bool(hp.integral)
-        record = normalization_record(self.normalize, hp.history, False, hp.flight_clock, integral)
-        size = len(observation_names(hp.history, False, hp.flight_clock, integral))
+        record = normalization_record(self.normalize, hp.layout)
+        size = len(observation_names(hp.layout))
         controller = LearnedController(self.model, ObservationNormalizer(record, size), settings)
         self.curve.append((wall, self.num_timesteps, self.score(controller)))
         self.model.policy.set_training_mode(True)
@@ -125,7 +124,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     recipes = [parse_recipe(item, args.torch_threads) for item in args.recipe or DEFAULT_RECIPES]
     for recipe in recipes:
         hp = load_hyperparameters(recipe.path, args.env_id)
-        if hp.observer:
+        if hp.layout.observer:
             parser.error(
                 f"--recipe {recipe.label}: a policy that reads the observer is not scored here "
                 "(train it and score its checkpoints with benchmarks/run_curve.py)"

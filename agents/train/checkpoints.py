@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from agents.memory import PolicyLayout
 from agents.train.hyperparams import algorithm_class
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import interrupts_held
@@ -51,16 +52,10 @@ def _statistics_file(checkpoint: Path, algo: str) -> Path:
 
 
 def checkpoint_normalization(
-    checkpoint: Path,
-    algo: str,
-    history: int,
-    observer: bool,
-    flight_clock: bool,
-    *,
-    integral: bool = False,
-    required: bool = False,
+    checkpoint: Path, algo: str, layout: PolicyLayout, *, required: bool = False
 ) -> dict[str, Any]:
-    """The observation normalisation ``checkpoint`` was trained with, as ``normalize.json``
+    """The observation normalisation ``checkpoint`` (of a policy of ``layout``) was trained
+    with, as ``normalize.json``
     holds a finished run's (:func:`agents.train.envs.normalization_record`); off when no
     statistics are beside it, unless ``required`` (the run normalised its observations):
     then ``FileNotFoundError`` naming them."""
@@ -80,7 +75,7 @@ def checkpoint_normalization(
             f"({_normalization_file(checkpoint, algo).name}, beside it) are not found; the run "
             "normalised its observations"
         )
-    return normalization_record(saved, history, observer, flight_clock, integral)
+    return normalization_record(saved, layout)
 
 
 def checkpoint_callback(**settings: Any) -> Any:

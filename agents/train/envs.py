@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
+from agents.memory import PolicyLayout
 from agents.train.hyperparams import Hyperparameters
 from rocketroll_common.errors import UsageError
 
@@ -54,11 +55,11 @@ def make_env(
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
-    if hp.incremental:
+    if hp.layout.incremental:
         from agents.vecenv import VecIncremental
 
-        env = VecIncremental(env, hp.incremental, adapter.config.fin_range_deg)
-    if hp.observer:
+        env = VecIncremental(env, hp.layout.incremental, adapter.config.fin_range_deg)
+    if hp.layout.observer:
         from agents.base import design_bank
         from agents.observer import ObserverFeatures
         from agents.vecenv import VecObserver
@@ -73,25 +74,29 @@ def make_env(
             # there, where it has one), as --policy designs it when the policy is
             # evaluated; in flight on its tunnel traces
             train_bank = design_bank(adapter.config, db)
-        features = ObserverFeatures.from_bank(adapter.config, train_bank, n_envs, hp.residual)
+        features = ObserverFeatures.from_bank(
+            adapter.config, train_bank, n_envs, hp.layout.residual
+        )
         env = VecObserver(env, features)
-    if hp.flight_clock:
+    if hp.layout.flight_clock:
         from agents.vecenv import VecFlightClock
 
         schedule = adapter.config.flight_schedule
         if schedule is None:
             raise UsageError(f"{hp.source}, {hp.env_id}: flight_clock needs a flight")
         env = VecFlightClock(env, schedule.scales[: adapter.config.max_episode_steps])
-    if hp.integral:
+    if hp.layout.integral:
         from agents.memory import ErrorIntegral
         from agents.vecenv import VecErrorIntegral
 
-        integral = ErrorIntegral(adapter.config.dt_s, hp.integral, hp.integral_clip, n_envs)
+        integral = ErrorIntegral(
+            adapter.config.dt_s, hp.layout.integral, hp.layout.integral_clip, n_envs
+        )
         env = VecErrorIntegral(env, integral)
-    if hp.history:
+    if hp.layout.history:
         from agents.vecenv import VecHistory
 
-        env = VecHistory(env, hp.history)
+        env = VecHistory(env, hp.layout.history)
     env = VecMonitor(env)
     normalize = None
     if hp.normalize is not None:
@@ -105,39 +110,34 @@ def make_env(
 
 
 # ----------------------------------------------------------------------------- outputs
-def observation_names(
-    history: int = 0, observer: bool = False, flight_clock: bool = False, integral: bool = False
-) -> list[str]:
-    """The names of the policy's observation: the env's, the observer's estimate, the
-    flight's phase, the error's integral, then the history (``name@t-k``, and
-    ``action@t-k``).
+def observation_names(layout: PolicyLayout | None = None) -> list[str]:
+    """The names of the observation a policy of ``layout`` reads: the env's, the observer's
+    estimate, the flight's phase, the error's integral, then the history (``name@t-k``, and
+    ``action@t-k``); None: the env's observation alone.
 
     Examples
     --------
-    >>> observation_names(1)[4:]
+    >>> observation_names(PolicyLayout(history=1))[4:]
     ['tracking_error@t-1', 'roll_rate_dps@t-1', 'fin_deg@t-1', 'fin_cmd_deg@t-1', 'action@t-1']
-    >>> len(observation_names(2, observer=True))  # (4 + 3) x 3 + 2
+    >>> len(observation_names(PolicyLayout(history=2, observer=True)))  # (4 + 3) x 3 + 2
     23
     """
     from agents.memory import ErrorIntegral, FlightClock
     from rollenv.layout import OBSERVATION_NAMES
 
-    now = [*OBSERVATION_NAMES, *(("v_hat_dps", "psi_hat_deg", "u_d_hat_deg") if observer else ())]
-    now += list(FlightClock.NAMES) if flight_clock else []
-    now += list(ErrorIntegral.NAMES) if integral else []
-    past = [f"{name}@t-{k}" for k in range(1, history + 1) for name in now]
-    return now + past + [f"action@t-{k}" for k in range(1, history + 1)]
+    layout = layout or PolicyLayout()
+    now = [*OBSERVATION_NAMES]
+    now += ["v_hat_dps", "psi_hat_deg", "u_d_hat_deg"] if layout.observer else []
+    now += list(FlightClock.NAMES) if layout.flight_clock else []
+    now += list(ErrorIntegral.NAMES) if layout.integral else []
+    past = [f"{name}@t-{k}" for k in range(1, layout.history + 1) for name in now]
+    return now + past + [f"action@t-{k}" for k in range(1, layout.history + 1)]
 
 
-def normalization_record(
-    venv: Any,
-    history: int = 0,
-    observer: bool = False,
-    flight_clock: bool = False,
-    integral: bool = False,
-) -> dict[str, Any]:
-    """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data."""
-    names = observation_names(history, observer, flight_clock, integral)
+def normalization_record(venv: Any, layout: PolicyLayout | None = None) -> dict[str, Any]:
+    """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data, for
+    a policy of ``layout``."""
+    names = observation_names(layout)
     if venv is None or not venv.norm_obs:
         return {"norm_obs": False, "observation_names": names}
     rms = venv.obs_rms

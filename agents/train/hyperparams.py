@@ -8,12 +8,13 @@ import inspect
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, RootModel, field_validator, model_validator
 
+from agents.memory import PolicyLayout
 from rocketroll_common.errors import UsageError
 from rocketroll_common.specs import Count, Whole, load_yaml, place, validated
 
@@ -125,25 +126,12 @@ class Hyperparameters:
         The file.
     algo : str
         The algorithm the entry is for.
-    history : int
-        Steps of past observations and actions beside the observation (0: none).
     noise : tuple or None
         ``("normal", sd)``: Gaussian exploration noise on the action (SAC, TD3).
-    observer : bool
-        The observer's estimate in the observation.
-    residual : float
-        0, or the scale of the action as a residual on the observer controller's
-        command (:class:`agents.observer.ObserverFeatures`).
-    incremental : float
-        0, or the scale of the action as a change of the last fin command
-        (:class:`agents.vecenv.VecIncremental`).
-    flight_clock : bool
-        The flight's phase in the observation (:class:`agents.memory.FlightClock`).
-    integral : float
-        0, or the time constant (s) of the observed error's leaky integral in the
-        observation (:class:`agents.memory.ErrorIntegral`).
-    integral_clip : float or None
-        The largest error magnitude that integral integrates (None: no clip).
+    layout : PolicyLayout
+        What the policy reads and sends beyond the env's observation and action: history,
+        the observer's estimate, a residual or incremental action, the flight's phase, the
+        error's integral; ``settings.json`` records it (:meth:`PolicyLayout.record`).
     """
 
     env_id: str
@@ -155,29 +143,8 @@ class Hyperparameters:
     algo_kwargs: dict[str, Any]
     source: str
     algo: str = "ppo"
-    history: int = 0
     noise: tuple[str, float] | None = None
-    observer: bool = False
-    residual: float = 0.0
-    incremental: float = 0.0
-    flight_clock: bool = False
-    integral: float = 0.0
-    integral_clip: float | None = None
-
-    def layout(self) -> dict[str, Any]:
-        """What the policy reads and sends beyond the env's observation and action (the keys
-        set: ``history``, ``observer``, ``residual``, ``incremental``, ``flight_clock``,
-        ``integral``, ``integral_clip``), as ``settings.json`` records them and
-        :class:`agents.learned.LearnedController` rebuilds the policy's observation."""
-        return {
-            **({"history": self.history} if self.history else {}),
-            **({"observer": True} if self.observer else {}),
-            **({"residual": self.residual} if self.residual else {}),
-            **({"incremental": self.incremental} if self.incremental else {}),
-            **({"flight_clock": True} if self.flight_clock else {}),
-            **({"integral": self.integral} if self.integral else {}),
-            **({"integral_clip": self.integral_clip} if self.integral_clip is not None else {}),
-        }
+    layout: PolicyLayout = field(default_factory=PolicyLayout)
 
 
 # ------------------------------------------------------------------------ hyperparameters
@@ -350,14 +317,16 @@ def load_hyperparameters(
         algo_kwargs=algo_kwargs,
         source=str(path),
         algo=algo,
-        history=entry.history,
         noise=noise,
-        observer=observer,
-        residual=float(entry.residual),
-        incremental=float(entry.incremental),
-        flight_clock=entry.flight_clock,
-        integral=float(entry.integral),
-        integral_clip=None if entry.integral_clip is None else float(entry.integral_clip),
+        layout=PolicyLayout(
+            history=entry.history,
+            observer=observer,
+            residual=float(entry.residual),
+            incremental=float(entry.incremental),
+            flight_clock=entry.flight_clock,
+            integral=float(entry.integral),
+            integral_clip=None if entry.integral_clip is None else float(entry.integral_clip),
+        ),
     )
 
 

@@ -213,9 +213,9 @@ def _memory_bytes() -> int | None:
 
 def _integral_line(hp: Hyperparameters) -> str:
     """The error integral of ``hp`` as the run's table shows it."""
-    line = f"in the observation, time constant {hp.integral:g} s"
-    if hp.integral_clip is not None:
-        line += f", integrand clipped at {hp.integral_clip:g}"
+    line = f"in the observation, time constant {hp.layout.integral:g} s"
+    if hp.layout.integral_clip is not None:
+        line += f", integrand clipped at {hp.layout.integral_clip:g}"
     return line
 
 
@@ -235,7 +235,7 @@ def _check_size(
             f"{steps // args.checkpoint_freq:,} checkpoints, more than {MAX_CHECKPOINTS}: give "
             f"at least --checkpoint-freq {-(-steps // MAX_CHECKPOINTS):,}, or 0 for none"
         )
-    width = len(observation_names(hp.history, hp.observer, hp.flight_clock, bool(hp.integral))) + 1
+    width = len(observation_names(hp.layout)) + 1
     if algo == "ppo":  # SB3's rollout buffer: observation, action and six float32s a step
         n_steps = int(kwargs.get("n_steps", 2048))
         need, what = 4 * n_steps * n_envs * (width + 6), f"--envs {n_envs} x n_steps {n_steps}"
@@ -336,20 +336,24 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         ("resume", args.resume if args.resume is not None else "-"),
         ("policy", hp.policy),
         ("normalize", hp.normalize if hp.normalize is not None else "off"),
-        ("history", f"{hp.history} steps" if hp.history else "off"),
-        ("observer estimate", "in the observation" if hp.observer else "off"),
-        *((("residual", f"x {hp.residual:g} on the observer's command"),) if hp.residual else ()),
+        ("history", f"{hp.layout.history} steps" if hp.layout.history else "off"),
+        ("observer estimate", "in the observation" if hp.layout.observer else "off"),
         *(
-            (("incremental", f"x {hp.incremental:g}: a change of the last command"),)
-            if hp.incremental
+            (("residual", f"x {hp.layout.residual:g} on the observer's command"),)
+            if hp.layout.residual
+            else ()
+        ),
+        *(
+            (("incremental", f"x {hp.layout.incremental:g}: a change of the last command"),)
+            if hp.layout.incremental
             else ()
         ),
         *(
             (("flight clock", "the flight's gain and damping in the observation"),)
-            if hp.flight_clock
+            if hp.layout.flight_clock
             else ()
         ),
-        *((("error integral", _integral_line(hp)),) if hp.integral else ()),
+        *((("error integral", _integral_line(hp)),) if hp.layout.integral else ()),
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.algo_kwargs[k]) for k in hp.algo_kwargs),
         ("env_kwargs", hp.env_kwargs or "-"),
@@ -426,9 +430,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     # The result: the final model and its observation statistics (as JSON, and as SB3's
     # VecNormalize pickle for `VecNormalize.load`).
     model.save(out / "model.zip")
-    norm_record = normalization_record(
-        normalize, hp.history, hp.observer, hp.flight_clock, bool(hp.integral)
-    )
+    norm_record = normalization_record(normalize, hp.layout)
     (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
     if normalize is not None:
         from stable_baselines3.common.vec_env import sync_envs_normalization
@@ -449,7 +451,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 "policy": hp.policy,
                 "normalize": hp.normalize,
                 "env_kwargs": hp.env_kwargs,
-                **hp.layout(),
+                **hp.layout.record(),
                 **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
                 **hp.algo_kwargs,
             }

@@ -24,6 +24,7 @@ from agents.actor import ActorChain
 from agents.base import FlightView
 from agents.cli import TRAIN_COMMAND as COMMAND
 from agents.learned import LearnedController, ObservationNormalizer
+from agents.memory import PolicyLayout
 from agents.train import (
     DEFAULT_HYPERPARAMS,
     VECNORMALIZE_FILE,
@@ -382,6 +383,31 @@ def test_the_shipped_hyperparameters_load_for_both_tasks():
         assert (hp.algo_kwargs["n_steps"] * hp.n_envs) % hp.algo_kwargs["batch_size"] == 0
 
 
+def test_a_policys_layout_is_read_back_as_it_was_recorded(tmp_path):
+    """What training records of a policy's layout (`settings.json`'s hyperparameters) is what
+    the controller reads back; keys absent from an older run's settings mean "not used", and
+    a residual implies the observer's estimate."""
+    layouts = [
+        PolicyLayout(),
+        PolicyLayout(history=2, incremental=0.1),
+        PolicyLayout(history=4, observer=True, residual=0.25),
+        PolicyLayout(flight_clock=True, integral=10.0, integral_clip=3.0),
+    ]
+    for layout in layouts:
+        recorded = json.loads(json.dumps({"hyperparameters": {"n_envs": 4, **layout.record()}}))
+        assert PolicyLayout.from_settings(recorded) == layout
+    assert PolicyLayout().record() == {}
+    assert PolicyLayout.from_settings({}) == PolicyLayout()
+    assert PolicyLayout.from_settings({"hyperparameters": {"residual": 0.5}}).observer
+    path = tmp_path / "hp.yml"
+    path.write_text(
+        TINY.replace("  n_steps: 32", "  history: 2\n  integral: 5\n  n_steps: 32"),
+        encoding="utf-8",
+    )
+    hp = load_hyperparameters(path, "RocketRoll-v0")
+    assert hp.layout == PolicyLayout(history=2, integral=5.0)
+
+
 # ------------------------------------------------------------------ SAC, TD3, memory
 TINY_OFF_POLICY = """\
 RocketRoll-v0:
@@ -595,7 +621,7 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
             ("ppo-observer", "ppo"),
         ]:
             hp = load_hyperparameters(HYPERPARAMS_DIR / f"{name}.yml", env_id, algo)
-            assert hp.history >= 1 and hp.n_timesteps is not None, (name, env_id)
+            assert hp.layout.history >= 1 and hp.n_timesteps is not None, (name, env_id)
     zero = load_hyperparameters(HYPERPARAMS_DIR / "ppo-zero.yml", "RocketRoll-v0")
     assert zero.env_kwargs == {"setpoint": "zero"}
     plain = load_hyperparameters(DEFAULT_HYPERPARAMS, "RocketRoll-v0")
@@ -605,7 +631,7 @@ def test_the_shipped_off_policy_and_memory_hyperparameters_load():
         plain.n_timesteps,
     )
     residual = load_hyperparameters(HYPERPARAMS_DIR / "ppo-residual.yml", "RocketRoll-v0")
-    assert residual.residual == 0.25 and residual.observer
+    assert residual.layout.residual == 0.25 and residual.layout.observer
     assert residual.env_kwargs == {"setpoint": "zero"}
 
 
@@ -640,7 +666,7 @@ def test_the_observer_refuses_env_kwargs_that_change_its_design(tmp_path):
     with pytest.raises(UsageError, match="observer: true with env_kwargs 'method'"):
         load_hyperparameters(path, "RocketRoll-v0")
     path.write_text(TINY + "  observer: true\n  env_kwargs: {setpoint_range: 20}\n", "utf-8")
-    assert load_hyperparameters(path, "RocketRoll-v0").observer
+    assert load_hyperparameters(path, "RocketRoll-v0").layout.observer
 
 
 # ------------------------------------------------------------------ residual on the observer
@@ -685,7 +711,7 @@ def test_a_residual_policy_adds_its_action_to_the_observer_controllers(residual_
     reference, (train_config, bank) = _observer_on_train(small_db)
     controller.attach_observer(train_config, bank)
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
-    assert hp.observer and hp.residual == 0.25
+    assert hp.layout.observer and hp.layout.residual == 0.25
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
     assert isinstance(stack.venv.venv.features, ObserverFeatures)
     _use_statistics(normalize, out)

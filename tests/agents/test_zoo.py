@@ -35,7 +35,7 @@ def test_rl_zoo3_trains_on_the_zoo_format_file(algo: str, tmp_path: Path, defaul
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_the_project_reads_the_zoo_format_files_as_the_zoo_does(algo: str) -> None:
     hp = load_hyperparameters(HYPERPARAMS / f"{algo}.yml", "RocketRoll-v0", algo)
-    assert not hp.history and not hp.observer  # the project's own keys live elsewhere
+    assert not hp.layout.history and not hp.layout.observer  # the project's own keys live elsewhere
     if algo == "ppo":
         assert hp.algo_kwargs["policy_kwargs"] == {
             "net_arch": [64, 64],
@@ -44,7 +44,7 @@ def test_the_project_reads_the_zoo_format_files_as_the_zoo_does(algo: str) -> No
         }
     mine = load_hyperparameters(HYPERPARAMS / f"{algo}-history.yml", "RocketRoll-v0", algo)
     if algo != "ppo":
-        assert mine.history == 4 and mine.algo_kwargs == hp.algo_kwargs
+        assert mine.layout.history == 4 and mine.algo_kwargs == hp.algo_kwargs
 
 
 def test_a_zoo_string_is_read_without_eval() -> None:
