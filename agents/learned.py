@@ -62,7 +62,7 @@ class ObservationNormalizer:
             self._scale = np.sqrt(self.var + self.epsilon)
 
     def __call__(self, obs: NDArray[Any]) -> NDArray[np.float32]:
-        """``obs`` (shape ``(..., len(Obs))``) normalised as in training, float32."""
+        """``obs`` (shape ``(..., size)``) normalised as in training, float32."""
         if not self.enabled:
             return np.asarray(obs, dtype=np.float32)
         normalized = np.clip((obs - self.mean) / self._scale, -self.clip_obs, self.clip_obs)
@@ -260,10 +260,11 @@ class LearnedController:
         return self.chain(self.normalizer(seen)).reshape(1)
 
     def predict(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches),
-        for a policy that reads the observation alone (no history, observer estimate, flight
-        phase or error integral); the policy's action, which for an incremental or
-        residual policy is not yet the command :meth:`act` returns."""
+        """The same action through SB3's ``model.predict`` (the reference :meth:`act` matches)
+        on ``obs``, the whole vector the policy reads (for a policy with a history, observer
+        estimate, flight phase or error integral, those too: :meth:`act` builds it); the
+        policy's action, which for an incremental or residual policy is not yet the command
+        :meth:`act` returns."""
         return self._predict(np.asarray(obs, dtype=np.float32).reshape(1, self._dim))
 
     def _predict(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -179,7 +179,7 @@ class PolicyLayout:
     """What a trained policy reads and sends beyond the env's observation and action.
 
     Training writes it into ``settings.json``'s ``hyperparameters`` (:meth:`record`, from
-    :meth:`agents.train.Hyperparameters.layout`); :class:`agents.learned.LearnedController`
+    :attr:`agents.train.Hyperparameters.layout`); :class:`agents.learned.LearnedController`
     reads it back (:meth:`from_settings`) to rebuild the policy's observation and command.
 
     Attributes
@@ -189,7 +189,8 @@ class PolicyLayout:
     observer : bool
         The observer's estimate in the observation (implied by ``residual``).
     residual : float
-        0, or the scale of the action as a residual on the observer controller's command.
+        0, or the scale of the action as a residual on the observer controller's command
+        (the observer's estimate is then in the observation: ``observer`` is set).
     incremental : float
         0, or the scale of the action as a change of the last fin command.
     flight_clock : bool
@@ -208,6 +209,10 @@ class PolicyLayout:
     flight_clock: bool = False
     integral: float = 0.0
     integral_clip: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.residual and not self.observer:  # a residual acts on the observer's command
+            object.__setattr__(self, "observer", True)
 
     def record(self) -> dict[str, Any]:
         """The keys ``settings.json`` records, those set only."""
@@ -229,7 +234,7 @@ class PolicyLayout:
         clip = hyper.get("integral_clip")
         return cls(
             history=int(hyper.get("history") or 0),
-            observer=bool(hyper.get("observer", False)) or residual > 0,
+            observer=bool(hyper.get("observer", False)),
             residual=residual,
             incremental=float(hyper.get("incremental") or 0.0),
             flight_clock=bool(hyper.get("flight_clock", False)),

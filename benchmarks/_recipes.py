@@ -15,7 +15,7 @@ from agents.train import HYPERPARAMS_DIR
 
 __all__ = ["DEFAULT_RECIPES", "Recipe", "parse_recipe"]
 
-#: Before and after: the committed policy's recipe (16 envs x 256 steps, batch 256,
+#: Before and after: the default recipe (16 envs x 256 steps, batch 256,
 #: 1 thread) and the throughput recipe (512 envs x 32 steps, batch 8192, 2 threads).
 DEFAULT_RECIPES = (
     f"ppo.yml={HYPERPARAMS_DIR / 'ppo.yml'}@1",

@@ -2,7 +2,7 @@
 side in the same run, each against its environment stepping alone.
 
 For each recipe (``--recipe LABEL=YAML[@THREADS]``, repeatable; default: the
-committed policy's ``ppo.yml`` with 1 torch thread, *before*, and the throughput
+default recipe, ``ppo.yml``, with 1 torch thread, *before*, and the throughput
 recipe ``ppo-fast.yml`` with 2, *after*) this measures, in one run:
 
 * **PPO training**: ``PPO.learn`` on ``VecNormalize(VecMonitor(RollVecEnv))``

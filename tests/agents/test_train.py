@@ -399,6 +399,7 @@ def test_a_policys_layout_is_read_back_as_it_was_recorded(tmp_path):
     assert PolicyLayout().record() == {}
     assert PolicyLayout.from_settings({}) == PolicyLayout()
     assert PolicyLayout.from_settings({"hyperparameters": {"residual": 0.5}}).observer
+    assert PolicyLayout(residual=0.25) == PolicyLayout(residual=0.25, observer=True)
     path = tmp_path / "hp.yml"
     path.write_text(
         TINY.replace("  n_steps: 32", "  history: 2\n  integral: 5\n  n_steps: 32"),
