@@ -348,7 +348,10 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
     """The results as a Markdown table (mean ± SD, worst case in brackets).
 
     The headline comes first, then its paired difference to the PID (mean ±
-    SEM over the common episodes, and how many SEMs that is)."""
+    SEM over the common episodes, and how many SEMs that is, where the SEM shows: a
+    difference shown ``± 0.00`` -- episodes that are copies of one another, as on a
+    recording too short for more than one window -- gets no count, which would be a
+    ratio of rounding noise)."""
     unit = "°" if config.task == "angle" else "°/s"
     reference = pid_result(results)
     head = (
@@ -370,7 +373,7 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
         if reference is not None and r is not reference:
             mean, sem = paired_difference(r, reference)
             if not np.isnan(sem):
-                z = f" ({abs(mean) / sem:.1f} SEM)" if sem > 0 else ""
+                z = f" ({abs(mean) / sem:.1f} SEM)" if sem >= 0.005 else ""
                 versus = f"{mean:+.2f} ± {sem:.2f}{z}"
         lines.append(
             f"| {r.name} | {cell(HEADLINE)} | {versus} | {cell('settle_time_s', 1)} "

@@ -172,6 +172,26 @@ def test_paired_difference_is_over_common_episodes():
     assert sem == pytest.approx(diff.std(ddof=1) / math.sqrt(3))
 
 
+def test_the_table_counts_sems_only_where_the_sem_shows():
+    """Episodes that are copies of one another (a recording with room for one window) give a
+    paired SEM of rounding noise: the table shows ``± 0.00`` and no count of SEMs."""
+    cfg = make_config("RocketRoll-v0", {"split": "test"})
+    names = [HEADLINE, "settle_time_s", "settled_rms_error", "rms_error", "max_error"]
+    names += ["fin_travel_dps", "rate_limit_pct", "range_limit_pct", "return"]
+
+    def result(name, values):
+        episodes = [{"episode": i, HEADLINE: v} for i, v in enumerate(values)]
+        nan = {"mean": math.nan, "sd": math.nan, "worst": math.nan}
+        return Evaluation(name, episodes, dict.fromkeys(names, nan), [])
+
+    pid = result("PID", [0.11 + 1e-12 * k for k in range(20)])
+    copies = result("trim", [0.02] * 20)
+    spread = result("observer", [0.0, 0.1] * 10)
+    rows = markdown_table([pid, copies, spread], cfg).splitlines()
+    assert rows[3].startswith("| trim | – | -0.09 ± 0.00 | – |"), rows[3]
+    assert rows[4].startswith("| observer | – | -0.06 ± 0.01 (5.2 SEM) | – |"), rows[4]
+
+
 def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
     out = tmp_path / "eval"
     code = rocketroll(
