@@ -30,3 +30,28 @@ def default_db(_private_default_database: Path) -> Path:
     with open_default(progress=False):
         pass
     return _private_default_database
+
+
+#: The modules that take longest (minutes of CPU each in the parallel run), in that order.
+#: pytest-xdist's --dist loadfile hands modules out in collection order, so these go first
+#: and the short ones fill in after: otherwise the last heavy module (collected last, being
+#: top-level) runs alone while the other workers have finished.
+SLOWEST_MODULES = (
+    "tests/test_benchmarks.py",
+    "tests/test_figures.py",
+    "tests/identification/test_flightfit.py",
+    "tests/test_new_user.py",
+    "tests/agents/test_sweep.py",
+    "tests/rollenv/test_env.py",
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The slowest modules first, every module's tests in their own order."""
+    root = config.rootpath
+
+    def rank(item: pytest.Item) -> int:
+        module = item.path.relative_to(root).as_posix() if item.path.is_relative_to(root) else ""
+        return SLOWEST_MODULES.index(module) if module in SLOWEST_MODULES else len(SLOWEST_MODULES)
+
+    items.sort(key=rank)  # stable
