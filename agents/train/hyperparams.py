@@ -287,9 +287,17 @@ def load_hyperparameters(
                 f"{where}: unknown normalize key(s) {', '.join(map(repr, bad))}; known: "
                 f"{', '.join(NORMALIZE_KEYS)}"
             )
-    observer = bool(entry.observer) or entry.residual > 0
+    layout = PolicyLayout(  # a residual implies the observer's estimate
+        history=entry.history,
+        observer=bool(entry.observer),
+        residual=float(entry.residual),
+        incremental=float(entry.incremental),
+        flight_clock=entry.flight_clock,
+        integral=float(entry.integral),
+        integral_clip=None if entry.integral_clip is None else float(entry.integral_clip),
+    )
     redesign = sorted(set(entry.env_kwargs) & set(OBSERVER_DESIGN))
-    if observer and redesign:
+    if layout.observer and redesign:
         raise UsageError(
             f"{where}: observer: true with env_kwargs {redesign[0]!r}: the observer is designed "
             "on the train split of the environment evaluated, which that setting changes"
@@ -318,15 +326,7 @@ def load_hyperparameters(
         source=str(path),
         algo=algo,
         noise=noise,
-        layout=PolicyLayout(
-            history=entry.history,
-            observer=observer,
-            residual=float(entry.residual),
-            incremental=float(entry.incremental),
-            flight_clock=entry.flight_clock,
-            integral=float(entry.integral),
-            integral_clip=None if entry.integral_clip is None else float(entry.integral_clip),
-        ),
+        layout=layout,
     )
 
 
