@@ -28,8 +28,9 @@ up to AVX2 and FMA (numpy's ``X86_V3`` level), one OpenBLAS thread -- what every
 x86-64-v3 processor runs alike, AMD or Intel -- and the C library's own choice
 of its ``exp``, ``log``, ``tanh`` ... (``GLIBC_TUNABLES`` cleared: with FMA, every
 such processor takes the same ones).  Where the machine cannot be pinned (not
-x86-64 Linux, or a processor without AVX2 and FMA) the computation runs in this
-process, as it would anyway.  The results are the same for the same versions
+x86-64 Linux, or a processor without AVX2 and FMA), or the environment says
+``ROCKETROLL_NUMERICS=unpinned``, the computation runs in this process, as it
+would anyway.  The results are the same for the same versions
 of numpy, scipy, numba and the C library (the Makefile's ``constraints.txt``
 fixes the first three; machines of one kind share the last).
 """
@@ -56,6 +57,7 @@ __all__ = [
     "MARKER",
     "call_pinned",
     "is_pinned",
+    "is_unpinned",
     "one_blas_thread",
     "pinned_environment",
     "with_settings",
@@ -77,7 +79,9 @@ def one_blas_thread() -> None:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
-#: Set to ``pinned`` in a process started under :func:`pinned_environment`.
+#: Set to ``pinned`` in a process started under :func:`pinned_environment`; set to
+#: ``unpinned`` by a user (or a test run) to compute everything in its own process, under
+#: the machine's own numerics, as on a machine that cannot be pinned.
 MARKER = "ROCKETROLL_NUMERICS"
 #: OpenBLAS's kernels for AVX2 and FMA, on any processor.
 _OPENBLAS_CORE = "Haswell"
@@ -193,6 +197,12 @@ def is_pinned() -> bool:
     return os.environ.get(MARKER) == "pinned"
 
 
+def is_unpinned() -> bool:
+    """Whether this process's environment asks for the machine's own numerics
+    (``ROCKETROLL_NUMERICS=unpinned``): :func:`call_pinned` then computes here."""
+    return os.environ.get(MARKER) == "unpinned"
+
+
 def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     """``function(*args, **kwargs)`` computed under the pinned numerics.
 
@@ -212,7 +222,7 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     main thread did not see: the kernel may hand a process's signal to any of
     its threads) raises ``KeyboardInterrupt`` here too, once it has cleaned up.
     """
-    env = None if is_pinned() else pinned_environment()
+    env = None if is_pinned() or is_unpinned() else pinned_environment()
     if env is None:
         return function(*args, **kwargs)
     try:

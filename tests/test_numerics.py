@@ -69,25 +69,65 @@ def fails(message: str) -> None:
     raise SettingError("--size", message)
 
 
-def _in_a_process(setting: str) -> tuple[str, str]:
-    """(pinned, unpinned) fingerprints computed by a new process under ``setting``."""
+def openblas_kernel() -> str:
+    """The kernel OpenBLAS chose in this process (``openblas_get_corename``), by the
+    instruction set it computes with: a processor's own kernels of one level (Haswell,
+    Zen: AVX2 and FMA) are the same arithmetic."""
+    import ctypes
+
+    libs = Path(np.__file__).parent.with_name("numpy.libs")
+    name = "unknown"
+    for lib in sorted(libs.glob("libscipy_openblas*.so*")):
+        handle = ctypes.CDLL(str(lib))
+        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename"):
+            corename = getattr(handle, symbol, None)
+            if corename is not None:
+                corename.restype = ctypes.c_char_p
+                name = corename().decode()
+                break
+    return _KERNEL_LEVELS.get(name.lower(), name)
+
+
+#: OpenBLAS's kernel names -> the instruction set they compute with.
+_KERNEL_LEVELS = {
+    **dict.fromkeys(("skylakex", "cooperlake", "sapphirerapids"), "AVX-512"),
+    **dict.fromkeys(("haswell", "zen"), "AVX2 and FMA"),
+    **dict.fromkeys(("sandybridge",), "AVX"),
+}
+
+
+def measured() -> tuple[str, str, str, bool]:
+    """(pinned, unpinned) fingerprints, the OpenBLAS kernel, and whether numpy's loops use
+    AVX-512, as this process sees them."""
+    features = importlib.import_module("numpy._core._multiarray_umath").__cpu_features__
+    pinned = numerics.call_pinned(fingerprint)
+    return pinned, fingerprint(), openblas_kernel(), bool(features.get("X86_V4"))
+
+
+def _in_a_process(setting: str) -> tuple[str, str, str, bool]:
+    """:func:`measured` by a new process under ``setting``."""
     env = numerics.with_settings(numerics.MACHINE_SETTINGS[setting])
-    code = (
-        "from rocketroll_common.numerics import call_pinned\n"
-        "from tests.test_numerics import fingerprint\n"
-        "print(call_pinned(fingerprint), fingerprint())\n"
-    )
+    code = "from tests.test_numerics import measured\nprint(*measured())\n"
     done = python(["-c", code], REPO, env, check=True)
-    pinned, unpinned = done.stdout.split()
-    return pinned, unpinned
+    pinned, unpinned, *kernel, avx512 = done.stdout.split()
+    return pinned, unpinned, " ".join(kernel), avx512 == "True"
 
 
 @pinnable
 def test_the_pinned_bits_are_the_same_under_every_environment() -> None:
     found = {name: _in_a_process(name) for name in VARIED}
-    assert len({pinned for pinned, _ in found.values()}) == 1, found
-    # The environments are really different: unpinned, the same arithmetic differs.
-    assert len({unpinned for _, unpinned in found.values()}) >= 3, found
+    assert len({pinned for pinned, *_ in found.values()}) == 1, found
+    # The environments are really different, and as different as the processor makes them:
+    # unpinned, two settings compute the same bits exactly when they run the same arithmetic
+    # (OpenBLAS's kernel and numpy's AVX-512 loops, as each process reports them).  Without
+    # AVX-512 (the processor's, or hidden by NPY_DISABLE_CPU_FEATURES) that is two kinds,
+    # OpenBLAS's AVX kernel and the processor's own; with it, three or more.
+    kinds = {name: (kernel, avx512) for name, (_, _, kernel, avx512) in found.items()}
+    for a in VARIED:
+        for b in VARIED:
+            same_bits = found[a][1] == found[b][1]
+            assert same_bits == (kinds[a] == kinds[b]), (a, b, found)
+    assert len(set(kinds.values())) >= 2, found
 
 
 @pinnable
@@ -112,6 +152,10 @@ def test_a_pinned_process_or_a_local_function_computes_here(
 ) -> None:
     monkeypatch.setenv(numerics.MARKER, "pinned")
     assert numerics.call_pinned(os.getpid) == os.getpid()
+    monkeypatch.setenv(numerics.MARKER, "unpinned")  # the user's choice: no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert numerics.call_pinned(os.getpid) == os.getpid()
     monkeypatch.delenv(numerics.MARKER)
     if numerics.pinned_environment() is None:
         return
