@@ -36,6 +36,7 @@ from rocketroll_common.settings import Command, check, setting
 
 __all__ = [
     "COMMANDS",
+    "RECIPE_COMMAND",
     "SAC_COMMAND",
     "SWEEP_COMMAND",
     "TD3_COMMAND",
@@ -72,6 +73,59 @@ TD3_COMMAND = Command(
     TD3Args,
     _train,
     agents.train.__doc__ or "",
+)
+
+
+@dataclass(frozen=True)
+class RecipeArgs:
+    """``rocketroll train recipe``."""
+
+    name: str | None = setting(
+        None, help="a shipped recipe (none: list them)", positional=True, metavar="NAME"
+    )
+    out: Path | None = setting(
+        None, "write a copy of the recipe to this file (to edit it)", output="file"
+    )
+
+    def __post_init__(self) -> None:
+        check(self)
+        shipped = agents.train.shipped_recipes()
+        if self.name is not None and self.name not in shipped:
+            raise UsageError(
+                f"NAME {self.name}: no shipped recipe of that name (those are: "
+                f"{', '.join(shipped)})"
+            )
+        if self.out is not None and self.name is None:
+            raise UsageError("--out copies one recipe: name it (rocketroll train recipe NAME)")
+
+
+def _recipe(args: RecipeArgs) -> int:
+    from rocketroll_common.files import write_atomic
+    from rocketroll_common.specs import load_yaml
+
+    if args.name is None:
+        for name in agents.train.shipped_recipes():
+            document, _ = load_yaml(agents.train.recipe_path(name))
+            keys = ", ".join(map(str, document)) if isinstance(document, dict) else "?"
+            print(f"{name:<14} {keys}")
+        print(f"(in {agents.train.HYPERPARAMS_DIR}; rocketroll train ppo --hyperparams NAME)")
+        return 0
+    path = agents.train.recipe_path(args.name)
+    if args.out is None:
+        print(path)  # for rl-zoo: -conf "$(rocketroll train recipe ppo)"
+        return 0
+    write_atomic(args.out, path.read_text(encoding="utf-8"))
+    print(f"wrote {args.out}: a copy of {path}")
+    return 0
+
+
+#: ``rocketroll train recipe [NAME]``: the shipped hyperparameter files, by name.
+RECIPE_COMMAND = Command(
+    "recipe",
+    "the shipped hyperparameter recipes: list them, print one's path (for rl-zoo's -conf) "
+    "or --out a copy",
+    RecipeArgs,
+    _recipe,
 )
 
 
@@ -238,7 +292,7 @@ COMMANDS: dict[str, Command] = {
         "train",
         "train a controller (PPO, SAC, TD3; Stable-Baselines3)",
         description=agents.train.__doc__ or "",
-        subcommands=(TRAIN_COMMAND, SAC_COMMAND, TD3_COMMAND),
+        subcommands=(TRAIN_COMMAND, SAC_COMMAND, TD3_COMMAND, RECIPE_COMMAND),
     ),
     "eval": evaluate.COMMAND,
     "seeds": seeds.COMMAND,

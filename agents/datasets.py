@@ -48,11 +48,14 @@ def check_minari(prefix: str, controllers: Sequence[str]) -> dict[str, str]:
         ) from exc
     from minari.dataset.minari_dataset import parse_dataset_id
 
+    if not _ID.match(prefix):
+        raise UsageError(
+            f"--minari {prefix!r}: not a dataset name Minari takes ([NAMESPACE/]NAME, as in "
+            "rocketroll/angle-test)"
+        )
     ids = {name: dataset_id(prefix, name) for name in controllers}
     for made in ids.values():
         try:
-            if not _ID.match(prefix):
-                raise ValueError(prefix)
             parse_dataset_id(made)
         except ValueError:
             raise UsageError(

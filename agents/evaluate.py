@@ -31,7 +31,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import Controller, EpisodeSpec, Evaluation, FlightView
-from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
+from agents.registry import (
+    check_policy,
+    default_policies,
+    make_controller,
+    policy_help,
+    unnamed_defaults,
+)
 from agents.replay import (
     check_options,
     db_setting,
@@ -476,6 +482,12 @@ class Args:
         check_options(self.settings)
 
 
+        for policy in unnamed_defaults(self.policy, default_policies(), self.env_id):
+            check_policy(policy, self.env_id)  # before any database is opened
+        if self.minari is not None:  # the extra and the prefix; the ids once named
+            from agents.datasets import check_minari
+
+            check_minari(self.minari, [])
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
     args = replace(args, policy=unnamed_defaults(args.policy, default_policies(), args.env_id))

@@ -21,7 +21,14 @@ from disturbances.bank import TraceBank
 from rollenv.core import RollConfig
 from rollenv.layout import Obs
 
-__all__ = ["COMMITTED", "LearnedController", "ObservationNormalizer", "make_learned", "make_ppo"]
+__all__ = [
+    "COMMITTED",
+    "LearnedController",
+    "ObservationNormalizer",
+    "check_run",
+    "make_learned",
+    "make_ppo",
+]
 
 
 class ObservationNormalizer:
@@ -281,15 +288,48 @@ def make_ppo(design: Design) -> LearnedController:
     return make_learned(design, "ppo")
 
 
+def _run_folder(algorithm: str, arg: str | None, env_id: str) -> Path:
+    """The training output ``--policy ALGO[:DIR]`` names (PPO: by default the committed
+    policy of the env id)."""
+    if arg:
+        return shipped_path(arg)
+    if algorithm == "ppo":
+        return COMMITTED / env_id
+    raise ValueError(f"--policy {algorithm}:DIR needs the folder of a training run")
+
+
+def check_run(algorithm: str, arg: str | None, env_id: str) -> None:
+    """Refuse (``ValueError``, naming the value) a ``--policy ALGO[:DIR]`` whose folder is not
+    a ``rocketroll train ALGO`` output: no folder, no ``model.zip`` or ``normalize.json``,
+    or another algorithm's run.  The registry's check, before any design."""
+    path = _run_folder(algorithm, arg, env_id)
+    shown = f"--policy {algorithm}{f':{arg}' if arg else ''}"
+    if not path.is_dir():
+        raise ValueError(f"{shown}: no such folder {path} (a `rocketroll train` output?)")
+    for required in ("model.zip", "normalize.json"):
+        if not (path / required).is_file():
+            raise ValueError(
+                f"{shown}: {path / required}: not found (a `rocketroll train` output?)"
+            )
+    settings_file = path / "settings.json"
+    if settings_file.is_file():
+        try:
+            trained = str(
+                json.loads(settings_file.read_text(encoding="utf-8")).get("algorithm", "ppo")
+            )
+        except (ValueError, AttributeError):
+            raise ValueError(f"{shown}: {settings_file}: not a run's settings (JSON)") from None
+        if trained != algorithm:
+            raise ValueError(
+                f"{shown}: that run trained {trained.upper()}, not {algorithm.upper()} (use "
+                f"--policy {trained}:{arg or path})"
+            )
+
+
 def make_learned(design: Design, algorithm: str) -> LearnedController:
     """``--policy ALGO[:DIR]``: a ``rocketroll train ALGO`` output (PPO: by default the
     committed policy of the env id)."""
-    if design.arg:
-        path = shipped_path(design.arg)
-    elif algorithm == "ppo":
-        path = COMMITTED / design.env_id
-    else:
-        raise ValueError(f"--policy {algorithm}:DIR needs the folder of a training run")
+    path = _run_folder(algorithm, design.arg, design.env_id)
     try:
         learned = LearnedController.load(path)
     except FileNotFoundError as exc:

@@ -51,7 +51,7 @@ from agents.nominal import NominalModel
 from agents.observer import ObserverController, TurbulenceModel, designed_on, scheduling
 from rollenv.core import RollConfig
 
-__all__ = ["DEFAULT_HORIZON", "MAX_HORIZON", "MPCController", "make_mpc"]
+__all__ = ["DEFAULT_HORIZON", "MAX_HORIZON", "MPCController", "check_horizon", "make_mpc"]
 
 FloatArray = NDArray[np.float64]
 
@@ -267,22 +267,30 @@ class MPCController(ObserverController):
             self._use_step(self.schedule_step)
 
 
+def check_horizon(policy: str, arg: str | None, env_id: str = "") -> int:
+    """``HORIZON`` of ``--policy mpc:HORIZON`` (:data:`DEFAULT_HORIZON` when not given);
+    ``ValueError`` naming the value if it is not a whole number of steps from 1 to
+    :data:`MAX_HORIZON`.  The registry's check, before any design."""
+    if not arg:
+        return DEFAULT_HORIZON
+    try:
+        horizon = int(arg)
+    except ValueError:
+        raise ValueError(
+            f"--policy {policy}:HORIZON needs a whole number of steps, got {arg!r}"
+        ) from None
+    if not 1 <= horizon <= MAX_HORIZON:
+        raise ValueError(
+            f"--policy {policy}:HORIZON must be 1 to {MAX_HORIZON} steps "
+            f"({MAX_HORIZON / 10:g} s ahead), got {horizon}"
+        )
+    return horizon
+
+
 def make_mpc(design: Design) -> MPCController:
     """``--policy mpc[:HORIZON]``: the observer's design, planned over HORIZON steps
     (in flight scheduled as the observer controller is, :func:`agents.observer.make_observer`)."""
-    horizon = DEFAULT_HORIZON
-    if design.arg:
-        try:
-            horizon = int(design.arg)
-        except ValueError:
-            raise ValueError(
-                f"mpc:HORIZON needs a whole number of steps, got {design.arg!r}"
-            ) from None
-        if not 1 <= horizon <= MAX_HORIZON:
-            raise ValueError(
-                f"mpc:HORIZON must be 1 to {MAX_HORIZON} steps ({MAX_HORIZON / 10:g} s ahead), "
-                f"got {horizon}"
-            )
+    horizon = check_horizon("mpc", design.arg)
     nominal, turbulence = designed_on(design.design_bank, design.config)
     return MPCController(
         design.config, nominal, turbulence, horizon=horizon, **scheduling(design.config)

@@ -27,6 +27,7 @@ __all__ = [
     "FLIGHT_BANDWIDTH",
     "PIDController",
     "PIDGains",
+    "check_omega",
     "make_pid",
     "make_tunnel_pid",
 ]
@@ -328,13 +329,25 @@ class PIDController:
         return np.array([command / self._range], dtype=np.float32)
 
 
-def _omega(design: Design, policy: str) -> float | None:
+def check_omega(policy: str, arg: str | None, env_id: str = "") -> float | None:
+    """``OMEGA`` of ``--policy pid:OMEGA`` (or ``pid-tunnel:OMEGA``), a bandwidth in rad/s
+    (None: the task's default); ``ValueError`` naming the value if it is not a positive
+    number.  The registry's check, before any design."""
+    if not arg:
+        return None
     try:
-        return float(design.arg) if design.arg else None
+        omega = float(arg)
     except ValueError:
+        raise ValueError(f"--policy {policy}:OMEGA needs a number, got {policy}:{arg}") from None
+    if not (math.isfinite(omega) and omega > 0):
         raise ValueError(
-            f"--policy {policy}:OMEGA needs a number, got {policy}:{design.arg}"
-        ) from None
+            f"--policy {policy}:OMEGA must be a positive bandwidth (rad/s), got {policy}:{arg}"
+        )
+    return omega
+
+
+def _omega(design: Design, policy: str) -> float | None:
+    return check_omega(policy, design.arg)
 
 
 def make_pid(design: Design) -> PIDController:

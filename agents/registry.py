@@ -19,6 +19,7 @@ test split the protocol evaluates on.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -30,10 +31,12 @@ __all__ = [
     "COMMITTED",
     "CONTROLLERS",
     "available",
+    "check_policy",
     "default_policies",
     "flies",
     "has_committed",
     "make_controller",
+    "no_argument",
     "policy_help",
     "register_controller",
     "shipped_path",
@@ -43,6 +46,9 @@ __all__ = [
 
 #: ``factory(design) -> controller``.
 Factory = Callable[[Design], Controller]
+#: ``check(name, arg, env_id)``: refuse (``ValueError``) a ``--policy NAME:ARG`` whose
+#: argument the factory would refuse, without designing anything (no database opened).
+ArgumentCheck = Callable[[str, "str | None", str], None]
 
 #: Where the committed policies are: one folder per environment id.
 COMMITTED = Path(__file__).resolve().parent / "policies"
@@ -85,6 +91,7 @@ def register_controller(
     default: bool = False,
     replace: bool = False,
     available: Callable[[str], bool] | None = None,
+    check: ArgumentCheck | str | None = None,
 ) -> None:
     """Register a controller for ``--policy NAME`` (``factory`` or ``"module:function"``).
 
@@ -92,7 +99,10 @@ def register_controller(
     puts it among the controllers ``rocketroll eval`` runs without
     ``--policy``; ``available(env_id)`` says whether it can run on an
     environment without an argument (the committed PPO policy exists for some
-    ids only), else the default set leaves it out there.
+    ids only), else the default set leaves it out there.  ``check(name, arg, env_id)``
+    (or ``"module:function"``) refuses a bad ``ARG`` with a ``ValueError`` before any work
+    (:func:`check_policy`: the commands call it before they open the database); without
+    one the argument is the factory's to refuse.
     """
     CONTROLLERS.register(
         name,
@@ -102,7 +112,30 @@ def register_controller(
         usage=usage or name,
         default=default,
         available=available,
+        check=check,
     )
+
+
+def no_argument(name: str, arg: str | None, env_id: str) -> None:
+    """The ``check`` of a controller that takes no argument."""
+    if arg:
+        raise ValueError(f"--policy {name} takes no argument, got {name}:{arg}")
+
+
+def check_policy(text: str, env_id: str) -> None:
+    """Refuse (``ValueError``, naming the value) a ``--policy NAME[:ARG]`` that names no
+    controller or whose argument its registered ``check`` refuses; reads no database."""
+    name, _, arg = text.partition(":")
+    try:
+        entry = CONTROLLERS.entry(name)
+    except ValueError as exc:
+        raise ValueError(f"--policy {text}: {exc}") from None
+    check = entry.info.get("check")
+    if isinstance(check, str):
+        module, _, function = check.partition(":")
+        check = getattr(importlib.import_module(module), function)
+    if check is not None:
+        check(name, arg or None, env_id)
 
 
 def default_policies() -> list[str]:
@@ -148,12 +181,14 @@ def make_controller(
 register_controller(
     "trim",
     "agents.nominal:make_trim",
+    check=no_argument,
     summary="fins held at the nominal trim -θ̄ (the floor)",
     default=True,
 )
 register_controller(
     "pid",
     "agents.pid:make_pid",
+    check="agents.pid:check_omega",
     usage="pid[:OMEGA]",
     summary="PID placed on the nominal rocket (OMEGA: bandwidth, rad/s)",
     default=True,
@@ -161,6 +196,7 @@ register_controller(
 register_controller(
     "pid-tunnel",
     "agents.pid:make_tunnel_pid",
+    check="agents.pid:check_omega",
     usage="pid-tunnel[:OMEGA]",
     summary="the PID with the tunnel's fixed gains, unscheduled in flight (the cautionary row)",
     default=True,
@@ -169,12 +205,14 @@ register_controller(
 register_controller(
     "observer",
     "agents.observer:make_observer",
+    check=no_argument,
     summary="u_d estimated on the fly (Kalman filter) and cancelled, LQR on the estimate",
     default=True,
 )
 register_controller(
     "mpc",
     "agents.mpc:make_mpc",
+    check="agents.mpc:check_horizon",
     usage="mpc[:HORIZON]",
     summary="the observer's estimate, a plan over HORIZON steps (1 to 100, default 20) within the "
     "servo's rate and range limits, solved by OSQP each step",
@@ -183,6 +221,7 @@ register_controller(
 register_controller(
     "ppo",
     "agents.learned:make_ppo",
+    check="agents.learned:check_run",
     usage="ppo[:DIR]",
     summary="a trained PPO policy (DIR: a `rocketroll train ppo` output; default: the "
     "committed policy agents/policies/ENV_ID)",
@@ -192,24 +231,28 @@ register_controller(
 register_controller(
     "sac",
     "agents.learned:make_sac",
+    check="agents.learned:check_run",
     usage="sac:DIR",
     summary="a trained SAC policy (DIR: a `rocketroll train sac` output)",
 )
 register_controller(
     "td3",
     "agents.learned:make_td3",
+    check="agents.learned:check_run",
     usage="td3:DIR",
     summary="a trained TD3 policy (DIR: a `rocketroll train td3` output)",
 )
 register_controller(
     "oracle",
     "agents.oracle:make_oracle",
+    check=no_argument,
     summary="perfect preview of u_d on the true rocket (a bound, not deployable)",
     default=True,
 )
 register_controller(
     "causal-oracle",
     "agents.oracle:make_causal_oracle",
+    check=no_argument,
     summary="the true rocket and state and the u_d now, its future drawn from the design "
     "split's turbulence model (the causal limit, not deployable)",
     default=True,

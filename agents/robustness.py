@@ -46,7 +46,13 @@ from agents.evaluate import (
     headline_scores,
     protocol_episodes,
 )
-from agents.registry import default_policies, make_controller, policy_help, unnamed_defaults
+from agents.registry import (
+    check_policy,
+    default_policies,
+    make_controller,
+    policy_help,
+    unnamed_defaults,
+)
 from agents.replay import (
     check_options,
     db_setting,
@@ -127,6 +133,8 @@ class Args:
                 raise UsageError(f"{flag} {repeated[0]} is given twice")
 
 
+        for policy in unnamed_defaults(self.policy, _default_policy(), self.env_id):
+            check_policy(policy, self.env_id)  # before any database is opened
 def markdown_table(
     scores: dict[str, dict[str, np.ndarray]], conditions: Sequence[str], unit: str
 ) -> str:

@@ -56,7 +56,7 @@ from agents.evaluate import (
     pid_result,
     protocol_episodes,
 )
-from agents.registry import make_controller
+from agents.registry import check_policy, make_controller
 from agents.replay import (
     check_options,
     db_setting,
@@ -243,6 +243,8 @@ class Args:
 
 def _groups(values: Sequence[str]) -> dict[str, list[str]]:
     """``[LABEL=]POLICY`` values by label (default: the policy's name before ``:``)."""
+        for policy in [*every, *self.reference]:
+            check_policy(policy, self.env_id)  # before any database is opened
     groups: dict[str, list[str]] = {}
     for value in values:
         label, sep, policy = value.partition("=")

@@ -425,6 +425,9 @@ def build(args: BuildArgs) -> int:
         and args.posterior == DEFAULT_POSTERIOR
     )
     if path.exists() and not args.force:
+    for recording in args.recordings:  # before the build's process starts
+        if not Path(recording).is_file():
+            raise UsageError(f"RECORDING {recording}: no such file")
         found = peek(path)
         if found is None:  # not a readable database: say why
             try:

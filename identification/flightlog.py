@@ -71,7 +71,7 @@ from identification.tunnel import (
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv
-from rocketroll_physics.ascent import FlightProfile, flight_profile
+from rocketroll_physics.ascent import FlightProfile, check_ascent_name, flight_profile
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
 from rocketroll_physics.dryden import roll_gust
 from rocketroll_physics.flown import flow_amplitude, fly_trace, tunnel_time
@@ -209,6 +209,10 @@ class FlightLogSpec:
         if self.no_gyro and self.encoder_counts == 0:
             raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
+        try:  # the name only: reading and simulating the ascent is the flight's work
+            check_ascent_name(self.ascent, self.descent)
+        except ValueError as exc:
+            raise SettingError("ascent", str(exc).removeprefix("flight: ")) from None
         if self.descent > 0.0 and self.turbulence == "dryden":
             raise SettingError(
                 "descent",

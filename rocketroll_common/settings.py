@@ -832,7 +832,14 @@ def _check_files(cls: type, args: Any) -> None:
     from rocketroll_common.files import KINDS, check_output, content_kind
 
     fields = list(_files(cls, args))
-    inputs = [(f.shown, p) for f, value in fields if f.spec.input for p in _paths(value)]
+    # An input is named as the user gave it: by its flag, or (a positional) by its path,
+    # not by the placeholder --help shows.
+    inputs = [
+        (f.shown, f.shown if not f.spec.positional else str(p), p)
+        for f, value in fields
+        if f.spec.input
+        for p in _paths(value)
+    ]
     for f, value in fields:
         if f.spec.output is not None and value is not None:
             check_output(
@@ -840,7 +847,7 @@ def _check_files(cls: type, args: Any) -> None:
                 f.shown,
                 folder=f.spec.output == "folder",
                 kind=f.spec.kind,
-                inputs=[(name, p) for name, p in inputs if name != f.shown],
+                inputs=[(name, p) for shown, name, p in inputs if shown != f.shown],
             )
         elif f.spec.input and f.spec.kind is not None:
             for path in _paths(value):

@@ -79,6 +79,7 @@ __all__ = [
     "AscentSpec",
     "FlightProfile",
     "FlightState",
+    "check_ascent_name",
     "flight_profile",
     "load_ascent_yaml",
     "load_profile_csv",
@@ -968,6 +969,21 @@ def flight_profile(name: str, descent_s: float = 0.0) -> FlightProfile:
     """
     if name in NAMED_ASCENTS:
         return _profile(name, 0, 0, descent_s)
+    check_ascent_name(name, descent_s)
+    path = Path(name)
+    try:
+        stat = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"flight: {name}: {exc.strerror or 'cannot be read'}") from None
+    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size, descent_s)
+
+
+def check_ascent_name(name: str, descent_s: float = 0.0) -> None:
+    """Refuse (``ValueError``, as :func:`flight_profile` words it) an ascent ``name`` that is
+    none of :data:`NAMED_ASCENTS` nor an existing ``.yml``/``.yaml``/``.csv`` file, or a
+    descent asked of a recorded profile; reads and simulates nothing."""
+    if name in NAMED_ASCENTS:
+        return
     path = Path(name)
     if path.suffix.lower() not in (".yml", ".yaml", ".csv"):
         raise ValueError(
@@ -979,11 +995,8 @@ def flight_profile(name: str, descent_s: float = 0.0) -> FlightProfile:
             f"flight: {name}: a recorded profile ends where its log ends; a descent past "
             "apogee needs a simulated ascent (default or a rocket YAML)"
         )
-    try:
-        stat = os.stat(path)
-    except OSError as exc:
-        raise ValueError(f"flight: {name}: {exc.strerror or 'cannot be read'}") from None
-    return _profile(str(path.resolve()), stat.st_mtime_ns, stat.st_size, descent_s)
+    if not path.is_file():
+        raise ValueError(f"flight: {name}: no such file")
 
 
 @functools.lru_cache(maxsize=8)

@@ -565,6 +565,28 @@ def test_the_wheel_carries_what_the_readme_runs_from_an_installed_package(
     zipfile.ZipFile(wheel).extractall(installed)
     written = json.loads((installed / "rocketroll" / "help.json").read_text(encoding="utf-8"))
     assert written["digest"] == kept.source_digest(installed)
+    # The guides name shipped recipes (`--hyperparams ppo-history`, rl-zoo's `-conf "$(rocketroll
+    # train recipe ppo)"`): from another folder they are the installed package's files.
+    env = {**os.environ, "PYTHONPATH": str(installed)}
+
+    def run(*argv: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "rocketroll", *argv],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
+
+    done = run("train", "recipe", "ppo")
+    assert done.returncode == 0, done.stderr
+    assert Path(done.stdout.strip()) == installed / "agents" / "hyperparams" / "ppo.yml"
+    done = run("train", "ppo", "--hyperparams", "ppo-histroy", "--out", "run")
+    assert done.returncode == 2 and one_line(done.stderr), done.stderr
+    assert "ppo-histroy: no such file, nor a shipped recipe" in done.stderr
+    assert "ppo-history" in done.stderr and not (tmp_path / "run").exists()
 
 
 # ------------------------------------------------------------------ 10. SB3 keywords and statistics

@@ -60,14 +60,14 @@ def test_an_output_that_is_the_input_is_refused(
 ) -> None:
     before = {name: path.read_bytes() for name, path in files.items()}
     rec, log = str(files["recording"]), str(files["log"])
-    refused(capsys, ["info", rec, "--json", rec], "--json", "is the input RECORDING")
-    refused(capsys, ["identify", rec, "--json", rec], "--json", "is the input RECORDING")
+    refused(capsys, ["info", rec, "--json", rec], "--json", f"is the input {rec};")
+    refused(capsys, ["identify", rec, "--json", rec], "--json", f"is the input {rec};")
     columns = ["--columns", "time,roll,fin"]
-    refused(capsys, ["import-csv", log, "--out", log, *columns], "--out", "is the input INPUT")
+    refused(capsys, ["import-csv", log, "--out", log, *columns], "--out", f"is the input {log};")
     # A link to the input is the input.
     link = tmp_path / "link.csv"
     link.symlink_to(files["recording"])
-    refused(capsys, ["info", rec, "--json", str(link)], "is the input RECORDING")
+    refused(capsys, ["info", rec, "--json", str(link)], f"is the input {rec};")
     other = tmp_path / "other.csv"
     shutil.copy(RECORDING, other)
     refused(

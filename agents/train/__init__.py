@@ -47,6 +47,8 @@ from agents.train.hyperparams import (
     algorithm_class,
     algorithm_keywords,
     load_hyperparameters,
+    recipe_path,
+    shipped_recipes,
     zoo_mapping,
 )
 from agents.train.run import (
@@ -79,6 +81,8 @@ __all__ = [
     "normalization_record",
     "observation_names",
     "parse_args",
+    "recipe_path",
+    "shipped_recipes",
     "train",
     "zoo_mapping",
 ]

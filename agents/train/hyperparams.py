@@ -23,6 +23,40 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parents[1] / "hyperparams"
 #: PPO's (``rocketroll train ppo``'s default).
 DEFAULT_HYPERPARAMS = HYPERPARAMS_DIR / "ppo.yml"
 
+
+def shipped_recipes() -> tuple[str, ...]:
+    """The names of the hyperparameter files shipped with the package (``ppo-history`` for
+    ``agents/hyperparams/ppo-history.yml``), sorted."""
+    return tuple(sorted(p.stem for p in HYPERPARAMS_DIR.glob("*.yml")))
+
+
+def recipe_path(given: str | os.PathLike[str]) -> Path:
+    """The hyperparameter file ``given`` names: a shipped recipe's name (``ppo-history``:
+    the package's ``agents/hyperparams/ppo-history.yml``, wherever it is installed), or a
+    path (a relative ``agents/hyperparams/...`` that is not there is the package's, as the
+    docs write it from the repository).
+
+    Raises
+    ------
+    UsageError
+        A name (no folder, no ``.yml``) that is no shipped recipe: the line lists them.
+    """
+    path = Path(given)
+    if path.suffix.lower() in (".yml", ".yaml") or len(path.parts) != 1 or path.exists():
+        if not path.exists() and not path.is_absolute():
+            installed = HYPERPARAMS_DIR.parents[1] / path
+            if installed.is_file():
+                return installed
+        return path
+    shipped = HYPERPARAMS_DIR / f"{path.name}.yml"
+    if not shipped.is_file():
+        raise UsageError(
+            f"--hyperparams {given}: no such file, nor a shipped recipe (those are: "
+            f"{', '.join(shipped_recipes())})"
+        )
+    return shipped
+
+
 #: ``rocketroll train ALGO`` → the Stable-Baselines3 class.
 ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 
@@ -239,7 +273,7 @@ def load_hyperparameters(
         The file is missing or not a mapping, has no entry for ``env_id``, or a key that is
         unknown, missing or of the wrong kind (named, with the file and its line).
     """
-    path = Path(path)
+    path = recipe_path(path)
     if not path.is_file():
         raise UsageError(f"--hyperparams {path}: no such file")
     document, lines = load_yaml(path)

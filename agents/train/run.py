@@ -11,6 +11,7 @@ import shlex
 import sys
 import time
 import warnings
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,7 @@ from agents.train.hyperparams import (
     algorithm_arguments,
     algorithm_class,
     load_hyperparameters,
+    recipe_path,
 )
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
 from rocketroll_common.settings import check, parse, setting, to_argv
@@ -91,7 +93,11 @@ class Args:
     )
     db: str | None = db_setting()
     hyperparams: Path = setting(
-        DEFAULT_HYPERPARAMS, "YAML file of hyperparameters keyed by environment id", input=True
+        DEFAULT_HYPERPARAMS,
+        "YAML file of hyperparameters keyed by environment id, or the name of a shipped "
+        "recipe (ppo-history: agents/hyperparams/ppo-history.yml; rocketroll train recipe "
+        "lists them)",
+        input=True,
     )
     eval_freq: int = setting(
         100_000,
@@ -139,8 +145,13 @@ class Args:
         check_options(self.settings)
         if self.db is not None and "://" not in self.db and not Path(self.db).is_file():
             raise SettingError("db", f"{self.db}: no such file")
+        recipe_path(self.hyperparams)  # an unknown recipe's name, before any work
         if self.resume is not None and not Path(self.resume).is_file():
             raise SettingError("resume", f"{self.resume}: no such file")
+        if self.resume is not None and not zipfile.is_zipfile(self.resume):
+            raise SettingError(
+                "resume", f"{self.resume}: not a checkpoint (the model zip a run saved)"
+            )
 
 
 # ----------------------------------------------------------------------------- arguments

@@ -69,3 +69,20 @@ def test_a_zoo_string_is_read_without_eval() -> None:
     ):
         with pytest.raises(UsageError, match=re.escape(said)):
             zoo_mapping(bad, "ppo.yml, RocketRoll-v0: policy_kwargs")
+
+
+def test_a_shipped_recipe_is_named_and_a_path_still_works(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from agents.train import recipe_path, shipped_recipes
+
+    monkeypatch.chdir(tmp_path)  # another folder than the repository, as a pip user's
+    assert recipe_path("ppo-history") == HYPERPARAMS / "ppo-history.yml"
+    assert recipe_path("agents/hyperparams/ppo.yml") == HYPERPARAMS / "ppo.yml"
+    mine = tmp_path / "ppo-history.yml"
+    mine.write_text("RocketRoll-v0: {n_envs: 2}\n", encoding="utf-8")
+    assert recipe_path(mine) == mine  # a path is a path, even with a shipped name
+    assert load_hyperparameters("ppo-history", "RocketRoll-v0").layout.history == 2
+    assert {"ppo", "ppo-history", "sac-history", "td3"} <= set(shipped_recipes())
+    with pytest.raises(UsageError, match=r"ppo-histroy: no such file, nor a shipped recipe"):
+        recipe_path("ppo-histroy")
