@@ -6,6 +6,12 @@ window in a few microseconds: one integer from the caller's generator picks a
 (trace, offset) pair uniformly among all windows of that length, and the
 window is a read-only view, not a copy.  ``benchmarks/db_windows.py`` measures
 it against the 100 µs budget.
+
+A bank loaded from a database holds its traces in :func:`draw_order`, a key made
+of what each trace is (its recording's name and content hash, its method, model,
+kind and seed, its uid), never the store's row order: the same seed draws the
+same episodes from a database, from its export imported back, and from one whose
+rows were added in any other order.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError
 from rocketroll_physics.flown import interval_means
 
-__all__ = ["REPLAY_OF_KIND", "BankError", "TraceBank", "Window"]
+__all__ = ["REPLAY_OF_KIND", "BankError", "TraceBank", "Window", "draw_order"]
 
 #: The environment's ``disturbance`` option that replays each kind of trace.
 REPLAY_OF_KIND = {"identified": "replay", "surrogate": "surrogate", "posterior": "posterior"}
@@ -129,6 +135,32 @@ def _lacking(
     )
 
 
+def draw_order(row: TraceRow) -> tuple[Any, ...]:
+    """The key a bank loaded from a database sorts its traces by.
+
+    Intrinsic to the trace, the same in every database and export: its
+    recording's name and content hash (two recordings of one name stay apart),
+    its identification's method and model, the identified trace before its
+    draws, then the draws by source, kind and seed (as a number), and the uid
+    last (unique).  A database's row ids or insertion order play no part, so a
+    seed draws the same episodes from a database and from its export imported
+    back.  The default database's build adds its recordings in name order
+    within each split, so there this order is also the row order.
+    """
+    seed = -1 if row.seed is None else int(row.seed)
+    return (
+        row.recording,
+        row.recording_hash,
+        row.method,
+        row.model,
+        row.source_uid is not None,
+        row.source_uid or "",
+        row.kind,
+        seed,
+        row.uid,
+    )
+
+
 def _one(value: Any) -> str | None:
     """A filter's single value (None for none or a list)."""
     return value if isinstance(value, str) else None
@@ -186,7 +218,9 @@ class TraceBank:
         ``split`` is required, so a bank never mixes training and evaluation
         disturbances.  The defaults select each recording once: the paper's
         method, the θ-dependent model, identified traces (``kind="surrogate"``
-        for surrogates), and only surrogates that passed their check.
+        for surrogates), and only surrogates that passed their check.  The
+        traces are in :func:`draw_order`, not the store's row order, so a seed
+        draws the same windows from any database holding the same traces.
         """
         if split not in ("train", "test"):
             raise ValueError(f"split must be 'train' or 'test', not {split!r}")
@@ -204,7 +238,7 @@ class TraceBank:
             raise BankError(
                 _lacking(db, split, method, model, kind, described, _one(filters.get("recording")))
             )
-        return cls(db.load_traces(infos), described or "all traces")
+        return cls(db.load_traces(sorted(infos, key=draw_order)), described or "all traces")
 
     @classmethod
     def from_arrays(
