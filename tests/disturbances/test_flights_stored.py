@@ -224,3 +224,22 @@ def test_model_based_designs_on_a_stored_flight_model_its_turbulence_in_the_tunn
     tunnel = RollConfig(flight="default").flight_schedule
     assert tunnel is not None
     np.testing.assert_array_equal(tunnel.airspeed_ratio, tunnel.scales[:, 0])
+
+
+def test_a_flight_exported_and_imported_back_keeps_its_reference_and_draws(
+    stored: Path, tmp_path: Path
+) -> None:
+    """A flight's fits keep their reference airspeed, density, scaling and verdict through
+    `db export` and `db import`, with every trace of the database row for row."""
+    from disturbances.exchange import import_export, write_export
+    from tests.disturbances.test_draw_order import stored_rows
+
+    folder, new = tmp_path / "export", tmp_path / "imported.sqlite"
+    with DisturbanceDB(stored, create=False) as db:
+        write_export(db, folder, "npz")
+    with DisturbanceDB(new, create=True) as db:
+        import_export(db, folder)
+        flights = db.identifications(method="flight")
+        assert len(flights) == 2
+        assert all(row.flight_reference is not None and row.verdict for row in flights)
+    assert stored_rows(new) == stored_rows(stored)
