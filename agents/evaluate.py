@@ -44,6 +44,7 @@ from agents.replay import (
     env_options_setting,
     recording_setting,
     replay_config,
+    unreliable_note,
 )
 from disturbances.bank import TraceBank
 from rocketroll_common.arrays import nan_to_none
@@ -514,6 +515,7 @@ def run(args: Args) -> list[Evaluation]:
     )
     if episode_note:
         print(episode_note)
+    caution = unreliable_note([bank], args.db)  # a recording stored with --accept-unreliable
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
     steps: dict[str, list[dict[str, Any]]] = {c.name: [] for c in controllers}
     keep = args.minari is not None
@@ -523,7 +525,7 @@ def run(args: Args) -> list[Evaluation]:
         )
         for c in controllers
     ]
-    table = markdown_table(results, config)
+    table = markdown_table(results, config) + ("" if caution is None else f"\n{caution}\n")
     print(table, end="")
     if args.out is not None:
         from agents.plots import plot_episode, plot_errors
@@ -539,6 +541,7 @@ def run(args: Args) -> list[Evaluation]:
             "settings": settings,
             "bank": bank.description,
             "command": command_of(args),
+            **({} if caution is None else {"note": caution}),
         }
         text = json.dumps(to_json(results, config, specs, protocol), indent=1, allow_nan=False)
         episode_png, _ = plot_episode(results, config)

@@ -37,6 +37,7 @@ __all__ = [
     "recording_setting",
     "replay_config",
     "replay_options",
+    "unreliable_note",
 ]
 
 #: Environment options a command sets itself (``--env-id``, ``--split``), never ``--set``.
@@ -145,27 +146,77 @@ def replay_config(
 ) -> tuple[RollConfig, TraceBank, dict[str, Any], str | None]:
     """What a command replays: the configuration (:func:`options_config` of the ``--set``
     options with ``--recording``, its episode fitted to the recording's trace by
-    :func:`fit_episode`), the bank of ``split``, the options (with the fitted
-    ``episode_s``: what a rerun or a Minari dataset needs), and the line that says the
-    episode was fitted (None: it was not)."""
+    :func:`fit_episode`, or for a stored flight flown as that rocket to the whole flight),
+    the bank of ``split``, the options (with the fitted ``episode_s``: what a rerun or a
+    Minari dataset needs), and the line that says the episode was fitted (None: it was
+    not).  An ``episode_s`` longer than the stored flight is a ``UsageError`` that says
+    what to set, before any work."""
     from rollenv.bank import load_bank, stored_flight_config
 
     options = replay_options(settings, recording)
-    config = options_config(env_id, options, split)
-    flown = stored_flight_config(config, db)  # a stored flight, flown as that rocket
-    if flown is not config:
-        config = flown
+    given = options.get("episode_s")
+    # The episode is checked against the ascent flown: a stored flight's, not the variant's.
+    config = options_config(
+        env_id, {name: v for name, v in options.items() if name != "episode_s"}, split
+    )
+    try:  # a stored flight, flown as that rocket
+        flown = stored_flight_config(config, db, given)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--set: {exc}") from None
+    note = None
+    if flown.flies_stored_flight and not config.flies_stored_flight:
         options = {
             **options,
-            "flight": config.flight,
-            "method": config.method,
-            "flight_turbulence": config.flight_turbulence,
+            "flight": flown.flight,
+            "method": flown.method,
+            "flight_turbulence": flown.flight_turbulence,
         }
+        schedule = flown.flight_schedule
+        if given is None and schedule is not None:
+            options["episode_s"] = flown.episode_s
+            note = (
+                f"  episode: {flown.episode_length_s:g} s, {flown.recording}'s stored flight "
+                f"from {3.6 * schedule.v_ref_mps:.0f} km/h on (--set episode_s=... for less)"
+            )
+    config = flown
     bank = load_bank(config, db)
-    config, note = fit_episode(config, [bank], options)
-    if note is not None:
+    config, fitted = fit_episode(config, [bank], options)
+    note = fitted or note
+    if fitted is not None:
         options = {**options, "episode_s": config.episode_s}
     return config, bank, options, note
+
+
+def unreliable_note(banks: Sequence[TraceBank], db: str | None) -> str | None:
+    """The line an evaluation's table carries where one of ``banks`` (of database ``db``)
+    replays a recording stored although every fit of it is judged unreliable (``rocketroll
+    db add --accept-unreliable``:
+    :attr:`disturbances.rows.IdentificationRow.accepted_unreliable`); None where none
+    does."""
+    judged = {t.recording for bank in banks for t in bank.traces if t.verdict == "unreliable"}
+    if not judged:
+        return None
+    from pathlib import Path
+
+    from disturbances.default import open_database
+
+    database = open_database(None if db is None else Path(db))
+    try:
+        accepted = {
+            row.recording
+            for row in database.identifications(verdict="unreliable")
+            if row.accepted_unreliable
+        }
+    finally:
+        database.close()
+    names = sorted(judged & accepted)
+    if not names:
+        return None
+    whose = "whose fits were" if len(names) == 1 else "recordings whose fits were all"
+    return (
+        f"note: replays {', '.join(names)}, {whose} judged unreliable (stored with "
+        "--accept-unreliable)"
+    )
 
 
 def check_options(options: Mapping[str, Any], flag: str = "--set") -> None:

@@ -60,6 +60,7 @@ from agents.replay import (
     options_config,
     recording_setting,
     replay_config,
+    unreliable_note,
 )
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -230,6 +231,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     )
     if episode_note:
         print(episode_note)
+    caution = unreliable_note(list(banks.values()), args.db)  # stored --accept-unreliable
     scores: dict[str, dict[str, np.ndarray]] = {c.name: {} for c in controllers}
     for condition, config in configs.items():
         bank = banks[condition]
@@ -239,6 +241,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
             result = evaluate(config, controller, specs, bank=bank, progress=True)
             scores[controller.name][condition] = headline_scores(result)
     table = markdown_table(scores, args.condition, unit)
+    table += "" if caution is None else f"\n{caution}\n"
     print(table, end="")
     if args.out is not None:
         from rocketroll_common.files import write_all_atomic
@@ -253,6 +256,7 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
                 "headline": HEADLINE,
                 "conditions": {c: CONDITIONS[c] for c in args.condition},
                 "policies": list(args.policy),
+                **({} if caution is None else {"note": caution}),
             },
             "scores": {n: {c: v.tolist() for c, v in per.items()} for n, per in scores.items()},
         }

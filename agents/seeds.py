@@ -63,6 +63,7 @@ from agents.replay import (
     env_options_setting,
     recording_setting,
     replay_config,
+    unreliable_note,
 )
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
@@ -371,6 +372,7 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
     )
     if episode_note:
         print(episode_note)
+    caution = unreliable_note([bank], args.db)  # a recording stored with --accept-unreliable
     specs = protocol_episodes(config, args.episodes, args.seed, bank=bank)
     evaluated_refs = [evaluate(config, c, specs, bank=bank, progress=True) for c in references]
     pid = pid_result(evaluated_refs)
@@ -390,6 +392,7 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
             )
         )
     table = markdown_table(learners, evaluated_refs, unit)
+    table += "" if caution is None else f"\n{caution}\n"
     print(table, end="")
     if args.out is not None:
         from rocketroll_common.files import write_all_atomic
@@ -404,6 +407,7 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
                 "headline": HEADLINE,
                 "resamples": RESAMPLES,
                 "bank": bank.description,
+                **({} if caution is None else {"note": caution}),
             },
             "learners": {
                 s.name: {

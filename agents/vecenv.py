@@ -27,7 +27,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from agents.memory import ErrorIntegral, FlightClock, History, history_space
 from disturbances.bank import TraceBank
-from rollenv.bank import load_bank, stored_flight_config, variant_config
+from rollenv.bank import load_bank, settings_config, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
 from rollenv.layout import Obs
@@ -135,7 +135,7 @@ class RollVecEnv(VecEnv):
         if "render_mode" in settings:
             raise ValueError("RollVecEnv does not render; render a single RocketRoll env")
         self.env_id = env_id
-        self.config = stored_flight_config(variant_config(env_id, settings), db)
+        self.config = settings_config(lambda given: variant_config(env_id, given), settings, db)
         # in flight a given tunnel bank becomes its flights (load_bank's are already)
         self.bank = load_bank(self.config, db) if bank is None else self.config.flights(bank)
         self._batch = RollBatch(self.config, self.bank, int(num_envs), parallel=False)

@@ -474,7 +474,9 @@ class ListArgs:
     json: bool = setting(False, "print JSON instead of a table")
 
 
-def _trace_table(rows: list[TraceRow]) -> str:
+def _trace_table(rows: list[TraceRow], accepted: set[tuple[str, str, str]]) -> str:
+    """The listing; a trace whose identification is among ``accepted`` (its recording stored
+    although every fit of it is judged unreliable) has its verdict marked."""
     lines = [
         f"{'id':>4}  {'uid':<40} {'kind':<10} {'split':<5} {'method':<12} {'model':<8} "
         f"{'dur s':>6} {'mean °':>7} {'SD °':>6} {'90 % interval °':>17} {'normal p':>8}  "
@@ -486,8 +488,18 @@ def _trace_table(rows: list[TraceRow]) -> str:
             f"{i.id:>4}  {i.uid:<40} {i.kind:<10} {i.split:<5} {i.method:<12} {i.model:<8} "
             f"{i.duration_s:>6.0f} {i.mean_deg:>7.2f} {i.sd_deg:>6.2f} "
             f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}] {p:>8}  {i.verdict or '-'}"
+            + (ACCEPTED_MARK if (i.recording_hash, i.method, i.model) in accepted else "")
+        )
+    if any((i.recording_hash, i.method, i.model) in accepted for i in rows):
+        lines.append(
+            "accepted: stored with db add --accept-unreliable, although every fit of its "
+            "recording is judged unreliable"
         )
     return "\n".join(lines)
+
+
+#: How ``db list`` marks the verdict of a fit stored with ``db add --accept-unreliable``.
+ACCEPTED_MARK = ", accepted"
 
 
 def _row_json(row: TraceRow) -> dict[str, Any]:
@@ -535,7 +547,10 @@ def list_traces(args: ListArgs) -> int:
             f"{db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
             f"{counts['surrogates']} surrogates{drawn}; {len(rows)} shown"
         )
-        print(_trace_table(rows))
+        accepted = {
+            i.key for i in db.identifications(verdict="unreliable") if i.accepted_unreliable
+        }
+        print(_trace_table(rows, accepted))
     return 0
 
 
@@ -666,6 +681,11 @@ class AddArgs:
         le=0.8,
         metavar="SHARE",
     )
+    accept_unreliable: bool = setting(
+        False,
+        "store the recording even where every fit of it is judged unreliable (refused "
+        "without this), marked: db list and the evaluations that replay it say so",
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
@@ -715,6 +735,7 @@ def add(args: AddArgs) -> int:
             posterior=args.posterior,
             posterior_seed=args.posterior_seed,
             holdout=args.holdout or 0.0,
+            unreliable="accept" if args.accept_unreliable else "refuse",
         )
         if result.recordings == 0 and result.traces == 0:
             print(f"{db.path}: {recording.name} is already stored (same samples); nothing added")
@@ -723,6 +744,13 @@ def add(args: AddArgs) -> int:
             f"{db.path}: added {recording.name}: {result.identifications} identifications, "
             f"{result.traces} traces (ids {', '.join(map(str, result.trace_ids))})"
         )
+        if args.accept_unreliable and any(
+            i.accepted_unreliable for i in db.identifications(recording=recording.name)
+        ):
+            print(
+                f"  every fit of {recording.name} is judged unreliable: stored with "
+                "--accept-unreliable, marked (db list; the evaluations that replay it say so)"
+            )
         if args.holdout:
             from disturbances.ingest import split_parts
 

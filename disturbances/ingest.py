@@ -36,13 +36,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal
 
 import numpy as np
 
 from disturbances.db import DatabaseError, StoreResult, now, package_version
 from disturbances.rows import (
+    ACCEPTED_UNRELIABLE,
     POSTERIOR_KIND,
     SURROGATE_KINDS,
     IdentificationRow,
@@ -368,6 +369,7 @@ def add_recording(
     posterior_seed: int = 0,
     holdout: float = 0.0,
     context: Context | None = None,
+    unreliable: Literal["store", "refuse", "accept"] = "store",
 ) -> StoreResult:
     """Identify a recording and store it with all its results, in one transaction.
 
@@ -413,7 +415,15 @@ def add_recording(
     context : Context, optional
         Where ``recording`` was identified already with ``options`` (``rocketroll
         identify --db``): its methods' fits are stored, not made again.
+    unreliable : {"store", "refuse", "accept"}
+        What becomes of a recording every fit of which is judged unreliable (its stored
+        ones too): ``"store"`` it as any other, ``"refuse"`` it (a ``UsageError`` that
+        names the verdict's reasons and the override; nothing is stored), or ``"accept"``
+        it, its new identifications marked (:data:`~disturbances.rows.ACCEPTED_UNRELIABLE`):
+        ``rocketroll db add`` without and with ``--accept-unreliable``.
     """
+    if unreliable not in ("store", "refuse", "accept"):
+        raise ValueError(f"unreliable must be 'store', 'refuse' or 'accept', not {unreliable!r}")
     if context is not None and (context.recording is not recording or context.options != options):
         raise ValueError("context: of another recording or other options")
     chosen = _methods(methods, recording)
@@ -424,15 +434,14 @@ def add_recording(
             raise ValueError("a run split for a held-out evaluation gets no surrogates")
         _check_new_run(db, recording)
         db.check_version(writing=True)
-        return db.store(
-            *holdout_rows(
-                Context(recording, options),
-                holdout,
-                chosen,
-                posterior=posterior,
-                posterior_seed=posterior_seed,
-            )
+        recordings, identifications, traces = holdout_rows(
+            Context(recording, options),
+            holdout,
+            chosen,
+            posterior=posterior,
+            posterior_seed=posterior_seed,
         )
+        return db.store(recordings, _judged(db, recordings, identifications, unreliable), traces)
     if surrogates:
         _check_surrogate_length(recording, options or IdentifyOptions())
     recording_hash = content_hash(recording.columns())
@@ -464,7 +473,58 @@ def add_recording(
         surrogate_method=source_method,
         posterior=posterior,
         posterior_seed=posterior_seed,
+        unreliable=unreliable,
     )
+
+
+def _judged(
+    db: Store,
+    recordings: Sequence[RecordingRow],
+    identifications: list[IdentificationRow],
+    unreliable: str,
+) -> list[IdentificationRow]:
+    """The ``identifications`` (of ``recordings``) to store, where every fit of a recording
+    among them (with those the database holds of it) is judged unreliable: refused
+    (``UsageError``) or marked (:data:`~disturbances.rows.ACCEPTED_UNRELIABLE`) as
+    ``unreliable`` says (:func:`add_recording`); as they are otherwise."""
+    if unreliable == "store":
+        return identifications
+    judged = []
+    for recording in recordings:
+        recording_hash = recording.content_hash
+        new = [i for i in identifications if i.recording_hash == recording_hash]
+        stored = (
+            db.identifications(recording_hash=recording_hash)
+            if db.has_recording(recording_hash)
+            else []
+        )
+        if not new or any(i.verdict != "unreliable" for i in (*new, *stored)):
+            continue
+        if unreliable == "refuse":
+            fits: dict[str, list[str]] = {}
+            for i in new:
+                fits.setdefault(_first_reason(i), []).append(f"{i.method} {i.model}")
+            reasons = "; ".join(f"{', '.join(by)}: {reason}" for reason, by in fits.items())
+            raise UsageError(
+                f"{recording.name}: every fit of it is judged unreliable ({reasons}); not "
+                "stored: give --accept-unreliable to store it anyway, marked (the evaluations "
+                "that replay it say so)"
+            )
+        judged.append(recording_hash)
+    return [
+        dataclasses.replace(i, metrics={**i.metrics, ACCEPTED_UNRELIABLE: True})
+        if i.recording_hash in judged
+        else i
+        for i in identifications
+    ]
+
+
+def _first_reason(identification: IdentificationRow) -> str:
+    """The first reason of an identification's adequacy verdict (the unreliable ones come
+    first)."""
+    figures = identification.metrics.get("adequacy")
+    reasons = figures.get("reasons") if isinstance(figures, Mapping) else None
+    return str(reasons[0]) if reasons else "no reason given"
 
 
 def _check_surrogate_length(recording: Recording, options: IdentifyOptions) -> None:
@@ -525,11 +585,13 @@ def _store(
     surrogate_method: str,
     posterior: int = 0,
     posterior_seed: int = 0,
+    unreliable: str = "store",
 ) -> StoreResult:
     db.check_version(writing=True)
     recording, identifications, traces = identification_rows(
         context, methods, posterior=posterior, posterior_seed=posterior_seed
     )
+    identifications = _judged(db, [recording], identifications, unreliable)
     if db.has_recording(recording.content_hash):
         # Partly stored already: new identifications must be made like the stored
         # ones, and surrogates come from the stored traces, never from new twins.

@@ -47,6 +47,7 @@ from rocketroll_common.errors import RocketrollError
 from rocketroll_physics.scaling import FlightReference
 
 __all__ = [
+    "ACCEPTED_UNRELIABLE",
     "KINDS",
     "POSTERIOR_KIND",
     "SPLITS",
@@ -76,6 +77,10 @@ KINDS = ("identified", *SURROGATE_KINDS, POSTERIOR_KIND)
 SPLITS = ("train", "test")
 #: Share of recordings (by hash) that go to the test split.
 TEST_FRACTION = 0.25
+#: The metric (``True``) of an identification stored although every fit of its recording was
+#: judged unreliable (:mod:`identification.adequacy`), because the user said so: ``rocketroll
+#: db add --accept-unreliable``; the evaluations that replay it say so under their tables.
+ACCEPTED_UNRELIABLE = "accepted_unreliable"
 _SPLIT_SALT = b"rocketroll-split/1:"
 
 
@@ -313,6 +318,13 @@ class IdentificationRow(_Row):
         from its metrics; ``None`` where it was not assessed (a flight fit, an old row)."""
         figures = self.metrics.get("adequacy")
         return None if not isinstance(figures, Mapping) else figures.get("verdict")
+
+    @property
+    def accepted_unreliable(self) -> bool:
+        """Whether it was stored although every fit of its recording was judged unreliable,
+        because the user said so (``rocketroll db add --accept-unreliable``: the metric
+        :data:`ACCEPTED_UNRELIABLE`)."""
+        return self.metrics.get(ACCEPTED_UNRELIABLE) is True
 
     @property
     def flight_reference(self) -> FlightReference | None:

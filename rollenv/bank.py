@@ -6,7 +6,7 @@ import dataclasses
 import difflib
 import os
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +15,14 @@ from disturbances.default import open_database
 from rollenv.core import RollConfig, config_fields
 from rollenv.flight import stored_flight_name
 
-__all__ = ["find_bank", "load_bank", "make_config", "stored_flight_config", "variant_config"]
+__all__ = [
+    "find_bank",
+    "load_bank",
+    "make_config",
+    "settings_config",
+    "stored_flight_config",
+    "variant_config",
+]
 
 _CACHE: dict[tuple[Any, ...], TraceBank] = {}
 _LOCK = threading.Lock()
@@ -124,14 +131,37 @@ def _flight_methods() -> list[str]:
     return [m for m in METHODS.names() if traits(m).flight]
 
 
-def stored_flight_config(config: RollConfig, db: str | os.PathLike[str] | None) -> RollConfig:
+def settings_config(
+    make: Callable[[dict[str, Any]], RollConfig],
+    settings: Mapping[str, Any],
+    db: str | os.PathLike[str] | None,
+) -> RollConfig:
+    """``make(settings)`` (:func:`make_config`, :func:`variant_config`), flying a stored
+    flight where ``settings`` name one (:func:`stored_flight_config`): its ``episode_s``,
+    where given, is checked against that flight, not against the ascent the variant flies
+    by default; without it the episode is the whole stored flight."""
+    rest = {name: value for name, value in settings.items() if name != "episode_s"}
+    return stored_flight_config(make(rest), db, settings.get("episode_s"))
+
+
+def stored_flight_config(
+    config: RollConfig, db: str | os.PathLike[str] | None, episode_s: float | None = None
+) -> RollConfig:
     """``config`` flying the stored flight ``config.recording`` as that rocket, where it
     is a flight environment (``flight`` given) and the database holds that recording's
     flight fit: its profile, its airspeed scaling and its own ``u_d``
     (:func:`rollenv.flight.stored_flight_name`, ``method="flight"``,
-    ``flight_turbulence="recorded"``); ``config`` itself otherwise."""
+    ``flight_turbulence="recorded"``), in an episode ``episode_s`` long (None: the whole
+    stored flight from the tunnel's airspeed, as a tunnel episode fits one recording's
+    trace); ``config`` itself otherwise, with ``episode_s`` where given.
+
+    Raises
+    ------
+    ValueError
+        Where ``episode_s`` is longer than the flight (the message says what to set).
+    """
     if config.flight is None or config.recording is None or config.flies_stored_flight:
-        return config
+        return config if episode_s is None else dataclasses.replace(config, episode_s=episode_s)
     database = open_database(None if db is None else Path(db))
     try:
         path = str(Path(database.path).resolve())
@@ -143,12 +173,13 @@ def stored_flight_config(config: RollConfig, db: str | os.PathLike[str] | None) 
     finally:
         database.close()
     if not methods:
-        return config
+        return config if episode_s is None else dataclasses.replace(config, episode_s=episode_s)
     return dataclasses.replace(
         config,
         flight=stored_flight_name(path, config.recording),
         method=methods[-1],
         flight_turbulence="recorded",
+        episode_s=episode_s,
     )
 
 

@@ -365,7 +365,9 @@ class RollConfig:
         elif given > full.duration_s + 1e-9:
             raise ValueError(
                 f"episode_s = {given:g} s is longer than the flight ({full.duration_s:g} s "
-                f"from {full.v_ref_mps * 3.6:.0f} km/h to apogee)"
+                f"of {full.profile.source} from {full.v_ref_mps * 3.6:.0f} km/h to apogee): "
+                f"give episode_s={full.duration_s:g} or less, or leave it out for the whole "
+                "flight"
             )
 
     # ------------------------------------------------------------ derived values

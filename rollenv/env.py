@@ -14,7 +14,7 @@ from gymnasium.envs.registration import EnvSpec
 from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
-from rollenv.bank import load_bank, make_config, stored_flight_config
+from rollenv.bank import load_bank, make_config, settings_config
 from rollenv.core import RollBatch, RollConfig, observation_bounds
 from rollenv.history import EpisodeHistory, HistoryRecorder
 from rollenv.layout import State
@@ -288,7 +288,9 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
         db: str | os.PathLike[str] | None = None,
         **settings: Any,
     ) -> None:
-        self.config = stored_flight_config(make_config(type(self).__name__, settings), db)
+        self.config = settings_config(
+            lambda given: make_config(type(self).__name__, given), settings, db
+        )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "

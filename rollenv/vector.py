@@ -11,7 +11,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
-from rollenv.bank import load_bank, make_config, stored_flight_config
+from rollenv.bank import load_bank, make_config, settings_config
 from rollenv.core import RollBatch
 from rollenv.env import EpisodeLengthSpec, check_action, make_spaces, reset_arguments
 from rollenv.history import HistoryRecorder
@@ -93,7 +93,9 @@ class RocketRollVectorEnv(
                 f"RocketRollVectorEnv renders 'rgb_array' frames (one per env), not "
                 f"{render_mode!r}; for a window make a single env with render_mode='human'"
             )
-        self.config = stored_flight_config(make_config(type(self).__name__, settings), db)
+        self.config = settings_config(
+            lambda given: make_config(type(self).__name__, given), settings, db
+        )
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
         # in flight a given tunnel bank becomes its flights (load_bank's are already)
