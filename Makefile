@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip
 DEMO   ?= build/demo
 
-.PHONY: demo test lint typecheck pytest pytest-varied docs venv clean recordings help schemas
+.PHONY: demo studies test lint typecheck pytest pytest-varied docs venv clean recordings help schemas
 
 $(BIN)/python:
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required, found " + sys.version'
@@ -51,8 +51,6 @@ demo: $(VENV)/.installed
 		$(foreach s,1 2 3 4,--run ppo:agents/policies/seeds/RocketRollRate-v0/ppo/seed$(s)) \
 		$(foreach s,0 1 2 3 4,--run sac:agents/policies/seeds/RocketRollRate-v0/sac/seed$(s)) \
 		--out $(DEMO)/seeds-rate
-	$(BIN)/rocketroll robustness --env-id RocketRoll-v0 --out $(DEMO)/robustness-angle
-	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
 	$(BIN)/rocketroll env ascent --plot $(DEMO)/flight-profile.png
 	$(BIN)/rocketroll eval --env-id RocketRollFlight-v0 --episodes 20 --seed 0 \
 		--policy trim --policy pid --policy pid-tunnel --policy observer --policy mpc \
@@ -67,12 +65,19 @@ demo: $(VENV)/.installed
 	@echo "      on held-out episodes in $(DEMO)/eval-angle/ and $(DEMO)/eval-rate/, PPO, PPO trained"
 	@echo "      at a zero setpoint, PPO as a residual on the observer, PPO with memory and SAC over"
 	@echo "      five training seeds each in $(DEMO)/seeds-angle/"
-	@echo "      and seeds-rate/, and every controller under"
-	@echo "      other worlds in $(DEMO)/robustness-angle/ and robustness-rate/, and in flight"
+	@echo "      and seeds-rate/, and in flight"
 	@echo "      (RocketRollFlight-v0) the ascent $(DEMO)/flight-profile.png, the scheduled PID, observer and MPC"
 	@echo "      against the tunnel's in $(DEMO)/eval-flight/ (tables above), and a virtual flight's"
 	@echo "      log $(DEMO)/flight-seed0.csv identified back in $(DEMO)/flight-seed0.json"
 	@echo "      and $(DEMO)/flight-seed0-report/"
+	@echo "      (every controller under other worlds: make studies)"
+
+# The heavier studies beside the demo (about two minutes of CPU): every controller designed
+# on the nominal rocket, evaluated under other worlds (results/evaluation.md, Robustness).
+studies: $(VENV)/.installed
+	@mkdir -p $(DEMO)
+	$(BIN)/rocketroll robustness --env-id RocketRoll-v0 --out $(DEMO)/robustness-angle
+	$(BIN)/rocketroll robustness --env-id RocketRollRate-v0 --out $(DEMO)/robustness-rate
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .
