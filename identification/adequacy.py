@@ -21,6 +21,10 @@ These figures read the model without it, against the raw measurements:
 * **u_d against the fins' range** -- the 99th percentile of ``|u_d|``, as a
   fraction of the servo's range: a "disturbance" the fins could not cancel is
   the model's error, not turbulence;
+* **the fin's range** -- a fin whose 99th percentile of ``|fin|`` stays under
+  :data:`~identification.recording.PLAUSIBLE_FIN_DEG` (1°) is no rocket's: a fin in
+  radians read as degrees (±10° reads ±0.17) gives a gain or a ``u_d`` 57 times off,
+  which every other figure misses (they are ratios): unreliable, with the unit to check;
 * **the gain's relative standard error**, where the method reports one;
 * **the innovations' whiteness**, where the method has them (ml: its one-step
   prediction errors of the first sensor): the largest ``|ACF|`` over lags 1-10, an
@@ -64,6 +68,7 @@ import numpy as np
 from identification.compiled import interval_maps
 from identification.model import RollParams, Servo, _linear_recurrence, damping
 from identification.pipeline import Measurements
+from identification.recording import PLAUSIBLE_FIN_DEG, Recording, small_fins
 from identification.statistics import decorrelation_stride, ols_newey_west
 from identification.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
@@ -140,6 +145,19 @@ class Findings:
         severity = beyond(value, limits, above)
         if severity:
             (self.weak if severity == 1 else self.bad).append(text)
+
+    def fin_unit(self, recording: Recording) -> None:
+        """A fin that stays under :data:`~identification.recording.PLAUSIBLE_FIN_DEG` (99th
+        percentile of ``|fin|``): unreliable, whatever the fit, for the gain or ``u_d`` it
+        gives is then most likely in the wrong unit (a fin in radians read as degrees)."""
+        for name, p99 in small_fins(recording.columns()).items():
+            self.bad.append(
+                f"the fin ({name}) stays within {p99:.2g}° (99 % of |fin|), under "
+                f"{PLAUSIBLE_FIN_DEG:g}°: a fin logged in radians and read as degrees looks "
+                "like this, and the gain or u_d is then 57 times off; check the fin's unit "
+                "(set the fin to a known 10° and see the log read 10, not 0.17) and "
+                f"re-import with import-csv --unit {name.removesuffix('_deg')}=rad if so"
+            )
 
     def rate_r2(self, r2: float) -> None:
         """The model without ``u_d`` against the measured rate (:data:`RATE_R2`)."""
@@ -426,6 +444,7 @@ def adequacy(
 
     found = Findings()
     weak, bad, check = found.weak, found.bad, found.check
+    found.fin_unit(rec)
     found.rate_r2(rate_r2)
     check(
         ahead_r2, AHEAD_R2, f"{k * dt:.2g} s ahead it predicts the rate to R² {ahead_r2:.2f}", False

@@ -1079,6 +1079,8 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
       scales), ``u_d`` against the fins' range and α's relative standard error, with the
       tunnel's weak and unreliable limits (:data:`~identification.adequacy.RATE_R2`,
       :data:`~identification.adequacy.UD_RANGE`, :data:`~identification.adequacy.ALPHA_REL_SE`);
+    * a fin under 1° all flight (:meth:`~identification.adequacy.Findings.fin_unit`):
+      unreliable;
     * the optimiser not reporting convergence: weak;
     * the fin acting later than the model (:func:`identification.adequacy.suspects`):
       suspected, not judged; the turbulence's intensity is not (in flight it changes with
@@ -1125,6 +1127,7 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
     p99 = float(np.percentile(np.abs(result.u_d_deg), 99.0))
     fin_range = (servo or Servo()).range_deg
 
+    found.fin_unit(inputs.recording)
     found.rate_r2(rate_r2)
     found.check(
         p99 / fin_range,

@@ -24,18 +24,20 @@ from typing import Any, Literal
 import numpy as np
 
 from identification.recording import (
+    PLAUSIBLE_FIN_DEG,
     Recording,
     RecordingError,
     StatedRig,
     parse_number,
     read_text,
+    small_fins,
     validate_samples,
 )
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, check_order, setting
 
-__all__ = ["ROLES", "ImportSettings", "import_csv", "read_csv"]
+__all__ = ["ROLES", "ImportSettings", "angle_on_integrated_rate", "import_csv", "read_csv"]
 
 #: Role of an input column -> the format-v1 column it becomes (None: ignored).
 ROLES: dict[str, str | None] = {
@@ -446,44 +448,83 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
 
 #: Degrees per radian: a rate column in the wrong angular unit is off by this factor.
 _RAD = 180.0 / math.pi
-#: The angle's rate against the rate column (a least-squares slope) within this factor of
-#: 1/``_RAD`` or ``_RAD`` is a rate in the other unit; only where the fit is tight (R²).
-_UNIT_BAND, _UNIT_R2 = 1.5, 0.5
+#: The roll angle against the integrated rate column (a least-squares slope) within this
+#: fraction of ``_RAD`` or 1/``_RAD`` is a rate (or an angle) in the other unit; judged only
+#: where the fit is tight (R² at least ``_UNIT_R2``): the angle moves enough to tell.
+_UNIT_BAND, _UNIT_R2 = 0.15, 0.9
+
+
+def angle_on_integrated_rate(
+    time: FloatArray, angle: FloatArray, rate: FloatArray
+) -> tuple[float, float]:
+    """How the roll angle follows the integrated roll rate: the least-squares slope of the
+    angle on the rate's running integral (trapezoids) and its R², 1 where both are in the
+    same unit, 57.3 or 1/57.3 where one is in radians and the other in degrees.
+
+    Robust to what a log does: an angle that wraps (at ±180° or 0/360°, or at ±π in
+    radians: unwrapped first, the unwrapping that fits best kept), a gyro's bias (the fit
+    also takes a line in time, whose drift it absorbs, and, where the angle itself moves
+    along that line, without it) and noise (integrated, not differentiated).  (NaN, NaN)
+    where the rate does not move the angle at all."""
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(time))])
+    best = (math.nan, math.nan)
+    if not np.ptp(integral) > 0.0:
+        return best
+    angles = [np.unwrap(angle, period=360.0)]
+    if float(np.max(np.abs(angle))) <= 2.0 * math.pi * 1.001:  # an angle in radians, wrapped
+        angles.append(np.unwrap(angle, period=2.0 * math.pi))
+    ones = np.ones(time.size)
+    span = max(float(time[-1] - time[0]), 1e-300)
+    line = (time - time[0]) / span
+    for x in (np.column_stack([ones, line, integral]), np.column_stack([ones, integral])):
+        for y in angles:
+            coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+            # R² of the part the integrated rate explains, beyond the other columns.
+            base, *_ = np.linalg.lstsq(x[:, :-1], y, rcond=None)
+            left = y - x[:, :-1] @ base
+            total = float(left @ left)
+            residual = y - x @ coef
+            if not total > 0.0:
+                continue
+            r2 = 1.0 - float(residual @ residual) / total
+            if not r2 <= best[1]:  # the first, or a better fit (NaN compares false)
+                best = (float(coef[-1]), r2)
+    return best
 
 
 def _check_rate_unit(where: str, out: dict[str, FloatArray], settings: ImportSettings) -> None:
     """Refuse a roll rate in another angular unit than the roll angle beside it (rad/s read
-    as °/s looks plausible on its own: 2.6 °/s): the angle's rate of change against the
-    rate column, a least-squares slope, is 1 when they agree and 57.3 or 1/57.3 when one
-    is in radians."""
+    as °/s looks plausible on its own: 2.6 °/s): the angle against the integrated rate
+    (:func:`angle_on_integrated_rate`) is 1 when they agree and 57.3 or 1/57.3 when one is
+    in radians; the message names the ``--unit`` that fits."""
     if "roll_deg" not in out or "roll_rate_dps" not in out:
         return
     time, angle, rate = out["time_s"], out["roll_deg"], out["roll_rate_dps"]
     if time.size < 3 or not np.all(np.diff(time) > 0):
         return  # the recording's own validation names it
-    change = np.gradient(angle, time)
-    spread = float(rate @ rate)
-    if not spread > 0.0:
-        return
-    slope = float(change @ rate) / spread
-    residual = change - slope * rate
-    total = float(np.sum((change - change.mean()) ** 2))
-    if not total > 0.0 or 1.0 - float(residual @ residual) / total < _UNIT_R2:
+    slope, r2 = angle_on_integrated_rate(time, angle, rate)
+    if not r2 >= _UNIT_R2:
         return  # the angle does not follow the rate closely enough to say
-    given = settings.unit.get("roll_rate", settings.units)
-    if _RAD / _UNIT_BAND <= slope <= _RAD * _UNIT_BAND:
+    read_angle = str(settings.unit.get("roll", settings.units))
+    read_rate = str(settings.unit.get("roll_rate", settings.units))
+    both = f"roll angle read in {read_angle}, roll_rate in {read_rate}/s"
+    if abs(slope / _RAD - 1.0) <= _UNIT_BAND:  # the angle is 57 times the integrated rate
+        fixes = ["roll_rate=rad"] * (read_rate == "deg") + ["roll=deg"] * (read_angle == "rad")
+        said = "the rate looks like rad/s" if read_rate == "deg" else "the angle looks like °"
         raise RecordingError(
             where,
             None,
             f"the roll angle changes {slope:.3g} times as fast as the roll_rate column says "
-            f"(read in {given}/s): the rate looks like rad/s; give --unit roll_rate=rad",
+            f"({both}): {said}; give " + " or ".join(f"--unit {f}" for f in fixes),
         )
-    if 1.0 / (_RAD * _UNIT_BAND) <= slope <= _UNIT_BAND / _RAD:
+    if abs(slope * _RAD - 1.0) <= _UNIT_BAND:  # the integrated rate is 57 times the angle
+        fixes = ["roll_rate=deg"] * (read_rate == "rad") + ["roll=rad"] * (read_angle == "deg")
+        said = "the rate looks like °/s" if read_rate == "rad" else "the angle looks like rad"
         raise RecordingError(
             where,
             None,
-            f"the roll_rate column (read in {given}/s) is {1.0 / slope:.3g} times the roll "
-            "angle's rate of change: the rate looks like °/s; give --unit roll_rate=deg",
+            f"the roll_rate column is {1.0 / slope:.3g} times the roll angle's rate of change "
+            f"({both}): {said}; give " + " or ".join(f"--unit {f}" for f in fixes),
         )
 
 
@@ -493,19 +534,44 @@ PLAUSIBLE_FLIGHT_RATE_DPS = 5.0
 
 
 def plausibility_warnings(recording: Recording) -> list[str]:
-    """What looks wrong in an imported recording without being certain: a flight whose roll
-    rate stays below :data:`PLAUSIBLE_FLIGHT_RATE_DPS` all along (where no angle beside it
-    lets the unit be checked, :func:`read_csv` refuses a rate that disagrees with one)."""
+    """What looks wrong in an imported recording without being certain, one line each:
+
+    * a fin column whose 99th percentile of ``|value|`` stays under
+      :data:`~identification.recording.PLAUSIBLE_FIN_DEG` (a fin in radians read as
+      degrees: ±10° reads ±0.17), named by its role and input column (the recording's
+      ``import.*`` metadata), with the ``--unit`` that fits if it was read in degrees;
+    * a flight whose roll rate stays below :data:`PLAUSIBLE_FLIGHT_RATE_DPS` all along
+      (where no angle beside it lets the unit be checked, :func:`read_csv` refuses a rate
+      that disagrees with one).
+    """
+    found = []
+    meta = recording.metadata
+    roles = meta.get("import.columns", "").split(",")
+    given = dict(e.split("=", 1) for e in meta.get("import.unit", "").split(",") if "=" in e)
+    for name, p99 in small_fins(recording.columns()).items():
+        role = next(r for r, target in ROLES.items() if target == name)
+        where = f"{role} (column {roles.index(role) + 1})" if role in roles else name
+        read = given.get(role, meta.get("import.units", "deg"))
+        fix = (
+            f"radians read as degrees? give --unit {role}=rad"
+            if read == "deg"
+            else "check its unit"
+        )
+        found.append(
+            f"{where}: 99 % of its |values| are under {p99:.2g}°, implausibly small for a fin "
+            f"(under {PLAUSIBLE_FIN_DEG:g}°): {fix}"
+        )
     rate = recording.roll_rate_dps
     if recording.airspeed_mps is None or rate is None or recording.roll_deg is not None:
-        return []
+        return found
     p99 = float(np.percentile(np.abs(rate), 99.0))
     if p99 >= PLAUSIBLE_FLIGHT_RATE_DPS:
-        return []
+        return found
     return [
+        *found,
         f"the roll rate stays within {p99:.3g} °/s (99th percentile) all flight: small for a "
         f"rocket in flight (under {PLAUSIBLE_FLIGHT_RATE_DPS:g} °/s); a column in rad/s read as "
-        "°/s looks like this (--unit roll_rate=rad if so)"
+        "°/s looks like this (--unit roll_rate=rad if so)",
     ]
 
 

@@ -71,6 +71,7 @@ __all__ = [
     "MAX_RATE_DPS",
     "MIN_FIN_CHANGE_DEG",
     "MIN_SAMPLES",
+    "PLAUSIBLE_FIN_DEG",
     "RIG_METADATA",
     "SAMPLING_RTOL",
     "SOURCES",
@@ -81,6 +82,7 @@ __all__ = [
     "load_recording",
     "read_text",
     "save_recording",
+    "small_fins",
     "validate_samples",
 ]
 
@@ -178,6 +180,9 @@ INTERVAL_RANGE_S = (1e-3, 1.0)
 DURATION_RANGE_S = (4.9, 86_400.0)
 #: Smallest fin-angle range (max - min) that gives something to identify, °.
 MIN_FIN_CHANGE_DEG = 0.1
+#: A fin column whose 99th percentile of ``|value|`` stays under this, °, is implausible for
+#: a roll experiment: a fin in radians read as degrees (±10° reads ±0.17) looks like this.
+PLAUSIBLE_FIN_DEG = 1.0
 
 #: Largest plausible roll rate, °/s: beyond what the paper's encoder is rated for
 #: (12 000 °/s, §2.1) and any sounding rocket's roll.  Faster rates -- read by a gyro
@@ -246,6 +251,20 @@ def _descent_hint(name: str, values: NDArray[np.float64], time: NDArray[np.float
 
 def _sample(lines: NDArray[np.int64] | None, index: int) -> str:
     return "" if lines is not None else f"sample {index}: "
+
+
+def small_fins(columns: Mapping[str, FloatArray | None]) -> dict[str, float]:
+    """The fin columns (of :data:`FIN_COLUMNS` present in ``columns``) whose 99th percentile
+    of ``|value|`` stays under :data:`PLAUSIBLE_FIN_DEG`, with that percentile, °: an
+    implausible fin range, most likely radians read as degrees."""
+    found = {}
+    for name in FIN_COLUMNS:
+        values = columns.get(name)
+        if values is not None and np.size(values):
+            p99 = float(np.percentile(np.abs(values), 99.0))
+            if p99 < PLAUSIBLE_FIN_DEG:
+                found[name] = p99
+    return found
 
 
 def validate_samples(

@@ -264,7 +264,7 @@ def test_roll_rate_units(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], units: str, scale: float
 ) -> None:
     k = np.arange(N)
-    fin = np.where(k < STEP, 0.0, 0.2)
+    fin = np.where(k < STEP, 0.0, 10.0 / scale)  # 10° in the file's unit
     rate = 0.8 * np.sin(0.3 * k) + 0.1
     src = tmp_path / "gyro.csv"
     lines = ["t;fin;p"] + [
