@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import unicodedata
 from collections.abc import Mapping
 from typing import Any
@@ -9,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from identification import paper
+from identification.adequacy import FIN_ERROR_MATERIAL
 from identification.methods import ModelFit
 from identification.pipeline import Identification
 
@@ -156,7 +158,7 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
             se = None if a["alpha_rel_se"] is None else 100 * a["alpha_rel_se"]
             lines.append(
                 f"{method:<14}{model:<10}{_blank(a['rate_r2'], '.3f'):>9}"
-                f"{_blank(a['ahead_r2'], '.3f'):>10}{_blank(a['fin_share'], '.2f'):>9}"
+                f"{_blank(a['ahead_r2'], '.3f'):>10}{_fin_share_cell(a):>9}"
                 f"{_blank(a['ud_range_fraction'], '.2f'):>13}{_blank(se, '.1f'):>8}"
                 f"  {a['verdict']}"
             )
@@ -250,6 +252,19 @@ def flight_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
         + "\n\n"
         + (methods_table(fits))
     )
+
+
+def _fin_share_cell(adequacy: Mapping[str, Any]) -> str:
+    """The share of ``u_d`` a line in the fin explains, or ``noise`` where ``u_d`` is too
+    small beside the fin for any share of it to matter: its SD under
+    :data:`~identification.adequacy.FIN_ERROR_MATERIAL` of the fin's, where the share is
+    the R² of a regression on rounding noise and differs from machine to machine."""
+    share, ratio = adequacy.get("fin_share"), adequacy.get("fin_error_ratio")
+    if share is None:
+        return ""
+    if ratio is not None and share > 0 and ratio / math.sqrt(share) < FIN_ERROR_MATERIAL:
+        return "noise"
+    return format(share, ".2f")
 
 
 def _blank(value: float | None, fmt: str) -> str:

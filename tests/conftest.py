@@ -23,7 +23,7 @@ def _private_default_database(tmp_path_factory: pytest.TempPathFactory) -> Itera
 
 @pytest.fixture(scope="session")
 def default_db(_private_default_database: Path) -> Path:
-    """The session's default database, built once (about 15 s; once per pytest-xdist
+    """The session's default database, built once (about 40 s of CPU; once per pytest-xdist
     worker, each in its own temporary folder); its path."""
     from disturbances.default import open_default
 
