@@ -10,7 +10,7 @@ from identification.tables import adequacy_table
 
 
 def _fit(share: float | None, ratio: float | None) -> Any:
-    adequacy = {
+    adequacy: dict[str, Any] = {
         "rate_r2": 0.986,
         "ahead_r2": 0.986,
         "fin_share": share,
