@@ -210,6 +210,7 @@ class SweepReportArgs:
         None,
         "folder for report.md and one report-N.png per table (default: DIR)",
         output="folder",
+        files=("report.md",),  # and the figures, checked as they are written
     )
     seed: int = setting(0, "seed of the bootstrap", ge=0, le=2**31 - 1)
 
@@ -254,7 +255,7 @@ def _sweep_report(args: SweepReportArgs) -> int:
     document = "\n".join(text)
     print(document, end="")
     files[out / "report.md"] = document
-    write_all_atomic(files)
+    write_all_atomic(files, folder=out, what="--out" if args.out is not None else "DIR")
     print(
         f"wrote {out / 'report.md'}"
         + (f" and {len(files) - 1} figure(s)" if len(files) > 1 else "")

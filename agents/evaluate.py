@@ -464,6 +464,7 @@ class Args:
         None,
         "folder for table.md, results.json, episode.png, errors.png (none: print only)",
         output="folder",
+        files=("table.md", "results.json", "episode.png", "errors.png"),
     )
     db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
@@ -551,7 +552,8 @@ def run(args: Args) -> list[Evaluation]:
                 out / "results.json": text + "\n",
                 out / "episode.png": episode_png,
                 out / "errors.png": plot_errors(results, config, HEADLINE),
-            }
+            },
+            folder=out,
         )
         print(f"wrote {out}/table.md, results.json, episode.png, errors.png")
     if args.minari is not None:

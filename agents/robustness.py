@@ -115,6 +115,7 @@ class Args:
         None,
         "folder for robustness.md, robustness.json, robustness.png (none: print only)",
         output="folder",
+        files=("robustness.md", "robustness.json", "robustness.png"),
     )
     db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
@@ -266,7 +267,8 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
                 out / "robustness.md": table,
                 out / "robustness.json": json.dumps(nan_to_none(record), indent=1) + "\n",
                 out / "robustness.png": plot(scores, args.condition, unit, title),
-            }
+            },
+            folder=out,
         )
         print(f"wrote {out}/robustness.md, robustness.json, robustness.png")
     return scores

@@ -218,7 +218,10 @@ class Args:
         0, "seed of the protocol's episodes and of the bootstrap", ge=0, le=2**31 - 1, always=True
     )
     out: Path | None = setting(
-        None, "folder for seeds.md, seeds.json, seeds.png (none: print only)", output="folder"
+        None,
+        "folder for seeds.md, seeds.json, seeds.png (none: print only)",
+        output="folder",
+        files=("seeds.md", "seeds.json", "seeds.png"),
     )
     db: str | None = db_setting()
     settings: dict[str, Any] = env_options_setting()
@@ -433,7 +436,8 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
                 out / "seeds.json": json.dumps(nan_to_none(record), indent=1, allow_nan=False)
                 + "\n",
                 out / "seeds.png": plot(learners, evaluated_refs, unit, title),
-            }
+            },
+            folder=out,
         )
         print(f"wrote {out}/seeds.md, seeds.json, seeds.png")
     return learners, evaluated_refs

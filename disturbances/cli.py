@@ -142,6 +142,23 @@ def _new_database(db: str | None) -> Iterator[None]:
 
 
 # --------------------------------------------------------------------------- identify
+def _report_files(args: IdentifyArgs) -> list[str]:
+    """The files ``--report`` may write, known before the fits: ``report.md``, a figure per
+    method asked for (the tunnel's defaults when none is), the paper's figures with its
+    method, and a flight's figure."""
+    from identification.fitreport import figure_name
+    from identification.flightreport import FIGURE_NAME
+    from identification.report import FIGURES, REPORT_NAME
+
+    methods = args.method or list(default_methods())
+    names = [REPORT_NAME, *(figure_name(m) for m in methods if not traits(m).flight)]
+    if "paper" in methods:
+        names += list(FIGURES)
+    if not args.method or any(traits(m).flight for m in methods):
+        names.append(FIGURE_NAME)
+    return names
+
+
 @dataclass(frozen=True)
 class IdentifyArgs:
     """``rocketroll identify``."""
@@ -156,6 +173,7 @@ class IdentifyArgs:
         "(its model without u_d against the rate, u_d beside the fin), and with the paper's "
         "method the paper's figures",
         output="folder",
+        files=_report_files,
     )
     method: list[str] = setting(
         default_factory=list,
@@ -301,7 +319,7 @@ def identify(args: IdentifyArgs) -> int:
             else f"stored in {args.db}: {added.identifications} identifications, "
             f"{added.traces} traces (ids {', '.join(map(str, added.trace_ids))})"
         )
-    write_all_atomic(outputs)  # all or nothing
+    write_all_atomic(outputs, folder=args.report, what="--report")  # all or nothing
     for method, reason in refused.items():  # the others ran
         print(f"rocketroll identify: method {method} cannot fit it: {reason}", file=sys.stderr)
     if result is not None:

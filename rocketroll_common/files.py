@@ -15,6 +15,15 @@ existing file that holds another kind of content than the command writes
 (:func:`content_kind`, read from the file's first bytes, not its name).
 Writing again over a command's own earlier output of the same kind is what
 re-running a command does, and stays allowed.
+
+A folder output (``rocketroll eval --out FOLDER``) holds files the user may have
+put there.  A command writes into it only the files it names, and over an
+existing one only when rocketroll wrote that file there and it has not changed
+since: the folder's manifest (:data:`MANIFEST`) lists each file rocketroll wrote
+with its SHA-256, and is written with the outputs in the same all-or-nothing
+step (:func:`write_all_atomic` with ``folder=``).  Any other existing file is
+refused (:func:`check_folder_files`), before the work where the names are known,
+unless the command runs with ``--force`` (:func:`forcing`).
 Missing folders above an output are created when it is written, for every
 output alike; nothing is created before the work has succeeded.
 """
@@ -22,21 +31,29 @@ output alike; nothing is created before the work has succeeded.
 from __future__ import annotations
 
 import errno
+import hashlib
+import json
 import os
 import stat
 import tempfile
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 
 from rocketroll_common.errors import UsageError
 
 __all__ = [
     "KINDS",
+    "MANIFEST",
+    "check_folder_files",
     "check_output",
     "content_kind",
     "created_folders_removed_on_error",
     "file_mode",
+    "forced",
+    "forcing",
+    "record_outputs",
     "write_all_atomic",
     "write_atomic",
 ]
@@ -112,6 +129,121 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+# ----------------------------------------------------------------------------- folders
+#: The manifest of an output folder: each file rocketroll wrote there (its path in the
+#: folder, ``/``-separated) with the SHA-256 it was written with.
+MANIFEST = ".rocketroll-outputs.json"
+_MANIFEST_FORMAT = "rocketroll-outputs/1"
+_FORCE: ContextVar[bool] = ContextVar("rocketroll_force", default=False)
+
+
+@contextmanager
+def forcing(force: bool = True) -> Iterator[None]:
+    """Within the block, a file in an output folder that rocketroll did not write there
+    (or that was changed since) is replaced instead of refused: a command's ``--force``."""
+    token = _FORCE.set(force)
+    try:
+        yield
+    finally:
+        _FORCE.reset(token)
+
+
+def forced() -> bool:
+    """Whether the block runs under :func:`forcing` (a command's ``--force``)."""
+    return _FORCE.get()
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _refuse(what: str, folder: Path, problem: str) -> UsageError:
+    return UsageError(f"{what} {folder}: {problem}; give another folder, or --force to replace it")
+
+
+def _read_manifest(folder: Path, what: str) -> dict[str, str]:
+    """The files rocketroll wrote in ``folder`` -> their SHA-256 (none without a manifest).
+
+    A file of the manifest's name that is not one is the user's: refused, or under
+    :func:`forcing` replaced (as if there were none).
+    """
+    path = folder / MANIFEST
+    if not (path.exists() or path.is_symlink()):
+        return {}
+    try:
+        data = json.loads(path.read_text("utf-8"))
+        files = data.get("files") if data.get("format") == _MANIFEST_FORMAT else None
+        valid = isinstance(files, dict) and all(isinstance(v, str) for v in files.values())
+    except (OSError, ValueError, AttributeError):
+        valid = False
+    if not valid or not isinstance(files, dict):
+        if forced():
+            return {}
+        raise _refuse(what, folder, f"{MANIFEST} exists and is not rocketroll's list of its files")
+    return {str(name): str(digest) for name, digest in files.items()}
+
+
+def check_folder_files(
+    folder: str | os.PathLike[str], names: Iterable[str | os.PathLike[str]], what: str
+) -> None:
+    """Refuse writing the files ``names`` (paths in ``folder``) into the output folder
+    ``folder`` where one exists that rocketroll did not write there, or that has changed
+    since it did (its manifest, :data:`MANIFEST`, says); under :func:`forcing` only a
+    folder in a file's place is refused.
+
+    Raises
+    ------
+    UsageError
+        One line naming ``what``, the folder and the file, and how to go on.
+    """
+    root = Path(folder)
+    if not root.is_dir():
+        return  # a new folder holds nothing; a file in its place is check_output's
+    known = _read_manifest(root, what)  # one that is not rocketroll's is refused too
+    for name in (Path(n).as_posix() for n in names):
+        target = root / name
+        if target.is_dir():
+            raise UsageError(f"{what} {root}: {name} is a folder there; give another folder")
+        if not (target.exists() or target.is_symlink()) or forced():
+            continue
+        recorded = known.get(name)
+        if recorded is None:
+            raise _refuse(what, root, f"{name} exists and rocketroll did not write it there")
+        if not target.is_file() or _sha256(target) != recorded:
+            raise _refuse(what, root, f"{name} was changed since rocketroll wrote it")
+
+
+def _manifest_text(folder: Path, written: Mapping[str, str], what: str) -> str:
+    """The manifest of ``folder`` once the files ``written`` (name -> SHA-256) are: the
+    files it listed that are still there, and these."""
+    listed = {
+        name: digest
+        for name, digest in _read_manifest(folder, what).items()
+        if (folder / name).is_file()
+    }
+    listed.update(written)
+    record = {"format": _MANIFEST_FORMAT, "files": dict(sorted(listed.items()))}
+    return json.dumps(record, indent=1) + "\n"
+
+
+def record_outputs(
+    folder: str | os.PathLike[str], names: Iterable[str | os.PathLike[str]], what: str = "--out"
+) -> None:
+    """Add files rocketroll wrote into ``folder`` other than by :func:`write_all_atomic`
+    (a library's own saves: a training run's checkpoints and logs) to its manifest, as
+    they are now; names of files that do not exist are left out."""
+    root = Path(folder)
+    hashes = {
+        Path(name).as_posix(): _sha256(root / name) for name in names if (root / name).is_file()
+    }
+    if hashes:
+        write_all_atomic({root / MANIFEST: _manifest_text(root, hashes, what)})
+
+
 def check_output(
     path: str | os.PathLike[str],
     what: str,
@@ -119,6 +251,7 @@ def check_output(
     folder: bool = False,
     kind: str | None = None,
     inputs: Sequence[tuple[str, str | os.PathLike[str]]] = (),
+    files: Iterable[str | os.PathLike[str]] = (),
 ) -> Path:
     """Refuse, before any work, an output that could not be written or that would destroy
     a file the command did not make.
@@ -139,6 +272,10 @@ def check_output(
     inputs : sequence of (name, path)
         The command's input files, by the name the user gave them: an output
         that is one of them is refused.
+    files : iterable of str
+        With ``folder=True``, the files the command writes there (paths in the
+        folder): an existing one that rocketroll did not write there, or that
+        was changed since, is refused (:func:`check_folder_files`).
 
     Returns
     -------
@@ -150,7 +287,8 @@ def check_output(
     UsageError
         A file output that is a folder, a folder output that is a file, a
         place whose nearest existing folder is not a writable folder, an
-        output that is an input, or an existing file of another kind.
+        output that is an input, an existing file of another kind, or a file in
+        a folder output that rocketroll did not write.
     """
     target = Path(path)
     if folder:
@@ -178,6 +316,9 @@ def check_output(
         raise UsageError(f"{what} {target}: {base} is not a folder")
     if not os.access(base, os.W_OK | os.X_OK):
         raise UsageError(f"{what} {target}: cannot write in {base} (permission denied)")
+    names = list(files)
+    if folder and names:
+        check_folder_files(target, names, what)
     return target
 
 
@@ -216,8 +357,19 @@ def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> None:
     write_all_atomic({path: data})
 
 
-def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> None:
+def write_all_atomic(
+    outputs: Mapping[str | os.PathLike[str], str | bytes],
+    *,
+    folder: str | os.PathLike[str] | None = None,
+    what: str = "--out",
+) -> None:
     """Write several files all or nothing.
+
+    With ``folder`` (an output folder, as the user named it ``what``), the
+    outputs inside it are first checked (:func:`check_folder_files`: an
+    existing file rocketroll did not write there is refused, unless
+    :func:`forcing`) and recorded in its manifest (:data:`MANIFEST`), which is
+    staged and renamed with them, last.
 
     Every file is first written in full to a temporary file beside its target
     (missing folders are created) and flushed to disk; only when all of them
@@ -229,6 +381,21 @@ def write_all_atomic(outputs: Mapping[str | os.PathLike[str], str | bytes]) -> N
     keeps its permissions; a new one gets those a plain ``open()`` would.  An
     ``OSError`` names the target, not the temporary file.
     """
+    if folder is not None:
+        root = Path(folder)
+        inside: dict[str, bytes] = {}
+        for path, data in outputs.items():
+            try:
+                name = Path(path).relative_to(root).as_posix()
+            except ValueError:
+                continue
+            inside[name] = data.encode("utf-8") if isinstance(data, str) else data
+        if MANIFEST in inside:
+            raise ValueError(f"{MANIFEST} is rocketroll's own file in an output folder")
+        if inside:
+            check_folder_files(root, inside, what)
+            hashes = {name: hashlib.sha256(data).hexdigest() for name, data in inside.items()}
+            outputs = {**outputs, root / MANIFEST: _manifest_text(root, hashes, what)}
     staged: list[tuple[str, Path]] = []
     made: list[Path] = []
     done = False

@@ -97,6 +97,7 @@ class _Spec:
     format: Callable[[Any], str] | None
     output: str | None
     kind: str | None
+    files: Sequence[str] | Callable[[Any], Sequence[str]] | None
     input: bool
     flatten: bool
     cli: bool
@@ -121,6 +122,7 @@ def setting(
     format: Callable[[Any], str] | None = None,
     output: Literal["file", "folder"] | None = None,
     kind: str | None = None,
+    files: Sequence[str] | Callable[[Any], Sequence[str]] | None = None,
     input: bool = False,
     flatten: bool = False,
     cli: bool = True,
@@ -160,6 +162,15 @@ def setting(
         What the file holds (a key of :data:`rocketroll_common.files.KINDS`):
         for an output, what the command writes there (an existing file of
         another kind is refused); for an input, what it must hold if it exists.
+    files : sequence of str, or callable, optional
+        For a folder output, the files the command writes there (paths in the
+        folder) as far as they are known before the work, or a function of
+        the arguments that gives them: an existing one that rocketroll did not
+        write there (or that changed since) is refused before the work
+        (:func:`rocketroll_common.files.check_folder_files`).  Given, the
+        command gets ``--force`` (:data:`FORCE_FLAG`) to replace them, and
+        must write the folder with ``write_all_atomic(..., folder=...)``,
+        which checks every file it writes there again.
     input : bool
         The field names input files (a path, or a list of them; a database
         given as ``scheme://...`` is not a file): no output may be one of
@@ -187,6 +198,7 @@ def setting(
         format=format,
         output=output,
         kind=kind,
+        files=files if files is None or callable(files) else tuple(files),
         input=input,
         flatten=flatten,
         cli=cli,
@@ -533,7 +545,23 @@ def argument_specs(cls: type) -> list[tuple[tuple[str, ...], dict[str, Any]]]:
         else:
             kwargs["default"] = f.default
         specs.append(((f.flag,), {"dest": f.name, **kwargs}))
+    if _folder_outputs(cls) and "force" not in seen:
+        specs.append(((FORCE_FLAG,), {"dest": "force", "help": FORCE_HELP, "action": "store_true"}))
     return specs
+
+
+#: The option of every command with a folder output whose files are declared
+#: (``setting(output="folder", files=...)``): replace what rocketroll did not write there.
+FORCE_FLAG = "--force"
+FORCE_HELP = (
+    "write into the output folder over files rocketroll did not write there (or that were "
+    "changed since): they are replaced"
+)
+
+
+def _folder_outputs(cls: type) -> list[_Field]:
+    """The folder outputs of ``cls`` (flattened) whose files are declared."""
+    return [f for f in _leaves(cls) if f.spec.output == "folder" and f.spec.files is not None]
 
 
 def _value(f: _Field, ns: argparse.Namespace) -> Any:
@@ -842,12 +870,14 @@ def _check_files(cls: type, args: Any) -> None:
     ]
     for f, value in fields:
         if f.spec.output is not None and value is not None:
+            names = f.spec.files(args) if callable(f.spec.files) else f.spec.files
             check_output(
                 value,
                 f.shown,
                 folder=f.spec.output == "folder",
                 kind=f.spec.kind,
                 inputs=[(name, p) for shown, name, p in inputs if shown != f.shown],
+                files=names or (),
             )
         elif f.spec.input and f.spec.kind is not None:
             for path in _paths(value):
@@ -876,8 +906,12 @@ def run_command(command: Command, argv: Sequence[str], prog: str) -> int:
         leaf: Command = ns._command
         if leaf.args is None or leaf.run is None:
             return leaf.run(None) if leaf.run is not None else 0
+        from rocketroll_common.files import forcing
+
         args = from_namespace(leaf.args, ns)
-        _check_files(leaf.args, args)
-        return leaf.run(args)
+        force = bool(_folder_outputs(leaf.args)) and bool(getattr(ns, "force", False))
+        with forcing(force):  # --force: what rocketroll did not write is replaced
+            _check_files(leaf.args, args)
+            return leaf.run(args)
 
     return guarded(prog, work)

@@ -3,6 +3,7 @@ replay buffer, saved together and resumed together."""
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,51 @@ def _replay_buffer_file(checkpoint: Path, algo: str) -> Path:
     return checkpoint.with_name(
         checkpoint.name.replace(f"{algo}_", f"{algo}_replay_buffer_", 1)
     ).with_suffix(".pkl")
+
+
+def checkpoint_files(checkpoint: Path, algo: str, normalize: bool) -> list[Path]:
+    """The files of the checkpoint ``checkpoint`` (a model zip) as they are saved: the
+    model, its ``VecNormalize`` statistics when the run normalises, and for SAC/TD3 the
+    replay buffer."""
+    files = [checkpoint]
+    if normalize:
+        files.append(_normalization_file(checkpoint, algo))
+    if algo != "ppo":
+        files.append(_replay_buffer_file(checkpoint, algo))
+    return files
+
+
+def planned_checkpoints(
+    folder: Path, algo: str, start: int, steps: int, every: int, n_envs: int, normalize: bool
+) -> list[Path]:
+    """The files SB3's ``CheckpointCallback`` (:func:`checkpoint_callback`, saving every
+    ``max(every // n_envs, 1)`` of its calls, ``n_envs`` env-steps each) writes into
+    ``folder`` over ``steps`` env-steps from ``start``: named by the env-steps at each
+    save."""
+    if not every:
+        return []
+    stride = max(every // n_envs, 1) * n_envs
+    saves = -(-max(steps, 0) // stride)
+    return [
+        file
+        for k in range(1, saves + 1)
+        for file in checkpoint_files(
+            folder / f"{algo}_{start + k * stride}_steps.zip", algo, normalize
+        )
+    ]
+
+
+def checkpoint_problem(path: Path) -> str | None:
+    """What keeps ``path`` from being a Stable-Baselines3 model to go on from (None: it
+    is one: a zip archive holding SB3's ``data``)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+    except (OSError, zipfile.BadZipFile):
+        return "not a Stable-Baselines3 model (a zip archive such as checkpoints/ppo_N_steps.zip)"
+    if "data" not in names:
+        return "a zip archive, but not a Stable-Baselines3 model (it holds no data entry)"
+    return None
 
 
 def _checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> Path:
@@ -78,17 +124,26 @@ def checkpoint_normalization(
     return normalization_record(saved, layout)
 
 
-def checkpoint_callback(**settings: Any) -> Any:
+def checkpoint_callback(*, recorded_in: Path | None = None, **settings: Any) -> Any:
     """SB3's ``CheckpointCallback`` (``settings`` its arguments) whose periodic saves a
     Ctrl-C does not cut short: it is held until the files are whole, then stops the run,
     which saves its own resumable checkpoint (an interrupt inside torch's zip writer left
-    a traceback and no clean stop)."""
+    a traceback and no clean stop).  With ``recorded_in`` (the run's output folder) each
+    save's files are added to that folder's manifest as rocketroll's
+    (:func:`rocketroll_common.files.record_outputs`)."""
     from stable_baselines3.common.callbacks import CheckpointCallback
+
+    from rocketroll_common.files import record_outputs
 
     class WholeCheckpoints(CheckpointCallback):
         def _on_step(self) -> bool:
             with interrupts_held():
-                return bool(super()._on_step())
+                going_on = bool(super()._on_step())
+                if recorded_in is not None and self.n_calls % self.save_freq == 0:
+                    saved = Path(self._checkpoint_path(extension="zip"))
+                    files = checkpoint_files(saved, self.name_prefix, self.save_vecnormalize)
+                    record_outputs(recorded_in, [f.relative_to(recorded_in) for f in files])
+                return going_on
 
     return WholeCheckpoints(**settings)
 

@@ -4,8 +4,10 @@
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import os
+import pickle
 import platform
 import shlex
 import sys
@@ -28,7 +30,15 @@ from agents.replay import (
     recording_setting,
 )
 from agents.train.callbacks import _make_eval_callback_class, evaluate_held_out
-from agents.train.checkpoints import VECNORMALIZE_FILE, _checkpoint, _resume, checkpoint_callback
+from agents.train.checkpoints import (
+    VECNORMALIZE_FILE,
+    _checkpoint,
+    _resume,
+    checkpoint_callback,
+    checkpoint_files,
+    checkpoint_problem,
+    planned_checkpoints,
+)
 from agents.train.envs import make_env, normalization_record, observation_names
 from agents.train.hyperparams import (
     ALGORITHMS,
@@ -41,6 +51,7 @@ from agents.train.hyperparams import (
     recipe_path,
 )
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
+from rocketroll_common.files import check_folder_files, record_outputs, write_all_atomic
 from rocketroll_common.settings import check, parse, setting, to_argv
 
 
@@ -57,6 +68,9 @@ MAX_ENVS = 4096
 MAX_CHECKPOINTS = 200
 #: Largest share of this machine's memory a run's rollout or replay buffer may take.
 MEMORY_SHARE = 0.5
+#: The files of a finished run in its output folder (and VECNORMALIZE_FILE when it
+#: normalises); beside them SB3 writes the checkpoints, the evaluations and the logs.
+RESULT_FILES = ("model.zip", "normalize.json", "settings.json")
 
 
 @dataclass(frozen=True)
@@ -89,7 +103,10 @@ class Args:
         le=MAX_ENVS,
     )
     out: Path | None = setting(
-        None, "output folder (default: runs/<algorithm>/<env-id>/seed<seed>)", output="folder"
+        None,
+        "output folder (default: runs/<algorithm>/<env-id>/seed<seed>)",
+        output="folder",
+        files=RESULT_FILES,  # and the checkpoints and logs: train() checks them
     )
     db: str | None = db_setting()
     hyperparams: Path = setting(
@@ -148,6 +165,8 @@ class Args:
         recipe_path(self.hyperparams)  # an unknown recipe's name, before any work
         if self.resume is not None and not Path(self.resume).is_file():
             raise SettingError("resume", f"{self.resume}: no such file")
+        if self.resume is not None and (problem := checkpoint_problem(self.resume)):
+            raise SettingError("resume", f"{self.resume}: {problem}")
         if self.resume is not None and not zipfile.is_zipfile(self.resume):
             raise SettingError(
                 "resume", f"{self.resume}: not a checkpoint (the model zip a run saved)"
@@ -261,6 +280,25 @@ def _check_size(
         )
 
 
+def _run_files(
+    out: Path, args: Args, hp: Hyperparameters, n_envs: int, start: int, steps: int
+) -> tuple[list[Path], list[Path]]:
+    """The files a run from ``start`` over ``steps`` env-steps writes into ``out`` (paths
+    in it): its results, and what SB3 writes itself (the evaluations, the log, the
+    periodic checkpoints)."""
+    normalizes = hp.normalize is not None
+    results = [Path(name) for name in RESULT_FILES]
+    if normalizes:
+        results.append(Path(VECNORMALIZE_FILE))
+    resumed_log = (out / "logs" / "progress.csv").exists()  # as _logger names it
+    log = f"progress_from_{start}.csv" if resumed_log else "progress.csv"
+    library = [Path("eval/evaluations.npz"), Path("eval/tracking_error.csv"), Path("logs") / log]
+    checkpoints = planned_checkpoints(
+        out / "checkpoints", args.ALGO, start, steps, args.checkpoint_freq, n_envs, normalizes
+    )
+    return results, library + [p.relative_to(out) for p in checkpoints]
+
+
 def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, Any]:
     """Train PPO as ``args`` says; write the output folder; return ``settings.json``'s data.
 
@@ -311,6 +349,10 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         args.out if args.out is not None else Path("runs") / algo / args.env_id / f"seed{args.seed}"
     )
     out = Path(out)
+    # Every file the run writes into the folder, before the work: one the user put there
+    # is refused, unless --force (a resumed run's checkpoints: once its steps are read).
+    results, library = _run_files(out, args, hp, n_envs, 0, planned)
+    check_folder_files(out, results + (library if args.resume is None else []), "--out")
 
     import torch
     from stable_baselines3.common.callbacks import CallbackList
@@ -389,6 +431,9 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             hp.policy, train_env, seed=args.seed, verbose=args.verbose, **algo_kwargs
         )
     start_steps = int(model.num_timesteps)
+    if args.resume is not None:
+        _, library = _run_files(out, args, hp, n_envs, start_steps, planned - start_steps)
+        check_folder_files(out, library, "--out")
     model.set_logger(_logger(out, args, algo_kwargs.get("tensorboard_log"), start_steps))
     held_out = _make_eval_callback_class()(
         eval_env,
@@ -411,6 +456,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 name_prefix=algo,
                 save_vecnormalize=normalize is not None,
                 save_replay_buffer=algo != "ppo",  # SAC/TD3 go on with what they collected
+                recorded_in=out,
             )
         )
     learn_started = time.perf_counter()
@@ -429,24 +475,42 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     except KeyboardInterrupt:
         # Named by the env-steps collected, as SB3's own checkpoints are: a rollout cut
         # short (at most n_steps x n_envs steps) is counted but collected again on resume.
+        named = out / "checkpoints" / f"{algo}_{model.num_timesteps}_steps.zip"
+        files = [f.relative_to(out) for f in checkpoint_files(named, algo, normalize is not None)]
+        record_outputs(out, library)
+        try:
+            check_folder_files(out, files, "--out")
+        except UsageError as exc:
+            raise Interrupted(
+                f"after {model.num_timesteps:,} env-steps; not saved: {exc}"
+            ) from None
         saved = _checkpoint(model, normalize, out / "checkpoints", algo)
+        record_outputs(out, files)
         again = to_argv(dataclasses.replace(args, resume=saved, out=out))
         raise Interrupted(
             f"after {model.num_timesteps:,} env-steps; saved the resumable checkpoint {saved} "
             f"(go on with: {shlex.join(['rocketroll', 'train', algo, *again])})"
         ) from None
+    except BaseException:
+        record_outputs(out, library)  # what SB3 wrote before the failure is the run's
+        raise
     train_s = time.perf_counter() - learn_started
     trained = int(model.num_timesteps) - start_steps  # by this run (a resumed one: since then)
 
     # The result: the final model and its observation statistics (as JSON, and as SB3's
     # VecNormalize pickle for `VecNormalize.load`).
-    model.save(out / "model.zip")
+    # Written at the end, all or nothing, with the folder's manifest.
+    saved_model = io.BytesIO()
+    model.save(saved_model)
     norm_record = normalization_record(normalize, hp.layout)
-    (out / "normalize.json").write_text(json.dumps(norm_record, indent=2) + "\n", "utf-8")
+    outputs: dict[str | os.PathLike[str], str | bytes] = {
+        out / "model.zip": saved_model.getvalue(),
+        out / "normalize.json": json.dumps(norm_record, indent=2) + "\n",
+    }
     if normalize is not None:
         from stable_baselines3.common.vec_env import sync_envs_normalization
 
-        normalize.save(str(out / VECNORMALIZE_FILE))
+        outputs[out / VECNORMALIZE_FILE] = pickle.dumps(normalize)  # as VecNormalize.save
         sync_envs_normalization(train_env, eval_env)
     final = evaluate_held_out(model, eval_env, eval_adapter, args.eval_seed)
     wall_s = time.perf_counter() - started
@@ -487,8 +551,10 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             "unit": "deg" if adapter.config.task == "angle" else "deg/s",
         },
     }
-    (out / "settings.json").write_text(json.dumps(settings, indent=2) + "\n", "utf-8")
+    outputs[out / "settings.json"] = json.dumps(settings, indent=2) + "\n"
     model.logger.close()
+    write_all_atomic(outputs, folder=out)
+    record_outputs(out, library)
     train_env.close()
     eval_env.close()
     resumed = ""
