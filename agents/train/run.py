@@ -165,12 +165,12 @@ class Args:
         recipe_path(self.hyperparams)  # an unknown recipe's name, before any work
         if self.resume is not None and not Path(self.resume).is_file():
             raise SettingError("resume", f"{self.resume}: no such file")
-        if self.resume is not None and (problem := checkpoint_problem(self.resume)):
-            raise SettingError("resume", f"{self.resume}: {problem}")
         if self.resume is not None and not zipfile.is_zipfile(self.resume):
             raise SettingError(
                 "resume", f"{self.resume}: not a checkpoint (the model zip a run saved)"
             )
+        if self.resume is not None and (problem := checkpoint_problem(self.resume)):
+            raise SettingError("resume", f"{self.resume}: {problem}")
 
 
 # ----------------------------------------------------------------------------- arguments
