@@ -3,6 +3,7 @@ within float32 rounding of SB3's predict()."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import subprocess
 import sys
@@ -72,31 +73,44 @@ def test_an_observation_of_another_size_is_refused() -> None:
         chain(np.zeros(4, np.float32))
 
 
-def test_the_committed_policy_acts_through_the_chain() -> None:
-    controller = LearnedController.load(COMMITTED / "RocketRoll-v0")
-    assert controller.chain is not None
+@pytest.fixture(scope="module")
+def committed() -> LearnedController:
+    """The committed angle policy, loaded once for the module."""
+    return LearnedController.load(COMMITTED / "RocketRoll-v0")
+
+
+def test_the_committed_policy_acts_through_the_chain(committed: LearnedController) -> None:
+    assert committed.chain is not None
 
 
 #: The committed angle policy's actions on fixed inputs (observation and history), hashed: the
-#: chain's, torch's.
+#: chain's, torch's (``_hashes`` in this process, ``_ACTIONS`` in another).
 _ACTIONS = """
-import hashlib, numpy as np
 from agents.learned import LearnedController
 from agents.registry import COMMITTED
-c = LearnedController.load(COMMITTED / "RocketRoll-v0")
-width = c.model.observation_space.shape[0]
-obs = np.random.default_rng(0).normal(0.0, 30.0, size=(500, width)).astype(np.float32)
-chain = np.concatenate([c.chain(c.normalizer(o[None])) for o in obs])
-torch = np.concatenate([c.predict(o) for o in obs])
-print(hashlib.sha256(chain.tobytes()).hexdigest(), hashlib.sha256(torch.tobytes()).hexdigest())
+from tests.agents.test_actor import _hashes
+print(*_hashes(LearnedController.load(COMMITTED / "RocketRoll-v0")))
 """
 
 
-def test_the_chain_has_the_same_bits_under_every_torch_kernel() -> None:
+def _hashes(c: LearnedController) -> tuple[str, str]:
+    """The sha256 of the chain's actions and of torch's on 500 fixed observations."""
+    assert c.chain is not None
+    width = c.model.observation_space.shape[0]
+    obs = np.random.default_rng(0).normal(0.0, 30.0, size=(500, width)).astype(np.float32)
+    chain = np.concatenate([c.chain(c.normalizer(o[None])) for o in obs])
+    torch = np.concatenate([c.predict(o) for o in obs])
+    return hashlib.sha256(chain.tobytes()).hexdigest(), hashlib.sha256(torch.tobytes()).hexdigest()
+
+
+def test_the_chain_has_the_same_bits_under_every_torch_kernel(
+    committed: LearnedController,
+) -> None:
     """torch's kernels (its own, chosen by ATEN_CPU_CAPABILITY, and MKL's, by MKL_CBWR)
-    give other bits on other processors; the chain does not use them."""
-    found = set()
-    for varied in ({}, {"ATEN_CPU_CAPABILITY": "default"}, {"MKL_CBWR": "COMPATIBLE"}):
+    give other bits on other processors; the chain does not use them.  The kernels as this
+    process has them are read here; each other setting in a process started with it."""
+    found = {_hashes(committed)}
+    for varied in ({"ATEN_CPU_CAPABILITY": "default"}, {"MKL_CBWR": "COMPATIBLE"}):
         done = subprocess.run(
             [sys.executable, "-c", _ACTIONS],
             cwd=REPO,
@@ -106,7 +120,8 @@ def test_the_chain_has_the_same_bits_under_every_torch_kernel() -> None:
             timeout=120,
             check=True,
         )
-        found.add(tuple(done.stdout.split()))
+        chain, torch = done.stdout.split()
+        found.add((chain, torch))
     assert len({chain for chain, _ in found}) == 1, found
     if len({torch for _, torch in found}) == 1:
         pytest.skip("torch's own bits do not change under these settings on this machine")

@@ -8,11 +8,14 @@ import json
 import re
 import sqlite3
 import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from agents.sweep import ResultStore, expand, load_spec, run_sweep
+from agents.sweep import ResultStore, SweepSpec, expand, load_spec, run_sweep
 from rocketroll.cli import command
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import run_command
@@ -130,14 +133,32 @@ def test_bad_specs_are_named(text, message, tmp_path):
     assert str(path) in str(info.value)
 
 
-def test_a_tiny_sweep_stores_every_trial_and_resumes(tmp_path, default_db):
+@dataclass(frozen=True)
+class _Swept:
+    """The two trials of :data:`TWO_TRIALS` run in-process: the spec, its folder, records."""
+
+    spec: SweepSpec
+    out: Path
+    records: list[dict[str, Any]]
+
+
+@pytest.fixture(scope="module")
+def tiny_sweep(tmp_path_factory: pytest.TempPathFactory, default_db: Path) -> Iterator[_Swept]:
+    """One in-process run of the two trials, for the store's test and Ray's to read."""
+    folder = tmp_path_factory.mktemp("tiny-sweep")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SB3_LOGDIR", str(folder / "sb3-logs"))
+        spec = load_spec(_spec(folder, TWO_TRIALS))
+        out = folder / "out"
+        yield _Swept(spec, out, run_sweep(spec, out, progress=False))
+
+
+def test_a_tiny_sweep_stores_every_trial_and_resumes(tiny_sweep: _Swept) -> None:
     """Two trials (PID, a tiny PPO): both stored with spec, version, metrics and artifacts;
     run again, nothing is re-run; the store's numbers are the protocol's."""
     from agents.evaluate import HEADLINE
 
-    spec = load_spec(_spec(tmp_path, TWO_TRIALS))
-    out = tmp_path / "out"
-    records = run_sweep(spec, out, progress=False)
+    spec, out, records = tiny_sweep.spec, tiny_sweep.out, tiny_sweep.records
     assert [r["status"] for r in records] == ["done", "done"], records
     with ResultStore(out / "results.sqlite") as store:
         rows = store.rows("tiny")
@@ -218,25 +239,26 @@ def test_the_store_is_plain_sqlite_and_exports_parquet(tmp_path):
     assert table[0]["id"] == "abc" and table[0]["headline_mean"] == 0.5
 
 
-def test_the_same_sweep_on_ray_gives_the_same_results(tmp_path, default_db):
-    """The two trials in-process and as Ray Tune trials on a local Ray instance started
-    here (2 CPUs): the same trial ids and the same numbers, value for value."""
+def test_the_same_sweep_on_ray_gives_the_same_results(tmp_path, tiny_sweep: _Swept) -> None:
+    """The learned trial (trained, then evaluated) as a Ray Tune trial on a local Ray
+    instance started here (one CPU): the same trial id and the same numbers, value for
+    value, as in-process."""
     ray = pytest.importorskip(
         "ray", reason="Ray is an optional extra (pip install 'rocketroll[ray]'); make test has it"
     )
     pytest.importorskip("ray.tune", reason="Ray Tune is part of the rocketroll[ray] extra")
-    spec = load_spec(_spec(tmp_path, TWO_TRIALS))
-    local = run_sweep(spec, tmp_path / "local", progress=False)
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    spec = load_spec(_spec(tmp_path, TWO_TRIALS.replace("  - {name: pid, policy: pid}\n", "")))
+    (learned,) = expand(spec)
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         remote = run_sweep(spec, tmp_path / "ray", progress=False, ray="auto")
     finally:
         ray.shutdown()
-    assert len(remote) == 2 and all(r["status"] == "done" for r in remote), remote
+    assert len(remote) == 1 and all(r["status"] == "done" for r in remote), remote
     with ResultStore(tmp_path / "ray" / "results.sqlite") as store:
         stored = {r["id"]: r for r in store.rows()}
-    local_by_id = {r["id"]: r for r in local}
-    assert stored.keys() == local_by_id.keys()
+    local_by_id = {r["id"]: r for r in tiny_sweep.records}
+    assert stored.keys() == {learned.id} and learned.id in local_by_id
     for trial_id, row in stored.items():
         mine = local_by_id[trial_id]
         assert row["headline_mean"] == mine["headline_mean"]

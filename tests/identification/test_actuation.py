@@ -9,13 +9,18 @@ over many seeds; these are single recordings.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from identification.actuation import fit_linkage, identify_actuation
+from identification.actuation import Actuation, fit_linkage, identify_actuation
 from identification.compiled import linkage_path
 from identification.model import Linkage, Rig, Servo, servo_path
 from identification.pipeline import IdentifyOptions, measurements
@@ -70,8 +75,47 @@ def test_a_measured_fin_gives_the_servo_lag_and_backlash_and_none_on_a_direct_ri
     assert lag.value == play.value == 0.0
 
 
-def test_the_latency_is_found_within_one_logging_interval_and_not_invented() -> None:
-    late = identify_actuation(run_tunnel(_short(1, Effects(latency_s=0.03))))
+@dataclass(frozen=True)
+class _Identified:
+    """``rocketroll identify --actuation`` on a rig whose sensors are 0.03 s late: what it
+    printed, the JSON it wrote and what :func:`identify_actuation` returned inside it."""
+
+    out: str
+    written: dict[str, Any]
+    found: Actuation
+
+
+@pytest.fixture(scope="module")
+def late_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[_Identified]:
+    """One identification (a maximum-likelihood latency and quadratic search, the module's
+    dearest step) serves the CLI's test and the latency's."""
+    import identification.actuation as actuation
+    from identification.recording import save_recording
+    from rocketroll.cli import main
+
+    folder = tmp_path_factory.mktemp("late-rig")
+    path = folder / "rig.csv"
+    save_recording(run_tunnel(_short(1, Effects(latency_s=0.03))), path)
+    out_json = folder / "fit.json"
+    found: list[Actuation] = []
+
+    def spy(*args: Any, **kwargs: Any) -> Actuation:
+        found.append(identify_actuation(*args, **kwargs))
+        return found[-1]
+
+    argv = ["identify", str(path), "--method", "paper", "--mc-runs", "0", "--actuation"]
+    argv += ["--json", str(out_json)]
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(io.StringIO()) as out:
+        mp.setattr(actuation, "identify_actuation", spy)
+        assert main(argv) == 0
+    (actuation_found,) = found
+    yield _Identified(out.getvalue(), json.loads(out_json.read_text()), actuation_found)
+
+
+def test_the_latency_is_found_within_one_logging_interval_and_not_invented(
+    late_rig: _Identified,
+) -> None:
+    late = late_rig.found
     term = late.terms[2]
     assert term.name == "sensor latency" and term.admitted
     assert abs(late.rig.latency_s - 0.03) <= 0.01 + 1e-12
@@ -104,24 +148,22 @@ def test_a_stated_linkage_and_latency_shape_the_fin_the_model_sees() -> None:
         StatedRig(sensor_latency_s=0.9)
 
 
-def test_identify_actuation_prints_and_writes_each_terms_test(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from identification.recording import save_recording
-    from rocketroll.cli import main
-
-    path = tmp_path / "rig.csv"
-    save_recording(run_tunnel(_short(1, Effects(servo_lag_s=0.05, backlash_deg=0.5))), path)
-    out_json = tmp_path / "fit.json"
-    argv = ["identify", str(path), "--method", "ml", "--actuation", "--json", str(out_json)]
-    assert main(argv) == 0
-    out = capsys.readouterr().out
+def test_identify_actuation_prints_and_writes_each_terms_test(late_rig: _Identified) -> None:
+    out = late_rig.out
     assert "beyond the model (each term admitted at p < 0.01):" in out
-    assert "servo lag" in out and "admitted; from the measured fin" in out
-    terms = json.loads(out_json.read_text())["actuation"]
-    assert terms["servo lag"]["admitted"] is True
-    assert terms["servo lag"]["value"] == pytest.approx(0.05, rel=0.2)
+    (line,) = (x for x in out.splitlines() if x.strip().startswith("sensor latency"))
+    assert "admitted; resolution 0.01 s" in line and "not admitted" not in line
+    (line,) = (x for x in out.splitlines() if x.strip().startswith("servo lag"))
+    assert "not admitted; estimate" in line
+    terms = late_rig.written["actuation"]
+    assert terms["sensor latency"]["admitted"] is True
+    assert terms["sensor latency"]["value"] == late_rig.found.rig.latency_s
+    assert abs(terms["sensor latency"]["value"] - 0.03) <= 0.01 + 1e-12
+    assert terms["servo lag"]["admitted"] is False
     assert set(terms) == {"servo lag", "backlash", "sensor latency", "quadratic damping"}
+    assert [terms[t.name]["statistic"] for t in late_rig.found.terms] == [
+        t.statistic for t in late_rig.found.terms
+    ]
 
 
 def test_a_recording_states_its_rig_in_format_1_2_and_older_files_still_read(
