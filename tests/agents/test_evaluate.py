@@ -217,6 +217,7 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
     for png in ("episode.png", "errors.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in out.iterdir()) == [
+        ".rocketroll-outputs.json",  # what rocketroll wrote there, for the next run
         "episode.png",
         "errors.png",
         "results.json",

@@ -433,7 +433,8 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert "flight constant [good]" in out and "fit adequacy" in out
     assert "held out: fitted to" in out
     # The flight's report: one figure (airspeed, fin, rate re-simulated, u_d) and report.md.
-    assert sorted(p.name for p in report.iterdir()) == ["flight_identification.png", "report.md"]
+    listed = sorted(p.name for p in report.iterdir())
+    assert listed == [".rocketroll-outputs.json", "flight_identification.png", "report.md"]
     assert (report / "flight_identification.png").read_bytes().startswith(b"\x89PNG")
     markdown = (report / "report.md").read_text(encoding="utf-8")
     assert "(flight_identification.png)" in markdown and "C_P-like" in markdown

@@ -66,7 +66,8 @@ def test_report_for_any_method(tmp_path: Path, capsys: pytest.CaptureFixture[str
     argv = ["identify", str(PAPER), "--method", "output-error", "--report", str(report)]
     assert main([*argv, "--mc-runs", "0"]) == 0
     assert "wrote" in capsys.readouterr().out
-    assert sorted(p.name for p in report.iterdir()) == ["fit-output-error.png", "report.md"]
+    listed = sorted(p.name for p in report.iterdir())
+    assert listed == [".rocketroll-outputs.json", "fit-output-error.png", "report.md"]
     text = (report / "report.md").read_text()
     assert text.startswith("# Identification report: ") and "fig05" not in text
     assert "**output-error constant**: good" in text
