@@ -482,14 +482,14 @@ class Args:
         if repeated:
             raise UsageError(f"--policy {repeated[0]} is given twice")
         check_options(self.settings)
-
-
         for policy in unnamed_defaults(self.policy, default_policies(), self.env_id):
             check_policy(policy, self.env_id)  # before any database is opened
         if self.minari is not None:  # the extra and the prefix; the ids once named
             from agents.datasets import check_minari
 
             check_minari(self.minari, [])
+
+
 def run(args: Args) -> list[Evaluation]:
     """Evaluate, print the table, write the outputs."""
     args = replace(args, policy=unnamed_defaults(args.policy, default_policies(), args.env_id))

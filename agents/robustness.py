@@ -133,10 +133,10 @@ class Args:
             repeated = sorted({v for v in values if values.count(v) > 1})
             if repeated:
                 raise UsageError(f"{flag} {repeated[0]} is given twice")
-
-
         for policy in unnamed_defaults(self.policy, _default_policy(), self.env_id):
             check_policy(policy, self.env_id)  # before any database is opened
+
+
 def markdown_table(
     scores: dict[str, dict[str, np.ndarray]], conditions: Sequence[str], unit: str
 ) -> str:

@@ -243,12 +243,12 @@ class Args:
         repeated = sorted({p for p in every if every.count(p) > 1})
         if repeated:
             raise UsageError(f"--run {repeated[0]} is given twice")
+        for policy in [*every, *self.reference]:
+            check_policy(policy, self.env_id)  # before any database is opened
 
 
 def _groups(values: Sequence[str]) -> dict[str, list[str]]:
     """``[LABEL=]POLICY`` values by label (default: the policy's name before ``:``)."""
-        for policy in [*every, *self.reference]:
-            check_policy(policy, self.env_id)  # before any database is opened
     groups: dict[str, list[str]] = {}
     for value in values:
         label, sep, policy = value.partition("=")

@@ -425,6 +425,9 @@ class BuildArgs:
 
 def build(args: BuildArgs) -> int:
     """Build a database from the bundled (or given) recordings."""
+    for recording in args.recordings:  # before the build's process starts
+        if not Path(recording).is_file():
+            raise UsageError(f"RECORDING {recording}: no such file")
     from disturbances.db import DatabaseError, DisturbanceDB
     from disturbances.default import (
         DEFAULT_POSTERIOR,
@@ -443,9 +446,6 @@ def build(args: BuildArgs) -> int:
         and args.posterior == DEFAULT_POSTERIOR
     )
     if path.exists() and not args.force:
-    for recording in args.recordings:  # before the build's process starts
-        if not Path(recording).is_file():
-            raise UsageError(f"RECORDING {recording}: no such file")
         found = peek(path)
         if found is None:  # not a readable database: say why
             try:
