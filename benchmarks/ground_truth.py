@@ -553,7 +553,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         choices=(*TRUTHS, "all"),
         help="a named truth (repeat for several; 'all': every one; default: paper); "
-        + "; ".join(f"{k}: {d}" for k, (d, _) in TRUTHS.items()),
+        # argparse formats help with %: a truth's "15 % more" must reach it as %%
+        + "; ".join(f"{k}: {d}" for k, (d, _) in TRUTHS.items()).replace("%", "%%"),
     )
     parser.add_argument(
         "--model",
