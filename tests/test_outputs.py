@@ -18,6 +18,7 @@ import pytest
 from identification.bundled import bundled_path
 from rocketroll.cli import main as rocketroll
 from rocketroll_common.files import MANIFEST, content_kind
+from tests.agents.test_sweep import TINY_PPO
 from tests.cli import refused
 
 RECORDING = bundled_path("tunnel-paper-seed0")
@@ -180,17 +181,6 @@ def test_writing_again_over_its_own_output_is_allowed(
 
 # ------------------------------------------------------------------------ output folders
 EVAL = ["eval", "--policy", "pid", "--episodes", "1"]
-TINY_PPO = """\
-RocketRoll-v0:
-  n_envs: 2
-  n_timesteps: 64
-  policy: MlpPolicy
-  normalize: {norm_obs: true, norm_reward: true}
-  n_steps: 32
-  batch_size: 32
-  n_epochs: 1
-  policy_kwargs: {net_arch: [8]}
-"""
 
 
 def _users_folder(folder: Path, names: dict[str, bytes]) -> dict[Path, bytes]:

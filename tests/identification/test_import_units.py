@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -25,15 +24,9 @@ from identification.pipeline import model_inputs
 from identification.recording import Recording, load_recording, small_fins
 from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main
+from tests.identification.test_adequacy import PRBS
 
 RAD = 180.0 / math.pi
-PRBS: dict[str, Any] = {
-    "schedule": "prbs",
-    "log_dt": 0.01,
-    "duration": 58.0,
-    "pulse": 0.5,
-    "lead": 2.0,
-}
 FIN_WARNING = "fin (column 1): 99 % of its |values| are under"
 
 
