@@ -87,9 +87,10 @@ typecheck: $(VENV)/.installed-dev
 	$(BIN)/mypy
 
 # On every core (pytest-xdist); --dist loadfile keeps a module's tests, and the fixtures they
-# share, on one worker.
+# share, on one worker; --no-loadscope-reorder hands the modules out in the order
+# tests/conftest.py sorts them (the slowest first), not by their number of tests.
 pytest: $(VENV)/.installed-dev
-	$(BIN)/pytest -n auto --dist loadfile
+	$(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder
 
 # Another machine's numerics (docs/results/reproducibility.md): OpenBLAS's AVX kernel, numpy
 # without its SIMD loops, numba compiling for a generic x86-64, torch's unvectorised

@@ -7,6 +7,8 @@ per test session (by the first test that needs it).
 
 from __future__ import annotations
 
+import os
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,20 +24,44 @@ def _private_default_database(tmp_path_factory: pytest.TempPathFactory) -> Itera
 
 
 @pytest.fixture(scope="session")
-def default_db(_private_default_database: Path) -> Path:
-    """The session's default database, built once (about 40 s of CPU; once per pytest-xdist
-    worker, each in its own temporary folder); its path."""
+def default_db(
+    _private_default_database: Path, tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    """The session's default database, built once (about 35 s of CPU) for all pytest-xdist
+    workers and copied into each worker's own folder, so no test sees another's changes;
+    its path."""
     from disturbances.default import open_default
 
-    with open_default(progress=False):
+    if not _private_default_database.exists():
+        shutil.copyfile(_shared_default_database(tmp_path_factory), _private_default_database)
+    with open_default(progress=False):  # checks the copy (and rebuilds one that is not right)
         pass
     return _private_default_database
 
 
+def _shared_default_database(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default database in the folder the workers share (the parent of each worker's
+    base folder; this session's own under one process), built by the first worker to ask:
+    the build's lock on its folder makes the others wait and then find it built."""
+    from disturbances.default import open_default
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    path = root / "shared-default-db" / "disturbances.sqlite"
+    path.parent.mkdir(exist_ok=True)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("ROCKETROLL_DB", str(path))
+        with open_default(progress=False):
+            pass
+    return path
+
+
 #: The modules that take longest (minutes of CPU each in the parallel run), in that order.
-#: pytest-xdist's --dist loadfile hands modules out in collection order, so these go first
-#: and the short ones fill in after: otherwise the last heavy module (collected last, being
-#: top-level) runs alone while the other workers have finished.
+#: pytest-xdist's --dist loadfile hands modules out in collection order (with
+#: --no-loadscope-reorder, as `make pytest` runs it), so these go first and the short ones
+#: fill in after: otherwise the last heavy module (collected last, being top-level) runs
+#: alone while the other workers have finished.
 SLOWEST_MODULES = (
     "tests/test_benchmarks.py",
     "tests/test_figures.py",
