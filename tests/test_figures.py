@@ -5,8 +5,10 @@ A change that moves a number they show fails here until the page says so.  The
 figures are the same on every x86-64 machine (docs/results/reproducibility.md):
 the default database is built under pinned numerics and the evaluation's
 arithmetic does not depend on the processor, so the comparison is exact; `make
-test` runs these tests a second time under another machine's numerics.  The
-committed PPO policies are reproduced from their recorded commands by the slow
+test` runs these tests a second time under another machine's numerics.  With the
+numerics unpinned (``ROCKETROLL_NUMERICS=unpinned``, as where the pin cannot be had) the
+tables' figures are exact no more: those tests check the rows' words, then skip, saying
+so.  The committed PPO policies are reproduced from their recorded commands by the slow
 tests at the end (``pytest -m slow``; minutes each).
 """
 
@@ -39,6 +41,28 @@ def page(name: str) -> str:
 SITE = "\n".join(page(p.relative_to(DOCS).as_posix()) for p in sorted(DOCS.rglob("*.md")))
 #: The page with the evaluation tables: the angle, rate and flight tasks, in that order.
 RESULTS = page("results/evaluation.md")
+
+
+#: A printed figure: digits, a decimal point and digits, signed (ASCII or typographic minus).
+FIGURE = re.compile(r"[-+\u2212]?\d+(?:\.\d+)?")
+
+
+def assert_same_rows(computed: list[str], shown: list[str], where: str) -> None:
+    """The computed table rows are the page's, to the character.  With the numerics unpinned
+    (``ROCKETROLL_NUMERICS=unpinned``, as where the pin cannot be had), the page's figures
+    are not the machine's (docs/results/reproducibility.md: exact only when pinned): the
+    rows and their words are still checked, then the test is skipped, saying so."""
+    from rocketroll_common.numerics import is_unpinned
+
+    if computed == shown:
+        return
+    if is_unpinned():
+        words = [FIGURE.sub("#", row) for row in computed]
+        assert words == [FIGURE.sub("#", row) for row in shown], where
+        pytest.skip(f"{where}: its figures are exact only under the pinned numerics")
+    assert len(computed) == len(shown), where
+    for ours, theirs in zip(computed, shown, strict=True):
+        assert ours == theirs, f"computed:\n{ours}\n{where}:\n{theirs}"
 
 
 def site_rows(first: str, count: int) -> list[str]:
@@ -92,8 +116,7 @@ def test_the_evaluation_tables(
     printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
     starts = [k for k, line in enumerate(RESULTS.splitlines()) if line.startswith("| trim |")]
     shown = RESULTS.splitlines()[starts[table] : starts[table] + len(printed) - 1]
-    for row, shown_row in zip(printed[1:], shown, strict=True):
-        assert row == shown_row, f"computed:\n{row}\nresults/evaluation.md:\n{shown_row}"
+    assert_same_rows(printed[1:], shown, "results/evaluation.md")
 
 
 def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -212,7 +235,7 @@ def test_the_seed_statistics_and_robustness_tables(
     for argv in (["seeds", "--env-id", env_id, *runs], ["robustness", "--env-id", env_id]):
         assert rocketroll(argv) == 0
         printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
-        assert printed == _table_after(printed[0], len(printed)), argv[0]
+        assert_same_rows(printed, _table_after(printed[0], len(printed)), f"{argv[0]}'s table")
 
 
 def guide_commands() -> list[list[str]]:
