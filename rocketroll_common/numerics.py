@@ -152,9 +152,12 @@ def _has_x86_v3() -> bool:
 
 def pinned_environment(environ: Mapping[str, str] | None = None) -> dict[str, str] | None:
     """``environ`` (default: this process's) with the numerics pinned, or None where this
-    machine cannot be pinned (not x86-64 Linux, or a processor below x86-64-v3)."""
+    machine cannot be pinned (not x86-64 Linux, or a processor below x86-64-v3) or
+    ``environ`` asks for the machine's own numerics (``ROCKETROLL_NUMERICS=unpinned``, which
+    so stands for such a machine)."""
     linux_x86 = platform.system() == "Linux" and platform.machine().lower() == "x86_64"
-    if not linux_x86 or not _has_x86_v3():
+    asked = (os.environ if environ is None else environ).get(MARKER) == "unpinned"
+    if asked or not linux_x86 or not _has_x86_v3():
         return None
     dispatch = _numpy_dispatch()
     if dispatch is None:
@@ -222,7 +225,7 @@ def call_pinned(function: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     main thread did not see: the kernel may hand a process's signal to any of
     its threads) raises ``KeyboardInterrupt`` here too, once it has cleaned up.
     """
-    env = None if is_pinned() or is_unpinned() else pinned_environment()
+    env = None if is_pinned() else pinned_environment()
     if env is None:
         return function(*args, **kwargs)
     try:

@@ -39,7 +39,8 @@ VARIED = (
 
 pinnable = pytest.mark.skipif(
     numerics.pinned_environment() is None,
-    reason="the numerics are pinned only on x86-64 Linux with AVX2 and FMA (x86-64-v3)",
+    reason="the numerics are pinned only on x86-64 Linux with AVX2 and FMA (x86-64-v3), and "
+    "not with ROCKETROLL_NUMERICS=unpinned",
 )
 
 
@@ -156,6 +157,18 @@ def test_a_pinned_process_or_a_local_function_computes_here(
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert numerics.call_pinned(os.getpid) == os.getpid()
+    # ... and it stands for a machine that cannot be pinned: a default database built so is
+    # the default one, its fingerprint saying "as found".
+    from disturbances import default
+    from identification.bundled import bundled_paths
+    from identification.pipeline import IdentifyOptions
+
+    assert numerics.pinned_environment() is None
+    files = bundled_paths()[:1]
+    here = default.fingerprint(files, IdentifyOptions(), 0, ("iaaft",), 0, ["paper"])
+    assert here == default.fingerprint(
+        files, IdentifyOptions(), 0, ("iaaft",), 0, ["paper"], pinned=False
+    )
     monkeypatch.delenv(numerics.MARKER)
     if numerics.pinned_environment() is None:
         return
