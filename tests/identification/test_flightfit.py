@@ -65,8 +65,16 @@ def paper_flight() -> Recording:
 
 
 @pytest.fixture(scope="module")
-def paper_fit(paper_flight: Recording) -> FlightFit:
-    return identify_flight(flight_inputs(paper_flight), "theta")
+def paper_constant(paper_flight: Recording) -> FlightFit:
+    """The constant model's fit to the default virtual flight."""
+    return identify_flight(flight_inputs(paper_flight), "constant")
+
+
+@pytest.fixture(scope="module")
+def paper_fit(paper_constant: FlightFit) -> FlightFit:
+    """The θ model's fit to the default virtual flight, started from the constant model's
+    fit it is given (which it would otherwise make first: the same fit)."""
+    return identify_flight(paper_constant.inputs, "theta", constant=paper_constant)
 
 
 def pct(x: float, truth: float) -> float:
@@ -426,7 +434,10 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     capsys.readouterr()
     out_json = tmp_path / "fit.json"
     report = tmp_path / "report"
-    assert main(["identify", str(path), "--json", str(out_json), "--report", str(report)]) == 0
+    # One identification writes the JSON and the report and stores the flight (below).
+    db = tmp_path / "db.sqlite"
+    argv = ["identify", str(path), "--json", str(out_json), "--report", str(report)]
+    assert main([*argv, "--db", str(db)]) == 0
     out, err = capsys.readouterr()
     assert err == ""
     assert "flight identification" in out and "C_P-like" in out
@@ -449,9 +460,7 @@ def test_rocketroll_identify_on_a_flight_log(tmp_path: Path, capsys):
     assert constant["metrics"]["resim_rate_mae_pct"] < 2.0
     assert constant["metrics"]["adequacy"]["verdict"] == "good"
     # A flight is stored with its fits' references (the flight env flies it as that rocket).
-    db = tmp_path / "db.sqlite"
-    assert main(["identify", str(path), "--db", str(db)]) == 0
-    assert "stored in" in capsys.readouterr().out
+    assert f"stored in {db}: " in out
     assert main(["db", "add", str(path), "--db", str(db)]) == 0
     assert "already stored" in capsys.readouterr().out
 
@@ -527,13 +536,14 @@ def test_a_recording_that_barely_moves_through_the_air_is_refused(paper_flight: 
         fit(still, "flight", ["constant"])
 
 
-def test_the_theta_model_starts_from_the_constant_fit_it_is_given(paper_flight: Recording):
-    inputs = flight_inputs(paper_flight)
-    constant = identify_flight(inputs, "constant")
-    theta = identify_flight(inputs, "theta", constant=constant)
-    assert theta.loglike >= constant.loglike - 1e-6  # it nests the constant model
+def test_the_theta_model_starts_from_the_constant_fit_it_is_given(
+    paper_constant: FlightFit, paper_fit: FlightFit
+):
+    theta = paper_fit  # identify_flight(inputs, "theta", constant=paper_constant)
+    assert theta.inputs is paper_constant.inputs
+    assert theta.loglike >= paper_constant.loglike - 1e-6  # it nests the constant model
     with pytest.raises(ValueError, match="constant model's fits to the same inputs"):
-        identify_flight(inputs, "theta", constant=theta)
+        identify_flight(theta.inputs, "theta", constant=theta)
 
 
 def test_a_tunnel_run_that_logs_its_steady_airspeed_is_not_a_flight(tmp_path: Path):
@@ -543,7 +553,8 @@ def test_a_tunnel_run_that_logs_its_steady_airspeed_is_not_a_flight(tmp_path: Pa
     steady = dataclasses.replace(rec, airspeed_mps=noisy)
     assert not steady.is_flight and steady.format == FORMAT  # the column is kept: format 1.1
     assert default_methods(steady) == default_methods()
-    assert fit(steady, "paper", ["constant"])["constant"].params.alpha > 0
+    options = IdentifyOptions(noise_runs=0)  # the fit, without its noise study
+    assert fit(steady, "paper", ["constant"], options)["constant"].params.alpha > 0
     path = tmp_path / "steady.csv"
     save_recording(steady, path)
     assert not load_recording(path).is_flight
@@ -650,7 +661,11 @@ def test_a_supersonic_flight_is_fitted_below_mach_0_8_unless_asked(
     assert found.metrics["supersonic_excluded_s"] == pytest.approx(left_out)
     first, last = found.metrics["fitted_s"]
     assert first > 0.0 and last == pytest.approx(float(fast.time_s[-1]))
-    both = fit(fast, "flight", ["constant"], IdentifyOptions(noise_runs=0, include_supersonic=True))
+    # Asked, the supersonic samples are fitted and said: the log's first 8 s (its peak,
+    # Mach 1.1 at 6.9 s, within) show it.
+    asked = IdentifyOptions(noise_runs=0, include_supersonic=True, flight_to=8.0)
+    both = fit(fast, "flight", ["constant"], asked)
+    assert float(np.max(mach_numbers(fast.part(*both["constant"].metrics["fitted_s"])))) > 1.0
     judged = both["constant"].metrics["adequacy"]
     assert both["constant"].metrics["supersonic_excluded_s"] == 0.0
     assert judged["verdict"] != "good"
@@ -815,7 +830,8 @@ def test_identify_prints_the_measured_scaling(tmp_path: Path, capsys):
     data = json.loads((tmp_path / "fit.json").read_text(encoding="utf-8"))
     metrics = data["methods"]["flight"]["constant"]["metrics"]
     assert metrics["eq_4_8_test"]["rejected"] and metrics["scaling_measured"]
-    assert main(["identify", str(path), "--scaling", "eq-4-8"]) == 0
+    # Held at eq. 4-8, the line says so (only the line is read: the first 6 s are fitted).
+    assert main(["identify", str(path), "--scaling", "eq-4-8", "--to", "6"]) == 0
     assert "scaling held: fin torque ∝ ρV^2, damping ∝ ρV^1" in capsys.readouterr().out
 
 

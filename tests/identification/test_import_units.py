@@ -19,7 +19,7 @@ from identification.adequacy import Adequacy, adequacy
 from identification.bundled import bundled_path
 from identification.flightlog import FlightLogSpec, run_flight
 from identification.importer import angle_on_integrated_rate
-from identification.ml import maximum_likelihood
+from identification.ml import MLFit, maximum_likelihood
 from identification.pipeline import model_inputs
 from identification.recording import Recording, load_recording, small_fins
 from identification.tunnel import TunnelSpec, run_tunnel
@@ -55,15 +55,27 @@ def _import(
     return code, capsys.readouterr().err
 
 
-def _verdict(rec: Recording) -> Adequacy:
-    """The adequacy of the maximum-likelihood fit (theta model) to ``rec``."""
+def _fitted(rec: Recording) -> tuple[MLFit, Adequacy]:
+    """The maximum-likelihood fit (theta model) to ``rec`` and its adequacy."""
     found = maximum_likelihood(rec, "theta")
     metrics = {"std_errors": found.std_errors}
-    return adequacy(model_inputs(rec, "theta", None), found.params, found.disturbance(), metrics)
+    inputs = model_inputs(rec, "theta", None)
+    return found, adequacy(inputs, found.params, found.disturbance(), metrics)
+
+
+def _verdict(rec: Recording) -> Adequacy:
+    """The adequacy of the maximum-likelihood fit (theta model) to ``rec``."""
+    return _fitted(rec)[1]
+
+
+@pytest.fixture(scope="module")
+def truth_verdict(truth: Recording) -> Adequacy:
+    """:func:`_verdict` of the tunnel run itself, which both tests set beside a log's."""
+    return _verdict(truth)
 
 
 def test_a_fin_in_radians_beside_a_roll_in_degrees(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], truth: Recording
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], truth: Recording, truth_verdict: Adequacy
 ) -> None:
     """The rig logs the fin and the gyro in radians, the encoder in degrees."""
     src = _log(tmp_path / "rig.txt", truth, 1.0 / RAD, 1.0, 1.0 / RAD)
@@ -76,20 +88,19 @@ def test_a_fin_in_radians_beside_a_roll_in_degrees(
     code, err = _import(capsys, src, out, "roll_rate=rad")  # the gyro right, the fin not
     assert code == 0 and err.count("\n") == 1
     assert err.startswith(f"warning: {src}: {FIN_WARNING} 0.7°") and "--unit fin=rad" in err
-    wrong = load_recording(out)
-    judged = _verdict(wrong)
+    found, judged = _fitted(load_recording(out))
     assert judged.verdict == "unreliable"
     assert any("(fin_deg) stays within 0.7°" in r and "--unit fin=rad" in r for r in judged.reasons)
-    assert maximum_likelihood(wrong, "theta").params.alpha > 20 * truth_alpha(truth)
+    assert found.params.alpha > 20 * truth_alpha(truth)
 
     code, err = _import(capsys, src, out, "roll_rate=rad", "fin=rad")  # all right: silent
     assert (code, err) == (0, "")
     right = _verdict(load_recording(out))
-    assert right.verdict == _verdict(truth).verdict == "good"
+    assert right.verdict == truth_verdict.verdict == "good"
 
 
 def test_everything_in_radians_read_as_degrees(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], truth: Recording
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], truth: Recording, truth_verdict: Adequacy
 ) -> None:
     """Every angle in radians: they agree with each other (nothing to refuse), the gain comes
     out right, u_d 57 times too small: only the fin's range tells."""
@@ -100,7 +111,7 @@ def test_everything_in_radians_read_as_degrees(
     judged = _verdict(load_recording(out))
     assert judged.verdict == "unreliable"
     assert any("stays within 0.7°" in r for r in judged.reasons)
-    assert judged.ud_p99_deg < 0.05 * _verdict(truth).ud_p99_deg
+    assert judged.ud_p99_deg < 0.05 * truth_verdict.ud_p99_deg
 
     code, err = _import(capsys, src, tmp_path / "half.csv", "roll=rad")  # the rate forgotten
     assert code == 2 and err.count("\n") == 1 and not (tmp_path / "half.csv").exists()
