@@ -14,6 +14,13 @@ from pathlib import Path
 
 import pytest
 
+from rocketroll_common.numerics import one_blas_thread
+
+# One OpenBLAS thread, as the `rocketroll` command runs (before anything imports numpy):
+# beside pytest-xdist's workers, which hold every core, OpenBLAS's own threads only wait
+# for each other (a maximum-likelihood module took 56 CPU-s with them, 32 without).
+one_blas_thread()
+
 
 @pytest.fixture(scope="session", autouse=True)
 def _private_default_database(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
@@ -24,9 +31,7 @@ def _private_default_database(tmp_path_factory: pytest.TempPathFactory) -> Itera
 
 
 @pytest.fixture(scope="session")
-def default_db(
-    _private_default_database: Path, tmp_path_factory: pytest.TempPathFactory
-) -> Path:
+def default_db(_private_default_database: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The session's default database, built once (about 35 s of CPU) for all pytest-xdist
     workers and copied into each worker's own folder, so no test sees another's changes;
     its path."""

@@ -89,6 +89,23 @@ def openblas_kernel() -> str:
     return _KERNEL_LEVELS.get(name.lower(), name)
 
 
+def test_the_suite_runs_on_the_openblas_threads_its_environment_names() -> None:
+    """tests/conftest.py asks for one OpenBLAS thread before numpy loads, as the
+    `rocketroll` command does; numpy's OpenBLAS took the number (or what it was told)."""
+    import ctypes
+
+    libs = sorted(Path(np.__file__).parent.with_name("numpy.libs").glob("libscipy_openblas*"))
+    if not libs:
+        pytest.skip("numpy is not linked with scipy-openblas here")
+    handle = ctypes.CDLL(str(libs[0]))
+    get = getattr(handle, "scipy_openblas_get_num_threads64_", None) or getattr(
+        handle, "scipy_openblas_get_num_threads", None
+    )
+    if get is None:
+        pytest.skip(f"{libs[0].name} does not say its number of threads")
+    assert get() == int(os.environ["OPENBLAS_NUM_THREADS"])
+
+
 #: OpenBLAS's kernel names -> the instruction set they compute with.
 _KERNEL_LEVELS = {
     **dict.fromkeys(("skylakex", "cooperlake", "sapphirerapids"), "AVX-512"),
