@@ -30,9 +30,9 @@ replaying them.
 
 Builds are atomic: the new database is written beside the target and renamed
 into place when complete.  One process at a time builds into a folder (a lock
-on the folder itself, so no lock file is left behind); a build killed half-way
-leaves its ``.NAME.*.building`` files, which the next build into that folder
-removes.
+on the folder itself, so no lock file is left behind); a build that fails or is
+interrupted removes its ``.NAME.*.building`` files, and what a build killed
+outright leaves is removed by the next build into that folder.
 """
 
 from __future__ import annotations
@@ -195,9 +195,7 @@ def build_database(
     """
     target = Path(path)
     with created_folders_removed_on_error(target), _build_lock(target.parent):
-        return call_pinned(
-            _build_registered,
-            _registered(methods),
+        return _build_pinned(
             target,
             recordings,
             options,
@@ -211,17 +209,39 @@ def build_database(
 
 def _build_default(target: Path, progress: bool) -> None:
     """Build the default database at ``target`` (its folder's build lock held)."""
-    call_pinned(
-        _build_registered,
-        _registered(None),
-        target,
-        None,
-        None,
-        DEFAULT_SURROGATES,
-        ("iaaft",),
-        DEFAULT_POSTERIOR,
-        progress,
-    )
+    _build_pinned(target, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, progress)
+
+
+def _build_pinned(
+    target: Path,
+    recordings: Sequence[str | os.PathLike[str]] | None,
+    options: IdentifyOptions | None,
+    surrogates: int,
+    surrogate_kinds: Sequence[str],
+    posterior: int,
+    progress: bool,
+    methods: Sequence[str] | None = None,
+) -> Path:
+    """:func:`_build` under the pinned numerics, its folder's build lock held.  A build
+    that does not finish (the pinned process killed after an interrupt's grace, before it
+    could clean up) leaves no ``.building`` file: they are removed here, where no other
+    build of the folder can be running (the lock)."""
+    try:
+        return call_pinned(
+            _build_registered,
+            _registered(methods),
+            target,
+            recordings,
+            options,
+            surrogates,
+            surrogate_kinds,
+            posterior,
+            progress,
+            methods,
+        )
+    except BaseException:
+        _remove_stale_builds(target)
+        raise
 
 
 def _registered(methods: Sequence[str] | None) -> list[tuple[str, Any, str, dict[str, Any]]]:

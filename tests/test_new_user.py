@@ -281,10 +281,11 @@ def assert_interrupted(proc: subprocess.Popen[str], err: str, command: str) -> N
 
 
 def test_ctrl_c_during_eval(tmp_path: Path, default_db: Path) -> None:
+    # One quick controller (the others' designs and torch only delay "policies:") and
+    # more episodes than it runs before the Ctrl-C arrives, whatever the machine's load.
     out = tmp_path / "eval"
-    proc = start(
-        ["eval", "--episodes", "50", "--out", out], tmp_path, ROCKETROLL_DB=str(default_db)
-    )
+    argv = ["eval", "--policy", "pid", "--episodes", "1000", "--out", out]
+    proc = start(argv, tmp_path, ROCKETROLL_DB=str(default_db))
     err = interrupt(proc, "policies:")
     assert_interrupted(proc, err, "eval")
     assert not out.exists()  # nothing half-made
@@ -316,12 +317,22 @@ def test_a_ctrl_c_while_a_checkpoint_is_written_waits_for_it() -> None:
     assert written == ["whole", "again"]
 
 
-def test_ctrl_c_during_training_leaves_a_resumable_checkpoint(tmp_path: Path) -> None:
-    db = tmp_path / "small.sqlite"
-    recordings = [bundled_path(n) for n in ("tunnel-paper-seed0", "tunnel-paper-seed4")]
+@pytest.fixture(scope="module")
+def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A database of two bundled recordings (one in each split) by the method the
+    environments replay by default (``ml``, its posterior draws) alone, for the training
+    tests (which only read it)."""
     from disturbances.default import build_database
 
-    build_database(db, recordings, options=FAST, surrogates=0)
+    db = tmp_path_factory.mktemp("small-db") / "small.sqlite"
+    recordings = [bundled_path(n) for n in ("tunnel-paper-seed0", "tunnel-paper-seed4")]
+    return build_database(db, recordings, options=FAST, surrogates=0, methods=("ml",))
+
+
+def test_ctrl_c_during_training_leaves_a_resumable_checkpoint(
+    tmp_path: Path, small_db: Path
+) -> None:
+    db = small_db
     hp = tmp_path / "hp.yml"
     hp.write_text(
         # 200 checkpoints (the most a run may write), each rollout slowed by its epochs
@@ -379,6 +390,27 @@ def test_a_killed_builds_leftovers_are_cleaned_by_the_next_build(tmp_path: Path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.sqlite"]
 
 
+def test_a_build_whose_pinned_process_is_killed_leaves_no_files_and_no_folders(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A pinned build that could not clean up (killed after an interrupt's grace) leaves
+    its half-written files; the build that started it removes them, and so the folders it
+    made, before the error goes on."""
+    import disturbances.default as default
+
+    target = tmp_path / "a" / "b" / "new.sqlite"
+
+    def killed(*args: object, **kwargs: object) -> None:
+        for suffix in ("", "-wal", "-shm"):
+            (target.parent / f".new.sqlite.k1ll3d.building{suffix}").write_bytes(b"half")
+        raise RuntimeError("the pinned computation of _build_registered ended with exit code -9")
+
+    monkeypatch.setattr(default, "call_pinned", killed)
+    with pytest.raises(RuntimeError, match="exit code -9"):
+        default.build_database(target, [bundled_path("tunnel-paper-seed0")], surrogates=0)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_opening_a_file_that_is_no_database_leaves_nothing_behind(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -395,7 +427,13 @@ def test_build_and_add_follow_one_folder_rule(
 ) -> None:
     """Missing folders above a new database are created, by build and by add alike, and
     removed again when the command fails."""
-    rec = bundled_path("tunnel-paper-seed0")
+    from identification.recording import save_recording
+    from identification.tunnel import run_tunnel
+
+    # a 70-s staircase: what the commands do with folders, not what they identify
+    rec = tmp_path / "staircase.csv"
+    short = TunnelSpec(schedule="staircase", steps=5, dwell_min=10.0, dwell_max=15.0, lead=5.0)
+    save_recording(run_tunnel(short), rec)
     built = tmp_path / "a" / "b" / "built.sqlite"
     assert cli(capsys, "db", "build", "--db", built, rec, "--surrogates", "0")[0] == 0
     added = tmp_path / "c" / "d" / "added.sqlite"
@@ -591,18 +629,15 @@ def test_the_wheel_carries_what_the_readme_runs_from_an_installed_package(
 
 # ------------------------------------------------------------------ 10. SB3 keywords and statistics
 def test_sb3_keywords_pass_through_and_the_final_statistics_load_in_sb3(
-    tmp_path: Path,
+    tmp_path: Path, small_db: Path
 ) -> None:
     pytest.importorskip("tensorboard", reason="tensorboard_log needs the tensorboard extra")
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.train import VECNORMALIZE_FILE, Args, train
     from agents.vecenv import RollVecEnv
-    from disturbances.default import build_database
 
-    db = tmp_path / "small.sqlite"
-    recordings = [bundled_path(n) for n in ("tunnel-paper-seed0", "tunnel-paper-seed4")]
-    build_database(db, recordings, options=FAST, surrogates=0)
+    db = small_db
     tb = tmp_path / "tb"
     hp = tmp_path / "hp.yml"
     hp.write_text(

@@ -75,10 +75,12 @@ def main(argv: list[str]) -> int:
 
 @pytest.fixture(scope="module")
 def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A database of one bundled recording per split (seed 0: train, seed 4: test), ~3 s."""
+    """A database of one bundled recording per split (seed 0: train, seed 4: test), of the
+    method the environments replay by default (``ml``, its posterior draws) alone."""
     path = tmp_path_factory.mktemp("agents-db") / "small.sqlite"
     recordings = [bundled_path(n) for n in ("tunnel-paper-seed0", "tunnel-paper-seed4")]
-    build_database(path, recordings, options=IdentifyOptions(noise_runs=0), surrogates=0)
+    options = IdentifyOptions(noise_runs=0)
+    build_database(path, recordings, options=options, surrogates=0, methods=("ml",))
     return path
 
 

@@ -124,11 +124,26 @@ def test_list_without_db_builds_the_default_database(capsys: pytest.CaptureFixtu
     assert (path.stat().st_mtime_ns, path.read_bytes()) == before
 
 
+def short_recording(folder: Path, seed: int) -> Path:
+    """A 70-s staircase of the virtual tunnel (a bundled recording is 573 s), written to
+    ``folder`` as ``staircase-<seed>.csv``: the methods identify it in a fraction of the
+    time, for the tests of what the commands do rather than of what they find."""
+    from identification.recording import save_recording
+    from identification.tunnel import TunnelSpec, run_tunnel
+
+    spec = TunnelSpec(
+        seed=seed, schedule="staircase", steps=5, dwell_min=10.0, dwell_max=15.0, lead=5.0
+    )
+    path = folder / f"staircase-{seed}.csv"
+    save_recording(run_tunnel(spec), path)
+    return path
+
+
 def test_build_given_recordings_refuses_plain_rebuild_and_force_replaces(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     db = tmp_path / "given.sqlite"
-    recordings = [str(bundled_path(SEED0)), str(bundled_path(SEED4))]
+    recordings = [str(short_recording(tmp_path, seed)) for seed in (0, 4)]
     out = ok(
         ["db", "build", "--db", str(db), *recordings, "--surrogates", "0", "--posterior", "2"],
         capsys,
@@ -138,7 +153,10 @@ def test_build_given_recordings_refuses_plain_rebuild_and_force_replaces(
         f"built {db}: 2 recordings, 12 identifications, 12 traces, 0 surrogates, 8 posterior draws"
     )
     with DisturbanceDB(db, create=False) as d:
-        assert [r.name for r in d.recordings()] == [SEED0, SEED4]
+        assert [r.name for r in d.recordings()] == [
+            "tunnel-staircase-seed0",
+            "tunnel-staircase-seed4",
+        ]
         assert d.info()["origin"] == "user"
         assert d.counts()["surrogates"] == 0
     before = db.read_bytes()
@@ -152,17 +170,19 @@ def test_build_given_recordings_refuses_plain_rebuild_and_force_replaces(
     assert db.read_bytes() == before
 
     # --force replaces it (here with one other recording).
-    out = ok(
-        ["db", "build", "--db", str(db), "--force", str(bundled_path(NEW)), "--surrogates", "0"],
-        capsys,
-    )
+    other = short_recording(tmp_path, 1)
+    out = ok(["db", "build", "--db", str(db), "--force", str(other), "--surrogates", "0"], capsys)
     assert out.strip() == (
         f"built {db}: 1 recordings, 6 identifications, 6 traces, 0 surrogates, 16 posterior draws"
     )
     with DisturbanceDB(db, create=False) as d:
-        assert [r.name for r in d.recordings()] == [NEW]
+        assert [r.name for r in d.recordings()] == ["tunnel-staircase-seed1"]
     # No temporary files of the atomic build are left beside it.
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.csv", "given.sqlite"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "broken.csv",
+        "given.sqlite",
+        *(f"staircase-{seed}.csv" for seed in (0, 1, 4)),
+    ]
 
 
 # --------------------------------------------------------------------------- list

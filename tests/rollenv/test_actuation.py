@@ -9,7 +9,10 @@ copy the sensors' past with the state.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -198,6 +201,23 @@ def test_each_rocket_flies_its_own_rig_unless_the_settings_give_one() -> None:
     assert own.core.link[0].tolist() == told.core.link[0].tolist()
 
 
+@contextlib.contextmanager
+def _ml_fitting_only(model: str) -> Iterator[None]:
+    """Within the block, ``ml`` registered as fitting ``model`` alone: a test that reads
+    one model's fit does not pay for the other's (with the quadratic damping searched, the
+    bulk of the work); registered as before after it."""
+    from identification.methods import METHODS, traits
+
+    saved = METHODS.snapshot(["ml"])
+    entry = METHODS.entry("ml")
+    only = dataclasses.replace(traits("ml"), models=(model,))
+    METHODS.register("ml", entry.target, summary=entry.summary, replace=True, traits=only)
+    try:
+        yield
+    finally:
+        METHODS.merge(saved)
+
+
 def test_a_stated_rig_goes_from_the_recording_through_the_database_into_the_replay(
     tmp_path: Path,
 ) -> None:
@@ -212,7 +232,7 @@ def test_a_stated_rig_goes_from_the_recording_through_the_database_into_the_repl
     effects = Effects(servo_lag_s=0.05, backlash_deg=0.5, latency_s=0.03)
     rec = run_tunnel(TunnelSpec(seed=3, effects=effects, state_rig=True, split="train"))
     path = tmp_path / "rig.sqlite"
-    with DisturbanceDB(path, create=True) as db:
+    with DisturbanceDB(path, create=True) as db, _ml_fitting_only("theta"):
         add_recording(db, rec, IdentifyOptions(noise_runs=0), methods=["ml"], posterior=2)
     stated = Rig(0.05, 0.5, 0.03)
     env = RocketRollEnv(db=path, recording=rec.name, disturbance="posterior")
@@ -226,8 +246,6 @@ def test_a_stated_rig_goes_from_the_recording_through_the_database_into_the_repl
 
 def _quadratic_bank(q: float) -> Any:
     """:func:`array_bank` with every rocket's damping growing by ``q`` at 30 °/s."""
-    import dataclasses
-
     from disturbances.bank import TraceBank
 
     bank = array_bank()
@@ -291,7 +309,7 @@ def test_an_identified_quadratic_damping_goes_through_the_database_into_the_repl
     rec = run_tunnel(TunnelSpec(seed=0, effects=Effects(quadratic_damping=0.5)))
     path = tmp_path / "q.sqlite"
     options = IdentifyOptions(noise_runs=0, fit_quadratic_damping=True)
-    with DisturbanceDB(path, create=True) as db:
+    with DisturbanceDB(path, create=True) as db, _ml_fitting_only("theta"):
         add_recording(db, rec, options, methods=["ml"], posterior=2)
         stored = db.traces(model="theta")
         (ident,) = db.identifications(model="theta")
