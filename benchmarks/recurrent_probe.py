@@ -35,7 +35,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.registry import make_controller
-from agents.train import algorithm_arguments, load_hyperparameters, make_env
+from agents.train import algorithm_arguments, load_hyperparameters, make_env, quiet_logger
 from rocketroll_common.errors import UsageError
 from rollenv.bank import load_bank, variant_config
 
@@ -180,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"RecurrentPPO (LSTM {args.lstm}), {args.envs} envs x {args.n_steps} steps, batch "
         f"{args.batch}, seed {args.seed}, {hp.source}'s reward and keywords:"
     )
+    model.set_logger(quiet_logger())
     scorer = Scorer(args.every, score, normalize)
     began = time.perf_counter()
     model.learn(total_timesteps=args.timesteps, callback=scorer)

@@ -52,6 +52,7 @@ from agents.train import (
     make_env,
     normalization_record,
     observation_names,
+    quiet_logger,
 )
 from rollenv.bank import load_bank, variant_config
 
@@ -158,6 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             torch.set_num_threads(recipe.threads)
             _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
             model = PPO(hp.policy, venv, seed=seed, device="cpu", **algorithm_arguments(hp))
+            model.set_logger(quiet_logger())
             scorer = Scorer(args.eval_every, score, normalize, config.task, hp)
             began = time.perf_counter()
             model.learn(total_timesteps=steps, callback=scorer)

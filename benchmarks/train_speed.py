@@ -48,7 +48,7 @@ from _recipes import DEFAULT_RECIPES, Recipe, parse_recipe
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
-from agents.train import algorithm_arguments, load_hyperparameters, make_env
+from agents.train import algorithm_arguments, load_hyperparameters, make_env, quiet_logger
 from agents.vecenv import RollVecEnv
 
 
@@ -142,6 +142,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _, env, _ = make_env(hp, hp.n_envs, ns.seed, split="train")
         torch.set_num_threads(recipe.threads)
         model = PPO(hp.policy, env, seed=ns.seed, device="cpu", **algorithm_arguments(hp))
+        model.set_logger(quiet_logger())
         runs.append(_Run(recipe, hp.n_envs, model, RolloutTimer(), alone, wrapped))
         print(
             f"  {recipe.label}: {hp.n_envs} envs x {model.n_steps} steps, batch "

@@ -59,6 +59,7 @@ from agents.train.run import (
     TD3Args,
     command_of,
     parse_args,
+    quiet_logger,
     train,
 )
 
@@ -81,6 +82,7 @@ __all__ = [
     "normalization_record",
     "observation_names",
     "parse_args",
+    "quiet_logger",
     "recipe_path",
     "shipped_recipes",
     "train",

@@ -593,6 +593,15 @@ def _logger(out: Path, args: Args, tensorboard_log: str | None, start_steps: int
     return Logger(folder=str(out / "logs"), output_formats=formats)
 
 
+def quiet_logger() -> Any:
+    """SB3's logger with no output and no folder, for a model trained outside
+    :func:`train` (a benchmark's, a test's): SB3's default logger makes an empty
+    ``tempdir/SB3-<time>`` folder for each model it trains, and leaves it."""
+    from stable_baselines3.common.logger import Logger
+
+    return Logger(folder=None, output_formats=[])
+
+
 @dataclass(frozen=True)
 class SACArgs(Args):
     """Arguments of a training run (``rocketroll train sac --help``)."""

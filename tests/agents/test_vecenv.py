@@ -8,6 +8,7 @@ whose autoreset step (NEXT_STEP) it skips.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.utils import check_for_correct_spaces
 from stable_baselines3.common.vec_env import VecCheckNan, VecMonitor, VecNormalize
 
+from agents.train import quiet_logger
 from agents.vecenv import ENV_ATTRIBUTES, RollVecEnv
 from rollenv.env import RocketRollEnv
 from rollenv.vector import RocketRollVectorEnv
@@ -81,11 +83,13 @@ def test_spaces_dtypes_and_shapes_are_what_sb3_expects(env_id):
         assert all(isinstance(i, dict) and isinstance(i["tracking_error"], float) for i in infos)
 
 
-def test_short_ppo_run_completes_and_bootstraps_at_truncation():
+def test_short_ppo_run_completes_and_bootstraps_at_truncation(tmp_path: Path):
     torch.set_num_threads(1)
     venv = VecNormalize(VecMonitor(adapter(2, seed=0)))
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=32, n_epochs=2, seed=0, device="cpu")
+    model.set_logger(quiet_logger())
     model.learn(total_timesteps=256)
+    assert not (tmp_path / "sb3-logs").exists()  # where SB3's default logger would write
     assert model.num_timesteps == 256
     # 20-step episodes: VecMonitor saw many end, each 20 steps long.
     assert model.ep_info_buffer is not None and len(model.ep_info_buffer) >= 10
@@ -106,6 +110,7 @@ def ppo_actions(seed: int) -> tuple[np.ndarray, np.ndarray]:
         device="cpu",
         policy_kwargs={"net_arch": [16, 16]},
     )
+    model.set_logger(quiet_logger())
     model.learn(total_timesteps=128)
     probe = np.random.default_rng(1).normal(0.0, 1.0, size=(8, 4)).astype(np.float32)
     policy_actions, _ = model.predict(probe, deterministic=True)
