@@ -18,6 +18,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -70,39 +71,41 @@ def fails(message: str) -> None:
     raise SettingError("--size", message)
 
 
+def openblas_function(*symbols: str) -> Any:
+    """The first of ``symbols`` that numpy's scipy-openblas exports (the 64-bit
+    interface's name first), or None where numpy is not linked with it."""
+    import ctypes
+
+    libs = Path(np.__file__).parent.with_name("numpy.libs")
+    for lib in sorted(libs.glob("libscipy_openblas*.so*")):
+        handle = ctypes.CDLL(str(lib))
+        for symbol in symbols:
+            found = getattr(handle, symbol, None)
+            if found is not None:
+                return found
+    return None
+
+
 def openblas_kernel() -> str:
     """The kernel OpenBLAS chose in this process (``openblas_get_corename``), by the
     instruction set it computes with: a processor's own kernels of one level (Haswell,
     Zen: AVX2 and FMA) are the same arithmetic."""
     import ctypes
 
-    libs = Path(np.__file__).parent.with_name("numpy.libs")
-    name = "unknown"
-    for lib in sorted(libs.glob("libscipy_openblas*.so*")):
-        handle = ctypes.CDLL(str(lib))
-        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename"):
-            corename = getattr(handle, symbol, None)
-            if corename is not None:
-                corename.restype = ctypes.c_char_p
-                name = corename().decode()
-                break
+    corename = openblas_function("scipy_openblas_get_corename64_", "scipy_openblas_get_corename")
+    if corename is None:
+        return "unknown"
+    corename.restype = ctypes.c_char_p
+    name = corename().decode()
     return _KERNEL_LEVELS.get(name.lower(), name)
 
 
 def test_the_suite_runs_on_the_openblas_threads_its_environment_names() -> None:
     """tests/conftest.py asks for one OpenBLAS thread before numpy loads, as the
     `rocketroll` command does; numpy's OpenBLAS took the number (or what it was told)."""
-    import ctypes
-
-    libs = sorted(Path(np.__file__).parent.with_name("numpy.libs").glob("libscipy_openblas*"))
-    if not libs:
-        pytest.skip("numpy is not linked with scipy-openblas here")
-    handle = ctypes.CDLL(str(libs[0]))
-    get = getattr(handle, "scipy_openblas_get_num_threads64_", None) or getattr(
-        handle, "scipy_openblas_get_num_threads", None
-    )
+    get = openblas_function("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads")
     if get is None:
-        pytest.skip(f"{libs[0].name} does not say its number of threads")
+        pytest.skip("numpy is not linked with a scipy-openblas that says its number of threads")
     assert get() == int(os.environ["OPENBLAS_NUM_THREADS"])
 
 
