@@ -88,9 +88,10 @@ typecheck: $(VENV)/.installed-dev
 
 # On every core (pytest-xdist); --dist loadfile keeps a module's tests, and the fixtures they
 # share, on one worker; --no-loadscope-reorder hands the modules out in the order
-# tests/conftest.py sorts them (the slowest first), not by their number of tests.
+# tests/conftest.py sorts them (the slowest first), not by their number of tests. The
+# slowest 20 tests are listed at the end (reported, never asserted).
 pytest: $(VENV)/.installed-dev
-	$(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder
+	$(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder --durations=20
 
 # Another machine's numerics (docs/results/reproducibility.md): OpenBLAS's AVX kernel, numpy
 # without its SIMD loops, numba compiling for a generic x86-64, torch's unvectorised
@@ -103,7 +104,8 @@ VARIED := OPENBLAS_CORETYPE=Sandybridge \
 
 # One module, so its tests are spread over the cores one by one (--dist load).
 pytest-varied: $(VENV)/.installed-dev
-	env $(VARIED) $(BIN)/pytest -p no:cacheprovider -n auto --dist load tests/test_figures.py
+	env $(VARIED) $(BIN)/pytest -p no:cacheprovider -n auto --dist load --durations=8 \
+		tests/test_figures.py
 
 # The documentation site into build/site, strict: a broken link or anchor, a page outside the
 # navigation or a docstring the API reference cannot read fails the build. No network.
