@@ -66,11 +66,13 @@ def _shared_default_database(tmp_path_factory: pytest.TempPathFactory) -> Path:
 #: pytest-xdist's --dist loadfile hands modules out in collection order (with
 #: --no-loadscope-reorder, as `make pytest` runs it), so these go first and the short ones
 #: fill in after: otherwise the last heavy module (collected last, being top-level) runs
-#: alone while the other workers have finished.
+#: alone while the other workers have finished.  The second needs no default database:
+#: its worker identifies flights while the first worker builds the database (about 40 s),
+#: where it would otherwise wait for that build.
 SLOWEST_MODULES = (
     "tests/test_benchmarks.py",
-    "tests/test_figures.py",
     "tests/identification/test_flightfit.py",
+    "tests/test_figures.py",
     "tests/test_new_user.py",
     "tests/agents/test_sweep.py",
     "tests/rollenv/test_env.py",
