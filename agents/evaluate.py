@@ -193,26 +193,32 @@ def _since_change(setpoint: np.ndarray) -> np.ndarray:
     return np.asarray(index - np.maximum.accumulate(last))
 
 
-def settle_times(rollout: EpisodeHistory, config: RollConfig) -> np.ndarray:
+def settling(rollout: EpisodeHistory, config: RollConfig) -> tuple[np.ndarray, np.ndarray]:
     """Time from each setpoint change until the error stays within ``SETTLE_BAND`` for 1 s
-    (10 consecutive control steps), s.
+    (10 consecutive control steps), s, and whether each step settled.
 
     A step that does not settle before the next change (or the episode's end)
-    counts as the whole time it had (censored).  Empty if the setpoint never
-    changes.
+    counts as the whole time it had (censored: its time is a lower bound).
+    Both empty if the setpoint never changes.
     """
     inside = np.abs(rollout.error) < SETTLE_BAND[config.task]
     hold = max(1, round(SETTLE_HOLD_S / config.dt_s))
     changes = np.flatnonzero(np.diff(rollout.setpoint) != 0) + 1
     ends = [*changes[1:].tolist(), inside.size][: changes.size]
-    times = []
+    times, settled_steps = [], []
     for start, end in zip(changes.tolist(), ends, strict=True):
         window = inside[start:end]
         # run[j]: the window is inside for `hold` samples from j on
         run = np.convolve(window, np.ones(hold), "valid") == hold if window.size >= hold else []
         settled = np.flatnonzero(run)
         times.append((settled[0] if settled.size else end - start) * config.dt_s)
-    return np.asarray(times, dtype=float)
+        settled_steps.append(bool(settled.size))
+    return np.asarray(times, dtype=float), np.asarray(settled_steps, dtype=bool)
+
+
+def settle_times(rollout: EpisodeHistory, config: RollConfig) -> np.ndarray:
+    """The time to settle after each setpoint change, s (:func:`settling`'s times)."""
+    return settling(rollout, config)[0]
 
 
 def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
@@ -229,7 +235,10 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     |error|; fin travel ``Σ|Δθ|/T``; time at the rate limit, the time the
     servo needs at 150 °/s to reach each command, capped at the step (the
     servo is a pure rate limiter, so this is the time it is moving, to within
-    a substep); steps ending with ``|θ| = 40°``; the return.
+    a substep); steps ending with ``|θ| = 40°``; the return.  Beside them, two
+    counts that are not metrics: ``setpoint_steps``, the setpoint changes timed,
+    and ``unsettled_steps``, those that never settled (their time to settle is
+    the whole time they had).
     """
     error = rollout.error[1:]
     fin = rollout.fin_deg
@@ -248,7 +257,7 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     regulating = since[1:] >= after
     if not regulating.any():
         regulating = settled
-    settle = settle_times(rollout, config)
+    settle, settled_steps = settling(rollout, config)
     travel = np.abs(np.diff(fin))
     needed = np.abs(rollout.command_deg[1:] - fin[:-1]) / config.rate_limit_dps
     at_range = np.abs(fin[1:]) >= config.fin_range_deg * (1 - 1e-9)
@@ -262,6 +271,8 @@ def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
         "rate_limit_pct": float(100 * np.minimum(needed, config.dt_s).sum() / duration),
         "range_limit_pct": float(100 * np.mean(at_range)),
         "return": float(rollout.reward[1:].sum()),
+        "setpoint_steps": int(settle.size),
+        "unsettled_steps": int(np.count_nonzero(~settled_steps)),
     }
 
 
@@ -358,7 +369,8 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
     SEM over the common episodes, and how many SEMs that is, where the SEM shows: a
     difference shown ``± 0.00`` -- episodes that are copies of one another, as on a
     recording too short for more than one window -- gets no count, which would be a
-    ratio of rounding noise)."""
+    ratio of rounding noise).  Under it, where a step never settled, the line of
+    :func:`unsettled_note`."""
     unit = "°" if config.task == "angle" else "°/s"
     reference = pid_result(results)
     head = (
@@ -388,7 +400,26 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
             f"| {cell('fin_travel_dps', 1)} | {cell('rate_limit_pct', 1)} "
             f"| {cell('range_limit_pct', 1)} | {cell('return', 1)} |"
         )
-    return "\n".join(lines) + "\n"
+    unsettled = unsettled_note(results)
+    return "\n".join(lines) + "\n" + ("" if unsettled is None else f"\n{unsettled}\n")
+
+
+def unsettled_note(results: Sequence[Evaluation]) -> str | None:
+    """The line under the table that says which controllers' time to settle counts setpoint
+    steps that never settled (each as the whole time it had: the mean is then a lower bound);
+    None where every step settled."""
+    counts = []
+    for r in results:
+        unsettled = sum(int(e.get("unsettled_steps", 0)) for e in r.episodes)
+        if unsettled:
+            steps = sum(int(e.get("setpoint_steps", 0)) for e in r.episodes)
+            counts.append(f"{r.name} {unsettled} of {steps}")
+    if not counts:
+        return None
+    return (
+        "Setpoint steps that never settled, each counted in the time to settle as the whole "
+        f"time it had (the mean is then a lower bound): {', '.join(counts)}."
+    )
 
 
 def to_json(
@@ -505,8 +536,11 @@ def run(args: Args) -> list[Evaluation]:
         from agents.datasets import check_minari
 
         check_minari(args.minari, [c.name for c in controllers])
-    print(f"rocketroll eval: {args.env_id}, split={args.split}, {args.episodes} episodes, ")
-    print(f"  seed={args.seed}, policies: {', '.join(args.policy)}")
+    print(
+        f"rocketroll eval: {args.env_id}, split={args.split}, {args.episodes} episodes, "
+        f"seed={args.seed}"
+    )
+    print(f"  policies: {', '.join(args.policy)}")
     draws = {"posterior": "posterior draws", "replay": "identified traces"}
     print(
         f"  replay: {config.method}'s {draws.get(str(config.disturbance), config.disturbance)}"

@@ -347,7 +347,8 @@ def identify(args: IdentifyArgs) -> int:
         print(f"wrote {args.json}")
     if args.report is not None:
         figures = sum(str(path).endswith(".png") for path in outputs)
-        print(f"wrote {args.report / 'report.md'} and {figures} figures")
+        plural = "" if figures == 1 else "s"
+        print(f"wrote {args.report / 'report.md'} and {figures} figure{plural}")
     return 0
 
 

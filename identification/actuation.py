@@ -70,7 +70,10 @@ FIN_RESOLUTION_DEG = 0.01
 @dataclass(frozen=True)
 class Term:
     """One optional term: its estimate, the likelihood-ratio statistic against the model
-    without it, the p-value, whether it is admitted, and what limits it (``note``)."""
+    without it, the p-value, whether it is admitted, and what limits it (``note``).
+
+    A term the recording cannot tell (``estimable`` false: the linkage without both fin
+    columns) is not tested; its ``note`` says what it needs, and its row shows no test."""
 
     name: str
     value: float
@@ -82,13 +85,16 @@ class Term:
     #: The estimate, admitted or not, and its 95 % interval, where the test gives one.
     estimate: float | None = None
     interval: tuple[float, float] | None = None
+    estimable: bool = True
 
     def line(self) -> str:
+        if not self.estimable:
+            return f"{self.name:17s} not estimable: {self.note}"
         said = "admitted" if self.admitted else "not admitted"
         tail = f"; {self.note}" if self.note else ""
         p = "p < 1e-9" if self.p_value < 1e-9 else f"p {self.p_value:.2g}"
         return (
-            f"{self.name:15s} {self.value:8.4g} {self.unit:2s}  LR {max(self.statistic, 0.0):9.2f}"
+            f"{self.name:17s} {self.value:8.4g} {self.unit:2s}  LR {max(self.statistic, 0.0):9.2f}"
             f"  {p:9s} {said}{tail}"
         )
 
@@ -202,11 +208,12 @@ def identify_actuation(
         terms += [lag, play]
         link = Linkage(lag.value, play.value)
     else:
-        lacking = "a measured fin column (fin_deg)" if recording.fin_deg is None else ""
         if recording.fin_cmd_deg is None:
-            lacking += (" and " if lacking else "") + "the command it followed (fin_cmd_deg)"
+            why = "the fin column is the measured fin; the servo's command (fin_cmd) is needed too"
+        else:
+            why = "the fin column is the servo's command; a measured fin (fin) is needed too"
         for name, unit in (("servo lag", "s"), ("backlash", "°")):
-            terms.append(Term(name, 0.0, unit, 0.0, 1.0, False, f"needs {lacking}"))
+            terms.append(Term(name, 0.0, unit, 0.0, 1.0, False, why, estimable=False))
     inputs = model_inputs(recording, model, opts)
     step = inputs.grid.step_s
     found = delay_search(inputs, model, range(round(max_latency_s / step) + 1))

@@ -155,7 +155,8 @@ class FlightInputs:
     quantum_deg : float
         The angle's quantisation step, ° (0 if none is seen).
     density : str
-        Where the density came from.
+        Where the flight's air density came from (the ISA density at the logged altitude, or
+        ``rho_ref_kgm3`` throughout without one).
     v_ref_mps, rho_ref_kgm3 : float
         The reference the coefficients are given at (by default the airspeed's mean over
         the flight: the coefficients there and the measured exponents are then as little
@@ -251,10 +252,11 @@ def flight_inputs(
         density = np.asarray(
             isa(np.interp(middle, time, recording.altitude_m) + site).density_kgm3, dtype=float
         )
-        source = "ISA at altitude_m" + (f" + the site's {site:g} m" if site else "")
+        above = f" + the site's {site:g} m" if site else ""
+        source = f"the ISA density at the logged altitude{above}, at each instant"
     else:
         density = np.full(middle.size, rho_ref_kgm3)
-        source = f"no altitude_m: ρ_ref = {rho_ref_kgm3:.4f} kg/m³ throughout"
+        source = "ρ_ref throughout, no altitude logged"
     if recording.fin_deg is not None:
         theta = np.interp(fine, time, recording.fin_deg)
         rate_limit = None

@@ -146,7 +146,8 @@ def render_flight_report(
     markdown = (
         f"# Flight identification: {recording.name}\n\n"
         f"Source: {kind}. Method `{first.method}`, at the reference airspeed "
-        f"{inputs.v_ref_mps:.2f} m/s ({inputs.density}).\n\n"
+        f"{inputs.v_ref_mps:.2f} m/s and density ρ_ref {inputs.rho_ref_kgm3:.4f} kg/m³ "
+        f"(in flight: {inputs.density}).\n\n"
         f"```\n{table}\n```\n\n"
         f"![airspeed, fin, roll rate measured and re-simulated, u_d]({FIGURE_NAME})\n"
     )

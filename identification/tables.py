@@ -210,7 +210,7 @@ def flight_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
             judged = f" [{verdict}]" if verdict else ""
             lines.append(
                 f"{f.method} {model}{judged}: at V_ref {m['v_ref_mps']:.2f} m/s, ρ_ref "
-                f"{m['rho_ref_kgm3']:.4f} kg/m³ ({m['density']}): "
+                f"{m['rho_ref_kgm3']:.4f} kg/m³ (in flight: {m['density']}): "
                 f"α₀ {f.params.alpha:.4f} ± {errors.get('alpha', float('nan')):.4f}, "
                 f"β̄₀ {f.params.beta_bar_per_s:.4f} ± "
                 f"{errors.get('beta_bar_per_s', float('nan')):.4f} 1/s; "

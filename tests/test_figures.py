@@ -99,13 +99,22 @@ def test_the_identification_table_of_the_bundled_reconstruction() -> None:
 FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "mpc", "oracle", "causal-oracle")
 
 
+#: How the line under an evaluation table begins that counts the steps that never settled.
+UNSETTLED = "Setpoint steps that never settled"
+
+
 def assert_evaluation_table(printed: list[str], table: int) -> None:
-    """``printed`` (an evaluation table's lines: header, rule, rows) is the results page's
-    table ``table`` (0: angle, 1: rate, 2: flight), row for row."""
+    """``printed`` (an evaluation table's lines: header, rule, rows, and the line under it
+    that counts the setpoint steps that never settled) is the results page's table
+    ``table`` (0: angle, 1: rate, 2: flight), row for row, with that line as printed."""
     rows = [line for line in printed if line.startswith("| ") and not line.startswith("| contr")]
-    starts = [k for k, line in enumerate(RESULTS.splitlines()) if line.startswith("| trim |")]
-    shown = RESULTS.splitlines()[starts[table] : starts[table] + len(rows)]
+    lines = RESULTS.splitlines()
+    starts = [k for k, line in enumerate(lines) if line.startswith("| trim |")]
+    shown = lines[starts[table] : starts[table] + len(rows)]
+    after = lines[starts[table] + len(rows) : starts[table] + len(rows) + 2]
     assert_same_rows(rows, shown, "results/evaluation.md")
+    notes = [line for line in printed if line.startswith(UNSETTLED)]
+    assert notes == [line for line in after if line.startswith(UNSETTLED)], "the unsettled steps"
 
 
 @pytest.mark.parametrize(

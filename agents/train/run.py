@@ -89,7 +89,8 @@ class Args:
     )
     timesteps: int | None = setting(
         None,
-        "environment steps to train for (default: n_timesteps of the hyperparameter file)",
+        "environment steps to train for (default: n_timesteps of the hyperparameter file); "
+        "PPO trains whole rollouts of --envs x n_steps, so at least one",
         ge=1,
         le=10**12,
     )

@@ -13,6 +13,7 @@ from agents.evaluate import (
     COMMAND,
     HEADLINE,
     METRICS,
+    aggregate,
     env_on,
     evaluate,
     markdown_table,
@@ -120,7 +121,8 @@ def test_metrics_of_a_hand_made_episode(angle_config):
     assert m["rate_limit_pct"] == pytest.approx(100 * (0.1 + 10 / 150 + 0.1) / 0.4)
     assert m["range_limit_pct"] == 25.0
     assert m["return"] == -10.0
-    assert set(m) == set(METRICS)
+    assert set(m) == {*METRICS, "setpoint_steps", "unsettled_steps"}
+    assert m["setpoint_steps"] == m["unsettled_steps"] == 0
 
 
 def _step_episode(error: list[float], setpoint: list[float]) -> EpisodeHistory:
@@ -158,6 +160,31 @@ def test_settle_time_and_regulation_window_of_a_hand_made_episode():
     # next change comes too (its hold is cut short).
     never = _step_episode([0.0] * 20 + [9.0] * 11 + [0.0] * 9, [0.0] * 20 + [30.0] * 20)
     assert settle_times(never, cfg).tolist() == pytest.approx([2.0])
+    assert (m["setpoint_steps"], m["unsettled_steps"]) == (2, 0)
+    censored = metrics(never, cfg)
+    assert (censored["setpoint_steps"], censored["unsettled_steps"]) == (1, 1)
+
+
+def test_the_table_says_how_many_steps_never_settled():
+    """A time to settle that counts steps that never settled (each as the whole time it had)
+    is a lower bound: a line under the table says so, with each such controller's count."""
+    cfg = make_config("RocketRoll-v0", {"setpoint_period_s": 2.0})
+    settles = _step_episode([0.0] * 20 + [1.0] * 20, [0.0] * 20 + [30.0] * 20)
+    never = _step_episode([0.0] * 20 + [9.0] * 11 + [0.0] * 9, [0.0] * 20 + [30.0] * 20)
+
+    def result(name, rollouts):
+        episodes = [{"episode": i, **metrics(r, cfg)} for i, r in enumerate(rollouts)]
+        return Evaluation(name, episodes, aggregate(episodes), rollouts)
+
+    pid, trim = result("PID", [settles, settles]), result("trim", [never, settles])
+    lines = markdown_table([trim, pid], cfg).splitlines()
+    assert lines[2].startswith("| trim | ") and lines[3].startswith("| PID | ")
+    assert lines[4:] == [
+        "",
+        "Setpoint steps that never settled, each counted in the time to settle as the whole "
+        "time it had (the mean is then a lower bound): trim 1 of 2.",
+    ]
+    assert markdown_table([pid], cfg).count("\n") == 3  # every step settled: no such line
 
 
 def test_paired_difference_is_over_common_episodes():
@@ -201,7 +228,11 @@ def test_the_cli_writes_table_json_and_plots(tmp_path, default_db, capsys):
     printed = capsys.readouterr().out
     assert "| trim |" in printed and "| PID ω=3 |" in printed
     table = (out / "table.md").read_text()
-    assert table.count("\n") == 4 and "RMS error (°)" in table
+    rows = [line for line in table.splitlines() if line.startswith("|")]
+    assert len(rows) == 4 and "RMS error (°)" in table
+    # trim holds the fins: most setpoint steps never settle, as the line under the table says
+    assert table.splitlines()[-1].startswith("Setpoint steps that never settled")
+    assert ": trim " in table.splitlines()[-1] and table.splitlines()[-1] in printed
     results = json.loads((out / "results.json").read_text())
     assert results["protocol"]["split"] == "test"
     assert results["protocol"]["command"].startswith(

@@ -135,6 +135,50 @@ def test_without_a_measured_fin_the_linkage_is_not_looked_for() -> None:
         fit_linkage(run_tunnel(_short(1, Effects(), measured_fin=False)), Servo())
 
 
+@pytest.mark.parametrize(
+    ("dropped", "why"),
+    [
+        ("fin_cmd_deg", "the fin column is the measured fin; the servo's command (fin_cmd)"),
+        ("fin_deg", "the fin column is the servo's command; a measured fin (fin)"),
+    ],
+)
+def test_a_linkage_the_fin_columns_cannot_tell_says_why_and_shows_no_test(
+    dropped: str, why: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With one fin column the lag and the play are not estimable: their rows say so and
+    what is needed, with no LR or p as if they had been tested; every row is aligned."""
+    import dataclasses
+
+    import identification.ml as ml
+
+    # The roll response's searches are not what this test reads: the cheapest answers.
+    monkeypatch.setattr(
+        ml, "delay_search", lambda inputs, model, delays: ml.DelaySearch(0, 0.01, 0.0, 0.0, {})
+    )
+    monkeypatch.setattr(
+        ml, "quadratic_search",
+        lambda inputs, model: ml.QuadraticSearch(0.0, 0.0, 0.0, {}, (-0.3, 1.0)),
+    )  # fmt: skip
+    rec = run_tunnel(_short(1, Effects()))
+    if dropped == "fin_cmd_deg":
+        rec = dataclasses.replace(rec, fin_cmd_deg=None)
+    else:
+        rec = dataclasses.replace(rec, fin_deg=None)
+    found = identify_actuation(rec)
+    lag, play = found.terms[:2]
+    assert not lag.estimable and not play.estimable and not lag.admitted
+    assert found.rig == Rig()
+    rows = found.lines()[1:]
+    for row in rows[:2]:
+        assert f"not estimable: {why} is needed too" in row
+        assert "LR" not in row and " p " not in row and "admitted" not in row
+    tested = rows[2:]
+    assert all("LR" in row for row in tested)
+    # The estimate starts in one column on the tested rows, the reason on the others.
+    assert len({row.index("LR") for row in tested}) == 1
+    assert len({row.index("not estimable") for row in rows[:2]} | {len("  ") + 18}) == 1
+
+
 def test_a_stated_linkage_and_latency_shape_the_fin_the_model_sees() -> None:
     rec = run_tunnel(_short(1, Effects(), measured_fin=False))
     plain = measurements(rec, IdentifyOptions(noise_runs=0))

@@ -751,7 +751,10 @@ def test_the_recorder_flies_another_scaling_a_biased_gyro_and_logs_above_the_pad
     # Re-simulating the truth along its exponents and the density at the pad's elevation plus
     # the logged height gives the logged rate less the bias (no gyro noise); eq. 4-8 does not.
     inputs = flight_inputs(quirky, v_ref_mps=TUNNEL_AIRSPEED_MPS)
-    assert inputs.density == "ISA at altitude_m + the site's 1500 m"
+    assert (
+        inputs.density
+        == "the ISA density at the logged altitude + the site's 1500 m, at each instant"
+    )
     mid = 0.5 * (col(quirky, "altitude_m")[1:] + col(quirky, "altitude_m")[:-1])
     np.testing.assert_allclose(
         inputs.density_ratio[2::4],
