@@ -17,7 +17,8 @@ REPO = Path(__file__).resolve().parents[1]
 #: The scripts these tests run: imported once (as modules, not run) by the script runner.
 SCRIPTS = (
     "closed_loop", "flight_fidelity", "flight_ground_truth", "ground_truth", "ml_bias",
-    "mpc_speed", "real_data", "recurrent_probe", "run_curve", "train_curve", "train_speed",
+    "mpc_speed", "real_data", "recurrent_probe", "run_curve", "same_behaviour", "train_curve",
+    "train_speed",
 )  # fmt: skip
 
 #: The script runner: imports what the scripts import (torch, stable-baselines3, the
@@ -412,3 +413,43 @@ def test_flight_fidelity_scores_a_design_on_the_replay_and_on_the_truth(runner: 
         truth, posterior, ratio = float(row[3]), float(row[4]), float(row[5])
         assert truth > 0 and abs(posterior / truth - ratio) < 0.006
     assert "within [0.9, 1.1]:" in out
+
+
+def test_the_readme_names_every_script() -> None:
+    readme = (REPO / "benchmarks" / "README.md").read_text(encoding="utf-8")
+    scripts = sorted(p.name for p in (REPO / "benchmarks").glob("[a-z]*.py"))
+    assert [s for s in scripts if f"| `benchmarks/{s}` |" not in readme] == []
+
+
+def _snapshot(folder: Path, database: str, **results: object) -> Path:
+    folder.mkdir()
+    manifest = {"commit": "0" * 40, "default_database_content_sha256": database}
+    (folder / "snapshot.json").write_text(json.dumps(manifest), encoding="utf-8")
+    for name, value in results.items():
+        (folder / f"{name}.json").write_text(json.dumps(value), encoding="utf-8")
+    return folder
+
+
+def test_same_behaviour_compares_snapshots_leaf_by_leaf(runner: Runner, tmp_path: Path) -> None:
+    def compare(first: Path, second: Path) -> subprocess.CompletedProcess[str]:
+        return run_benchmark(runner, "same_behaviour.py", "compare", str(first), str(second))
+
+    fit = {"alpha": 0.659, "n": 3, "method": "ml", "se": [0.01, float("nan")]}
+    before = _snapshot(tmp_path / "a", "d1", fit=fit)
+    close = _snapshot(tmp_path / "b", "d1", fit={**fit, "alpha": 0.659 * (1 + 1e-12)})
+    same = compare(before, close)
+    assert same.returncode == 0, same.stdout + same.stderr
+    assert "1 JSON files, 3 numbers compared" in same.stdout
+    assert "default database content identical: the same" in same.stdout
+    moved = {**fit, "alpha": 0.659 * (1 + 1e-6), "n": 4, "extra": 1}
+    differ = compare(before, _snapshot(tmp_path / "c", "d2", fit=moved))
+    assert differ.returncode == 1
+    for said in (
+        "fit.json: alpha: 0.659 against",
+        "fit.json: n: 3 against 4",
+        "fit.json: extra: only in the second",
+        "default database: content SHA-256 d1 against d2",
+    ):
+        assert said in differ.stdout, differ.stdout
+    refused = compare(before, tmp_path)
+    assert refused.returncode == 2 and "not a snapshot" in refused.stderr
