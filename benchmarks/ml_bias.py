@@ -56,7 +56,7 @@ def offsets(truth: str, seed: int) -> list[float]:
     out = []
     for variant, rec in zip(VARIANTS, (quantised, white, exact), strict=True):
         if variant == "white":  # the filter told the resolution the noise stands for
-            with mock.patch.object(ml, "_quantum", lambda values: q):
+            with mock.patch.object(ml, "quantum_of", lambda values: q):
                 found = ml.maximum_likelihood(rec, "theta")
         else:
             found = ml.maximum_likelihood(rec, "theta")

@@ -433,9 +433,9 @@ def build(args: BuildArgs) -> int:
     from disturbances.default import (
         DEFAULT_POSTERIOR,
         DEFAULT_SURROGATES,
-        _expected_fingerprint,
         build_database,
         default_path,
+        expected_fingerprint,
         peek,
     )
     from disturbances.schema import SCHEMA_VERSION
@@ -463,7 +463,7 @@ def build(args: BuildArgs) -> int:
         if (
             default_recipe
             and version == SCHEMA_VERSION
-            and info.get("fingerprint") == _expected_fingerprint()
+            and info.get("fingerprint") == expected_fingerprint()
         ):
             print(f"{path}: up to date (built by rocketroll {info.get('created_by')})")
             return 0

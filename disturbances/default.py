@@ -69,6 +69,7 @@ __all__ = [
     "ENV_VAR",
     "build_database",
     "default_path",
+    "expected_fingerprint",
     "fingerprint",
     "open_database",
     "open_default",
@@ -306,7 +307,7 @@ def _build(
                 files, opts, surrogates, surrogate_kinds, posterior, chosen, pinned=is_pinned()
             )
             # Only the default recipe on the bundled data may be rebuilt automatically.
-            default = bundled and made == _expected_fingerprint()
+            default = bundled and made == expected_fingerprint()
             db.set_info(
                 {
                     "origin": "bundled" if default else "user",
@@ -330,7 +331,7 @@ def _remove_stale_builds(target: Path) -> None:
             leftover.unlink(missing_ok=True)
 
 
-def _expected_fingerprint() -> str:
+def expected_fingerprint() -> str:
     return fingerprint(
         bundled_paths(), IdentifyOptions(), DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR
     )
@@ -416,7 +417,7 @@ def _open_or_build(path: Path, show: bool) -> DisturbanceDB:
         return DisturbanceDB(path, create=False)
     db = DisturbanceDB(path, create=False)
     info = db.info()
-    if info.get("origin") == "bundled" and info.get("fingerprint") != _expected_fingerprint():
+    if info.get("origin") == "bundled" and info.get("fingerprint") != expected_fingerprint():
         db.close()
         built_by = info.get("created_by", "?")
         why = (

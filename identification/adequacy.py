@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from identification.compiled import interval_maps
-from identification.model import RollParams, Servo, _linear_recurrence, damping
+from identification.model import RollParams, Servo, damping, linear_recurrence
 from identification.pipeline import Measurements
 from identification.recording import PLAUSIBLE_FIN_DEG, Recording, small_fins
 from identification.statistics import decorrelation_stride, ols_newey_west
@@ -370,7 +370,7 @@ def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
         rate, source = np.asarray(rec.roll_rate_dps, dtype=float), "gyro"
     else:
         rate, source = smoothed, "velocity from the angle"
-    v = _linear_recurrence(e, f, float(smoothed[0]))
+    v = linear_recurrence(e, f, float(smoothed[0]))
     phi = float(np.asarray(inputs.angle_deg)[0]) + np.concatenate(
         [[0.0], np.cumsum(a_phi * v[:-1] + g_phi)]
     )

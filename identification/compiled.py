@@ -19,7 +19,14 @@ from identification import model
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 
-__all__ = ["interval_maps", "linkage", "linkage_path", "piece"]
+__all__ = [
+    "UNSCALED",
+    "interval_maps",
+    "interval_maps_kernel",
+    "linkage",
+    "linkage_path",
+    "piece",
+]
 
 
 @numba.extending.overload(model.select)
@@ -110,7 +117,7 @@ def _substep(
 
 
 @numba.njit(cache=True, nogil=True)
-def _interval_maps(
+def interval_maps_kernel(
     alpha: float,
     theta_bar: float,
     beta_bar: float,
@@ -171,7 +178,7 @@ def _interval_maps(
 
 
 #: No per-substep scales: the rocket the parameters say, throughout.
-_UNSCALED = np.empty(0)
+UNSCALED = np.empty(0)
 
 
 def interval_maps(
@@ -198,12 +205,12 @@ def interval_maps(
     if (gain is None) != (damping is None):
         raise ValueError("give gain and damping together")
     scales = [
-        _UNSCALED if x is None else np.ascontiguousarray(x, dtype=float) for x in (gain, damping)
+        UNSCALED if x is None else np.ascontiguousarray(x, dtype=float) for x in (gain, damping)
     ]
     if gain is not None and any(x.shape != (steps,) for x in scales):
         raise ValueError(f"gain and damping need one value per substep ({steps})")
     return np.asarray(
-        _interval_maps(
+        interval_maps_kernel(
             params.alpha,
             params.theta_bar_deg,
             params.beta_bar_per_s,

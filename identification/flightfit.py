@@ -217,7 +217,7 @@ def flight_inputs(
         :data:`MIN_AIRSPEED_FRACTION` of the tunnel's on all but fewer than
         :data:`MIN_MOVING_INTERVALS` intervals (the fins move nothing there).
     """
-    from identification.ml import _quantum
+    from identification.ml import quantum_of
 
     rig = recording.rig if rig is None else rig
     if recording.airspeed_mps is None:
@@ -285,7 +285,7 @@ def flight_inputs(
         tunnel_dt_s=speed_mid / TURBULENCE_FRAME_MPS * np.diff(time),
         rate=rate,
         angle=angle,
-        quantum_deg=0.0 if angle is None else _quantum(angle),
+        quantum_deg=0.0 if angle is None else quantum_of(angle),
         density=source,
         v_ref_mps=v_ref_mps,
         rho_ref_kgm3=rho_ref_kgm3,
@@ -915,7 +915,7 @@ def identify_flights(
         For no flights, a flight without a roll measurement, flights with different
         measurements (gyro or angle) or different references.
     """
-    from identification.ml import _hessian
+    from identification.ml import numerical_hessian
 
     flights = list(flights)
     if not flights:
@@ -969,7 +969,7 @@ def identify_flights(
     params = _params(nat)
     assert params is not None
     errors = _standard_errors(
-        _hessian(lambda x: _negloglike(x, flights, layout), best.x), layout, params
+        numerical_hessian(lambda x: _negloglike(x, flights, layout), best.x), layout, params
     )
     fits = []
     for inputs in flights:

@@ -52,7 +52,7 @@ import numba
 import numpy as np
 from scipy import linalg, optimize, stats
 
-from identification.compiled import _UNSCALED, _interval_maps, interval_maps
+from identification.compiled import UNSCALED, interval_maps, interval_maps_kernel
 from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.model import (
     QUADRATIC_RATE_DPS,
@@ -92,10 +92,12 @@ __all__ = [
     "interval_maps",
     "maximum_likelihood",
     "ml_method",
+    "numerical_hessian",
     "posterior_given",
     "posterior_traces",
     "quadratic_fit",
     "quadratic_search",
+    "quantum_of",
     "rate_damped",
     "roll_transition",
     "stationary_cov",
@@ -126,15 +128,15 @@ class _Data:
     theta_min: float
     theta_max: float
     #: Per substep: the gain's and the damping's multipliers (empty: none), as in flight.
-    gain_scale: FloatArray = field(default_factory=lambda: _UNSCALED)
-    damping_scale: FloatArray = field(default_factory=lambda: _UNSCALED)
+    gain_scale: FloatArray = field(default_factory=lambda: UNSCALED)
+    damping_scale: FloatArray = field(default_factory=lambda: UNSCALED)
 
     @property
     def n(self) -> int:
         return int(self.y.shape[0])
 
 
-def _quantum(values: FloatArray) -> float:
+def quantum_of(values: FloatArray) -> float:
     """The encoder's resolution: the step of the grid the angle values lie on (0 if none)."""
     levels = np.unique(values)
     if levels.size < 3:
@@ -178,7 +180,7 @@ def _prepare(inputs: Measurements) -> _Data:
         observed.append(0)
     if rec.roll_deg is not None:
         roll = np.asarray(rec.roll_deg, dtype=float)
-        q = _quantum(roll)
+        q = quantum_of(roll)
         angle_var = max(q * q / 12.0, _VAR_FLOOR)
         angle_noise = _noise_beyond_grid(roll, angle_var)
         columns.append(roll)
@@ -346,7 +348,7 @@ def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
         return None
     ar = np.asarray(nat["ar"], dtype=float)
     m = 2 + ar.size
-    maps = _interval_maps(
+    maps = interval_maps_kernel(
         alpha,
         theta_bar,
         beta_bar,
@@ -751,7 +753,7 @@ def _pivot(data: _Data, theta_bar: float) -> float:
     return max(float(np.mean(np.abs(data.theta_fine + theta_bar))), 1.0)
 
 
-def _hessian(f: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
+def numerical_hessian(f: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
     """statsmodels' ``approx_hess3`` (Ridout's four-point central differences, its steps,
     its arithmetic: the same numbers), with the ``2k(k + 1)`` evaluations of ``f``
     spread over threads."""
@@ -809,7 +811,7 @@ def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
         return out
 
     point = np.concatenate([[nat[name] for name in rocket], x0[k:]])
-    hess = _hessian(lambda values: _negloglike_natural(data, trial(values)), point)
+    hess = numerical_hessian(lambda values: _negloglike_natural(data, trial(values)), point)
     try:
         cov: FloatArray | None = np.asarray(np.linalg.inv(hess), dtype=float)
     except np.linalg.LinAlgError:
@@ -1226,7 +1228,7 @@ class QuadraticSearch:
     profile: dict[float, float]
     interval: tuple[float, float]
     #: ``|v|`` per substep, the linear fit's filtered and predicted rate (:func:`rate_damped`).
-    speed: FloatArray = field(default_factory=lambda: _UNSCALED, repr=False)
+    speed: FloatArray = field(default_factory=lambda: UNSCALED, repr=False)
 
     @property
     def statistic(self) -> float:

@@ -87,6 +87,7 @@ __all__ = [
     "SimResult",
     "check_model",
     "damping",
+    "linear_recurrence",
     "linkage_step",
     "model_of",
     "piece_coefficients",
@@ -904,7 +905,7 @@ def simulate(
         e, c, big_a, big_b = roll_coefficients(
             params, theta[:-1], theta[1:], u_fine, h, rate_limit, gain=gain, damping=damping
         )
-        return _linear_recurrence(e, c, v0), big_a, big_b
+        return linear_recurrence(e, c, v0), big_a, big_b
 
     rate, big_a, big_b = path(scales[0], scales[1])
     if params.quadratic_damping != 0.0:
@@ -970,11 +971,11 @@ def _per_substep(name: str, value: ArrayLike, n: int, substeps: int) -> FloatArr
 
 
 #: Largest |log| of the decay accumulated inside one block of
-#: :func:`_linear_recurrence`; keeps every scaled term within e^±20.
+#: :func:`linear_recurrence`; keeps every scaled term within e^±20.
 _BLOCK_LOG_SPAN = 20.0
 
 
-def _linear_recurrence(e: FloatArray, c: FloatArray, x0: float) -> FloatArray:
+def linear_recurrence(e: FloatArray, c: FloatArray, x0: float) -> FloatArray:
     """``x[k+1] = e[k]·x[k] + c[k]`` from ``x[0] = x0``; returns all n+1 values.
 
     Vectorised in blocks: inside a block starting from ``xs`` with the running

@@ -8,7 +8,15 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from tests.import_graph import LAYERS, ROOT, cycles, module_graph, package_graph, upward_edges
+from tests.import_graph import (
+    LAYERS,
+    ROOT,
+    cycles,
+    module_graph,
+    package_graph,
+    private_imports,
+    upward_edges,
+)
 
 
 def test_no_module_imports_a_higher_layer() -> None:
@@ -21,6 +29,12 @@ def test_no_module_imports_a_higher_layer() -> None:
 
 def test_the_modules_import_one_another_without_a_cycle() -> None:
     assert cycles(module_graph()) == []
+
+
+def test_no_module_imports_another_modules_private_names() -> None:
+    """What a module keeps private (``_name``) is its own: a name two modules need is
+    public in the one that defines it."""
+    assert private_imports() == []
 
 
 def test_the_checks_can_fail() -> None:

@@ -242,7 +242,7 @@ def load_spec(path: str | os.PathLike[str], options: Mapping[str, Any] | None = 
         for env_id in doc.env_ids:  # fail now, not in the middle of the sweep
             for point in points(grid):
                 try:
-                    _entry_with(hyperparams, env_id, entry.train, point)
+                    entry_with(hyperparams, env_id, entry.train, point)
                 except UsageError as exc:
                     raise UsageError(f"{where}: {exc}") from None
         controllers.append(
@@ -282,7 +282,7 @@ def points(axes: dict[str, list[Any]]) -> list[dict[str, Any]]:
     ]
 
 
-def _entry_with(
+def entry_with(
     hyperparams: Path, env_id: str, algo: str, overrides: dict[str, Any]
 ) -> dict[str, Any]:
     """The hyperparameter entry of ``env_id`` with ``overrides`` (dotted keys reach into

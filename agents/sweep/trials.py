@@ -23,7 +23,7 @@ import numpy as np
 from agents.replay import (
     options_config,
 )
-from agents.sweep.spec import ControllerSpec, SweepSpec, _entry_with, points
+from agents.sweep.spec import ControllerSpec, SweepSpec, entry_with, points
 from rocketroll_common import __version__
 
 
@@ -101,7 +101,7 @@ def expand(spec: SweepSpec) -> list[Trial]:
                         trained_on = {
                             f"env_kwargs.{k}": v for k, v in settings.items() if k != "recording"
                         }
-                        recipe = _entry_with(
+                        recipe = entry_with(
                             Path(controller.hyperparams),
                             env_id,
                             controller.train,

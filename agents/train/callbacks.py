@@ -11,7 +11,7 @@ import numpy as np
 
 
 # ----------------------------------------------------------------------------- evaluation
-def _make_eval_callback_class() -> type:
+def make_eval_callback_class() -> type:
     """:class:`HeldOutEval`, built lazily so importing this module does not import SB3."""
     from stable_baselines3.common.callbacks import EvalCallback
 

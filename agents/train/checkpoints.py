@@ -75,7 +75,7 @@ def checkpoint_problem(path: Path) -> str | None:
     return None
 
 
-def _checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> Path:
+def save_checkpoint(model: Any, normalize: Any, folder: Path, algo: str = "ppo") -> Path:
     """Save a resumable checkpoint as SB3's ``CheckpointCallback`` names them (the model,
     its ``VecNormalize`` statistics, and for SAC/TD3 the replay buffer), whole: a second
     Ctrl-C waits for it."""
@@ -148,7 +148,7 @@ def checkpoint_callback(*, recorded_in: Path | None = None, **settings: Any) -> 
     return WholeCheckpoints(**settings)
 
 
-def _resume(
+def resume_model(
     checkpoint: Path, train_env: Any, normalize: Any, device: str, algo: str = "ppo"
 ) -> Any:
     """The model of ``checkpoint`` on ``train_env``, with its normalisation statistics

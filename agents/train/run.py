@@ -29,15 +29,15 @@ from agents.replay import (
     options_config,
     recording_setting,
 )
-from agents.train.callbacks import _make_eval_callback_class, evaluate_held_out
+from agents.train.callbacks import evaluate_held_out, make_eval_callback_class
 from agents.train.checkpoints import (
     VECNORMALIZE_FILE,
-    _checkpoint,
-    _resume,
     checkpoint_callback,
     checkpoint_files,
     checkpoint_problem,
     planned_checkpoints,
+    resume_model,
+    save_checkpoint,
 )
 from agents.train.envs import make_env, normalization_record, observation_names
 from agents.train.hyperparams import (
@@ -417,7 +417,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     _print_table(rows)
 
     if args.resume is not None:  # refused before the output folder is made
-        model = _resume(args.resume, train_env, normalize, algo_kwargs["device"], algo)
+        model = resume_model(args.resume, train_env, normalize, algo_kwargs["device"], algo)
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval").mkdir(exist_ok=True)
     if args.resume is None:
@@ -436,7 +436,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         _, library = _run_files(out, args, hp, n_envs, start_steps, planned - start_steps)
         check_folder_files(out, library, "--out")
     model.set_logger(_logger(out, args, algo_kwargs.get("tensorboard_log"), start_steps))
-    held_out = _make_eval_callback_class()(
+    held_out = make_eval_callback_class()(
         eval_env,
         eval_adapter,
         args.eval_seed,
@@ -485,7 +485,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
             raise Interrupted(
                 f"after {model.num_timesteps:,} env-steps; not saved: {exc}"
             ) from None
-        saved = _checkpoint(model, normalize, out / "checkpoints", algo)
+        saved = save_checkpoint(model, normalize, out / "checkpoints", algo)
         record_outputs(out, files)
         again = to_argv(dataclasses.replace(args, resume=saved, out=out))
         raise Interrupted(

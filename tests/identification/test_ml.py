@@ -15,12 +15,12 @@ import pytest
 from identification.methods import fit
 from identification.ml import (
     _filter,
-    _hessian,
     _parts,
     _prepare,
     _state_space,
     interval_maps,
     maximum_likelihood,
+    numerical_hessian,
     posterior_given,
     posterior_traces,
 )
@@ -252,7 +252,7 @@ def test_the_threaded_hessian_is_statsmodels_approx_hess3() -> None:
         return float(np.sum(np.sin(x) * x[::-1]) + x[0] ** 3 * x[2] + np.exp(0.1 * x[4]))
 
     x = np.array([0.3, -1.2, 2.0, 0.05, 7.0])
-    assert np.array_equal(_hessian(f, x), approx_hess3(x, f))
+    assert np.array_equal(numerical_hessian(f, x), approx_hess3(x, f))
 
 
 def _with_sensor_noise(rec: Recording, gyro_sd: float, angle_sd: float, seed: int) -> Recording:
