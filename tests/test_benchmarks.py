@@ -16,7 +16,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 #: The scripts these tests run: imported once (as modules, not run) by the script runner.
 SCRIPTS = (
-    "closed_loop", "flight_fidelity", "flight_ground_truth", "ground_truth", "ml_bias",
+    "closed_loop", "code_size", "flight_fidelity", "flight_ground_truth", "ground_truth", "ml_bias",
     "mpc_speed", "real_data", "recurrent_probe", "run_curve", "same_behaviour", "train_curve",
     "train_speed",
 )  # fmt: skip
