@@ -72,7 +72,9 @@ __all__ = [
     "paired_difference",
     "pid_result",
     "protocol_episodes",
+    "protocol_record",
     "run",
+    "write_study",
 ]
 
 
@@ -420,6 +422,36 @@ def unsettled_note(results: Sequence[Evaluation]) -> str | None:
         "Setpoint steps that never settled, each counted in the time to settle as the whole "
         f"time it had (the mean is then a lower bound): {', '.join(counts)}."
     )
+
+
+def protocol_record(args: Any, note: str | None = None, **extra: Any) -> dict[str, Any]:
+    """The protocol a study's JSON record states: ``args``' environment, split, episodes
+    and seed, the headline metric, ``extra`` (what the study adds), and ``note`` (a
+    caution printed under its table) where there is one."""
+    return {
+        "env_id": args.env_id,
+        "split": args.split,
+        "episodes": args.episodes,
+        "seed": args.seed,
+        "headline": HEADLINE,
+        **extra,
+        **({} if note is None else {"note": note}),
+    }
+
+
+def write_study(out: Path, stem: str, table: str, record: dict[str, Any], figure: bytes) -> None:
+    """A study's table, JSON record (NaN as null) and figure written into ``out`` together
+    (all or none), as ``stem``.md, ``stem``.json and ``stem``.png; their names printed."""
+    from rocketroll_common.files import write_all_atomic
+
+    text = json.dumps(nan_to_none(record), indent=1, allow_nan=False) + "\n"
+    files: dict[str | os.PathLike[str], str | bytes] = {
+        out / f"{stem}.md": table,
+        out / f"{stem}.json": text,
+        out / f"{stem}.png": figure,
+    }
+    write_all_atomic(files, folder=out)
+    print(f"wrote {out}/{stem}.md, {stem}.json, {stem}.png")
 
 
 def to_json(

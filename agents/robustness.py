@@ -28,7 +28,6 @@ grouped bars (log scale).  Outputs (``--out``): ``robustness.md``,
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -39,12 +38,13 @@ import numpy as np
 
 from agents.base import Controller
 from agents.evaluate import (
-    HEADLINE,
     check_unique_names,
     env_id_setting,
     evaluate,
     headline_scores,
     protocol_episodes,
+    protocol_record,
+    write_study,
 )
 from agents.registry import (
     check_policy,
@@ -62,7 +62,6 @@ from agents.replay import (
     replay_config,
     unreliable_note,
 )
-from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv.bank import load_bank
@@ -245,32 +244,18 @@ def run(args: Args) -> dict[str, dict[str, np.ndarray]]:
     table += "" if caution is None else f"\n{caution}\n"
     print(table, end="")
     if args.out is not None:
-        from rocketroll_common.files import write_all_atomic
-
-        out = Path(args.out)
         record = {
-            "protocol": {
-                "env_id": args.env_id,
-                "split": args.split,
-                "episodes": args.episodes,
-                "seed": args.seed,
-                "headline": HEADLINE,
-                "conditions": {c: CONDITIONS[c] for c in args.condition},
-                "policies": list(args.policy),
-                **({} if caution is None else {"note": caution}),
-            },
+            "protocol": protocol_record(
+                args,
+                caution,
+                conditions={c: CONDITIONS[c] for c in args.condition},
+                policies=list(args.policy),
+            ),
             "scores": {n: {c: v.tolist() for c, v in per.items()} for n, per in scores.items()},
         }
         title = f"{args.env_id}: controllers designed on the default replay, under other worlds"
-        write_all_atomic(
-            {
-                out / "robustness.md": table,
-                out / "robustness.json": json.dumps(nan_to_none(record), indent=1) + "\n",
-                out / "robustness.png": plot(scores, args.condition, unit, title),
-            },
-            folder=out,
-        )
-        print(f"wrote {out}/robustness.md, robustness.json, robustness.png")
+        figure = plot(scores, args.condition, unit, title)
+        write_study(Path(args.out), "robustness", table, record, figure)
     return scores
 
 

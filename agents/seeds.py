@@ -55,6 +55,8 @@ from agents.evaluate import (
     headline_scores,
     pid_result,
     protocol_episodes,
+    protocol_record,
+    write_study,
 )
 from agents.registry import check_policy, make_controller
 from agents.replay import (
@@ -65,7 +67,6 @@ from agents.replay import (
     replay_config,
     unreliable_note,
 )
-from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 
@@ -398,20 +399,8 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
     table += "" if caution is None else f"\n{caution}\n"
     print(table, end="")
     if args.out is not None:
-        from rocketroll_common.files import write_all_atomic
-
-        out = Path(args.out)
         record = {
-            "protocol": {
-                "env_id": args.env_id,
-                "split": args.split,
-                "episodes": args.episodes,
-                "seed": args.seed,
-                "headline": HEADLINE,
-                "resamples": RESAMPLES,
-                "bank": bank.description,
-                **({} if caution is None else {"note": caution}),
-            },
+            "protocol": protocol_record(args, caution, resamples=RESAMPLES, bank=bank.description),
             "learners": {
                 s.name: {
                     "runs": s.runs,
@@ -430,16 +419,8 @@ def run(args: Args) -> tuple[list[LearnerStats], list[Evaluation]]:
             "references": {r.name: headline_scores(r).tolist() for r in evaluated_refs},
         }
         title = f"{args.env_id}: headline over training seeds ({args.episodes} test episodes)"
-        write_all_atomic(
-            {
-                out / "seeds.md": table,
-                out / "seeds.json": json.dumps(nan_to_none(record), indent=1, allow_nan=False)
-                + "\n",
-                out / "seeds.png": plot(learners, evaluated_refs, unit, title),
-            },
-            folder=out,
-        )
-        print(f"wrote {out}/seeds.md, seeds.json, seeds.png")
+        figure = plot(learners, evaluated_refs, unit, title)
+        write_study(Path(args.out), "seeds", table, record, figure)
     return learners, evaluated_refs
 
 
