@@ -72,29 +72,6 @@ def site_rows(first: str, count: int) -> list[str]:
     return lines[start : start + count]
 
 
-def test_the_identification_table_of_the_bundled_reconstruction() -> None:
-    result = identify(load_bundled("tunnel-paper-seed0"))
-    p = result.parameters()
-    resim = result.resimulations
-    theta = result.statistics.theta
-    noise = result.noise
-    assert noise is not None
-    i10 = list(noise.levels_pct).index(10.0)
-    rows = site_rows("| α (°/s)/° |", 7)
-    truth = result.truth()
-    assert truth is not None
-    alpha_error = 100 * (p["alpha"] / truth["alpha"] - 1)
-    assert rows[0].startswith(f"| α (°/s)/° | {p['alpha']:.4f} ({alpha_error:+.1f} %) |")
-    assert rows[1].startswith(f"| β °/s | {p['beta_dps']:.3f} |")
-    assert rows[2].startswith(f"| steady-state R² | {p['steady_state_r2']:.4f} |")
-    rate = f"{resim['constant'].rate_mae_dps:.3f} / {resim['theta'].rate_mae_dps:.3f} °/s"
-    angle = f"{resim['constant'].angle_mae_deg:.3f} / {resim['theta'].angle_mae_deg:.3f} °"
-    assert f"| {rate} |" in rows[3] and f"| {angle} |" in rows[4]
-    interval = f"[{theta.q05_deg:.2f}, {theta.q95_deg:.2f}]°".replace("-", "−")
-    assert f"| {interval} |" in rows[5]
-    assert f"| {noise.mae_deg[i10]:.2f} / {noise.p90_deg[i10]:.2f} ° |" in rows[6]
-
-
 #: The flight table's controllers (results/evaluation.md, In flight).
 FLIGHT_POLICIES = ("trim", "pid", "pid-tunnel", "observer", "mpc", "oracle", "causal-oracle")
 
@@ -133,6 +110,123 @@ def test_the_evaluation_tables(
     words = ["eval", "--env-id", env_id, "--episodes", "20", "--seed", "0", *policies]
     assert rocketroll(words) == 0
     assert_evaluation_table(capsys.readouterr().out.splitlines(), table)
+
+
+# The tests that need no default database come right after the first two that do:
+# spread one by one over two workers (`make pytest-varied`), one worker then runs the
+# guides while the other builds the database.
+def test_the_bring_your_own_rocket_guide_runs_as_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The guide's commands on a user's raw log: a virtual-tunnel run of ramps (not the
+    paper's dwells) of a rocket unlike the bundled ones, written as the guide's raw file is
+    (headerless, radians, 100 Hz: roll, roll rate, measured fin)."""
+    from identification.tunnel import run_tunnel, spec_from_command
+
+    rec = run_tunnel(
+        spec_from_command(
+            "--seed 7 --log-dt 0.01 --gyro-noise 1 --measured-fin --schedule ramps --steps 10 "
+            "--dwell-min 2 --dwell-max 3 --lead 1 --ramp 1 --alpha 1.8 --beta -4 "
+            "--alpha-bar 0.02 --beta-bar 4 --turbulence-sd 4"
+        )
+    )
+    assert rec.roll_deg is not None and rec.roll_rate_dps is not None and rec.fin_deg is not None
+    raw = np.radians(np.column_stack([rec.roll_deg, rec.roll_rate_dps, rec.fin_deg]))
+    np.savetxt(tmp_path / "raw.csv", raw, delimiter=",", fmt="%.9g")
+    monkeypatch.chdir(tmp_path)
+    commands = guide_commands()
+    assert 1 <= len(commands) <= 4
+    printed = []
+    for argv in commands:
+        assert rocketroll(argv) == 0, argv
+        printed.append(capsys.readouterr().out)
+    assert "fit adequacy" in printed[1]
+    ml_rows = [line.split() for line in printed[1].splitlines() if line.startswith("ml ")]
+    assert ml_rows and all(abs(float(row[2]) / 1.8 - 1) < 0.05 for row in ml_rows[:2])
+    assert (tmp_path / "mine-report" / "fit-ml.png").is_file()
+    assert "held-out part" in printed[2]
+    assert "recording mine" in printed[3] and "episode:" in printed[3]
+    table = (tmp_path / "mine-eval" / "table.md").read_text()
+    assert "| observer |" in table and "(trained on another database's rockets)" in table
+
+
+def test_the_fly_your_flight_log_guide_runs_as_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The flight guide's commands on a flight computer's log: a virtual flight of a rocket
+    whose fin torque grows as ρV^1.5, from a pad at 1500 m, written with time in ms,
+    airspeed in km/h and altitude in feet above the pad."""
+    import shlex
+
+    from identification.flightlog import FlightLogSpec, run_flight
+
+    ascent = tmp_path / "high.yml"
+    default = (Path(__file__).parent.parent / "identification/data/ascent-default.yml").read_text(
+        encoding="utf-8"
+    )
+    ascent.write_text(default.replace("launch_altitude_m: 0.0", "launch_altitude_m: 1500.0"))
+    rec = run_flight(
+        FlightLogSpec(
+            seed=5, model="constant", torque_exponent=1.5, ascent=str(ascent),
+            altitude_above_ground=True,
+        )
+    )  # fmt: skip
+    assert rec.fin_cmd_deg is not None and rec.roll_rate_dps is not None
+    assert rec.airspeed_mps is not None and rec.altitude_m is not None
+    columns = [
+        1000.0 * rec.time_s, rec.fin_cmd_deg, rec.roll_rate_dps, 3.6 * rec.airspeed_mps,
+        rec.altitude_m / 0.3048,
+    ]  # fmt: skip
+    np.savetxt(
+        tmp_path / "log.csv", np.column_stack(columns), delimiter=",", fmt="%.9g",
+        header="t_ms,fin,gyro,v_kmh,h_ft", comments="",
+    )  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    section = page("guides/own-flight.md")
+    block = section.split("```bash\n", 1)[1].split("```", 1)[0]
+    commands = [
+        shlex.split(line)[1:] for line in block.splitlines() if line.startswith("rocketroll")
+    ]
+    assert 1 <= len(commands) <= 4
+    printed = []
+    for argv in commands:
+        assert rocketroll(argv) == 0, argv
+        printed.append(capsys.readouterr().out)
+    fits = [line for line in printed[1].splitlines() if line.startswith("flight ") and "[" in line]
+    assert len(fits) == 2 and all("[good]" in line for line in fits), printed[1]
+    assert "scaling measured" in printed[1] and "eq. 4-8 (n 2, m 1) rejected" in printed[1]
+    assert (tmp_path / "flight-report" / "flight_identification.png").is_file()
+    assert "8 posterior" in printed[2] or "traces" in printed[2]
+    assert "recording myflight" in printed[3]
+    rows = {
+        line.split("|")[1].strip(): float(line.split("|")[2].split("±")[0])
+        for line in (tmp_path / "flight-eval" / "table.md").read_text().splitlines()
+        if line.startswith("| ") and not line.startswith("| controller")
+    }
+    assert rows["PID"] < 0.5 * rows["trim"], rows
+
+
+def test_the_identification_table_of_the_bundled_reconstruction() -> None:
+    result = identify(load_bundled("tunnel-paper-seed0"))
+    p = result.parameters()
+    resim = result.resimulations
+    theta = result.statistics.theta
+    noise = result.noise
+    assert noise is not None
+    i10 = list(noise.levels_pct).index(10.0)
+    rows = site_rows("| α (°/s)/° |", 7)
+    truth = result.truth()
+    assert truth is not None
+    alpha_error = 100 * (p["alpha"] / truth["alpha"] - 1)
+    assert rows[0].startswith(f"| α (°/s)/° | {p['alpha']:.4f} ({alpha_error:+.1f} %) |")
+    assert rows[1].startswith(f"| β °/s | {p['beta_dps']:.3f} |")
+    assert rows[2].startswith(f"| steady-state R² | {p['steady_state_r2']:.4f} |")
+    rate = f"{resim['constant'].rate_mae_dps:.3f} / {resim['theta'].rate_mae_dps:.3f} °/s"
+    angle = f"{resim['constant'].angle_mae_deg:.3f} / {resim['theta'].angle_mae_deg:.3f} °"
+    assert f"| {rate} |" in rows[3] and f"| {angle} |" in rows[4]
+    interval = f"[{theta.q05_deg:.2f}, {theta.q95_deg:.2f}]°".replace("-", "−")
+    assert f"| {interval} |" in rows[5]
+    assert f"| {noise.mae_deg[i10]:.2f} / {noise.p90_deg[i10]:.2f} ° |" in rows[6]
 
 
 def test_the_default_database(default_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -261,97 +355,6 @@ def guide_commands() -> list[list[str]]:
     section = page("guides/own-rocket.md")
     block = section.split("```bash\n", 1)[1].split("```", 1)[0]
     return [shlex.split(line)[1:] for line in block.splitlines() if line.startswith("rocketroll")]
-
-
-def test_the_bring_your_own_rocket_guide_runs_as_written(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """The guide's commands on a user's raw log: a virtual-tunnel run of ramps (not the
-    paper's dwells) of a rocket unlike the bundled ones, written as the guide's raw file is
-    (headerless, radians, 100 Hz: roll, roll rate, measured fin)."""
-    from identification.tunnel import run_tunnel, spec_from_command
-
-    rec = run_tunnel(
-        spec_from_command(
-            "--seed 7 --log-dt 0.01 --gyro-noise 1 --measured-fin --schedule ramps --steps 10 "
-            "--dwell-min 2 --dwell-max 3 --lead 1 --ramp 1 --alpha 1.8 --beta -4 "
-            "--alpha-bar 0.02 --beta-bar 4 --turbulence-sd 4"
-        )
-    )
-    assert rec.roll_deg is not None and rec.roll_rate_dps is not None and rec.fin_deg is not None
-    raw = np.radians(np.column_stack([rec.roll_deg, rec.roll_rate_dps, rec.fin_deg]))
-    np.savetxt(tmp_path / "raw.csv", raw, delimiter=",", fmt="%.9g")
-    monkeypatch.chdir(tmp_path)
-    commands = guide_commands()
-    assert 1 <= len(commands) <= 4
-    printed = []
-    for argv in commands:
-        assert rocketroll(argv) == 0, argv
-        printed.append(capsys.readouterr().out)
-    assert "fit adequacy" in printed[1]
-    ml_rows = [line.split() for line in printed[1].splitlines() if line.startswith("ml ")]
-    assert ml_rows and all(abs(float(row[2]) / 1.8 - 1) < 0.05 for row in ml_rows[:2])
-    assert (tmp_path / "mine-report" / "fit-ml.png").is_file()
-    assert "held-out part" in printed[2]
-    assert "recording mine" in printed[3] and "episode:" in printed[3]
-    table = (tmp_path / "mine-eval" / "table.md").read_text()
-    assert "| observer |" in table and "(trained on another database's rockets)" in table
-
-
-def test_the_fly_your_flight_log_guide_runs_as_written(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """The flight guide's commands on a flight computer's log: a virtual flight of a rocket
-    whose fin torque grows as ρV^1.5, from a pad at 1500 m, written with time in ms,
-    airspeed in km/h and altitude in feet above the pad."""
-    import shlex
-
-    from identification.flightlog import FlightLogSpec, run_flight
-
-    ascent = tmp_path / "high.yml"
-    default = (Path(__file__).parent.parent / "identification/data/ascent-default.yml").read_text(
-        encoding="utf-8"
-    )
-    ascent.write_text(default.replace("launch_altitude_m: 0.0", "launch_altitude_m: 1500.0"))
-    rec = run_flight(
-        FlightLogSpec(
-            seed=5, model="constant", torque_exponent=1.5, ascent=str(ascent),
-            altitude_above_ground=True,
-        )
-    )  # fmt: skip
-    assert rec.fin_cmd_deg is not None and rec.roll_rate_dps is not None
-    assert rec.airspeed_mps is not None and rec.altitude_m is not None
-    columns = [
-        1000.0 * rec.time_s, rec.fin_cmd_deg, rec.roll_rate_dps, 3.6 * rec.airspeed_mps,
-        rec.altitude_m / 0.3048,
-    ]  # fmt: skip
-    np.savetxt(
-        tmp_path / "log.csv", np.column_stack(columns), delimiter=",", fmt="%.9g",
-        header="t_ms,fin,gyro,v_kmh,h_ft", comments="",
-    )  # fmt: skip
-    monkeypatch.chdir(tmp_path)
-    section = page("guides/own-flight.md")
-    block = section.split("```bash\n", 1)[1].split("```", 1)[0]
-    commands = [
-        shlex.split(line)[1:] for line in block.splitlines() if line.startswith("rocketroll")
-    ]
-    assert 1 <= len(commands) <= 4
-    printed = []
-    for argv in commands:
-        assert rocketroll(argv) == 0, argv
-        printed.append(capsys.readouterr().out)
-    fits = [line for line in printed[1].splitlines() if line.startswith("flight ") and "[" in line]
-    assert len(fits) == 2 and all("[good]" in line for line in fits), printed[1]
-    assert "scaling measured" in printed[1] and "eq. 4-8 (n 2, m 1) rejected" in printed[1]
-    assert (tmp_path / "flight-report" / "flight_identification.png").is_file()
-    assert "8 posterior" in printed[2] or "traces" in printed[2]
-    assert "recording myflight" in printed[3]
-    rows = {
-        line.split("|")[1].strip(): float(line.split("|")[2].split("±")[0])
-        for line in (tmp_path / "flight-eval" / "table.md").read_text().splitlines()
-        if line.startswith("| ") and not line.startswith("| controller")
-    }
-    assert rows["PID"] < 0.5 * rows["trim"], rows
 
 
 # ------------------------------------------------------------------ the README, a front page
