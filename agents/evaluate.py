@@ -218,11 +218,6 @@ def settling(rollout: EpisodeHistory, config: RollConfig) -> tuple[np.ndarray, n
     return np.asarray(times, dtype=float), np.asarray(settled_steps, dtype=bool)
 
 
-def settle_times(rollout: EpisodeHistory, config: RollConfig) -> np.ndarray:
-    """The time to settle after each setpoint change, s (:func:`settling`'s times)."""
-    return settling(rollout, config)[0]
-
-
 def metrics(rollout: EpisodeHistory, config: RollConfig) -> dict[str, float]:
     """The protocol's metrics of one episode (see :data:`METRICS`).
 

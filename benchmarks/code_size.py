@@ -28,16 +28,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from rocketroll.help import PACKAGES
+
 REPO = Path(__file__).resolve().parent.parent
-PACKAGES = (
-    "rocketroll_common",
-    "rocketroll_physics",
-    "identification",
-    "disturbances",
-    "rollenv",
-    "agents",
-    "rocketroll",
-)
 OTHERS = ("benchmarks", "tests")
 SKIPPED = {tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT}
 

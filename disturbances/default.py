@@ -204,7 +204,7 @@ def build_database(
             surrogate_kinds,
             posterior,
             progress,
-            methods,
+            methods=methods,
         )
 
 
@@ -213,33 +213,14 @@ def _build_default(target: Path, progress: bool) -> None:
     _build_pinned(target, None, None, DEFAULT_SURROGATES, ("iaaft",), DEFAULT_POSTERIOR, progress)
 
 
-def _build_pinned(
-    target: Path,
-    recordings: Sequence[str | os.PathLike[str]] | None,
-    options: IdentifyOptions | None,
-    surrogates: int,
-    surrogate_kinds: Sequence[str],
-    posterior: int,
-    progress: bool,
-    methods: Sequence[str] | None = None,
-) -> Path:
-    """:func:`_build` under the pinned numerics, its folder's build lock held.  A build
-    that does not finish (the pinned process killed after an interrupt's grace, before it
+def _build_pinned(target: Path, *args: Any, methods: Sequence[str] | None = None) -> Path:
+    """:func:`_build` (``target``, then ``args``, its other arguments in its order, and
+    ``methods``) under the pinned numerics, its folder's build lock held.  A build that
+    does not finish (the pinned process killed after an interrupt's grace, before it
     could clean up) leaves no ``.building`` file: they are removed here, where no other
     build of the folder can be running (the lock)."""
     try:
-        return call_pinned(
-            _build_registered,
-            _registered(methods),
-            target,
-            recordings,
-            options,
-            surrogates,
-            surrogate_kinds,
-            posterior,
-            progress,
-            methods,
-        )
+        return call_pinned(_build_registered, _registered(methods), target, *args, methods)
     except BaseException:
         _remove_stale_builds(target)
         raise

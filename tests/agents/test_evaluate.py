@@ -20,7 +20,7 @@ from agents.evaluate import (
     metrics,
     paired_difference,
     protocol_episodes,
-    settle_times,
+    settling,
 )
 from agents.registry import make_controller
 from rocketroll.cli import main as rocketroll
@@ -150,7 +150,8 @@ def test_settle_time_and_regulation_window_of_a_hand_made_episode():
     error = [0.0] * 20 + [50, 20, 5] + [1] * 17 + [40, 10, 1, 1, 1, 3] + [1] * 14
     setpoint = [0.0] * 20 + [30.0] * 20 + [-10.0] * 20
     rollout = _step_episode(error, setpoint)
-    assert settle_times(rollout, cfg).tolist() == pytest.approx([0.3, 0.6])
+    assert settling(rollout, cfg)[0].tolist() == pytest.approx([0.3, 0.6])
+    assert settling(rollout, cfg)[1].tolist() == [True, True]
     m = metrics(rollout, cfg)
     assert m["settle_time_s"] == pytest.approx(0.45)
     # The headline counts samples >= 15 (3/4 of the 20-step period, below 7.5 s) after
@@ -159,7 +160,8 @@ def test_settle_time_and_regulation_window_of_a_hand_made_episode():
     # A step that never settles counts the whole time it had; one that settles only as the
     # next change comes too (its hold is cut short).
     never = _step_episode([0.0] * 20 + [9.0] * 11 + [0.0] * 9, [0.0] * 20 + [30.0] * 20)
-    assert settle_times(never, cfg).tolist() == pytest.approx([2.0])
+    assert settling(never, cfg)[0].tolist() == pytest.approx([2.0])
+    assert settling(never, cfg)[1].tolist() == [False]  # censored
     assert (m["setpoint_steps"], m["unsettled_steps"]) == (2, 0)
     censored = metrics(never, cfg)
     assert (censored["setpoint_steps"], censored["unsettled_steps"]) == (1, 1)
