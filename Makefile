@@ -126,7 +126,7 @@ schemas: $(VENV)/.installed
 
 # Regenerate the bundled synthetic recordings from their recorded commands.
 recordings: $(VENV)/.installed
-	$(BIN)/python -m identification.bundled --regenerate
+	$(BIN)/python -m identification.instruments.bundled --regenerate
 
 clean:
 	rm -rf $(VENV) build .mypy_cache .pytest_cache .ruff_cache

@@ -1,9 +1,9 @@
 """The true rocket outside the model in closed loop, for the benchmarks.
 
 :class:`ReferenceRollEnv` is ``RocketRoll-v0`` (or its rate task) whose rocket
-is integrated by :mod:`identification.reference` -- the independent Runge-Kutta
+is integrated by :mod:`identification.instruments.reference` -- the independent Runge-Kutta
 integrator, with the servo lag, backlash, sensor latency and quadratic damping
-of an :class:`~identification.reference.Effects` -- instead of the
+of an :class:`~identification.instruments.reference.Effects` -- instead of the
 environment's exact kernel; its sensors (encoder, gyro noise with the same
 draws), observation and reward are the environment's.  With no effects it scores
 what the environment scores (``tests/test_benchmarks.py``), so a replay's score
@@ -21,8 +21,8 @@ from typing import Any, SupportsFloat
 import numpy as np
 
 from disturbances.bank import TraceBank
+from identification.instruments.reference import Effects, advance, fine_steps
 from identification.model import RollParams
-from identification.reference import Effects, advance, fine_steps
 from rollenv.core import RollConfig, observe_kernel, step_reward
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Cfg, Cursor, State

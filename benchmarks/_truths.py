@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from identification.reference import Effects
-from identification.tunnel import TunnelSpec
+from identification.instruments.reference import Effects
+from identification.instruments.tunnel import TunnelSpec
 
 __all__ = ["MISMATCH_TRUTHS", "SHAPES", "SHAPE_TRUTHS", "TRUTHS", "shape_command", "spec_of"]
 
@@ -45,8 +45,8 @@ TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
         "rate gyro (2 % noise, eq. 52) and measured fin, no encoder; Student-t turbulence",
         {"no_encoder": True, "gyro_noise": 2.0, "measured_fin": True, "turbulence": "student-t"},
     ),
-    # Outside the model (identification.reference): the paper's rocket and schedule with one
-    # effect at a physically modest level, or all four together.
+    # Outside the model (identification.instruments.reference): the paper's rocket and
+    # schedule with one effect at a physically modest level, or all four together.
     "servo-lag": (
         "outside the model: a 50-ms servo lag and 0.5° of backlash",
         {"effects": Effects(servo_lag_s=0.05, backlash_deg=0.5)},

@@ -3,7 +3,7 @@ and without them.
 
 For each truth (``benchmarks/_truths.py``) and seed, the virtual tunnel records
 the paper's schedule at ``--hz`` with a 1 % gyro and, unless ``--no-fin``, a
-measured fin column; :func:`identification.actuation.identify_actuation` looks
+measured fin column; :func:`identification.methods.actuation.identify_actuation` looks
 for each optional term at its level.  Per truth the table gives how often each
 term was admitted, the mean estimate where it was, and the true value: on a
 truth without a term it should stay out (the rig inside the model keeps the
@@ -34,8 +34,8 @@ import numpy as np
 from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
-from identification.actuation import LEVEL, identify_actuation
-from identification.tunnel import run_tunnel
+from identification.instruments.tunnel import run_tunnel
+from identification.methods.actuation import LEVEL, identify_actuation
 
 DEFAULT_TRUTHS = ("paper", "negative", "servo-lag", "latency", "quadratic", "mismatch-all")
 #: term -> the truth's value of it (Effects' field)

@@ -1,4 +1,4 @@
-"""Calibration of the fit-adequacy verdict (:mod:`identification.adequacy`).
+"""Calibration of the fit-adequacy verdict (:mod:`identification.methods.adequacy`).
 
 Right fits: the maximum-likelihood fit of three virtual-tunnel truths (the
 paper's rocket; α 0.9 with θ̄ negative and a 0.3-s turbulence; a constant-damping
@@ -36,13 +36,13 @@ from typing import Any
 import numpy as np
 from _truths import SHAPE_TRUTHS, SHAPES, shape_command, spec_of
 
-from identification.adequacy import Adequacy, adequacy
-from identification.ml import MLFit, innovation_checks, maximum_likelihood, posterior_given
+from identification.instruments.tunnel import run_tunnel, spec_from_command
+from identification.methods.adequacy import Adequacy, adequacy
+from identification.methods.ml import MLFit, innovation_checks, maximum_likelihood, posterior_given
+from identification.methods.pipeline import model_inputs
+from identification.methods.steps import Disturbance
 from identification.model import RollParams
-from identification.pipeline import model_inputs
-from identification.recording import Recording
-from identification.steps import Disturbance
-from identification.tunnel import run_tunnel, spec_from_command
+from identification.recordings.recording import Recording
 
 
 def metrics_of(found: MLFit) -> dict[str, Any]:

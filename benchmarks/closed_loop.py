@@ -27,7 +27,7 @@ deployable controllers within [0.90, 1.10] and the oracle's within [0.80,
 Truths outside the model (``servo-lag``, ``quadratic``, ``latency``, ``gusty``,
 ``mismatch-all``: ``benchmarks/_truths.py``) fly their true rocket on the
 independent reference integrator (``benchmarks/_reference_env.py``:
-:mod:`identification.reference` in closed loop, the environment's sensors and
+:mod:`identification.instruments.reference` in closed loop, the environment's sensors and
 reward); ``--reference`` flies every true rocket there (with no effects it
 scores what the environment scores).  Below the ratios, the **ranking
 agreement**: per replay, the controller pairs it orders against the truth on
@@ -83,13 +83,13 @@ from agents.base import Controller, EpisodeSpec
 from agents.evaluate import HEADLINE, env_on, metrics, run_episode
 from agents.registry import make_controller
 from disturbances.bank import TraceBank
-from identification.actuation import identify_actuation
+from identification.instruments.reference import Effects
+from identification.instruments.tunnel import run_tunnel
 from identification.methods import METHODS, Context, fit, tunnel_methods
+from identification.methods.actuation import identify_actuation
+from identification.methods.pipeline import IdentifyOptions
 from identification.model import RIG_LIMITS, Rig, RollParams
-from identification.pipeline import IdentifyOptions
-from identification.recording import Recording, StatedRig
-from identification.reference import Effects
-from identification.tunnel import run_tunnel
+from identification.recordings.recording import Recording, StatedRig
 from rocketroll_common.arrays import FloatArray
 from rollenv.bank import variant_config
 from rollenv.core import RollConfig
@@ -164,7 +164,7 @@ def rockets_of(
     on the reference integrator where it is outside the model, or ``reference``); with
     ``stated_factors``, the posterior draws of the recording identified and replayed with
     the linkage and latency a user states (the truth's, off by each factor); with
-    ``identified``, with what :func:`identification.actuation.identify_actuation` finds.
+    ``identified``, with what :func:`identification.methods.actuation.identify_actuation` finds.
     ``hz``: the recording logged at this rate with a 1 % gyro and a measured fin (default:
     the truth's own, the paper's 10-Hz encoder); ``quadratic``: also the posterior draws
     identified with the quadratic damping searched (``identify --fit-quadratic-damping``:

@@ -2,7 +2,7 @@
 
 For each seed and truth (``--n``: the fin torque's true airspeed exponent; the
 recorder's default rocket, ascent, staircase and flown tunnel turbulence
-otherwise), a virtual flight (:func:`identification.flightlog.run_flight`) is
+otherwise), a virtual flight (:func:`identification.instruments.flightlog.run_flight`) is
 identified and stored as a user would (``db add --posterior 8``: the flight
 method, its measured scaling, ``u_d`` and posterior draws), and the controllers
 of ``--policies`` are designed on it (``rocketroll eval --env-id
@@ -45,7 +45,7 @@ from agents.registry import make_controller
 from disturbances.db import DisturbanceDB
 from disturbances.ingest import identification_rows, trace_summary
 from disturbances.rows import checksum
-from identification.flightlog import FlightLogSpec, run_flight, truth_reference
+from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_reference
 from identification.methods import Context
 from rollenv.bank import load_bank, stored_flight_config, variant_config
 

@@ -5,9 +5,9 @@ For each truth (``--truth``; default all of :data:`TRUTHS`: the paper's
 either sign, a positive ᾱ, Dryden gusts, a heavy-tailed turbulence, an
 angle-only log, and two stretches outside the model: a descent past apogee
 and a supersonic one) and seed, the virtual flight
-(:func:`identification.flightlog.run_flight`)
+(:func:`identification.instruments.flightlog.run_flight`)
 logs its ascent (the default, unless the truth says), and the ``flight`` method
-(:func:`identification.flightfit.identify_flight`, the truth's damping model)
+(:func:`identification.methods.flightfit.identify_flight`, the truth's damping model)
 identifies it on the part ``identify`` fits (to apogee, at or below Mach 0.8;
 ``--whole``: every sample).  Per flight: the relative error of ``α₀`` and ``β̄₀`` (the
 scaled coefficients at the reference airspeed: ``C_δ``- and ``C_P``-like),
@@ -20,7 +20,7 @@ over every fit.
 Since the flight method measures the airspeed scaling (fin torque ``∝ ρV^n``,
 damping ``∝ ρV^m``), the coefficients are compared at the fit's reference
 airspeed (the flight's mean), with the truth carried there by its own scaling
-(:func:`identification.flightlog.truth_at`).
+(:func:`identification.instruments.flightlog.truth_at`).
 
 ``--scaling`` flies the truth of ``--truth`` (default the paper's rocket, flown
 tunnel turbulence, the recorder's default staircase and ascent) with every
@@ -32,7 +32,7 @@ two standard errors of the truth, the mean SE of ``n``, the share with α₀ and
 the first 70 %, as a share of the true model's own R² there.
 
 ``--joint K`` fits K flights of the rocket together
-(:func:`identification.flightfit.identify_flights`: one rocket, one
+(:func:`identification.methods.flightfit.identify_flights`: one rocket, one
 turbulence's statistics, one gyro; each flight its own filter), ``--seeds``
 such fits per truth, and reports the first flight's re-simulation.
 
@@ -56,15 +56,15 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from identification.flightfit import (
+from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_at
+from identification.methods.flightfit import (
     _model_only_r2,
     flight_inputs,
     flight_window,
     held_out_prediction,
     identify_flights,
 )
-from identification.flightlog import FlightLogSpec, run_flight, truth_at
-from identification.pipeline import IdentifyOptions
+from identification.methods.pipeline import IdentifyOptions
 
 #: Name -> (FlightLogSpec settings, what it tests).
 TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
@@ -111,9 +111,9 @@ def one(
     whole: bool = False,
 ) -> dict[str, Any]:
     """Fly, identify, compare: flights ``seed·joint`` to ``seed·joint + joint - 1``, fitted
-    together (:func:`identification.flightfit.identify_flights`), the first one's fit;
+    together (:func:`identification.methods.flightfit.identify_flights`), the first one's fit;
     ``extra`` recorder settings on top of the truth's.  Each flight is fitted on the part
-    ``identify`` fits (:func:`identification.flightfit.flight_window`: to apogee, at or
+    ``identify`` fits (:func:`identification.methods.flightfit.flight_window`: to apogee, at or
     below Mach 0.8), or ``whole``."""
     settings, _ = TRUTHS[truth]
     settings = {**settings, **(extra or {})}

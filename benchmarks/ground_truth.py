@@ -20,7 +20,7 @@ with the truth the tunnel recorded:
 * ᾱ and β̄ of the θ-dependent model (eq. 48);
 * the identified ``u_d`` against the tunnel's true ``u_d``: mean absolute
   error, °, and its ratio to the **bound**: the smoother with the *true*
-  parameters and turbulence statistics (:func:`identification.ml.posterior_given`)
+  parameters and turbulence statistics (:func:`identification.methods.ml.posterior_given`)
   on the same recording, computed in the same run;
 * for a method with a posterior (``ml``): how often the true ``u_d`` lies in
   the 90 % posterior band, and 50 posterior sample traces' SD and lag-1..10
@@ -62,12 +62,12 @@ import numpy as np
 from _truths import SHAPE_TRUTHS, SHAPES, TRUTHS, shape_command, spec_of
 from tqdm.auto import tqdm
 
+from identification.instruments.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from identification.methods import METHODS, Context, ModelFit, fit, tunnel_methods
-from identification.ml import posterior_given
+from identification.methods.ml import posterior_given
+from identification.methods.pipeline import IdentifyOptions
 from identification.model import RollParams, damping
-from identification.pipeline import IdentifyOptions
-from identification.recording import Recording
-from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
 
 #: Posterior sample traces drawn per seed for the SD and autocorrelation checks.

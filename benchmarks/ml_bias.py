@@ -34,9 +34,9 @@ import numpy as np
 from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
-from identification import ml
+from identification.instruments.tunnel import run_tunnel
+from identification.methods import ml
 from identification.model import damping
-from identification.tunnel import run_tunnel
 
 VARIANTS = ("quantised", "white", "exact")
 LEVELS = np.linspace(-20.0, 20.0, 9)

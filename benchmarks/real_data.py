@@ -6,7 +6,7 @@ keeps every N-th reading: 100 Hz, 50 Hz, 10 Hz of a 100-Hz log), every tunnel me
 (``--methods``; default all) fits both damping models through
 :func:`identification.methods.fit` with one shared context.  Printed per fit: α, θ̄, a
 (or β̄ and ᾱ), α's standard error where the method reports one, the adequacy figures
-(:mod:`identification.adequacy`: rate R² of the model without ``u_d``, R² a time
+(:mod:`identification.methods.adequacy`: rate R² of the model without ``u_d``, R² a time
 constant ahead, the share of ``u_d`` the fin explains, ``|u_d|`` against the fins'
 range) and the verdict with its reasons; a method that cannot fit the recording
 says why in one line, and the others run.
@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from identification.methods import Context, default_methods, fit, is_flight_method, tunnel_methods
+from identification.methods.steps import IdentificationError
 from identification.model import MODEL_NAMES, RollParams
-from identification.recording import Recording, RecordingError, load_recording
-from identification.steps import IdentificationError
-from identification.tables import scaling_line
+from identification.recordings.recording import Recording, RecordingError, load_recording
+from identification.reports.tables import scaling_line
 
 
 def thinned(rec: Recording, every: int) -> Recording:
@@ -79,7 +79,7 @@ def truth_of(
     if params is None:
         return {}
     if v_ref_mps is not None and "truth.v_ref_mps" in rec.metadata:
-        from identification.flightlog import truth_at
+        from identification.instruments.flightlog import truth_at
 
         params = truth_at(rec, v_ref_mps)
     out = {"alpha": params.alpha, "theta_bar": params.theta_bar_deg}

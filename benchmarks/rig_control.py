@@ -39,8 +39,8 @@ from _truths import TRUTHS
 from agents.base import Controller
 from agents.evaluate import HEADLINE, evaluate, protocol_episodes
 from agents.registry import make_controller
+from identification.instruments.reference import Effects
 from identification.model import Rig
-from identification.reference import Effects
 from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollConfig
 

@@ -7,14 +7,14 @@ paper's Table 1 experiment, 5731 samples at 10 Hz):
   ``identify(rec, IdentifyOptions(noise_runs=0))`` -- one warm-up call, then
   ``--repeats`` timed calls; median and IQR against the 50 ms target;
 * the named reference measured in the same run: the output-error peer
-  :func:`identification.baselines.output_error` (``"constant"`` and
+  :func:`identification.methods.baselines.output_error` (``"constant"`` and
   ``"theta"``) on the same recording, with its ratio to the pipeline;
 * the §3.3 Monte Carlo (4 noise levels x 100 runs = 400 runs) timed by
-  calling :func:`identification.noise.noise_study` directly with the pieces of
+  calling :func:`identification.methods.noise.noise_study` directly with the pieces of
   one identification, median of ``--mc-repeats`` against the 5 s target;
 * maximum likelihood (``method="ml"``) of both models in one call, against
   the 1 s target, and 100 posterior ``u_d`` traces drawn from its θ-model fit
-  (:func:`identification.ml.posterior_traces`), against 0.5 s;
+  (:func:`identification.methods.ml.posterior_traces`), against 0.5 s;
 * every other registered identification method
   (:data:`identification.methods.METHODS`) through
   ``methods.fit(recording, method, [model])`` -- its parameters *and* its
@@ -54,10 +54,10 @@ from dataclasses import dataclass
 import numpy as np
 from _against import SERVE, Remote, serve, start_against
 
-from identification.baselines import output_error
-from identification.bundled import load_bundled
-from identification.noise import noise_study
-from identification.pipeline import Identification, IdentifyOptions, identify
+from identification.instruments.bundled import load_bundled
+from identification.methods.baselines import output_error
+from identification.methods.noise import noise_study
+from identification.methods.pipeline import Identification, IdentifyOptions, identify
 
 RECORDING = "tunnel-paper-seed0"
 PIPELINE_TARGET_MS = 50.0
@@ -235,14 +235,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     n_levels = len(result.options.noise_levels_pct)
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
-    from identification.ml import maximum_likelihood, posterior_traces
+    from identification.methods.ml import maximum_likelihood, posterior_traces
 
     others = [  # the tunnel's methods (a flight method identifies flights only)
         m for m in METHODS.names() if m != "paper" and not traits(m).flight
     ]
     ml_theta = maximum_likelihood(rec, "theta", options=options)
-    from identification.adequacy import adequacy
     from identification.methods import Context
+    from identification.methods.adequacy import adequacy
 
     context = Context(rec, options)
     judged = {m: fit(context, m, ["theta"])["theta"] for m in ("paper", *others)}

@@ -23,9 +23,9 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from disturbances.rows import KINDS, SPLITS, SURROGATE_KINDS
 from identification.methods import METHODS, default_methods, has_posterior, traits
+from identification.methods.pipeline import IdentifyOptions
 from identification.model import MODEL_NAMES, QUADRATIC_RATE_DPS
-from identification.pipeline import IdentifyOptions
-from identification.recording import SOURCES, Recording
+from identification.recordings.recording import SOURCES, Recording
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 
@@ -146,9 +146,9 @@ def _report_files(args: IdentifyArgs) -> list[str]:
     """The files ``--report`` may write, known before the fits: ``report.md``, a figure per
     method asked for (the tunnel's defaults when none is), the paper's figures with its
     method, and a flight's figure."""
-    from identification.fitreport import figure_name
-    from identification.flightreport import FIGURE_NAME
-    from identification.report import FIGURES, REPORT_NAME
+    from identification.reports.fitreport import figure_name
+    from identification.reports.flightreport import FIGURE_NAME
+    from identification.reports.report import FIGURES, REPORT_NAME
 
     methods = args.method or list(default_methods())
     names = [REPORT_NAME, *(figure_name(m) for m in methods if not traits(m).flight)]
@@ -210,10 +210,10 @@ class IdentifyArgs:
 
 def _fit_each(context: Any, methods: Sequence[str]) -> tuple[dict[str, Any], dict[str, str]]:
     """Each method's fits, and the reason of each method that cannot fit the recording (its
-    :class:`~identification.steps.IdentificationError`: the paper's method on a recording
+    :class:`~identification.methods.steps.IdentificationError`: the paper's method on a recording
     without held fin steps, ...); when none can, the first one's error."""
     from identification.methods import fit
-    from identification.steps import IdentificationError
+    from identification.methods.steps import IdentificationError
 
     fits: dict[str, Any] = {}
     refused: dict[str, str] = {}
@@ -236,8 +236,8 @@ def identify(args: IdentifyArgs) -> int:
     import dataclasses
 
     from identification.methods import Context, is_flight_method
-    from identification.recording import load_recording
-    from identification.tables import (
+    from identification.recordings.recording import load_recording
+    from identification.reports.tables import (
         adequacy_table,
         flight_table,
         methods_table,
@@ -264,7 +264,7 @@ def identify(args: IdentifyArgs) -> int:
     fits, refused = _fit_each(context, methods)
     found = None
     if args.actuation:
-        from identification.actuation import identify_actuation
+        from identification.methods.actuation import identify_actuation
 
         found = identify_actuation(recording, options)
     result = context.paper if "paper" in fits else None
@@ -283,17 +283,17 @@ def identify(args: IdentifyArgs) -> int:
         outputs[args.json] = json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n"
     tunnel_fits = {method: f for method, f in fits.items() if not is_flight_method(method)}
     if args.report is not None and tunnel_fits:
-        from identification.fitreport import render_fit_report
+        from identification.reports.fitreport import render_fit_report
 
         paper_report = None
         if result is not None:
-            from identification.report import render_report
+            from identification.reports.report import render_report
 
             paper_report = render_report(result)
         for name, content in render_fit_report(context, tunnel_fits, paper_report).items():
             outputs[args.report / name] = content
     elif args.report is not None and "flight" in fits:
-        from identification.flightreport import render_flight_report
+        from identification.reports.flightreport import render_flight_report
 
         table = flight_table({"flight": fits["flight"]})
         for name, content in render_flight_report(recording, fits["flight"], table).items():
@@ -731,7 +731,7 @@ def add(args: AddArgs) -> int:
     import dataclasses
 
     from disturbances.ingest import add_recording
-    from identification.recording import load_recording
+    from identification.recordings.recording import load_recording
 
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)

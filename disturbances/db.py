@@ -60,10 +60,10 @@ from disturbances.rows import (
     TraceRow,
 )
 from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
-from identification.adequacy import VERDICTS
 from identification.methods import METHODS
+from identification.methods.adequacy import VERDICTS
 from identification.model import MODEL_NAMES, Rig, RollParams
-from identification.recording import SOURCES, Recording
+from identification.recordings.recording import SOURCES, Recording
 from rocketroll_common import __version__
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
@@ -219,8 +219,8 @@ class DisturbanceDB:
     --------
     >>> import tempfile, pathlib
     >>> from disturbances.ingest import add_recording
-    >>> from identification.bundled import load_bundled
-    >>> from identification.pipeline import IdentifyOptions
+    >>> from identification.instruments.bundled import load_bundled
+    >>> from identification.methods.pipeline import IdentifyOptions
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     with DisturbanceDB(pathlib.Path(tmp) / "db.sqlite") as db:
     ...         added = add_recording(db, load_bundled("tunnel-paper-seed0"),

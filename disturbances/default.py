@@ -8,7 +8,7 @@ database lives at
 2. ``$XDG_CACHE_HOME/rocketroll/disturbances.sqlite`` (``~/.cache/...``).
 
 It is made from the bundled synthetic recordings
-(:data:`identification.bundled.BUNDLED`): each is identified by the default
+(:data:`identification.instruments.bundled.BUNDLED`): each is identified by the default
 methods -- the paper's, the output-error peer and maximum likelihood -- both
 models, with :data:`DEFAULT_SURROGATES` IAAFT surrogates of every paper-method
 trace and :data:`DEFAULT_POSTERIOR` posterior draws of every maximum-likelihood
@@ -55,10 +55,10 @@ from disturbances.ingest import add_recording
 from disturbances.rows import SURROGATE_KINDS
 from disturbances.schema import APPLICATION_ID, SCHEMA_VERSION
 from disturbances.stores import Store, open_store
-from identification.bundled import bundled_paths
+from identification.instruments.bundled import bundled_paths
 from identification.methods import METHODS, database_methods, has_posterior
-from identification.pipeline import IdentifyOptions
-from identification.recording import load_recording
+from identification.methods.pipeline import IdentifyOptions
+from identification.recordings.recording import load_recording
 from rocketroll_common.files import created_folders_removed_on_error, file_mode
 from rocketroll_common.numerics import call_pinned, is_pinned, pinned_environment
 

@@ -65,10 +65,10 @@ from identification.methods import (
     has_posterior,
     traits,
 )
+from identification.methods.pipeline import Identification, IdentifyOptions
+from identification.methods.statistics import trace_statistics
 from identification.model import Rig
-from identification.pipeline import Identification, IdentifyOptions
-from identification.recording import Recording
-from identification.statistics import trace_statistics
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import UsageError
 from rocketroll_physics.scaling import FlightReference
@@ -260,7 +260,7 @@ def _from(row: TraceRow, start_s: float) -> TraceRow:
     skip = max(0, math.ceil((start_s - row.t0_s) / row.dt_s - 1e-9))
     u = np.asarray(row.u_d_deg[skip:], dtype=np.float64)
     if u.size < 2:
-        from identification.steps import IdentificationError
+        from identification.methods.steps import IdentificationError
 
         raise IdentificationError(
             f"{row.recording}: its {row.method} trace holds less than two intervals after "

@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.adequacy import VERDICTS
+from identification.methods.adequacy import VERDICTS
 from identification.model import Rig, RollParams, check_model
-from identification.recording import SOURCES, Recording
+from identification.recordings.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 from rocketroll_physics.scaling import FlightReference
@@ -78,8 +78,9 @@ SPLITS = ("train", "test")
 #: Share of recordings (by hash) that go to the test split.
 TEST_FRACTION = 0.25
 #: The metric (``True``) of an identification stored although every fit of its recording was
-#: judged unreliable (:mod:`identification.adequacy`), because the user said so: ``rocketroll
-#: db add --accept-unreliable``; the evaluations that replay it say so under their tables.
+#: judged unreliable (:mod:`identification.methods.adequacy`), because the user said so:
+#: ``rocketroll db add --accept-unreliable``; the evaluations that replay it say so under
+#: their tables.
 ACCEPTED_UNRELIABLE = "accepted_unreliable"
 _SPLIT_SALT = b"rocketroll-split/1:"
 
@@ -234,7 +235,7 @@ class RecordingRow(_Row):
 
     @classmethod
     def of(cls, recording: Recording, added_at: str) -> RecordingRow:
-        """The row for a :class:`~identification.recording.Recording`."""
+        """The row for a :class:`~identification.recordings.recording.Recording`."""
         columns = recording.columns()
         return cls(
             content_hash=content_hash(columns),
@@ -252,7 +253,7 @@ class RecordingRow(_Row):
         return {name: samples[:, i] for i, name in enumerate(self.columns)}
 
     def recording(self) -> Recording:
-        """The :class:`~identification.recording.Recording` (validated again)."""
+        """The :class:`~identification.recordings.recording.Recording` (validated again)."""
         return Recording(
             name=self.name, source=self.source, metadata=self.metadata, **self.column_dict()
         )
@@ -281,7 +282,7 @@ class IdentificationRow(_Row):
     metrics : mapping
         Fit metrics (JSON-safe): R², re-simulation errors, the noise study, ...
     options : mapping
-        The :class:`~identification.pipeline.IdentifyOptions` used (JSON-safe).
+        The :class:`~identification.methods.pipeline.IdentifyOptions` used (JSON-safe).
     package_version : str
         The rocketroll version that identified it.
     created_at : str
@@ -314,8 +315,9 @@ class IdentificationRow(_Row):
 
     @property
     def verdict(self) -> str | None:
-        """The fit's adequacy verdict (good, weak, unreliable: :mod:`identification.adequacy`)
-        from its metrics; ``None`` where it was not assessed (a flight fit, an old row)."""
+        """The fit's adequacy verdict (good, weak, unreliable:
+        :mod:`identification.methods.adequacy`) from its metrics; ``None`` where it was not
+        assessed (a flight fit, an old row)."""
         figures = self.metrics.get("adequacy")
         return None if not isinstance(figures, Mapping) else figures.get("verdict")
 

@@ -11,7 +11,7 @@ parameters at a reference airspeed and density with the airspeed scaling it meas
 (``v_ref_mps``, ``rho_ref_kgm3``, ``torque_exponent``, ``damping_exponent``:
 :class:`rocketroll_physics.scaling.FlightReference`; NULL for the tunnel's, which hold at
 the tunnel's airspeed).  Version 3 adds each identification's adequacy ``verdict`` (good, weak or
-unreliable: :mod:`identification.adequacy`; NULL where it was not assessed -- a flight
+unreliable: :mod:`identification.methods.adequacy`; NULL where it was not assessed -- a flight
 fit, or one stored before version 3 without it in its metrics).  Version 2 validates
 method, model, kind and source names in Python -- against the registries of identification methods
 (:data:`identification.methods.METHODS`), damping models

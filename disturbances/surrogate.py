@@ -35,7 +35,7 @@ Validation (:func:`check_surrogate`)
       Kolmogorov-Smirnov test, not rejected at :data:`KS_ALPHA`.  KS assumes
       independent samples, so both traces are first thinned to every
       ``stride``-th value, ``stride`` being the source's decorrelation lag
-      (:func:`identification.statistics.decorrelation_stride`);
+      (:func:`identification.methods.statistics.decorrelation_stride`);
     * its power spectrum is close to the source's: the RMS over frequencies
       (DC excluded) of ``log10(P_surrogate / P_source)`` between Welch [3]_
       estimates, in decades, is at most :data:`PSD_TOLERANCE_DECADES`.
@@ -62,7 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
 from statsmodels.tsa.ar_model import AutoReg, ar_select_order
 
-from identification.statistics import decorrelation_stride
+from identification.methods.statistics import decorrelation_stride
 from rocketroll_common.arrays import readonly_array
 
 __all__ = [

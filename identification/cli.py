@@ -16,9 +16,9 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from identification.flightlog import FlightLogSpec
-from identification.importer import ImportSettings
-from identification.tunnel import TunnelSpec
+from identification.instruments.flightlog import FlightLogSpec
+from identification.instruments.tunnel import TunnelSpec
+from identification.recordings.importer import ImportSettings
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 
@@ -35,8 +35,8 @@ class TunnelArgs:
 
 def tunnel(args: TunnelArgs) -> int:
     """Run the virtual tunnel and write the recording."""
-    from identification.recording import save_recording
-    from identification.tunnel import run_tunnel
+    from identification.instruments.tunnel import run_tunnel
+    from identification.recordings.recording import save_recording
 
     recording = run_tunnel(args.spec)
     save_recording(recording, args.out)
@@ -56,8 +56,8 @@ class RecordFlightArgs:
 
 def record_flight(args: RecordFlightArgs) -> int:
     """Fly the virtual flight recorder and write its log."""
-    from identification.flightlog import AscentError, run_flight
-    from identification.recording import save_recording
+    from identification.instruments.flightlog import AscentError, run_flight
+    from identification.recordings.recording import save_recording
 
     try:
         recording = run_flight(args.spec)
@@ -86,8 +86,8 @@ class InfoArgs:
 
 def info(args: InfoArgs) -> int:
     """Validate a recording, print its summary, write the JSON and figure asked for."""
-    from identification.recording import load_recording
-    from identification.summary import plot_recording, summarize
+    from identification.recordings.recording import load_recording
+    from identification.reports.summary import plot_recording, summarize
     from rocketroll_common.files import write_all_atomic
 
     recording = load_recording(args.recording)
@@ -120,8 +120,8 @@ class ImportArgs:
 
 def import_csv(args: ImportArgs) -> int:
     """Convert the file and write the recording."""
-    from identification.importer import plausibility_warnings, read_csv
-    from identification.recording import save_recording
+    from identification.recordings.importer import plausibility_warnings, read_csv
+    from identification.recordings.recording import save_recording
 
     recording = read_csv(args.input, args.settings)
     save_recording(recording, args.out)

@@ -1,7 +1,7 @@
 """The one closed form (:func:`identification.model.piece_coefficients`), compiled by numba.
 
 The environment's kernel (:mod:`rollenv.core`) and the maximum-likelihood
-identification (:mod:`identification.ml`) both call :data:`piece`, so the
+identification (:mod:`identification.methods.ml`) both call :data:`piece`, so the
 physics they integrate is the source in :mod:`identification.model`, not a
 copy.  For numba the array helpers ``select`` and ``phi_functions`` become
 scalar branches (only the branch that is used is computed).

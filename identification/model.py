@@ -58,7 +58,7 @@ FloatArray = NDArray[np.float64]
 
 #: The roll rate at which a quadratic damping coefficient ``q`` is the fraction of ``a(θ)``
 #: added (``a(θ)·q·v·|v|/QUADRATIC_RATE_DPS``), °/s: the virtual tunnel's truth, the
-#: maximum-likelihood search (:func:`identification.ml.quadratic_search`) and the
+#: maximum-likelihood search (:func:`identification.methods.ml.quadratic_search`) and the
 #: environment's kernel read it.
 QUADRATIC_RATE_DPS = 30.0
 #: The least the quadratic damping's factor ``1 + q·|v|/QUADRATIC_RATE_DPS`` may fall to (a
@@ -121,7 +121,7 @@ class RollParams:
         The damping's growth with the roll rate beyond the paper's model: the fraction
         ``q`` of ``a(θ)`` added at :data:`QUADRATIC_RATE_DPS`, the damping being
         ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` (0: the paper's linear roll, eq. 23).
-        Identified by :func:`identification.ml.quadratic_search` where the data admit it.
+        Identified by :func:`identification.methods.ml.quadratic_search` where the data admit it.
     """
 
     alpha: float

@@ -10,7 +10,7 @@ With ``z1``, ``z2`` independent standard normals and ``u = h/T``::
 
 :func:`interval_coefficients` gives ``phi, a1, mean, l21, l22``.  The Dryden
 gust generator (:mod:`rocketroll_physics.dryden`) draws with them, and the flight
-identification (:mod:`identification.flightfit`) filters with them, so the
+identification (:mod:`identification.methods.flightfit`) filters with them, so the
 turbulence both hold is one process.
 
 References

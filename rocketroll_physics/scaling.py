@@ -60,7 +60,7 @@ class AirspeedScaling:
     not follow them -- canards whose effectiveness falls with the airspeed
     (flow separation, aeroelastic twist, the body's interference) give a smaller
     ``n`` -- and the flight method measures both
-    (:mod:`identification.flightfit`).  The identified model's gain ``α``
+    (:mod:`identification.methods.flightfit`).  The identified model's gain ``α``
     (torque per damping) then scales as ``V^(n−m)`` and its damping ``a`` as
     ``ρ·V^m``.
 

@@ -215,7 +215,7 @@ def _stored(
 ) -> tuple[FlightProfile, FlightReference]:
     del mtime_ns, size  # the cache key: a changed file is read again
     from disturbances.db import DisturbanceDB
-    from identification.flightfit import site_elevation
+    from identification.recordings.flight import site_elevation
 
     with DisturbanceDB(path, create=False) as db:
         fits = [

@@ -18,7 +18,16 @@ from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["LAYERS", "ROOT", "cycles", "module_graph", "package_graph", "upward_edges"]
+__all__ = [
+    "LAYERS",
+    "ROOT",
+    "SUBLAYERS",
+    "cycles",
+    "module_graph",
+    "package_graph",
+    "sublayer_upward_edges",
+    "upward_edges",
+]
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The top-level packages, lowest layer first: each may import only those before it.
@@ -31,6 +40,21 @@ LAYERS = (
     "agents",
     "rocketroll",
 )
+#: A package's sub-packages and top-level modules, lowest layer first: each may import only
+#: those before it (the package's ``__init__`` may import any).
+SUBLAYERS = {
+    "identification": (
+        "paper",
+        "model",
+        "compiled",
+        "recordings",
+        "instruments",
+        "estimation",
+        "methods",
+        "reports",
+        "cli",
+    ),
+}
 
 
 def _modules() -> dict[str, Path]:
@@ -119,6 +143,26 @@ def upward_edges(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
     )
 
 
+def sublayer_upward_edges(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """``(module, imported module)`` where, inside a package of :data:`SUBLAYERS`, a lower
+    sub-package imports a higher one."""
+    found = []
+    for package, order in SUBLAYERS.items():
+
+        def rank(module: str, package: str = package, order: tuple[str, ...] = order) -> int:
+            parts = module.split(".")
+            return order.index(parts[1]) if parts[0] == package and len(parts) > 1 else -1
+
+        found += [
+            (m, t)
+            for m, targets in graph.items()
+            if rank(m) >= 0
+            for t in targets
+            if rank(t) > rank(m)
+        ]
+    return sorted(found)
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Every cycle found by a depth-first search (empty: the graph is acyclic)."""
     found: list[list[str]] = []
@@ -152,7 +196,7 @@ def main() -> int:
     print("\nmodules:")
     for module in sorted(graph, key=lambda m: (LAYERS.index(m.split(".")[0]), m)):
         print(f"  {module:<34} -> {', '.join(sorted(graph[module])) or '-'}")
-    found, upward = cycles(graph), upward_edges(graph)
+    found, upward = cycles(graph), upward_edges(graph) + sublayer_upward_edges(graph)
     for cycle in found:
         print(f"CYCLE: {' -> '.join(cycle)}")
     for low, high in upward:

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from identification.bundled import bundled_path
+from identification.instruments.bundled import bundled_path
 from rocketroll.cli import COMMANDS, command
 from rocketroll.cli import main as rocketroll
 from rocketroll_common.settings import Command, _Field, _leaves
@@ -42,11 +42,11 @@ WORK = (
     "disturbances:open_default",
     "identification.methods:fit",
     "disturbances.ingest:fit",
-    "identification.pipeline:identify",
+    "identification.methods.pipeline:identify",
     "agents.train.run:make_env",
     "agents.cli:run_sweep",
-    "identification.tunnel:run_tunnel",
-    "identification.flightlog:run_flight",
+    "identification.instruments.tunnel:run_tunnel",
+    "identification.instruments.flightlog:run_flight",
 )
 
 

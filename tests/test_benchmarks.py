@@ -195,7 +195,7 @@ def test_the_reference_truth_in_closed_loop_scores_what_the_environment_does(
     from _reference_env import ReferenceRollEnv
     from closed_loop import Rocket, _config, _controller, rockets_of, score, windows
 
-    from identification.reference import Effects
+    from identification.instruments.reference import Effects
 
     true, _ = rockets_of("paper", 0, [], 0)
     for task in ("angle-zero", "rate-steps"):
@@ -352,8 +352,8 @@ def test_recurrent_probe_scores_an_lstm_policy_as_it_trains(runner: Runner) -> N
 def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_truth(
     runner: Runner, tmp_path: Path
 ) -> None:
-    from identification.recording import save_recording
-    from identification.tunnel import run_tunnel, spec_from_command
+    from identification.instruments.tunnel import run_tunnel, spec_from_command
+    from identification.recordings.recording import save_recording
 
     rec = run_tunnel(
         spec_from_command(
@@ -386,8 +386,8 @@ def test_real_data_fits_the_given_recordings_at_each_rate_and_scores_a_known_tru
 def test_real_data_fits_a_flight_with_its_scaling(runner: Runner, tmp_path: Path) -> None:
     """A flight log: the flight method, the measured scaling and eq. 4-8's test, and the
     truth carried to the fit's reference airspeed."""
-    from identification.flightlog import FlightLogSpec, run_flight
-    from identification.recording import save_recording
+    from identification.instruments.flightlog import FlightLogSpec, run_flight
+    from identification.recordings.recording import save_recording
 
     path = tmp_path / "flight.csv"
     # logged at 50 Hz (the recorder's default is 100): half the samples to fit, the same checks

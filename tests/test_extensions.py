@@ -27,7 +27,7 @@ from agents.base import Design
 from agents.registry import CONTROLLERS, register_controller
 from disturbances.db import DisturbanceDB
 from disturbances.default import build_database, fingerprint
-from identification.bundled import bundled_path
+from identification.instruments.bundled import bundled_path
 from identification.methods import (
     METHODS,
     Context,
@@ -37,7 +37,7 @@ from identification.methods import (
     resimulation_metrics,
     trace_settings,
 )
-from identification.pipeline import IdentifyOptions
+from identification.methods.pipeline import IdentifyOptions
 from rocketroll.cli import main as rocketroll
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs

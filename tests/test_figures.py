@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 import torch
 
-from identification.bundled import load_bundled
-from identification.pipeline import identify
+from identification.instruments.bundled import load_bundled
+from identification.methods.pipeline import identify
 from rocketroll.cli import main as rocketroll
 
 REPO = Path(__file__).resolve().parents[1]
@@ -121,7 +121,7 @@ def test_the_bring_your_own_rocket_guide_runs_as_written(
     """The guide's commands on a user's raw log: a virtual-tunnel run of ramps (not the
     paper's dwells) of a rocket unlike the bundled ones, written as the guide's raw file is
     (headerless, radians, 100 Hz: roll, roll rate, measured fin)."""
-    from identification.tunnel import run_tunnel, spec_from_command
+    from identification.instruments.tunnel import run_tunnel, spec_from_command
 
     rec = run_tunnel(
         spec_from_command(
@@ -158,7 +158,7 @@ def test_the_fly_your_flight_log_guide_runs_as_written(
     airspeed in km/h and altitude in feet above the pad."""
     import shlex
 
-    from identification.flightlog import FlightLogSpec, run_flight
+    from identification.instruments.flightlog import FlightLogSpec, run_flight
 
     ascent = tmp_path / "high.yml"
     default = (Path(__file__).parent.parent / "identification/data/ascent-default.yml").read_text(

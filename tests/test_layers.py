@@ -15,6 +15,7 @@ from tests.import_graph import (
     module_graph,
     package_graph,
     private_imports,
+    sublayer_upward_edges,
     upward_edges,
 )
 
@@ -25,6 +26,16 @@ def test_no_module_imports_a_higher_layer() -> None:
     packages = package_graph(graph)
     for package, imported in packages.items():
         assert all(LAYERS.index(p) < LAYERS.index(package) for p in imported), package
+
+
+def test_no_sub_package_imports_a_higher_one() -> None:
+    """Inside identification: the roll model, recordings, instruments, the estimation
+    core, the methods, the reports, the commands, each importing only those before it."""
+    assert sublayer_upward_edges(module_graph()) == []
+    graph = {"identification.recordings.a": {"identification.methods.b"}}
+    assert sublayer_upward_edges(graph) == [
+        ("identification.recordings.a", "identification.methods.b")
+    ]
 
 
 def test_the_modules_import_one_another_without_a_cycle() -> None:

@@ -27,10 +27,10 @@ import numpy as np
 import pytest
 
 import rollenv  # noqa: F401  (registers the environments)
-from identification.bundled import bundled_path
-from identification.pipeline import IdentifyOptions
-from identification.recording import RecordingError, load_recording
-from identification.tunnel import TunnelSpec
+from identification.instruments.bundled import bundled_path
+from identification.instruments.tunnel import TunnelSpec
+from identification.methods.pipeline import IdentifyOptions
+from identification.recordings.recording import RecordingError, load_recording
 from rocketroll.cli import main as rocketroll
 from rocketroll_common.files import write_all_atomic, write_atomic
 from rocketroll_common.settings import _fields
@@ -148,8 +148,8 @@ def test_every_numeric_option_of_every_command_declares_its_range() -> None:
 
 
 def test_the_largest_turbulence_allowed_writes_ordinary_cells() -> None:
-    from identification.recording import recording_text
-    from identification.tunnel import run_tunnel
+    from identification.instruments.tunnel import run_tunnel
+    from identification.recordings.recording import recording_text
 
     spec = TunnelSpec(turbulence_sd=45.0, turbulence="student-t", dof=2.1, seed=3, steps=3)
     text = recording_text(run_tunnel(dataclasses.replace(spec, schedule="staircase")))
@@ -427,8 +427,8 @@ def test_build_and_add_follow_one_folder_rule(
 ) -> None:
     """Missing folders above a new database are created, by build and by add alike, and
     removed again when the command fails."""
-    from identification.recording import save_recording
-    from identification.tunnel import run_tunnel
+    from identification.instruments.tunnel import run_tunnel
+    from identification.recordings.recording import save_recording
 
     # a 70-s staircase: what the commands do with folders, not what they identify
     rec = tmp_path / "staircase.csv"

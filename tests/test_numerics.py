@@ -180,8 +180,8 @@ def test_a_pinned_process_or_a_local_function_computes_here(
     # ... and it stands for a machine that cannot be pinned: a default database built so is
     # the default one, its fingerprint saying "as found".
     from disturbances import default
-    from identification.bundled import bundled_paths
-    from identification.pipeline import IdentifyOptions
+    from identification.instruments.bundled import bundled_paths
+    from identification.methods.pipeline import IdentifyOptions
 
     assert numerics.pinned_environment() is None
     files = bundled_paths()[:1]
@@ -325,7 +325,7 @@ def test_the_child_imports_what_the_caller_does_not_its_working_folder(tmp_path:
     script = tmp_path / "bin" / "run.py"
     script.parent.mkdir()
     script.write_text(
-        "from identification.bundled import bundled_paths\n"
+        "from identification.instruments.bundled import bundled_paths\n"
         "from rocketroll_common.numerics import call_pinned\n"
         "print(len(call_pinned(bundled_paths)))\n"
     )

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from identification.bundled import bundled_path
+from identification.instruments.bundled import bundled_path
 from rocketroll.cli import main as rocketroll
 from rocketroll_common.files import MANIFEST, content_kind
 from tests.agents.test_sweep import TINY_PPO

@@ -194,7 +194,7 @@ def test_import_csv(log: dict[str, Any], time_unit: str, units: str, out_name: s
         mine = out_name in ("log.csv", "out.json")  # the input, and a file of another kind
         code, _ = run_contract(argv, root, outputs=() if mine else (out,))
         if code == 0:
-            from identification.recording import load_recording
+            from identification.recordings.recording import load_recording
 
             assert load_recording(out).n_samples > 0
 

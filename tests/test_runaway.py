@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.bundled import load_bundled
-from identification.recording import load_recording
+from identification.instruments.bundled import load_bundled
+from identification.recordings.recording import load_recording
 from rocketroll.cli import main as rocketroll
 from tests.cli import refused
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from disturbances.bank import TraceBank
-from identification.bundled import bundled_path
-from identification.recording import load_recording
+from identification.instruments.bundled import bundled_path
+from identification.recordings.recording import load_recording
 from rocketroll.cli import main as rocketroll
 from rocketroll_physics.flown import interval_means
 from tests.cli import ok, refused

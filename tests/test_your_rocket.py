@@ -17,8 +17,8 @@ from agents.base import Design
 from agents.nominal import NominalModel
 from agents.replay import fitted_settings, options_config
 from disturbances.db import DisturbanceDB
-from identification.recording import load_recording
-from identification.tunnel import run_tunnel, spec_from_command
+from identification.instruments.tunnel import run_tunnel, spec_from_command
+from identification.recordings.recording import load_recording
 from tests.cli import ok, refused
 
 TRUTH = "--model constant --alpha 2.5 --beta -5 --beta-bar 6 --turbulence-sd 3"
@@ -32,7 +32,7 @@ RUN = (
 def mine(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """The run as a recording, and a database holding it split 60/40."""
     from disturbances.ingest import add_recording
-    from identification.recording import save_recording
+    from identification.recordings.recording import save_recording
 
     folder = tmp_path_factory.mktemp("mine")
     rec = run_tunnel(spec_from_command(RUN))

@@ -3,21 +3,21 @@
 The paper treats the turbulence as an equivalent fin angle ``u_d`` (eq. 36:
 ``θ + θ̄ + u_d`` drives the roll), which makes it a *matched* disturbance:
 whatever of it can be predicted, the fins can cancel.  This module does that
-with the identification's own state-space model (:mod:`identification.ml`),
+with the identification's own state-space model (:mod:`identification.methods.ml`),
 run forward in real time:
 
 * :class:`TurbulenceModel` -- the autoregressive model of ``u_d`` on the control
   grid, fitted to the train split's traces (pooled least squares, order by
-  AIC as in :mod:`identification.ml`), and a slow random-walk *offset* that
+  AIC as in :mod:`identification.methods.ml`), and a slow random-walk *offset* that
   carries what is constant in an episode: the rocket's own θ̄ against the
   nominal one, and any other steady mismatch.
 * :class:`RollObserver` -- a Kalman filter on ``[v, ψ, u_d[k], ...,
   u_d[k-p+1], b]``: roll rate, angle relative to the setpoint, the AR lags
   and the offset.  Its time update is the ML model's
-  (:func:`identification.ml.interval_maps` over the fin path the servo takes
-  to the command, :func:`identification.ml.roll_transition`,
-  :func:`identification.statespace.predict`), its measurement update the
-  ML's for the gyro (:func:`identification.statespace.update`, the
+  (:func:`identification.methods.ml.interval_maps` over the fin path the servo takes
+  to the command, :func:`identification.methods.ml.roll_transition`,
+  :func:`identification.estimation.statespace.predict`), its measurement update the
+  ML's for the gyro (:func:`identification.estimation.statespace.update`, the
   multiplicative noise of eq. 52 as ``g²·(v̂² + P_vv)``); the encoder as a
   quantised measurement: the prior of the angle truncated to the count read
   (:meth:`RollObserver._encoder`).  A setpoint step shows as a reading the

@@ -36,8 +36,8 @@ from agents.train import (
 )
 from agents.vecenv import RollVecEnv
 from disturbances.default import build_database
-from identification.bundled import bundled_path
-from identification.pipeline import IdentifyOptions
+from identification.instruments.bundled import bundled_path
+from identification.methods.pipeline import IdentifyOptions
 from rocketroll.cli import command
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import flags, run_command

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from disturbances.default import build_database
-from identification.bundled import bundled_path
-from identification.pipeline import IdentifyOptions
+from identification.instruments.bundled import bundled_path
+from identification.methods.pipeline import IdentifyOptions
 
 FAST = IdentifyOptions(noise_runs=0)
 #: One recording of each split (seed 4 is in the test split by hash, seed 0 in train).

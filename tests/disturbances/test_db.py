@@ -21,11 +21,11 @@ from disturbances import default as default_db
 from disturbances.db import DatabaseError, DisturbanceDB
 from disturbances.ingest import add_recording
 from disturbances.rows import TEST_FRACTION, RecordingRow, checksum, content_hash, split_of
-from identification.bundled import bundled_path, load_bundled
+from identification.instruments.bundled import bundled_path, load_bundled
 from identification.methods import METHODS, register_method
-from identification.pipeline import identify
-from identification.recording import Recording
-from identification.steps import IdentificationError
+from identification.methods.pipeline import identify
+from identification.methods.steps import IdentificationError
+from identification.recordings.recording import Recording
 from rocketroll_common import numerics
 from tests.disturbances.conftest import FAST, SMALL
 
@@ -222,8 +222,8 @@ WRITER = textwrap.dedent(
     import sys, time
     from disturbances.db import DisturbanceDB
     from disturbances.ingest import add_recording
-    from identification.bundled import load_bundled
-    from identification.pipeline import IdentifyOptions
+    from identification.instruments.bundled import load_bundled
+    from identification.methods.pipeline import IdentifyOptions
 
     fast = IdentifyOptions(noise_runs=0)
     db = DisturbanceDB(sys.argv[1], create=False)

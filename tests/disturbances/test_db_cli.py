@@ -22,7 +22,7 @@ import pytest
 from disturbances.db import DisturbanceDB, package_version
 from disturbances.default import default_path
 from disturbances.rows import content_hash
-from identification.bundled import BUNDLED, bundled_path, load_bundled
+from identification.instruments.bundled import BUNDLED, bundled_path, load_bundled
 from rocketroll.cli import main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -128,8 +128,8 @@ def short_recording(folder: Path, seed: int) -> Path:
     """A 70-s staircase of the virtual tunnel (a bundled recording is 573 s), written to
     ``folder`` as ``staircase-<seed>.csv``: the methods identify it in a fraction of the
     time, for the tests of what the commands do rather than of what they find."""
-    from identification.recording import save_recording
-    from identification.tunnel import TunnelSpec, run_tunnel
+    from identification.instruments.tunnel import TunnelSpec, run_tunnel
+    from identification.recordings.recording import save_recording
 
     spec = TunnelSpec(
         seed=seed, schedule="staircase", steps=5, dwell_min=10.0, dwell_max=15.0, lead=5.0
@@ -619,7 +619,7 @@ def test_failed_identification_into_a_new_database_leaves_no_file(
 ) -> None:
     import numpy as np
 
-    from identification.recording import Recording, save_recording
+    from identification.recordings.recording import Recording, save_recording
 
     t = np.arange(0, 60, 0.1)
     one_step = Recording(
@@ -641,7 +641,8 @@ def test_the_identification_layer_imports_nothing_above_it() -> None:
     import sys
 
     code = (
-        "import sys, identification.cli, identification.pipeline, identification.report\n"
+        "import sys, identification.cli, identification.methods.pipeline,"
+        " identification.reports.report\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in "
         "('disturbances', 'rollenv', 'agents', 'rocketroll')))"
     )

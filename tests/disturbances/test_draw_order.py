@@ -26,8 +26,8 @@ from disturbances.bank import TraceBank, draw_order
 from disturbances.db import DisturbanceDB
 from disturbances.exchange import FORMATS, import_export, write_export
 from disturbances.ingest import add_recording
-from identification.bundled import load_bundled
-from identification.pipeline import IdentifyOptions
+from identification.instruments.bundled import load_bundled
+from identification.methods.pipeline import IdentifyOptions
 from rocketroll.cli import main
 
 FAST = IdentifyOptions(noise_runs=0)

@@ -11,8 +11,8 @@ import pytest
 
 from disturbances.bank import TraceBank
 from disturbances.db import DisturbanceDB
-from identification.flightlog import FlightLogSpec, run_flight
-from identification.recording import save_recording
+from identification.instruments.flightlog import FlightLogSpec, run_flight
+from identification.recordings.recording import save_recording
 from rocketroll.cli import main
 from rocketroll_physics.scaling import AirspeedScaling, FlightReference
 
@@ -128,7 +128,7 @@ def test_a_stored_flights_rocket_flies_another_ascent_its_u_d_flown_anew(
     import numpy as np
 
     import rollenv  # noqa: F401  (registers the variants)
-    from identification.recording import load_recording
+    from identification.recordings.recording import load_recording
     from rollenv.core import RollConfig
     from rollenv.flight import FlightSchedule
 

@@ -13,9 +13,9 @@ from disturbances.bank import TraceBank
 from disturbances.db import DisturbanceDB
 from disturbances.exchange import import_export, write_export
 from disturbances.ingest import add_recording
-from identification.pipeline import IdentifyOptions
-from identification.recording import Recording
-from identification.tunnel import TunnelSpec, run_tunnel
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.methods.pipeline import IdentifyOptions
+from identification.recordings.recording import Recording
 from rocketroll.cli import main as rocketroll
 
 FAST = IdentifyOptions(noise_runs=0)

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 from disturbances.db import DisturbanceDB
-from identification.bundled import bundled_path
-from identification.flightlog import FlightLogSpec, run_flight
-from identification.recording import save_recording
+from identification.instruments.bundled import bundled_path
+from identification.instruments.flightlog import FlightLogSpec, run_flight
+from identification.recordings.recording import save_recording
 from rocketroll.cli import main
 from rollenv.core import RollConfig
 

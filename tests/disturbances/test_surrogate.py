@@ -27,8 +27,8 @@ from disturbances.surrogate import (
     iaaft,
     make_surrogate,
 )
-from identification.bundled import load_bundled
-from identification.pipeline import IdentifyOptions, identify
+from identification.instruments.bundled import load_bundled
+from identification.methods.pipeline import IdentifyOptions, identify
 from rocketroll_common.arrays import FloatArray
 
 DT_S = 0.1

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from identification.actuation import Actuation, fit_linkage, identify_actuation
 from identification.compiled import linkage_path
+from identification.instruments.reference import Effects
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.methods.actuation import Actuation, fit_linkage, identify_actuation
+from identification.methods.pipeline import IdentifyOptions, measurements
 from identification.model import Linkage, Rig, Servo, servo_path
-from identification.pipeline import IdentifyOptions, measurements
-from identification.recording import StatedRig
-from identification.reference import Effects
-from identification.tunnel import TunnelSpec, run_tunnel
+from identification.recordings.recording import StatedRig
 
 
 def _short(seed: int, effects: Effects, **settings: object) -> TunnelSpec:
@@ -89,8 +89,8 @@ class _Identified:
 def late_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[_Identified]:
     """One identification (a maximum-likelihood latency and quadratic search, the module's
     dearest step) serves the CLI's test and the latency's."""
-    import identification.actuation as actuation
-    from identification.recording import save_recording
+    import identification.methods.actuation as actuation
+    from identification.recordings.recording import save_recording
     from rocketroll.cli import main
 
     folder = tmp_path_factory.mktemp("late-rig")
@@ -149,7 +149,7 @@ def test_a_linkage_the_fin_columns_cannot_tell_says_why_and_shows_no_test(
     what is needed, with no LR or p as if they had been tested; every row is aligned."""
     import dataclasses
 
-    import identification.ml as ml
+    import identification.methods.ml as ml
 
     # The roll response's searches are not what this test reads: the cheapest answers.
     monkeypatch.setattr(
@@ -213,7 +213,7 @@ def test_identify_actuation_prints_and_writes_each_terms_test(late_rig: _Identif
 def test_a_recording_states_its_rig_in_format_1_2_and_older_files_still_read(
     tmp_path: Path,
 ) -> None:
-    from identification.recording import (
+    from identification.recordings.recording import (
         FORMAT_V1,
         FORMAT_V1_2,
         RecordingError,
@@ -245,7 +245,7 @@ def test_a_recording_states_its_rig_in_format_1_2_and_older_files_still_read(
 
 
 def test_import_csv_stores_what_the_user_states_of_the_rig(tmp_path: Path) -> None:
-    from identification.recording import load_recording
+    from identification.recordings.recording import load_recording
     from rocketroll.cli import main
 
     source = tmp_path / "log.csv"
@@ -281,8 +281,8 @@ def test_the_rig_in_memory_is_the_rig_read_back_and_older_databases_take_new_met
 
 
 def test_a_flight_fit_sees_the_fin_its_rig_makes() -> None:
-    from identification.flightfit import flight_inputs
-    from identification.flightlog import FlightLogSpec, run_flight
+    from identification.instruments.flightlog import FlightLogSpec, run_flight
+    from identification.methods.flightfit import flight_inputs
 
     rec = run_flight(FlightLogSpec(seed=1))
     plain = flight_inputs(rec)
@@ -298,7 +298,7 @@ def test_a_quadratic_damping_is_not_invented_on_the_papers_rocket() -> None:
     """The paper's 573-s schedule at 10 Hz on the paper's linear rocket: the profile
     interval covers 0 and the term is not admitted (where it is present, the database's
     chain finds it: ``tests/rollenv/test_actuation.py``)."""
-    from identification.ml import model_inputs, quadratic_search
+    from identification.methods.ml import model_inputs, quadratic_search
 
     options = IdentifyOptions(noise_runs=0)
     plain = quadratic_search(

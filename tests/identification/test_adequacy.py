@@ -16,22 +16,22 @@ from typing import Any
 import numpy as np
 import pytest
 
-from identification.adequacy import VERDICTS, Adequacy, adequacy
-from identification.baselines import output_error
-from identification.bundled import bundled_path, load_bundled
+from identification.instruments.bundled import bundled_path, load_bundled
+from identification.instruments.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from identification.methods import fit
-from identification.ml import MLFit, maximum_likelihood, posterior_given
-from identification.model import RollParams
-from identification.pipeline import (
+from identification.methods.adequacy import VERDICTS, Adequacy, adequacy
+from identification.methods.baselines import output_error
+from identification.methods.ml import MLFit, maximum_likelihood, posterior_given
+from identification.methods.pipeline import (
     SMOOTHING_PER_TIME_CONSTANT,
     IdentifyOptions,
     model_inputs,
     recover_disturbance,
     smoothing_for,
 )
-from identification.recording import Recording
-from identification.steps import smoothing_spread_s
-from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
+from identification.methods.steps import smoothing_spread_s
+from identification.model import RollParams
+from identification.recordings.recording import Recording
 from rocketroll.cli import main as rocketroll
 
 PRBS: dict[str, Any] = {
@@ -159,8 +159,8 @@ def test_the_fin_share_is_statsmodels_ols_with_newey_west_and_its_wald_test() ->
     import numpy as np
     import statsmodels.api as sm
 
-    from identification.adequacy import _fin_share
-    from identification.statistics import decorrelation_stride
+    from identification.methods.adequacy import _fin_share
+    from identification.methods.statistics import decorrelation_stride
 
     rng = np.random.default_rng(3)
     n = 3000
@@ -182,7 +182,7 @@ def test_the_fins_delay_is_read_off_u_d_in_first_differences() -> None:
     turbulence alone gives none (z near 0)."""
     from scipy.signal import lfilter
 
-    from identification.adequacy import fin_delay
+    from identification.methods.adequacy import fin_delay
 
     rng = np.random.default_rng(0)
     n, dt = 6000, 0.1
@@ -199,7 +199,7 @@ def test_the_fins_delay_is_read_off_u_d_in_first_differences() -> None:
 def test_a_wandering_intensity_is_told_from_a_stationary_one() -> None:
     from scipy.signal import lfilter
 
-    from identification.adequacy import INTENSITY_RATIO, intensity_ratio
+    from identification.methods.adequacy import INTENSITY_RATIO, intensity_ratio
 
     rng = np.random.default_rng(1)
     n, dt, ar = 6000, 0.1, 0.85

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from identification.bundled import BUNDLED, DATA_DIR, bundled_paths, load_bundled, make
-from identification.recording import recording_text
+from identification.instruments.bundled import BUNDLED, DATA_DIR, bundled_paths, load_bundled, make
+from identification.recordings.recording import recording_text
 
 
 def test_every_bundled_file_is_listed_and_present() -> None:

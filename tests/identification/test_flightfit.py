@@ -12,7 +12,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from identification.flightfit import (
+from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_at
+from identification.instruments.reference import Effects
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.methods import default_methods, fit
+from identification.methods.flightfit import (
     MACH_LIMIT,
     MIN_DAMPING,
     FlightFit,
@@ -25,16 +29,15 @@ from identification.flightfit import (
     flight_window,
     identify_flight,
     identify_flights,
-    mach_numbers,
     rescale,
     subsonic_part,
 )
-from identification.flightlog import FlightLogSpec, run_flight, truth_at
-from identification.importer import import_csv, plausibility_warnings
-from identification.methods import default_methods, fit
+from identification.methods.pipeline import IdentifyOptions
+from identification.methods.steps import IdentificationError
 from identification.model import PAPER_THETA, RollParams, Servo, simulate
-from identification.pipeline import IdentifyOptions
-from identification.recording import (
+from identification.recordings.flight import mach_numbers
+from identification.recordings.importer import import_csv, plausibility_warnings
+from identification.recordings.recording import (
     FORMAT,
     FORMAT_V1,
     Recording,
@@ -43,9 +46,6 @@ from identification.recording import (
     recording_text,
     save_recording,
 )
-from identification.reference import Effects
-from identification.steps import IdentificationError
-from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main
 from rocketroll_common.errors import SettingError, UsageError
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3, isa
@@ -333,7 +333,7 @@ def test_a_supersonic_stretch_flies_compressible_fins_and_is_left_out_of_the_fit
     assert found.params.alpha == pytest.approx(truth.alpha, rel=0.05)
     assert found.params.beta_bar_per_s == pytest.approx(truth.beta_bar_per_s, rel=0.05)
     # The report re-simulates the part fitted (the whole log drawn, that part shaded).
-    from identification.flightreport import render_flight_report
+    from identification.reports.flightreport import render_flight_report
 
     report = render_flight_report(rec, {"constant": found}, "the table")
     assert report["flight_identification.png"][:4] == b"\x89PNG"
@@ -677,7 +677,7 @@ def test_a_failed_flight_fit_names_what_failed(
 ) -> None:
     """Where no start gives a finite likelihood, the error says that, where the optimiser
     stopped and after how many iterations (not a bare 'ABNORMAL')."""
-    import identification.flightfit as flightfit
+    import identification.methods.flightfit as flightfit
 
     monkeypatch.setattr(flightfit, "_negloglike", lambda x, flights, layout: 1e12)
     with pytest.raises(IdentificationError) as caught:
@@ -942,7 +942,7 @@ def test_the_flights_interval_maps_are_the_models_substeps_composed(paper_flight
     """The compiled interval maps (the maximum-likelihood method's, with per-substep scales
     and the servo's ramp) against the model's own substep coefficients
     (:func:`identification.model.roll_coefficients`, numpy) composed here."""
-    from identification.flightfit import SUBSTEPS, interval_maps
+    from identification.methods.flightfit import SUBSTEPS, interval_maps
     from identification.model import roll_coefficients
 
     inputs = flight_inputs(paper_flight)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from identification.bundled import bundled_path
-from identification.recording import Recording, save_recording
+from identification.instruments.bundled import bundled_path
+from identification.recordings.recording import Recording, save_recording
 from rocketroll.cli import main
 
 PAPER = bundled_path("tunnel-paper-seed0")
@@ -78,7 +78,7 @@ def test_report_for_any_method(tmp_path: Path, capsys: pytest.CaptureFixture[str
 def test_real_recording_has_no_truth_column(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from identification.bundled import load_bundled
+    from identification.instruments.bundled import load_bundled
 
     rec = load_bundled("tunnel-paper-seed1")
     real = Recording(

@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.adequacy import Adequacy, adequacy
-from identification.bundled import bundled_path
-from identification.flightlog import FlightLogSpec, run_flight
-from identification.importer import angle_on_integrated_rate
-from identification.ml import MLFit, maximum_likelihood
-from identification.pipeline import model_inputs
-from identification.recording import Recording, load_recording, small_fins
-from identification.tunnel import TunnelSpec, run_tunnel
+from identification.instruments.bundled import bundled_path
+from identification.instruments.flightlog import FlightLogSpec, run_flight
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.methods.adequacy import Adequacy, adequacy
+from identification.methods.ml import MLFit, maximum_likelihood
+from identification.methods.pipeline import model_inputs
+from identification.recordings.importer import angle_on_integrated_rate
+from identification.recordings.recording import Recording, load_recording, small_fins
 from rocketroll.cli import main
 from tests.identification.test_adequacy import PRBS
 

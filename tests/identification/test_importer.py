@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.importer import import_csv
-from identification.recording import (
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.recordings.importer import import_csv
+from identification.recordings.recording import (
     Recording,
     RecordingError,
     load_recording,
     save_recording,
 )
-from identification.tunnel import TunnelSpec, run_tunnel
 from rocketroll.cli import main
 
 
@@ -449,7 +449,7 @@ def test_an_import_is_never_labelled_synthetic(tmp_path: Path) -> None:
 def test_a_window_per_column_units_scale_offset_and_sign(tmp_path: Path) -> None:
     """A real log as it comes: a stretch of it, the roll in radians beside a fin in
     degrees, a fin whose sign is the other way round and trimmed 1.5° off zero."""
-    from identification.importer import ImportSettings, read_csv
+    from identification.recordings.importer import ImportSettings, read_csv
 
     t = np.arange(0.0, 20.0, 0.01)
     fin = np.where(t < 10.0, 10.0, -10.0)

@@ -12,8 +12,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from identification.estimation.statespace import loglike
+from identification.instruments.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from identification.methods import fit
-from identification.ml import (
+from identification.methods.ml import (
     _filter,
     _parts,
     _prepare,
@@ -24,11 +26,9 @@ from identification.ml import (
     posterior_given,
     posterior_traces,
 )
+from identification.methods.pipeline import IdentifyOptions, identify, measurements
 from identification.model import RollParams, simulate
-from identification.pipeline import IdentifyOptions, identify, measurements
-from identification.recording import Recording
-from identification.statespace import loglike
-from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
+from identification.recordings.recording import Recording
 
 NEGATIVE_ASYMMETRY = TunnelSpec(seed=3, alpha=0.9, beta=-3.0, correlation_time=0.3)
 STAIRCASE_LAPLACE = TunnelSpec(
@@ -344,8 +344,8 @@ def test_the_band_carries_the_parameters_uncertainty_on_a_short_record() -> None
 
 
 def test_innovations_are_white_under_the_fit_and_not_under_a_gain_30_percent_off() -> None:
-    from identification.adequacy import adequacy
-    from identification.ml import innovation_checks
+    from identification.methods.adequacy import adequacy
+    from identification.methods.ml import innovation_checks
 
     spec = spec_from_command(
         "--seed 0 --log-dt 0.01 --gyro-noise 1 --schedule doublets --steps 12 --pulse 1 "

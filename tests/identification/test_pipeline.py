@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.bundled import load_bundled
-from identification.importer import import_csv
-from identification.pipeline import Identification, IdentifyOptions, identify
-from identification.recording import Recording
-from identification.steps import IdentificationError
-from identification.tunnel import PAPER_TABLE1, TunnelSpec, run_tunnel
+from identification.instruments.bundled import load_bundled
+from identification.instruments.tunnel import PAPER_TABLE1, TunnelSpec, run_tunnel
+from identification.methods.pipeline import Identification, IdentifyOptions, identify
+from identification.methods.steps import IdentificationError
+from identification.recordings.importer import import_csv
+from identification.recordings.recording import Recording
 from rocketroll_common.errors import SettingError
 
 OPTS = IdentifyOptions(noise_runs=0)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from identification.importer import import_csv
-from identification.recording import (
+from identification.recordings.importer import import_csv
+from identification.recordings.recording import (
     MIN_FIN_CHANGE_DEG,
     MIN_SAMPLES,
     SAMPLING_RTOL,

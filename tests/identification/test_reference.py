@@ -9,10 +9,15 @@ from typing import Any
 import numpy as np
 import pytest
 
+from identification.instruments.reference import (
+    Effects,
+    ReferenceRun,
+    gust_factor,
+    simulate_reference,
+)
+from identification.instruments.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from identification.model import PAPER_CONSTANT, simulate
-from identification.recording import recording_text
-from identification.reference import Effects, ReferenceRun, gust_factor, simulate_reference
-from identification.tunnel import TunnelSpec, run_tunnel, spec_from_command
+from identification.recordings.recording import recording_text
 from rocketroll.cli import main
 from rocketroll_common.errors import SettingError
 
@@ -141,7 +146,7 @@ def test_the_flight_recorder_flies_the_effects_on_the_reference_integrator() -> 
     """In flight too: with a vanishing effect the reference integrator (its gain and
     damping per 1-ms step) logs what the exact kernel logs to 0.01 °/s on a rate of 40 °/s;
     30 ms of latency delays the gyro by three samples; the log names its effects."""
-    from identification.flightlog import FlightLogSpec, run_flight
+    from identification.instruments.flightlog import FlightLogSpec, run_flight
 
     base: dict[str, Any] = {"seed": 0, "gyro_noise": 0.0, "gyro_floor": 0.0, "measured_fin": True}
     exact = run_flight(FlightLogSpec(**base))

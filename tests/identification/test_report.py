@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from matplotlib import image
 
-from identification.bundled import load_bundled
-from identification.pipeline import Identification, IdentifyOptions, identify
-from identification.report import FIGURES, REPORT_NAME, render_report, write_report
+from identification.instruments.bundled import load_bundled
+from identification.methods.pipeline import Identification, IdentifyOptions, identify
+from identification.reports.report import FIGURES, REPORT_NAME, render_report, write_report
 from rocketroll_common.errors import UsageError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from statsmodels.tsa.statespace.simulation_smoother import SimulationSmoother
 
-from identification.statespace import (
+from identification.estimation.statespace import (
     LinearGaussian,
     _cholesky,
     loglike,

@@ -1,4 +1,4 @@
-"""Each step of the paper's pipeline (identification.steps and friends) on a known answer.
+"""Each step of the paper's pipeline (identification.methods.steps and friends) on a known answer.
 
 Every case here is constructed so that the right result is known exactly (or
 to the discretisation error of the method, stated per test):
@@ -25,18 +25,17 @@ import pytest
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import lfilter
 
-from identification.baselines import output_error
-from identification.model import PAPER_THETA, RollParams, Servo, servo_path, simulate
-from identification.noise import noise_study
-from identification.pipeline import IdentifyOptions
-from identification.recording import Recording
-from identification.statistics import (
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.methods.baselines import output_error
+from identification.methods.noise import noise_study
+from identification.methods.pipeline import IdentifyOptions
+from identification.methods.statistics import (
     decorrelation_stride,
     disturbance_statistics,
     newey_west_meat,
     trace_statistics,
 )
-from identification.steps import (
+from identification.methods.steps import (
     PAPER_SERVO,
     Disturbance,
     FineGrid,
@@ -56,7 +55,8 @@ from identification.steps import (
     resimulate,
     smooth3,
 )
-from identification.tunnel import TunnelSpec, run_tunnel
+from identification.model import PAPER_THETA, RollParams, Servo, servo_path, simulate
+from identification.recordings.recording import Recording
 
 DT = 0.1  # the paper's 10 Hz log
 H = 0.01  # the paper's 100 Hz fine grid

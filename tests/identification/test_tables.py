@@ -5,8 +5,8 @@ from __future__ import annotations
 from types import SimpleNamespace
 from typing import Any
 
-from identification.adequacy import FIN_ERROR_MATERIAL
-from identification.tables import adequacy_table
+from identification.methods.adequacy import FIN_ERROR_MATERIAL
+from identification.reports.tables import adequacy_table
 
 
 def _fit(share: float | None, ratio: float | None) -> Any:

@@ -6,10 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from identification.model import PAPER_CONSTANT, PAPER_THETA
-from identification.recording import load_recording
-from identification.summary import summarize
-from identification.tunnel import (
+from identification.instruments.tunnel import (
     PAPER_TABLE1,
     Distribution,
     FinSchedule,
@@ -18,6 +15,9 @@ from identification.tunnel import (
     run_tunnel,
     spec_from_command,
 )
+from identification.model import PAPER_CONSTANT, PAPER_THETA
+from identification.recordings.recording import load_recording
+from identification.reports.summary import summarize
 from rocketroll.cli import main
 
 PAPER_MEAN_ABS_RATE_DPS = 16.4  # paper abstract
@@ -194,7 +194,7 @@ def test_pulses_and_bits_are_whole_log_steps_so_both_halves_last_alike() -> None
 
 
 def test_a_chirp_stops_at_a_zero_crossing() -> None:
-    from identification.tunnel import SmoothSchedule
+    from identification.instruments.tunnel import SmoothSchedule
 
     sweep = SmoothSchedule.sweep(30.0, 0.1, 2.0, 10.0, 1.0)
     assert sweep.chirp is not None

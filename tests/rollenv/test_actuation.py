@@ -2,7 +2,7 @@
 
 Off, they leave the kernel's arithmetic as it was (the golden trajectories of the
 other tests); on, the kernel flies what the independent reference integrator
-(:mod:`identification.reference`, in closed loop by ``benchmarks/_reference_env.py``)
+(:mod:`identification.instruments.reference`, in closed loop by ``benchmarks/_reference_env.py``)
 flies, the vector env steps them like the single env, and the oracle's predictors
 copy the sensors' past with the state.
 """
@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from identification.instruments.reference import Effects
 from identification.model import Rig
-from identification.reference import Effects
 from rollenv.core import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs, State
@@ -226,8 +226,8 @@ def test_a_stated_rig_goes_from_the_recording_through_the_database_into_the_repl
     and all), unless its settings give another."""
     from disturbances.db import DisturbanceDB
     from disturbances.ingest import add_recording
-    from identification.pipeline import IdentifyOptions
-    from identification.tunnel import TunnelSpec, run_tunnel
+    from identification.instruments.tunnel import TunnelSpec, run_tunnel
+    from identification.methods.pipeline import IdentifyOptions
 
     effects = Effects(servo_lag_s=0.05, backlash_deg=0.5, latency_s=0.03)
     rec = run_tunnel(TunnelSpec(seed=3, effects=effects, state_rig=True, split="train"))
@@ -303,8 +303,8 @@ def test_an_identified_quadratic_damping_goes_through_the_database_into_the_repl
     posterior draws, and the replay flies it."""
     from disturbances.db import DisturbanceDB
     from disturbances.ingest import add_recording
-    from identification.pipeline import IdentifyOptions
-    from identification.tunnel import TunnelSpec, run_tunnel
+    from identification.instruments.tunnel import TunnelSpec, run_tunnel
+    from identification.methods.pipeline import IdentifyOptions
 
     rec = run_tunnel(TunnelSpec(seed=0, effects=Effects(quadratic_damping=0.5)))
     path = tmp_path / "q.sqlite"

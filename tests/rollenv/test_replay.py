@@ -1,6 +1,6 @@
 """Replay fidelity: the environment reproduces the identification's re-simulation.
 
-Step 9 of the identification (:func:`identification.steps.resimulate`)
+Step 9 of the identification (:func:`identification.methods.steps.resimulate`)
 simulates a recording open loop with its identified ``u_d``, starting from the
 measured velocity and angle of the first sample, with the fin angle of step 5
 (the commanded angle through the servo of eq. 23 on the 0.01-s grid).  The
@@ -25,9 +25,9 @@ import pytest
 
 from disturbances.bank import TraceBank
 from disturbances.default import open_default
-from identification.bundled import load_bundled
-from identification.pipeline import Identification, IdentifyOptions, identify
-from identification.recording import Recording
+from identification.instruments.bundled import load_bundled
+from identification.methods.pipeline import Identification, IdentifyOptions, identify
+from identification.recordings.recording import Recording
 from rollenv.env import RocketRollEnv
 
 RTOL = ATOL = 1e-9

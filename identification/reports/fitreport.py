@@ -1,9 +1,9 @@
 """Every tunnel method's fit, judged: one figure per method and a ``report.md`` section
 (``rocketroll identify REC --report DIR`` with any method).
 
-The paper's report (:mod:`identification.report`) re-creates the paper's figures
+The paper's report (:mod:`identification.reports.report`) re-creates the paper's figures
 from its own pipeline; this one shows, for whichever methods ran, what the
-adequacy (:mod:`identification.adequacy`) judges, on one time axis:
+adequacy (:mod:`identification.methods.adequacy`) judges, on one time axis:
 
 1. the measured roll rate (the gyro's raw readings, or the velocity from the
    angle) and each damping model driven by the fin alone, ``u_d = 0``: a model
@@ -24,9 +24,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from identification.adequacy import model_only
 from identification.methods import Context, ModelFit
-from identification.tables import adequacy_table, methods_table
+from identification.methods.adequacy import model_only
+from identification.reports.tables import adequacy_table, methods_table
 from rocketroll_common.plotting import new_figure, png_bytes
 
 __all__ = ["figure_name", "fit_section", "render_fit_report"]
@@ -132,7 +132,7 @@ def render_fit_report(
         ``{method: {model: ModelFit}}`` of tunnel methods (not flights).
     paper_report : mapping, optional
         The paper's report of the same recording
-        (:func:`identification.report.render_report`): its ``report.md`` gets the
+        (:func:`identification.reports.report.render_report`): its ``report.md`` gets the
         section, after its own; else the section has a title of its own.
     """
     if not fits:

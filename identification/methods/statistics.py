@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike
 from scipy import stats
 from scipy.fft import next_fast_len
 
-from identification.steps import Disturbance
+from identification.methods.steps import Disturbance
 from rocketroll_common.arrays import FloatArray
 
 __all__ = [

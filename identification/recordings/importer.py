@@ -23,7 +23,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from identification.recording import (
+from identification.recordings.recording import (
     PLAUSIBLE_FIN_DEG,
     Recording,
     RecordingError,
@@ -537,7 +537,7 @@ def plausibility_warnings(recording: Recording) -> list[str]:
     """What looks wrong in an imported recording without being certain, one line each:
 
     * a fin column whose 99th percentile of ``|value|`` stays under
-      :data:`~identification.recording.PLAUSIBLE_FIN_DEG` (a fin in radians read as
+      :data:`~identification.recordings.recording.PLAUSIBLE_FIN_DEG` (a fin in radians read as
       degrees: ±10° reads ±0.17), named by its role and input column (the recording's
       ``import.*`` metadata), with the ``--unit`` that fits if it was read in degrees;
     * a flight whose roll rate stays below :data:`PLAUSIBLE_FLIGHT_RATE_DPS` all along

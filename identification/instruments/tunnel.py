@@ -35,7 +35,7 @@ The paper reports the *identified* ``u_d,θ``: 90 % interval [-13.38, 14.28]°
 normality (§3.4).  The identification cannot return the turbulence exactly:
 the roll rate is differentiated from a 10 Hz encoder and smoothed (§3.2), which
 attenuates fast fluctuations.  The defaults are therefore calibrated so that
-the paper's own pipeline (:func:`identification.pipeline.identify`, default
+the paper's own pipeline (:func:`identification.methods.pipeline.identify`, default
 options) run on tunnel data returns the paper's numbers:
 
 * Gaussian, mean 0° (a mean is indistinguishable from the asymmetry θ̄);
@@ -66,6 +66,12 @@ from numpy.typing import NDArray
 from scipy import signal, stats
 
 from identification import paper
+from identification.instruments.reference import (
+    Effects,
+    gust_factor,
+    gust_stream,
+    simulate_reference,
+)
 from identification.model import (
     MODEL_NAMES,
     PAPER_CONSTANT,
@@ -74,8 +80,7 @@ from identification.model import (
     Servo,
     simulate,
 )
-from identification.recording import Recording, StatedRig, metadata_items
-from identification.reference import Effects, gust_factor, gust_stream, simulate_reference
+from identification.recordings.recording import Recording, StatedRig, metadata_items
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, parse, setting, to_argv
 
@@ -704,7 +709,7 @@ _LENGTH_SET_BY = {
 def _check_schedule(spec: TunnelSpec) -> None:
     """Refuse (``SettingError``, before anything is simulated) a run a recording cannot
     hold -- its span, its number of samples -- or a command that never changes."""
-    from identification.recording import DURATION_RANGE_S, MIN_SAMPLES
+    from identification.recordings.recording import DURATION_RANGE_S, MIN_SAMPLES
 
     flag = "duration" if spec.schedule in ("prbs", "chirp") else "steps"
     if spec.schedule in ("prbs", "chirp"):  # known before the sequence is drawn
@@ -758,7 +763,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
 
     Examples
     --------
-    >>> from identification.tunnel import TunnelSpec, run_tunnel
+    >>> from identification.instruments.tunnel import TunnelSpec, run_tunnel
     >>> rec = run_tunnel(TunnelSpec(seed=1))
     >>> rec.source, rec.n_samples
     ('synthetic', 5731)

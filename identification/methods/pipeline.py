@@ -1,8 +1,8 @@
 """``identify(recording) -> Identification``: the paper's whole pipeline.
 
-Chains the steps of :mod:`identification.steps` (Fig. 9), the noise study of
-:mod:`identification.noise` (§3.3) and the disturbance statistics of
-:mod:`identification.statistics` (§3.4) into one frozen result.  The result
+Chains the steps of :mod:`identification.methods.steps` (Fig. 9), the noise study of
+:mod:`identification.methods.noise` (§3.3) and the disturbance statistics of
+:mod:`identification.methods.statistics` (§3.4) into one frozen result.  The result
 is what the CLI prints, what ``--json`` writes and what the disturbance
 database stores (:meth:`Identification.to_dict` plus the ``u_d`` traces).
 """
@@ -16,11 +16,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from identification.model import RollParams, check_model, damping
-from identification.noise import NoiseStudy, noise_study
-from identification.recording import Recording, StatedRig
-from identification.statistics import DisturbanceStatistics, disturbance_statistics
-from identification.steps import (
+from identification.methods.noise import NoiseStudy, noise_study
+from identification.methods.statistics import DisturbanceStatistics, disturbance_statistics
+from identification.methods.steps import (
     PAPER_SERVO,
     SMOOTHING_WINDOW_S,
     BilinearFit,
@@ -48,6 +46,8 @@ from identification.steps import (
     resimulate,
     smoothing_spread_s,
 )
+from identification.model import RollParams, check_model, damping
+from identification.recordings.recording import Recording, StatedRig
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
 from rocketroll_common.settings import check, check_order, setting
@@ -86,12 +86,12 @@ class IdentifyOptions:
     smoothing_window_s : float
         Span of one moving-average pass, s: the paper's three points at 10 Hz
         (0.3 s); at other sampling rates the number of points follows
-        (:func:`identification.steps.smoothing_width`).
+        (:func:`identification.methods.steps.smoothing_width`).
     fine_step_s : float
         δt of the interpolated velocity (§2.7.1; 0.01 s = 100 Hz).
     fit_quadratic_damping : bool
         The ``ml`` method also searches a damping growing with the roll rate
-        (:func:`identification.ml.quadratic_search`) and keeps the term where its
+        (:func:`identification.methods.ml.quadratic_search`) and keeps the term where its
         likelihood-ratio test admits it at :data:`identification.model.TERM_LEVEL`.
     ud_interval_s : float
         Δt over which ``u_d`` is constant (§2.7.1; 0.1 s).
@@ -540,10 +540,10 @@ def checked_model(name: str) -> str:
         raise IdentificationError(str(exc)) from None
 
 
-#: Largest spread of the velocity smoothing (:func:`identification.steps.smoothing_spread_s`)
-#: as a fraction of the rocket's time constant 1/a, for the methods that fit the smoothed
-#: rate.  The paper's three passes over 0.3 s spread 0.15 s: a fifth to a third of its
-#: rocket's 0.5-0.8 s.
+#: Largest spread of the velocity smoothing
+#: (:func:`identification.methods.steps.smoothing_spread_s`) as a fraction of the rocket's
+#: time constant 1/a, for the methods that fit the smoothed rate.  The paper's three passes
+#: over 0.3 s spread 0.15 s: a fifth to a third of its rocket's 0.5-0.8 s.
 SMOOTHING_PER_TIME_CONSTANT = 0.5
 
 
@@ -631,8 +631,8 @@ def identify(recording: Recording, options: IdentifyOptions | None = None) -> Id
 
     Examples
     --------
-    >>> from identification.bundled import load_bundled
-    >>> from identification.pipeline import IdentifyOptions, identify
+    >>> from identification.instruments.bundled import load_bundled
+    >>> from identification.methods.pipeline import IdentifyOptions, identify
     >>> result = identify(load_bundled("tunnel-paper-seed0"), IdentifyOptions(noise_runs=0))
     >>> round(result.steady.alpha, 2), result.segments.n_steps
     (0.68, 8)

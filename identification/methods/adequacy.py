@@ -22,7 +22,7 @@ These figures read the model without it, against the raw measurements:
   fraction of the servo's range: a "disturbance" the fins could not cancel is
   the model's error, not turbulence;
 * **the fin's range** -- a fin whose 99th percentile of ``|fin|`` stays under
-  :data:`~identification.recording.PLAUSIBLE_FIN_DEG` (1°) is no rocket's: a fin in
+  :data:`~identification.recordings.recording.PLAUSIBLE_FIN_DEG` (1°) is no rocket's: a fin in
   radians read as degrees (±10° reads ±0.17) gives a gain or a ``u_d`` 57 times off,
   which every other figure misses (they are ratios): unreliable, with the unit to check;
 * **the gain's relative standard error**, where the method reports one;
@@ -66,11 +66,11 @@ from typing import Any
 import numpy as np
 
 from identification.compiled import interval_maps
+from identification.methods.pipeline import Measurements
+from identification.methods.statistics import decorrelation_stride, ols_newey_west
+from identification.methods.steps import Disturbance
 from identification.model import RollParams, Servo, damping, linear_recurrence
-from identification.pipeline import Measurements
-from identification.recording import PLAUSIBLE_FIN_DEG, Recording, small_fins
-from identification.statistics import decorrelation_stride, ols_newey_west
-from identification.steps import Disturbance
+from identification.recordings.recording import PLAUSIBLE_FIN_DEG, Recording, small_fins
 from rocketroll_common.arrays import FloatArray
 
 __all__ = [
@@ -147,9 +147,10 @@ class Findings:
             (self.weak if severity == 1 else self.bad).append(text)
 
     def fin_unit(self, recording: Recording) -> None:
-        """A fin that stays under :data:`~identification.recording.PLAUSIBLE_FIN_DEG` (99th
-        percentile of ``|fin|``): unreliable, whatever the fit, for the gain or ``u_d`` it
-        gives is then most likely in the wrong unit (a fin in radians read as degrees)."""
+        """A fin that stays under
+        :data:`~identification.recordings.recording.PLAUSIBLE_FIN_DEG` (99th percentile of
+        ``|fin|``): unreliable, whatever the fit, for the gain or ``u_d`` it gives is then most
+        likely in the wrong unit (a fin in radians read as degrees)."""
         for name, p99 in small_fins(recording.columns()).items():
             self.bad.append(
                 f"the fin ({name}) stays within {p99:.2g}° (99 % of |fin|), under "
@@ -226,7 +227,7 @@ def _fin_share(
 
     The arithmetic of statsmodels' ``OLS(...).fit(cov_type="HAC")`` and its
     ``wald_test(..., scalar=True)`` (Bartlett weights, no small-sample factor, χ²),
-    written out (:func:`identification.statistics.ols_newey_west`): the results object's
+    written out (:func:`identification.methods.statistics.ols_newey_west`): the results object's
     machinery and the kernel's loop over lags cost more than the regression (p-values
     equal to statsmodels' to 1e-9 relative, tested)."""
     from scipy import stats

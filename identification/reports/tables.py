@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 
 from identification import paper
-from identification.adequacy import FIN_ERROR_MATERIAL
 from identification.methods import ModelFit
-from identification.pipeline import Identification
+from identification.methods.adequacy import FIN_ERROR_MATERIAL
+from identification.methods.pipeline import Identification
 
 __all__ = ["adequacy_table", "flight_table", "methods_table", "parameter_table", "scaling_line"]
 
@@ -141,7 +141,7 @@ def _beyond_lines(fits: Mapping[str, Mapping[str, ModelFit]]) -> list[str]:
 
 
 def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
-    """Each fit's adequacy (:mod:`identification.adequacy`): the model without ``u_d``
+    """Each fit's adequacy (:mod:`identification.methods.adequacy`): the model without ``u_d``
     against the raw rate, its prediction a time constant ahead, the share of ``u_d``
     the fin explains, ``|u_d|`` against the fins' range, α's standard error, and the
     verdict with its reasons below the table.  Fits without figures are left out."""
@@ -257,7 +257,7 @@ def flight_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
 def _fin_share_cell(adequacy: Mapping[str, Any]) -> str:
     """The share of ``u_d`` a line in the fin explains, or ``noise`` where ``u_d`` is too
     small beside the fin for any share of it to matter: its SD under
-    :data:`~identification.adequacy.FIN_ERROR_MATERIAL` of the fin's, where the share is
+    :data:`~identification.methods.adequacy.FIN_ERROR_MATERIAL` of the fin's, where the share is
     the R² of a regression on rounding noise and differs from machine to machine."""
     share, ratio = adequacy.get("fin_share"), adequacy.get("fin_error_ratio")
     if share is None:

@@ -8,9 +8,9 @@ Space Methods*, and of ``statsmodels.tsa.statespace``)::
     s[0]   ~ N(a0, P0)
 
 with a time-varying transition ``T[k]`` and intercept ``c[k]`` (the roll
-model's closed form depends on the fin history, :mod:`identification.ml`), a
+model's closed form depends on the fin history, :mod:`identification.methods.ml`), a
 state covariance ``Q`` that is constant (the tunnel) or changes per step (a
-flight, whose airspeed scales the turbulence's effect: :mod:`identification.flightfit`),
+flight, whose airspeed scales the turbulence's effect: :mod:`identification.methods.flightfit`),
 a selection ``Z`` of state components, diagonal measurement variances that may
 change per sample, and missing observations as NaN.  Observations are
 processed one component at a time (the univariate treatment of Koopman &

@@ -21,6 +21,15 @@ database's recipe and the benchmarks find it::
 :func:`fit` runs a method by name, as python-control's ``method=`` keywords
 do.  A :class:`Context` is shared by all methods run on one recording, so
 the measurements are prepared, and the paper's pipeline run, at most once.
+
+The methods live beside the registry: the paper's steps
+(:mod:`~identification.methods.steps`, eq. by eq.), its pipeline
+(:mod:`~identification.methods.pipeline`), its noise study and statistics;
+output error (:mod:`~identification.methods.baselines`); maximum likelihood in the
+tunnel (:mod:`~identification.methods.ml`) and in flight
+(:mod:`~identification.methods.flightfit`), both on the estimation core; the
+fin's linkage, latency and quadratic damping (:mod:`~identification.methods.actuation`);
+and every fit's adequacy (:mod:`~identification.methods.adequacy`).
 """
 
 from __future__ import annotations
@@ -33,13 +42,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from identification.model import MODEL_NAMES, RollParams, check_model
-from identification.recording import Recording
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.registry import Registry
 
 if TYPE_CHECKING:
-    from identification.pipeline import Identification, IdentifyOptions, Measurements
-    from identification.steps import Disturbance, Resimulation
+    from identification.methods.pipeline import Identification, IdentifyOptions, Measurements
+    from identification.methods.steps import Disturbance, Resimulation
 
 __all__ = [
     "METHODS",
@@ -251,7 +260,7 @@ class Context:
         *,
         together: Sequence[Recording] = (),
     ) -> None:
-        from identification.pipeline import IdentifyOptions
+        from identification.methods.pipeline import IdentifyOptions
 
         self.recording = recording
         self.together = tuple(together)
@@ -266,7 +275,7 @@ class Context:
     @cached_property
     def paper(self) -> Identification:
         """The paper's pipeline (steps 1-9 and §3) on this recording."""
-        from identification.pipeline import identify
+        from identification.methods.pipeline import identify
 
         return identify(self.recording, self.options)
 
@@ -275,7 +284,7 @@ class Context:
         """What every estimator starts from: steps 1 and 5, the smoothed velocity (§3.2)."""
         if "paper" in self.__dict__:
             return self.paper.measurements
-        from identification.pipeline import measurements
+        from identification.methods.pipeline import measurements
 
         return measurements(self.recording, self.options)
 
@@ -286,7 +295,7 @@ class Context:
             return self.measurements
         made: dict[float, Measurements] = self.__dict__.setdefault("_smoothed_over", {})
         if window_s not in made:
-            from identification.pipeline import measurements
+            from identification.methods.pipeline import measurements
 
             made[window_s] = measurements(
                 self.recording, replace(self.options, smoothing_window_s=window_s)
@@ -300,7 +309,7 @@ class Context:
 
     def disturbance(self, params: RollParams, model: str) -> tuple[Disturbance, Resimulation]:
         """Steps 8-9 for any parameters: ``u_d`` by eq. 35-44, and its re-simulation (§3.5)."""
-        from identification.pipeline import recover_disturbance
+        from identification.methods.pipeline import recover_disturbance
 
         return recover_disturbance(self.measurements, params, model, self.options)
 
@@ -331,8 +340,8 @@ def fit(
 
     Examples
     --------
-    >>> from identification.bundled import load_bundled
-    >>> from identification.pipeline import IdentifyOptions
+    >>> from identification.instruments.bundled import load_bundled
+    >>> from identification.methods.pipeline import IdentifyOptions
     >>> fits = fit(load_bundled("tunnel-paper-seed0"), "output-error", ["constant"],
     ...            IdentifyOptions(noise_runs=0))
     >>> round(fits["constant"].params.alpha, 2)
@@ -343,7 +352,7 @@ def fit(
     rec = context.recording
     flight_method = traits(method).flight
     if rec.is_flight and not flight_method:
-        from identification.steps import IdentificationError
+        from identification.methods.steps import IdentificationError
 
         assert rec.airspeed_mps is not None
         raise IdentificationError(
@@ -354,7 +363,7 @@ def fit(
         )
     for one in (rec, *context.together) if flight_method else ():
         if one.airspeed_mps is None:
-            from identification.steps import IdentificationError
+            from identification.methods.steps import IdentificationError
 
             raise IdentificationError(
                 f"recording {one.name!r} has no airspeed_mps column: method {method!r} "
@@ -362,7 +371,7 @@ def fit(
                 + " or ".join(f"--method {m}" for m in default_methods())
             )
     if context.together and not flight_method:
-        from identification.steps import IdentificationError
+        from identification.methods.steps import IdentificationError
 
         raise IdentificationError(
             f"method {method!r} identifies one recording; other flights fitted together "
@@ -387,8 +396,8 @@ def fit(
 
 
 def with_adequacy(found: ModelFit, context: Context) -> ModelFit:
-    """``found`` with its adequacy (:mod:`identification.adequacy`) in its metrics."""
-    from identification.adequacy import adequacy
+    """``found`` with its adequacy (:mod:`identification.methods.adequacy`) in its metrics."""
+    from identification.methods.adequacy import adequacy
 
     figures = adequacy(
         context.measurements_of(found),
@@ -401,7 +410,8 @@ def with_adequacy(found: ModelFit, context: Context) -> ModelFit:
 
 
 def paper_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
-    """The paper's pipeline (:func:`identification.pipeline.identify`), a ModelFit per model.
+    """The paper's pipeline (:func:`~identification.methods.pipeline.identify`), a ModelFit per
+    model.
 
     Its metrics: the steady-state fit (R², β), the piecewise-linear fit, the
     re-simulation errors and the per-step table; for the constant model also
@@ -460,13 +470,13 @@ register_method(
 )
 register_method(
     "output-error",
-    "identification.baselines:output_error_method",
+    "identification.methods.baselines:output_error_method",
     summary="output-error nonlinear least squares on the simulated roll rate (the peer, §1)",
     default=True,
 )
 register_method(
     "ml",
-    "identification.ml:ml_method",
+    "identification.methods.ml:ml_method",
     summary="maximum likelihood: Kalman filter on the roll model with the turbulence as an "
     "AR state; its u_d is the posterior mean, and its posterior draws are what the "
     "environment replays by default",
@@ -475,7 +485,7 @@ register_method(
 )
 register_method(
     "flight",
-    "identification.flightfit:flight_method",
+    "identification.methods.flightfit:flight_method",
     summary="a flight (a recording with airspeed_mps): maximum likelihood of a, α at a "
     "reference airspeed (--v-ref) with the airspeed scaling measured (fin torque ∝ ρV^n, "
     "damping ∝ ρV^m) and eq. 4-8 tested, the turbulence a field flown through; u_d from "

@@ -24,8 +24,8 @@ the roll dynamics, written apart from the exact kernel of
 :mod:`identification.model` so that a bug in one is not a bug in both (with
 every effect off the two agree to within 1e-3 °/s on the paper's run;
 ``tests/identification/test_reference.py``).  The virtual tunnel
-(:mod:`identification.tunnel`) and the flight recorder
-(:mod:`identification.flightlog`, the gain and damping per step) write their truth with
+(:mod:`identification.instruments.tunnel`) and the flight recorder
+(:mod:`identification.instruments.flightlog`, the gain and damping per step) write their truth with
 it when an effect is on; ``benchmarks/closed_loop.py`` flies it in closed loop.
 """
 
@@ -62,8 +62,8 @@ FINE_STEP_S = 0.001
 class Effects:
     """What a rocket adds to the roll model; every field 0 is the model itself.
 
-    Each field is a ``rocketroll tunnel`` flag (:class:`identification.tunnel.TunnelSpec`
-    holds one), bounded to a physical range.
+    Each field is a ``rocketroll tunnel`` flag
+    (:class:`identification.instruments.tunnel.TunnelSpec` holds one), bounded to a physical range.
     """
 
     servo_lag_s: float = setting(

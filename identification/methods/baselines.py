@@ -22,15 +22,15 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from identification.methods import Context, ModelFit, resimulation_metrics, trace_settings
-from identification.model import RollParams, damping, simulate
-from identification.pipeline import (
+from identification.methods.pipeline import (
     IdentifyOptions,
     Measurements,
     model_inputs,
     recover_disturbance,
     smoothing_for,
 )
-from identification.recording import Recording
+from identification.model import RollParams, damping, simulate
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
 
 __all__ = ["OutputErrorFit", "output_error", "output_error_method"]
@@ -94,7 +94,7 @@ def output_error(
         ``constant`` or ``theta``.
     options : IdentifyOptions, optional
         Velocity smoothing, fine grid and servo settings (shared with
-        :func:`identification.pipeline.identify`).
+        :func:`identification.methods.pipeline.identify`).
     x0 : RollParams, optional
         Starting point.  Default: α and β from a straight line through the
         measured rate against the fin angle (all samples after the first
@@ -189,14 +189,18 @@ def _sandwich(
     """Standard errors and correlations of a least-squares fit whose residuals are
     correlated in time (the turbulence's response is in them): the Newey-West sandwich
     ``(JᵀJ)⁻¹ S (JᵀJ)⁻¹`` with ``S`` over Bartlett-weighted lags up to four times the
-    residuals' correlation length (:func:`identification.statistics.newey_west_meat`,
+    residuals' correlation length (:func:`identification.methods.statistics.newey_west_meat`,
     statsmodels' ``S_hac_simple``), with its small-sample
     factor ``n / (n - k)``.  NaN / empty where ``JᵀJ`` is singular.
 
     Approximate: over 12 seeds each of three tunnel truths the errors of α were 1.10-1.35
     reported standard errors in SD (1.15-1.50 with lags up to twice the correlation
     length), where 1 is exact."""
-    from identification.statistics import decorrelation_stride, newey_west_meat, standard_errors
+    from identification.methods.statistics import (
+        decorrelation_stride,
+        newey_west_meat,
+        standard_errors,
+    )
 
     n, k = jac.shape
     try:
@@ -212,10 +216,10 @@ def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFi
     """The output-error peer as an identification method (``method="output-error"``).
 
     Its ``u_d`` is recovered by the paper's step 8 under its own parameters
-    and re-simulated the same way (:func:`identification.pipeline.recover_disturbance`),
+    and re-simulated the same way (:func:`identification.methods.pipeline.recover_disturbance`),
     so the traces and metrics of both methods compare like for like.  Where the
     velocity smoothing is not short against the fitted rocket's time constant
-    (:func:`identification.pipeline.smoothing_for`: a rocket several times faster than
+    (:func:`identification.methods.pipeline.smoothing_for`: a rocket several times faster than
     the paper's) the rate is smoothed again over a shorter window and the fit starts
     again from the previous one, until the window is short against the time constant
     fitted through it (at most :data:`MAX_RESMOOTHING` times).  Metrics: the

@@ -1,7 +1,7 @@
 """The virtual tunnel's flight counterpart: a flight log with known truth
 (``rocketroll record-flight``).
 
-The tunnel (:mod:`identification.tunnel`) re-creates the paper's experiment so
+The tunnel (:mod:`identification.instruments.tunnel`) re-creates the paper's experiment so
 that every identification can be checked against the truth.  This module does
 the same for the flight the paper's §4 looks ahead to: the rocket of a
 :class:`~rocketroll_physics.ascent.FlightProfile` (default: the 5-kg rocket to
@@ -22,7 +22,7 @@ equivalent fin angle grows without bound) -- with
   settles in tens of milliseconds at speed), through the servo of eq. 23;
 * turbulence flown, from one of the two sources of the flight environment:
   ``tunnel`` -- a stationary ``u_d`` process like the tunnel's
-  (:class:`identification.tunnel.Turbulence`) flown by the law of
+  (:class:`identification.instruments.tunnel.Turbulence`) flown by the law of
   :mod:`rocketroll_physics.flown` (Taylor's frozen field, amplitude
   ``V_ref/max(V, V_ref)``) -- or ``dryden`` -- the MIL-F-8785C roll gust
   ``p_g`` (:mod:`rocketroll_physics.dryden`) as ``α·u_d = p_g``;
@@ -49,18 +49,14 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.flightfit import SITE_ELEVATION_KEY
-from identification.model import MODEL_NAMES, RollParams, Servo
-from identification.model import simulate as simulate_roll
-from identification.recording import Recording, metadata_items
-from identification.reference import (
+from identification.instruments.reference import (
     Effects,
     fine_steps,
     gust_factor,
     gust_stream,
     simulate_reference,
 )
-from identification.tunnel import (
+from identification.instruments.tunnel import (
     FinSchedule,
     Turbulence,
     check_dwells,
@@ -68,6 +64,10 @@ from identification.tunnel import (
     rocket_params,
     rocket_setting,
 )
+from identification.model import MODEL_NAMES, RollParams, Servo
+from identification.model import simulate as simulate_roll
+from identification.recordings.flight import SITE_ELEVATION_KEY
+from identification.recordings.recording import Recording, metadata_items
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv

@@ -4,7 +4,7 @@ Each file in ``identification/data`` was written by the virtual wind tunnel
 with the command listed here (also stored in the file's ``# command:`` line);
 ``tests/identification/test_bundled.py`` regenerates every one and compares
 bytes.  Regenerate them all with ``make recordings`` or
-``python -m identification.bundled --regenerate``.
+``python -m identification.instruments.bundled --regenerate``.
 
 All of them are ``source: synthetic``: the paper's own data are not public.
 """
@@ -17,11 +17,11 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from identification.recording import Recording, load_recording, save_recording
+from identification.recordings.recording import Recording, load_recording, save_recording
 
 __all__ = ["BUNDLED", "DATA_DIR", "bundled_path", "bundled_paths", "load_bundled", "regenerate"]
 
-DATA_DIR = Path(__file__).resolve().parent / "data"
+DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 
 #: file name -> the exact command that made it (run with ``--out DATA_DIR/<file>``).
 BUNDLED: dict[str, str] = {
@@ -67,7 +67,7 @@ def load_bundled(name: str) -> Recording:
 
 def make(name: str) -> Recording:
     """Run the recorded command of a bundled file and return the recording."""
-    from identification.tunnel import run_tunnel, spec_from_command
+    from identification.instruments.tunnel import run_tunnel, spec_from_command
 
     return run_tunnel(spec_from_command(BUNDLED[name]))
 
@@ -83,8 +83,10 @@ def regenerate(directory: Path = DATA_DIR) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m identification.bundled [--regenerate]``."""
-    parser = argparse.ArgumentParser(prog="python -m identification.bundled", description=__doc__)
+    """``python -m identification.instruments.bundled [--regenerate]``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m identification.instruments.bundled", description=__doc__
+    )
     parser.add_argument("--regenerate", action="store_true", help="rewrite the bundled files")
     ns = parser.parse_args(argv)
     if ns.regenerate:

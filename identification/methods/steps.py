@@ -14,7 +14,7 @@ Steps (paper §2.3-§2.7, the algorithm of Fig. 9):
 9. :func:`resimulate` -- drive the model with its ``u_d`` and compare (§3.5).
 
 Steps 1-7 use the data after the first deflection (§2.1); steps 8-9 use all
-of it.  :func:`identification.pipeline.identify` chains them.
+of it.  :func:`identification.methods.pipeline.identify` chains them.
 
 Errata (tested in ``tests/identification/test_steps.py``)
 ---------------------------------------------------------
@@ -40,7 +40,7 @@ from scipy.ndimage import uniform_filter1d
 
 from identification.compiled import linkage_path
 from identification.model import Linkage, RollParams, Servo, damping, servo_path, simulate
-from identification.recording import Recording
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 

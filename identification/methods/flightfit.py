@@ -15,7 +15,7 @@ so ``β̄₀/(ρ_ref·V_ref)`` is ``S·d²·|C_P|/(4·I)`` and ``β̄₀·α₀/
 ``S·d·C_δ/I``: the ``C_P``- and ``C_δ``-like coefficients, reported as such.
 
 Method: maximum likelihood with a Kalman filter (the flight's version of
-:mod:`identification.ml`).  The state is the roll rate ``v``, the roll angle
+:mod:`identification.methods.ml`).  The state is the roll rate ``v``, the roll angle
 ``φ`` and the turbulence ``w``; the rocket moves by the exact update of
 :mod:`identification.model` with the scales of each substep; the turbulence
 is the physics of :mod:`rocketroll_physics.flown` and :mod:`rocketroll_physics.dryden`
@@ -58,9 +58,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import optimize
 
-from identification import compiled, statespace
+from identification import compiled
 from identification.compiled import linkage_path
+from identification.estimation import statespace
+from identification.estimation.statespace import LinearGaussian
 from identification.methods import ModelFit
+from identification.methods.steps import Disturbance, IdentificationError
 from identification.model import (
     Rig,
     RollParams,
@@ -69,9 +72,8 @@ from identification.model import (
     servo_path,
     simulate,
 )
-from identification.recording import Recording, RecordingError
-from identification.statespace import LinearGaussian
-from identification.steps import Disturbance, IdentificationError
+from identification.recordings.flight import mach_numbers, mean_airspeed, site_elevation
+from identification.recordings.recording import Recording, RecordingError
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3, isa
 from rocketroll_physics.ou import interval_coefficients
@@ -85,7 +87,7 @@ from rocketroll_physics.scaling import (
 
 if TYPE_CHECKING:
     from identification.methods import Context
-    from identification.pipeline import IdentifyOptions
+    from identification.methods.pipeline import IdentifyOptions
 
 __all__ = [
     "EQ_4_8_TEST_SIZE",
@@ -201,7 +203,7 @@ def flight_inputs(
     """The fin path, the scales and the measurements of a flight recording.
 
     ``rig`` (default: the recording's own, its ``rig.*`` lines) shapes the fin the model
-    sees as :func:`identification.pipeline.measurements` does for a tunnel run: the
+    sees as :func:`identification.methods.pipeline.measurements` does for a tunnel run: the
     commanded fin through its linkage, and the fin delayed by its sensors' latency.
 
     The substep grid follows the recorded timestamps (each sample interval cut
@@ -217,7 +219,7 @@ def flight_inputs(
         :data:`MIN_AIRSPEED_FRACTION` of the tunnel's on all but fewer than
         :data:`MIN_MOVING_INTERVALS` intervals (the fins move nothing there).
     """
-    from identification.ml import quantum_of
+    from identification.methods.ml import quantum_of
 
     rig = recording.rig if rig is None else rig
     if recording.airspeed_mps is None:
@@ -291,28 +293,6 @@ def flight_inputs(
         rho_ref_kgm3=rho_ref_kgm3,
         rig=rig,
     )
-
-
-#: The metadata key of a recording whose altitude is above the pad: the pad's elevation, m.
-SITE_ELEVATION_KEY = "flight.site_elevation_m"
-
-
-def site_elevation(recording: Recording) -> float:
-    """The elevation to add to a recording's ``altitude_m`` for the height above sea level:
-    the pad's, where the log says its altitude is above the ground
-    (:data:`SITE_ELEVATION_KEY`), 0 otherwise."""
-    return float(recording.metadata.get(SITE_ELEVATION_KEY, 0.0))
-
-
-def mean_airspeed(recordings: Sequence[Recording]) -> float:
-    """The airspeed's mean over the flights' time, rounded to 0.1 m/s (at least 0.1): the
-    default reference airspeed of a flight fit."""
-    total = 0.0
-    for recording in recordings:
-        assert recording.airspeed_mps is not None
-        total += float(np.trapezoid(recording.airspeed_mps, recording.time_s))
-    duration = sum(float(r.time_s[-1] - r.time_s[0]) for r in recordings)
-    return max(round(total / duration, 1), 0.1)
 
 
 def interval_maps(
@@ -416,10 +396,10 @@ def _params(nat: dict[str, float]) -> RollParams | None:
 
 
 def _system(inputs: FlightInputs, nat: dict[str, float]) -> LinearGaussian | None:
-    """The flight as a linear Gaussian state-space model (:mod:`identification.statespace`)
-    of the roll rate, the angle and the turbulence ``w``, its system matrices changing with
-    every interval's airspeed; None where ``nat`` is not a rocket (α 0, or a damping below
-    :data:`MIN_DAMPING` on the flown fins)."""
+    """The flight as a linear Gaussian state-space model
+    (:mod:`identification.estimation.statespace`) of the roll rate, the angle and the
+    turbulence ``w``, its system matrices changing with every interval's airspeed; None where
+    ``nat`` is not a rocket (α 0, or a damping below :data:`MIN_DAMPING` on the flown fins)."""
     params = _params(nat)
     if params is None:
         return None
@@ -654,7 +634,7 @@ class FlightFit:
 
     def posterior_draws(self, size: int, seed: int = 0) -> FloatArray:
         """``size`` draws of ``u_d`` per sample interval from its posterior given the flight
-        (the simulation smoother of :mod:`identification.statespace`, at the fit's
+        (the simulation smoother of :mod:`identification.estimation.statespace`, at the fit's
         estimates), shape (size, n): each a turbulence the rocket may have flown."""
         _, _, _, _, draws = _smoothed(self.inputs, self.estimates, size, seed)
         return np.asarray(self.inputs.u_per_w * draws)
@@ -915,7 +895,7 @@ def identify_flights(
         For no flights, a flight without a roll measurement, flights with different
         measurements (gyro or angle) or different references.
     """
-    from identification.ml import numerical_hessian
+    from identification.methods.ml import numerical_hessian
 
     flights = list(flights)
     if not flights:
@@ -1070,7 +1050,7 @@ _SENSOR_NOISE = ("gyro_rel", "gyro_abs", "angle_sd")
 
 def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, Any]:
     """How far a flight fit can be trusted, with the tunnel's figures and limits
-    (:mod:`identification.adequacy`) where they apply, and the flight's own failures.
+    (:mod:`identification.methods.adequacy`) where they apply, and the flight's own failures.
 
     * **a parameter on a bound** -- the damping at its floor (:data:`MIN_DAMPING`: the
       fit makes the rocket an integrator) or a log-parameter at the optimiser's bound:
@@ -1079,12 +1059,13 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
       unreliable;
     * the model **without** ``u_d`` against the measured rate (R², along the flight's
       scales), ``u_d`` against the fins' range and α's relative standard error, with the
-      tunnel's weak and unreliable limits (:data:`~identification.adequacy.RATE_R2`,
-      :data:`~identification.adequacy.UD_RANGE`, :data:`~identification.adequacy.ALPHA_REL_SE`);
-    * a fin under 1° all flight (:meth:`~identification.adequacy.Findings.fin_unit`):
+      tunnel's weak and unreliable limits (:data:`~identification.methods.adequacy.RATE_R2`,
+      :data:`~identification.methods.adequacy.UD_RANGE`,
+      :data:`~identification.methods.adequacy.ALPHA_REL_SE`);
+    * a fin under 1° all flight (:meth:`~identification.methods.adequacy.Findings.fin_unit`):
       unreliable;
     * the optimiser not reporting convergence: weak;
-    * the fin acting later than the model (:func:`identification.adequacy.suspects`):
+    * the fin acting later than the model (:func:`identification.methods.adequacy.suspects`):
       suspected, not judged; the turbulence's intensity is not (in flight it changes with
       the airspeed by the model itself).
 
@@ -1093,7 +1074,7 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
     ``fin_delay_s``, ``fin_delay_z``, ``suspected``, ``verdict`` and ``reasons``,
     JSON-safe.
     """
-    from identification.adequacy import ALPHA_REL_SE, UD_RANGE, Findings, suspects
+    from identification.methods.adequacy import ALPHA_REL_SE, UD_RANGE, Findings, suspects
 
     params, inputs = result.params, result.inputs
     found = Findings()
@@ -1166,18 +1147,6 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         "verdict": found.verdict,
         "reasons": list(found.reasons),
     }
-
-
-def mach_numbers(recording: Recording) -> FloatArray:
-    """A flight's Mach number at each sample: its airspeed over the ISA speed of sound at
-    its altitude (at sea level without an altitude column)."""
-    assert recording.airspeed_mps is not None
-    altitude = (
-        recording.altitude_m + site_elevation(recording)
-        if recording.altitude_m is not None
-        else np.zeros(recording.n_samples)
-    )
-    return np.asarray(recording.airspeed_mps) / np.asarray(isa(altitude).speed_of_sound_mps)
 
 
 def longest_stretch(recording: Recording, keep: ArrayLike, why: str) -> Recording:
@@ -1326,7 +1295,7 @@ def _model_only_r2(
 ) -> float:
     """R² of the measured rate (less the gyro's bias) by ``params``' model without ``u_d``
     over ``inputs`` along ``scaling``, from the first measured rate."""
-    from identification.adequacy import r_squared
+    from identification.methods.adequacy import r_squared
 
     measured = measured_rate(inputs) - (gyro_bias_dps or 0.0)
     sim = resimulated(inputs, params, np.zeros(inputs.n), float(measured[0]), scaling)
@@ -1398,8 +1367,8 @@ def _judge_held_out(
 ) -> None:
     """Add the held-out prediction to a flight fit's adequacy: its figures, and a reason
     where the model without ``u_d`` predicts the unseen part worse than the adequacy's
-    rate limits (:data:`~identification.adequacy.RATE_R2`)."""
-    from identification.adequacy import RATE_R2, beyond
+    rate limits (:data:`~identification.methods.adequacy.RATE_R2`)."""
+    from identification.methods.adequacy import RATE_R2, beyond
 
     if held_out is None:
         return
@@ -1418,7 +1387,7 @@ def _judge_held_out(
 def _add_reason(adequacy: dict[str, Any], text: str, severity: int) -> None:
     """``text`` among a judged fit's reasons, its verdict at least as bad as ``severity``
     (1 weak, 2 unreliable; 0 adds nothing)."""
-    from identification.adequacy import VERDICTS
+    from identification.methods.adequacy import VERDICTS
 
     if severity:
         adequacy["reasons"] = [*adequacy["reasons"], text]

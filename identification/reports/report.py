@@ -1,6 +1,6 @@
 """An identification's report: PNG figures in the spirit of the paper's, and ``report.md``.
 
-:func:`render_report` turns an :class:`~identification.pipeline.Identification`
+:func:`render_report` turns an :class:`~identification.methods.pipeline.Identification`
 into file contents (name -> bytes or text); :func:`write_report` writes them
 into a directory, all or nothing.  The figures and the paper's figures they
 re-create:
@@ -56,8 +56,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from identification import paper
+from identification.methods.pipeline import Identification
 from identification.model import damping, simulate
-from identification.pipeline import Identification
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import UsageError
 from rocketroll_common.files import write_all_atomic
@@ -131,7 +131,7 @@ def write_report(result: Identification, directory: str | os.PathLike[str]) -> l
     Parameters
     ----------
     result : Identification
-        The output of :func:`identification.pipeline.identify`.
+        The output of :func:`identification.methods.pipeline.identify`.
     directory : str or path-like
         Where to write; existing files of the same names are replaced.
 
@@ -953,7 +953,7 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
         lines += [
             "",
             "With noise drawn independently at every 100 Hz sample the paper's 0.62° cannot be "
-            "reproduced; see `identification/noise.py`.",
+            "reproduced; see `identification/methods/noise.py`.",
         ]
     lines += ["", "## Figures", ""]
     for name in figures:

@@ -13,7 +13,7 @@ The turbulence is a zero-mean autoregressive process of order ``p`` on the
 sample grid, ``u_d[k+1] = Σ a_i·u_d[k+1-i] + η[k]`` (its mean cannot be told
 from the asymmetry θ̄: θ̄ carries it, as in the paper).  With the state
 ``[v, φ, u_d[k], ..., u_d[k-p+1]]`` this is a linear Gaussian state-space
-model (:mod:`identification.statespace`) whose measurements are the
+model (:mod:`identification.estimation.statespace`) whose measurements are the
 recording's columns: the encoder angle with its quantisation (variance
 ``q²/12``, ``q`` read off the data), the rate gyro with the multiplicative
 noise of eq. 52 (its level estimated), or both.  Real sensors are noisier
@@ -53,23 +53,7 @@ import numpy as np
 from scipy import linalg, optimize, stats
 
 from identification.compiled import UNSCALED, interval_maps, interval_maps_kernel
-from identification.methods import Context, ModelFit, resimulation_metrics
-from identification.model import (
-    QUADRATIC_RATE_DPS,
-    TERM_LEVEL,
-    RollParams,
-    check_model,
-    quadratic_growth,
-)
-from identification.pipeline import (
-    IdentifyOptions,
-    Measurements,
-    delayed,
-    measurements,
-    model_inputs,
-)
-from identification.recording import Recording
-from identification.statespace import (
+from identification.estimation.statespace import (
     LinearGaussian,
     Smoothed,
     filtered_means,
@@ -78,8 +62,24 @@ from identification.statespace import (
     standardized_innovations,
     update,
 )
-from identification.statistics import standard_errors
-from identification.steps import Disturbance, IdentificationError, resimulate
+from identification.methods import Context, ModelFit, resimulation_metrics
+from identification.methods.pipeline import (
+    IdentifyOptions,
+    Measurements,
+    delayed,
+    measurements,
+    model_inputs,
+)
+from identification.methods.statistics import standard_errors
+from identification.methods.steps import Disturbance, IdentificationError, resimulate
+from identification.model import (
+    QUADRATIC_RATE_DPS,
+    TERM_LEVEL,
+    RollParams,
+    check_model,
+    quadratic_growth,
+)
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
@@ -449,7 +449,7 @@ def _predict_roll(
     innovation_var: float,
     work: FloatArray,
 ) -> None:
-    """The time update of :func:`identification.statespace.predict` for the roll model's
+    """The time update of :func:`identification.estimation.statespace.predict` for the roll model's
     sparse transition (``step`` = ``[E, G, f, A, B, g]``; AR companion below), in place.
 
     Row by row, ``T·P`` and then ``(T·P)·T'`` touch only the non-zero entries of ``T``:
@@ -821,7 +821,7 @@ def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
 
 def _rocket_estimates(info: _Information, model: str) -> tuple[dict[str, float], dict[str, float]]:
     """Standard errors and correlations of the rocket's parameters
-    (:func:`identification.statistics.standard_errors`; ``a_per_s`` names the constant
+    (:func:`identification.methods.statistics.standard_errors`; ``a_per_s`` names the constant
     damping, ``beta_bar_per_s`` eq. 48's)."""
     rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
     return standard_errors(info.cov, [rename.get(n, n) for n in info.rocket])
@@ -1358,7 +1358,8 @@ def quadratic_fit(
 def posterior_traces(fit: MLFit, size: int, seed: int = 0) -> FloatArray:
     """``size`` draws of the whole ``u_d`` trace from its posterior given the recording.
 
-    Durbin–Koopman simulation smoothing (:func:`identification.statespace.simulation_smoother`):
+    Durbin–Koopman simulation smoothing
+    (:func:`identification.estimation.statespace.simulation_smoother`):
     each draw is a realisation of the fitted turbulence process consistent
     with the data.  Returns shape ``(size, n - 1)``, ° per sample interval.
     """

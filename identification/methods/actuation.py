@@ -16,13 +16,13 @@ so that a rig inside the model keeps the model:
   without it (Gaussian likelihood ratio; a parameter on its boundary at 0, so
   half a χ²(1) tail);
 * **sensor latency**, from the roll response: the maximum-likelihood fit with the
-  fin delayed by each candidate on the fine grid (:func:`identification.ml.delay_search`),
+  fin delayed by each candidate on the fine grid (:func:`identification.methods.ml.delay_search`),
   tested against no delay the same way.  Below one logging interval a latency
   cannot be resolved, and the answer says so;
 * **quadratic damping**, a damping that grows with the roll rate
   (``a(θ)·(1 + q·|v|/v₀)``, ``v₀`` :data:`~identification.model.QUADRATIC_RATE_DPS`),
   from the roll response with the rig found above: the coefficient's profile likelihood
-  (:func:`identification.ml.quadratic_search`), tested against ``q = 0`` (two-sided:
+  (:func:`identification.methods.ml.quadratic_search`), tested against ``q = 0`` (two-sided:
   ``q`` may be of either sign), with its 95 % interval, which says how well the
   recording tells it.  It belongs to the rocket, not the rig: the environment does not
   fly it yet.
@@ -42,6 +42,8 @@ import numpy as np
 from scipy import optimize, stats
 
 from identification.compiled import linkage_path
+from identification.instruments.reference import fine_steps
+from identification.methods.pipeline import IdentifyOptions
 from identification.model import (
     QUADRATIC_RATE_DPS,
     RIG_KEYS,
@@ -51,9 +53,7 @@ from identification.model import (
     Rig,
     Servo,
 )
-from identification.pipeline import IdentifyOptions
-from identification.recording import Recording, StatedRig
-from identification.reference import fine_steps
+from identification.recordings.recording import Recording, StatedRig
 
 __all__ = ["LEVEL", "MAX_LATENCY_S", "Actuation", "Term", "fit_linkage", "identify_actuation"]
 
@@ -195,7 +195,7 @@ def identify_actuation(
 ) -> Actuation:
     """The linkage (from a measured fin column), the sensors' latency and a quadratic
     damping (from the roll response, by maximum likelihood), each admitted at ``level``."""
-    from identification.ml import delay_search, model_inputs, quadratic_search
+    from identification.methods.ml import delay_search, model_inputs, quadratic_search
 
     opts = IdentifyOptions() if options is None else options
     # What the data show, whatever the user states: the search starts from the model's rig.

@@ -5,7 +5,7 @@ The 100 Hz velocity is corrupted with the multiplicative noise of eq. 52,
 the method is applied to it again: the moving average of §3.2
 (``smoothing_passes`` passes over the same 0.3 s span as the paper's three
 points at 10 Hz, i.e. 31 points at 100 Hz) and step 8
-(:func:`identification.steps.identify_disturbance`).  The error is the
+(:func:`identification.methods.steps.identify_disturbance`).  The error is the
 difference from the same processing without noise.  The paper does this for
 the constant-damping model with η = 1, 2, 5, 10 % and 100 runs each.
 
@@ -18,7 +18,7 @@ MAE 0.96°, P90 2.3°, against the paper's 0.62° and 1.49°).
 
 All runs of a chunk are solved at once: step 8 is linear in the velocity,
 so its velocity-independent integrals are computed once
-(:func:`identification.steps.disturbance_system`) and each run costs a few
+(:func:`identification.methods.steps.disturbance_system`) and each run costs a few
 array operations.
 """
 
@@ -32,8 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from tqdm.auto import tqdm
 
-from identification.model import RollParams, damping
-from identification.steps import (
+from identification.methods.steps import (
     SMOOTHING_WINDOW_S,
     FineGrid,
     disturbance_system,
@@ -41,6 +40,7 @@ from identification.steps import (
     smoothing_width,
     solve_disturbance,
 )
+from identification.model import RollParams, damping
 from rocketroll_common.arrays import FloatArray
 
 __all__ = ["NoiseStudy", "noise_study"]
@@ -128,7 +128,7 @@ def noise_study(
     smoothing_passes : int
         Three-point moving-average passes applied to every (noisy and
         noise-free) 100 Hz velocity before step 8, each over
-        ``smoothing_window_s`` (:func:`identification.steps.smoothing_width`).
+        ``smoothing_window_s`` (:func:`identification.methods.steps.smoothing_width`).
     smoothing_window_s : float
         Span of one pass, s.
     progress : bool

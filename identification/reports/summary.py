@@ -9,7 +9,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from identification import paper
-from identification.recording import Recording
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
 
 __all__ = ["RecordingSummary", "plot_recording", "rate_from_angle", "summarize"]
@@ -179,7 +179,7 @@ def _flight(recording: Recording) -> dict[str, float] | None:
     """A flight's airspeed, Mach and altitude ranges (None for a tunnel run)."""
     if not recording.is_flight:
         return None
-    from identification.flightfit import mach_numbers, site_elevation
+    from identification.recordings.flight import mach_numbers, site_elevation
 
     assert recording.airspeed_mps is not None
     out = {

@@ -1,7 +1,7 @@
 """A flight's identification report: one figure and ``report.md`` (``rocketroll identify
 FLIGHT --report DIR``).
 
-The tunnel's report (:mod:`identification.report`) re-creates the paper's
+The tunnel's report (:mod:`identification.reports.report`) re-creates the paper's
 figures; a flight has none in the paper, so its report shows what a reader of
 a flight identification checks first, on one time axis (s after the first
 sample):
@@ -25,15 +25,15 @@ from typing import Any
 import numpy as np
 from matplotlib.axes import Axes
 
-from identification.flightfit import (
+from identification.methods import ModelFit
+from identification.methods.flightfit import (
     SUBSTEPS,
     flight_inputs,
     measured_rate,
     resimulated,
 )
-from identification.methods import ModelFit
 from identification.model import Rig
-from identification.recording import Recording
+from identification.recordings.recording import Recording
 from rocketroll_common.plotting import new_figure, png_bytes
 from rocketroll_physics.scaling import FlightReference
 
