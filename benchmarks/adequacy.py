@@ -40,8 +40,7 @@ from identification.instruments.tunnel import run_tunnel, spec_from_command
 from identification.methods.adequacy import Adequacy, adequacy
 from identification.methods.ml import MLFit, innovation_checks, maximum_likelihood, posterior_given
 from identification.methods.pipeline import model_inputs
-from identification.methods.steps import Disturbance
-from identification.model import RollParams
+from identification.model import Disturbance, RollParams
 from identification.recordings.recording import Recording
 
 

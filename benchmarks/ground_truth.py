@@ -167,7 +167,7 @@ def bound_of(rec_spec: TunnelSpec, rec: Recording) -> FloatArray:
         turbulence.sd_deg,
         gyro_noise=gyro,
     )
-    return np.asarray(found.u_d_mean_deg, dtype=float)
+    return np.asarray(found.u_d_deg, dtype=float)
 
 
 @functools.cache

@@ -14,7 +14,7 @@ paper's Table 1 experiment, 5731 samples at 10 Hz):
   one identification, median of ``--mc-repeats`` against the 5 s target;
 * maximum likelihood (``method="ml"``) of both models in one call, against
   the 1 s target, and 100 posterior ``u_d`` traces drawn from its θ-model fit
-  (:func:`identification.methods.ml.posterior_traces`), against 0.5 s;
+  (:meth:`identification.methods.ml.MLFit.posterior_draws`), against 0.5 s;
 * every other registered identification method
   (:data:`identification.methods.METHODS`) through
   ``methods.fit(recording, method, [model])`` -- its parameters *and* its
@@ -235,7 +235,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     n_levels = len(result.options.noise_levels_pct)
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
-    from identification.methods.ml import maximum_likelihood, posterior_traces
+    from identification.methods.ml import maximum_likelihood
 
     others = [  # the tunnel's methods (a flight method identifies flights only)
         m for m in METHODS.names() if m != "paper" and not traits(m).flight
@@ -269,8 +269,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     ns.peer_repeats,
                 ),
                 (
-                    f"posterior_traces({POSTERIOR_DRAWS})",
-                    functools.partial(posterior_traces, ml_theta, POSTERIOR_DRAWS, 0),
+                    f"posterior_draws({POSTERIOR_DRAWS})",
+                    functools.partial(ml_theta.posterior_draws, POSTERIOR_DRAWS, 0),
                     ns.peer_repeats,
                 ),
                 *(

@@ -79,7 +79,9 @@ __all__ = [
     "RIG_KEYS",
     "RIG_LIMITS",
     "TERM_LEVEL",
+    "TIME_TOL",
     "DampingModel",
+    "Disturbance",
     "Linkage",
     "Rig",
     "RollParams",
@@ -87,6 +89,7 @@ __all__ = [
     "SimResult",
     "check_model",
     "damping",
+    "interval_index",
     "linear_recurrence",
     "linkage_step",
     "model_of",
@@ -1005,3 +1008,44 @@ def linear_recurrence(e: FloatArray, c: FloatArray, x0: float) -> FloatArray:
         x = q_end[b] * (x + t_end[b])
     out[1:] = (q * (starts[:, None] + t)).ravel()[:n]
     return out
+
+
+#: Tolerance when comparing sample times with step and interval boundaries, s.
+TIME_TOL = 1e-9
+
+
+def interval_index(edges: ArrayLike, time_s: ArrayLike) -> NDArray[np.intp]:
+    """Index ``k`` with ``edges[k] <= t < edges[k+1]`` (-1 before the first edge)."""
+    found = np.searchsorted(edges, np.asarray(time_s, dtype=float) + TIME_TOL, side="right")
+    return np.asarray(found - 1, dtype=np.intp)
+
+
+@dataclass(frozen=True, eq=False)
+class Disturbance:
+    """Identified disturbance ``u_d(t)`` for one model (eq. 35-44).
+
+    Attributes
+    ----------
+    model : str
+        ``constant`` (``u_d,constant``, eq. 50) or ``theta`` (``u_d,θ``, eq. 51).
+    params : RollParams
+        The model it was identified with.
+    interval_s : float
+        Δt, the length over which ``u_d`` is constant (0.1 s).
+    start_s : ndarray, shape (N_total,)
+        ``t_{i-1}`` of each interval, s.
+    u_d_deg : ndarray, shape (N_total,)
+        ``u_d,i``, ° of equivalent fin angle (eq. 44).
+    """
+
+    model: str
+    params: RollParams
+    interval_s: float
+    start_s: FloatArray
+    u_d_deg: FloatArray
+
+    def at(self, time_s: ArrayLike) -> FloatArray:
+        """The piecewise-constant ``u_d(t)`` of eq. 44 (held past the last interval), °."""
+        t = np.asarray(time_s, dtype=float)
+        k = interval_index(self.start_s, t)
+        return np.asarray(self.u_d_deg[np.clip(k, 0, self.u_d_deg.size - 1)], dtype=float)

@@ -48,7 +48,8 @@ from rocketroll_common.registry import Registry
 
 if TYPE_CHECKING:
     from identification.methods.pipeline import Identification, IdentifyOptions, Measurements
-    from identification.methods.steps import Disturbance, Resimulation
+    from identification.methods.steps import Resimulation
+    from identification.model import Disturbance
 
 __all__ = [
     "METHODS",

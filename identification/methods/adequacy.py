@@ -68,8 +68,7 @@ import numpy as np
 from identification.compiled import interval_maps
 from identification.methods.pipeline import Measurements
 from identification.methods.statistics import decorrelation_stride, ols_newey_west
-from identification.methods.steps import Disturbance
-from identification.model import RollParams, Servo, damping, linear_recurrence
+from identification.model import Disturbance, RollParams, Servo, damping, linear_recurrence
 from identification.recordings.recording import PLAUSIBLE_FIN_DEG, Recording, small_fins
 from rocketroll_common.arrays import FloatArray
 

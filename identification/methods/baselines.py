@@ -196,11 +196,8 @@ def _sandwich(
     Approximate: over 12 seeds each of three tunnel truths the errors of α were 1.10-1.35
     reported standard errors in SD (1.15-1.50 with lags up to twice the correlation
     length), where 1 is exact."""
-    from identification.methods.statistics import (
-        decorrelation_stride,
-        newey_west_meat,
-        standard_errors,
-    )
+    from identification.estimation.likelihood import standard_errors
+    from identification.methods.statistics import decorrelation_stride, newey_west_meat
 
     n, k = jac.shape
     try:

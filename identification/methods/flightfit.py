@@ -49,6 +49,7 @@ the tunnel).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -61,9 +62,18 @@ from scipy import optimize
 from identification import compiled
 from identification.compiled import linkage_path
 from identification.estimation import statespace
+from identification.estimation.likelihood import (
+    StateSpaceFit,
+    covariance,
+    maximise,
+    negloglike,
+    numerical_hessian,
+    posterior_states,
+    standard_errors,
+)
 from identification.estimation.statespace import LinearGaussian
 from identification.methods import ModelFit
-from identification.methods.steps import Disturbance, IdentificationError
+from identification.methods.steps import IdentificationError
 from identification.model import (
     Rig,
     RollParams,
@@ -73,7 +83,7 @@ from identification.model import (
     simulate,
 )
 from identification.recordings.flight import mach_numbers, mean_airspeed, site_elevation
-from identification.recordings.recording import Recording, RecordingError
+from identification.recordings.recording import Recording, RecordingError, quantum_of
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3, isa
 from rocketroll_physics.ou import interval_coefficients
@@ -219,8 +229,6 @@ def flight_inputs(
         :data:`MIN_AIRSPEED_FRACTION` of the tunnel's on all but fewer than
         :data:`MIN_MOVING_INTERVALS` intervals (the fins move nothing there).
     """
-    from identification.methods.ml import quantum_of
-
     rig = recording.rig if rig is None else rig
     if recording.airspeed_mps is None:
         raise IdentificationError(
@@ -463,24 +471,27 @@ def _system(inputs: FlightInputs, nat: dict[str, float]) -> LinearGaussian | Non
     )
 
 
-def _negloglike(x: FloatArray, flights: Sequence[FlightInputs], layout: _Layout) -> float:
-    """Minus the log-likelihood of ``x`` over the flights (each its own Kalman filter)."""
-    nat = layout.natural(x)
-    if not all(math.isfinite(v) for v in nat.values()):
-        return 1e12
-    low, high = EXPONENT_BOUNDS
-    if not all(low <= nat[k] <= high for k in ("torque_exponent", "damping_exponent")):
-        return 1e12
-    total = 0.0
-    for inputs in flights:
-        system = _system(inputs, nat)
-        if system is None:
-            return 1e12
-        loglike = statespace.loglike(system)
-        if not math.isfinite(loglike):
-            return 1e12
-        total -= loglike
-    return total
+@dataclass(frozen=True)
+class _Flights:
+    """Flights of one rocket as the estimation core fits them: the sum of each flight's
+    Kalman-filter log-likelihood (``-inf`` where the parameters are no rocket)."""
+
+    flights: Sequence[FlightInputs]
+    layout: _Layout
+
+    def loglike(self, nat: dict[str, Any]) -> float:
+        low, high = EXPONENT_BOUNDS
+        if not all(math.isfinite(v) for v in nat.values()) or not all(
+            low <= nat[k] <= high for k in ("torque_exponent", "damping_exponent")
+        ):
+            return -math.inf
+        total = 0.0
+        for inputs in self.flights:
+            system = _system(inputs, nat)
+            if system is None:
+                return -math.inf
+            total += statespace.loglike(system)
+        return total
 
 
 def measured_rate(inputs: FlightInputs) -> FloatArray:
@@ -539,10 +550,11 @@ def _turbulence_starts(
     fixed start falls into it on some flights (half of ten Dryden flights did), a
     survey of a hundred Kalman passes (a fraction of a second) does not.
     """
+    model = _Flights(flights, layout)
     rows = []
     for tau in _START_TAUS:
         values = [
-            _negloglike(layout.vector({**rough, "tau": tau, "sigma_w": sd}), flights, layout)
+            negloglike(model, layout.vector({**rough, "tau": tau, "sigma_w": sd}))
             for sd in _START_SIGMAS
         ]
         j = int(np.argmin(values))
@@ -553,35 +565,25 @@ def _turbulence_starts(
     return [{**rough, "tau": tau, "sigma_w": sd} for _, tau, sd in chosen]
 
 
-@dataclass(frozen=True, eq=False)
-class FlightFit:
-    """The maximum-likelihood fit of one damping model to a flight (:func:`identify_flight`).
+@dataclass(frozen=True, eq=False, kw_only=True)
+class FlightFit(StateSpaceFit):
+    """The maximum-likelihood fit of one damping model to a flight (:func:`identify_flight`):
+    a :class:`~identification.estimation.likelihood.StateSpaceFit` (its ``params`` the
+    rocket at ``v_ref_mps`` and ``rho_ref_kgm3``, ``u_d_deg`` the flight's equivalent fin
+    angle per sample interval) with the flight's own figures.
 
     Attributes
     ----------
-    model : str
-        ``constant`` or ``theta``.
-    params : RollParams
-        The rocket at ``v_ref_mps`` and ``rho_ref_kgm3``.
     turbulence_sd_deg : float
         ``σ_w`` (°): the turbulence's intensity, stationary along the flight.
     turbulence_tau_s : float
         Its time constant ``T``, tunnel seconds.
     gyro_noise_pct, gyro_floor_dps : float or None
         The gyro's estimated relative noise (%, eq. 52) and additive floor.
-    loglike : float
-        The maximised log-likelihood.
     std_errors : dict
         Asymptotic standard errors of α, θ̄, β̄ (and ᾱ) from the inverse Hessian.
-    u_d_deg : ndarray, shape (n,)
-        Posterior mean of ``u_d`` over each sample interval (the flight's
-        equivalent fin angle, °).
-    u_d_sd_deg : ndarray, shape (n,)
-        Its posterior SD, °.
     rate_dps : ndarray, shape (n + 1,)
         Posterior mean of the roll rate at the samples, °/s.
-    converged : bool
-        Whether the optimiser said so.
     estimates : dict
         Every maximised parameter in natural units (the model's, the exponents,
         ``sigma_w``, ``tau`` and the sensor's noise and bias), as a start for a richer model.
@@ -601,18 +603,11 @@ class FlightFit:
         The gyro's estimated constant bias, °/s.
     """
 
-    model: str
-    params: RollParams
     turbulence_sd_deg: float
     turbulence_tau_s: float
     gyro_noise_pct: float | None
     gyro_floor_dps: float | None
-    loglike: float
-    std_errors: dict[str, float]
-    u_d_deg: FloatArray
-    u_d_sd_deg: FloatArray
     rate_dps: FloatArray
-    converged: bool
     estimates: dict[str, float]
     inputs: FlightInputs
     flights: int = 1
@@ -620,17 +615,6 @@ class FlightFit:
     scaling_measured: bool = False
     eq_4_8_test: dict[str, Any] | None = None
     gyro_bias_dps: float | None = None
-
-    def disturbance(self) -> Disturbance:
-        """``u_d`` as the tunnel methods give theirs (held over each sample interval)."""
-        time = self.inputs.recording.time_s
-        return Disturbance(
-            model=self.model,
-            params=self.params,
-            interval_s=self.inputs.dt_s,
-            start_s=readonly_array(time[:-1]),
-            u_d_deg=readonly_array(self.u_d_deg),
-        )
 
     def posterior_draws(self, size: int, seed: int = 0) -> FloatArray:
         """``size`` draws of ``u_d`` per sample interval from its posterior given the flight
@@ -699,25 +683,9 @@ def resimulated(
 def _maximise(
     flights: Sequence[FlightInputs], layout: _Layout, starts: Sequence[dict[str, float]]
 ) -> optimize.OptimizeResult:
-    """L-BFGS-B from each start; the best."""
-    best: optimize.OptimizeResult | None = None
-    for start in starts:
-        x0 = np.clip(
-            layout.vector(start),
-            [-np.inf if low is None else low for low, _ in layout.bounds],
-            [np.inf if high is None else high for _, high in layout.bounds],
-        )
-        result = optimize.minimize(
-            _negloglike,
-            x0,
-            args=(flights, layout),
-            method="L-BFGS-B",
-            bounds=layout.bounds,
-            options={"maxiter": 500},
-        )
-        if best is None or result.fun < best.fun:
-            best = result
-    assert best is not None
+    """The estimation core's L-BFGS-B from each start (:func:`maximise`); the best, or an
+    error that says why it is no rocket."""
+    best = maximise(_Flights(flights, layout), starts)
     nat = layout.natural(best.x)
     if _params(nat) is None or best.fun >= 1e12:
         if not all(math.isfinite(v) for v in nat.values()):
@@ -785,8 +753,7 @@ def _smoothed(
     )
     samples = np.empty((draws, inputs.n))
     if draws:
-        rng = np.random.default_rng(seed)
-        for k, states in enumerate(statespace.simulation_smoother(system, smoothed, rng, draws)):
+        for k, states in enumerate(posterior_states(system, smoothed, draws, seed)):
             samples[k] = mean_w(states)
     return smoothed.loglike, smoothed.mean[:, 0], mean_w(smoothed.mean), sd, samples
 
@@ -895,8 +862,6 @@ def identify_flights(
         For no flights, a flight without a roll measurement, flights with different
         measurements (gyro or angle) or different references.
     """
-    from identification.methods.ml import numerical_hessian
-
     flights = list(flights)
     if not flights:
         raise IdentificationError("no flights to identify")
@@ -948,9 +913,8 @@ def identify_flights(
     nat = layout.natural(best.x)
     params = _params(nat)
     assert params is not None
-    errors = _standard_errors(
-        numerical_hessian(lambda x: _negloglike(x, flights, layout), best.x), layout, params
-    )
+    hess = numerical_hessian(functools.partial(negloglike, _Flights(flights, layout)), best.x)
+    errors = _standard_errors(covariance(hess), layout, params)
     fits = []
     for inputs in flights:
         loglike, rate, mean_w, sd_w, _ = _smoothed(inputs, nat)
@@ -964,6 +928,8 @@ def identify_flights(
                 gyro_floor_dps=nat["gyro_abs"] if gyro else None,
                 loglike=loglike,
                 std_errors=errors,
+                time_s=inputs.recording.time_s,
+                interval_s=inputs.dt_s,
                 u_d_deg=readonly_array(inputs.u_per_w * mean_w),
                 u_d_sd_deg=readonly_array(inputs.u_per_w * sd_w),
                 rate_dps=readonly_array(rate),
@@ -991,22 +957,22 @@ _REPORTED = {
 }
 
 
-def _standard_errors(hess: FloatArray, layout: _Layout, params: RollParams) -> dict[str, float]:
+def _standard_errors(
+    cov: FloatArray | None, layout: _Layout, params: RollParams
+) -> dict[str, float]:
     """The asymptotic standard errors of the model's parameters (and the measured
-    exponents) from the inverse Hessian; empty where it is not positive there."""
-    try:
-        diag = np.diag(np.linalg.inv(hess))
-    except np.linalg.LinAlgError:
+    exponents) from the estimates' covariance; empty where any is not positive."""
+    names = [name for name in _REPORTED if name in layout.names]
+    index = [layout.names.index(name) for name in names]
+    reported = [_REPORTED[name] for name in names]
+    block = None if cov is None else cov[np.ix_(index, index)]
+    se, _ = standard_errors(block, [shown for shown, _ in reported])
+    if not all(math.isfinite(v) for v in se.values()):
         return {}
-    index = {name: layout.names.index(name) for name in _REPORTED if name in layout.names}
-    if not np.all(diag[list(index.values())] > 0):
-        return {}
-    errors = {}
-    for name, k in index.items():
-        reported, is_log = _REPORTED[name]
-        se = math.sqrt(diag[k])
-        errors[reported] = params.beta_bar_per_s * se if is_log else se
-    return errors
+    return {
+        shown: params.beta_bar_per_s * se[shown] if is_log else se[shown]
+        for shown, is_log in reported
+    }
 
 
 def c_coefficients(

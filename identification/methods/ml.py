@@ -29,7 +29,7 @@ coefficients, the innovation SD and the gyro's noise level -- maximise the
 Kalman filter's likelihood (``scipy.optimize.minimize``, L-BFGS-B); their
 standard errors come from the Hessian of the log-likelihood.  The order
 ``p`` is the one of smallest AIC up to :data:`MAX_ORDER`.  The smoother gives
-``E[u_d | data]`` and its pointwise SD; :func:`posterior_traces` draws whole
+``E[u_d | data]`` and its pointwise SD; :meth:`MLFit.posterior_draws` draws whole
 traces from ``p(u_d | data)`` with the simulation smoother -- turbulence with
 the right amplitude and spectrum that is consistent with the recording.
 
@@ -42,9 +42,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,11 +51,20 @@ import numpy as np
 from scipy import linalg, optimize, stats
 
 from identification.compiled import UNSCALED, interval_maps, interval_maps_kernel
+from identification.estimation.likelihood import (
+    OUTSIDE,
+    StateSpaceFit,
+    covariance,
+    maximise,
+    negloglike_at,
+    numerical_hessian,
+    posterior_states,
+    standard_errors,
+)
 from identification.estimation.statespace import (
     LinearGaussian,
     Smoothed,
     filtered_means,
-    simulation_smoother,
     smooth,
     standardized_innovations,
     update,
@@ -70,8 +77,7 @@ from identification.methods.pipeline import (
     measurements,
     model_inputs,
 )
-from identification.methods.statistics import standard_errors
-from identification.methods.steps import Disturbance, IdentificationError, resimulate
+from identification.methods.steps import IdentificationError, resimulate
 from identification.model import (
     QUADRATIC_RATE_DPS,
     TERM_LEVEL,
@@ -79,7 +85,7 @@ from identification.model import (
     check_model,
     quadratic_growth,
 )
-from identification.recordings.recording import Recording
+from identification.recordings.recording import Recording, quantum_of
 from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
@@ -92,12 +98,9 @@ __all__ = [
     "interval_maps",
     "maximum_likelihood",
     "ml_method",
-    "numerical_hessian",
     "posterior_given",
-    "posterior_traces",
     "quadratic_fit",
     "quadratic_search",
-    "quantum_of",
     "rate_damped",
     "roll_transition",
     "stationary_cov",
@@ -134,21 +137,6 @@ class _Data:
     @property
     def n(self) -> int:
         return int(self.y.shape[0])
-
-
-def quantum_of(values: FloatArray) -> float:
-    """The encoder's resolution: the step of the grid the angle values lie on (0 if none)."""
-    levels = np.unique(values)
-    if levels.size < 3:
-        return 0.0
-    steps = np.diff(levels)
-    q = float(np.min(steps))
-    if q <= 0.0:
-        return 0.0
-    ratio = steps / q
-    if float(np.max(np.abs(ratio - np.round(ratio)))) > 1e-3:
-        return 0.0  # not on a grid: an unquantised (or already processed) angle
-    return q
 
 
 #: The angle's sample-to-sample noise, as a multiple of its grid's ``q/√12``, beyond
@@ -232,6 +220,11 @@ class _Layout:
             *(("angle",) if self.angle else ()),
             *(("floor",) if self.floor else ()),
         )
+
+    @property
+    def bounds(self) -> None:
+        """None: the vector is unbounded (the transforms below keep it in the model)."""
+        return None
 
     def natural(self, x: FloatArray) -> dict[str, Any]:
         """Parameters from the optimiser's vector: AR coefficients stationary by
@@ -535,16 +528,26 @@ def _roll_loglike(
     return ll
 
 
-#: Negative log-likelihood returned where the parameters are outside the model (unstable).
-_OUTSIDE = 1e12
+def _loglike(data: _Data, nat: dict[str, Any]) -> float:
+    """The log-likelihood of ``data`` under natural parameters (``-inf``: no stable model)."""
+    parts = _parts(data, nat)
+    return -math.inf if parts is None else _filter(data, parts)
 
 
 def _negloglike_natural(data: _Data, nat: dict[str, Any]) -> float:
-    parts = _parts(data, nat)
-    if parts is None:
-        return _OUTSIDE
-    value = -_filter(data, parts)
-    return value if np.isfinite(value) else _OUTSIDE
+    return negloglike_at(functools.partial(_loglike, data), nat)
+
+
+@dataclass(frozen=True)
+class _Roll:
+    """The roll model of one recording, as the estimation core fits it (with the sparse
+    kernel's log-likelihood)."""
+
+    data: _Data
+    layout: _Layout
+
+    def loglike(self, nat: dict[str, Any]) -> float:
+        return _loglike(self.data, nat)
 
 
 def _filter(data: _Data, parts: _Parts) -> float:
@@ -563,10 +566,6 @@ def _filter(data: _Data, parts: _Parts) -> float:
             parts.initial_cov,
         )
     )
-
-
-def _negloglike(x: FloatArray, data: _Data, layout: _Layout) -> float:
-    return _negloglike_natural(data, layout.natural(x))
 
 
 def _start(data: _Data, inputs: Measurements, model: str, order: int) -> dict[str, Any]:
@@ -623,16 +622,14 @@ def _equation_error_start(data: _Data, inputs: Measurements) -> dict[str, Any] |
     return _starting_point(data, 1, c / (1.0 - e), d / c, damping, residual)
 
 
-@dataclass(frozen=True, eq=False)
-class MLFit:
-    """Result of :func:`maximum_likelihood` for one damping model.
+@dataclass(frozen=True, eq=False, kw_only=True)
+class MLFit(StateSpaceFit):
+    """Result of :func:`maximum_likelihood` for one damping model: a
+    :class:`~identification.estimation.likelihood.StateSpaceFit` (the rocket, its
+    log-likelihood, ``u_d`` and draws of it) with the tunnel model's own figures.
 
     Attributes
     ----------
-    model : str
-        ``constant`` or ``theta``.
-    params : RollParams
-        The estimate.
     ar : ndarray
         The turbulence's AR coefficients (order = size).
     innovation_sd_deg, sd_deg : float
@@ -645,8 +642,8 @@ class MLFit:
     angle_noise_deg : float
         Estimated white noise SD of the angle beyond its grid's quantisation, ° (0
         for an encoder).
-    loglike, aic : float
-        Log-likelihood at the optimum and ``2k - 2·loglike``.
+    aic : float
+        ``2k - 2·loglike``.
     n_params : int
         ``k``.
     std_errors : dict
@@ -657,39 +654,27 @@ class MLFit:
         (empty where the Hessian is not positive definite).
     orders : dict
         AIC of each AR order tried.
-    converged : bool
-        The optimiser's verdict.
     nfev : int
         Likelihood evaluations (all orders).
-    u_d_mean_deg, u_d_sd_deg : ndarray, shape (n - 1,)
+    u_d_deg, u_d_sd_deg : ndarray, shape (n - 1,)
         Posterior mean and SD of ``u_d`` over each sample interval; the SD of a fit holds
         the parameters' own uncertainty too (delta method over the observed information),
         which on a short record is most of it (:func:`posterior_given`'s, under given
         parameters, is the smoother's alone).  The posterior draws
-        (:func:`posterior_traces`) are conditional on the fitted parameters.
-    time_s : ndarray, shape (n,)
-        Sample times.
+        (:meth:`posterior_draws`) are conditional on the fitted parameters.
     """
 
-    model: str
-    params: RollParams
     ar: FloatArray
     innovation_sd_deg: float
     sd_deg: float
     gyro_noise: float
     gyro_floor_dps: float
     angle_noise_deg: float
-    loglike: float
     aic: float
     n_params: int
-    std_errors: dict[str, float]
     correlations: dict[str, float]
     orders: dict[int, float]
-    converged: bool
     nfev: int
-    u_d_mean_deg: FloatArray
-    u_d_sd_deg: FloatArray
-    time_s: FloatArray
     _state_space: LinearGaussian = field(repr=False)
     _smoothed: Smoothed = field(repr=False)
 
@@ -699,84 +684,21 @@ class MLFit:
         first = self._smoothed.mean[0]
         return float(first[0]), float(first[1])
 
-    @property
-    def interval_s(self) -> float:
-        return float(self.time_s[1] - self.time_s[0])
+    def posterior_draws(self, size: int, seed: int = 0) -> FloatArray:
+        """``size`` draws of the whole ``u_d`` trace from its posterior given the recording.
 
-    def disturbance(self) -> Disturbance:
-        """The posterior mean ``u_d`` as a step-8 style disturbance (held per interval)."""
-        return Disturbance(
-            model=self.model,
-            params=self.params,
-            interval_s=self.interval_s,
-            start_s=readonly_array(self.time_s[:-1]),
-            u_d_deg=readonly_array(self.u_d_mean_deg),
-        )
-
-
-#: Forward-difference step of the gradient, relative to ``max(1, |x|)`` (√ machine epsilon).
-_FD_STEP = math.sqrt(np.finfo(float).eps)
-#: Step scale of the Hessian's central differences (statsmodels' ``EPS**(1/4)``).
-_HESS_STEP = float(np.finfo(float).eps) ** 0.25
-
-
-@functools.cache
-def _threads() -> ThreadPoolExecutor:
-    """Workers for the gradient's likelihood evaluations (the kernels release the GIL)."""
-    return ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)))
-
-
-def _value_and_gradient(x: FloatArray, data: _Data, layout: _Layout) -> tuple[float, FloatArray]:
-    """−log-likelihood and its forward-difference gradient, the ``k + 1`` evaluations
-    spread over threads (what scipy's ``approx_grad`` does, one after another)."""
-    steps = _FD_STEP * np.maximum(1.0, np.abs(x))
-    points = [x] + [x + step * unit for step, unit in zip(steps, np.eye(x.size), strict=True)]
-    values = np.fromiter(
-        _threads().map(lambda point: _negloglike(point, data, layout), points), float, len(points)
-    )
-    return float(values[0]), (values[1:] - values[0]) / steps
-
-
-def _minimize(data: _Data, layout: _Layout, start: dict[str, Any]) -> optimize.OptimizeResult:
-    return optimize.minimize(
-        _value_and_gradient,
-        layout.vector(start),
-        args=(data, layout),
-        jac=True,
-        method="L-BFGS-B",
-        options={"maxiter": 500},
-    )
+        Durbin–Koopman simulation smoothing
+        (:func:`~identification.estimation.likelihood.posterior_states`): each draw is a
+        realisation of the fitted turbulence process consistent with the data.  Returns
+        shape ``(size, n - 1)``, ° per sample interval.
+        """
+        draws = posterior_states(self._state_space, self._smoothed, size, seed)
+        return np.asarray(draws[:, :-1, 2], dtype=float)
 
 
 def _pivot(data: _Data, theta_bar: float) -> float:
     """The typical deflection ``mean |θ + θ̄|`` of the recording, ° (at least 1°)."""
     return max(float(np.mean(np.abs(data.theta_fine + theta_bar))), 1.0)
-
-
-def numerical_hessian(f: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
-    """statsmodels' ``approx_hess3`` (Ridout's four-point central differences, its steps,
-    its arithmetic: the same numbers), with the ``2k(k + 1)`` evaluations of ``f``
-    spread over threads."""
-    n = x.size
-    h = _HESS_STEP * np.maximum(np.abs(x), 0.1)
-    ee = np.diag(h)
-    pairs = [(i, j) for i in range(n) for j in range(i, n)]
-    points = [
-        point
-        for i, j in pairs
-        for point in (
-            x + ee[i, :] + ee[j, :],
-            x + ee[i, :] - ee[j, :],
-            x - ee[i, :] + ee[j, :],
-            x - ee[i, :] - ee[j, :],
-        )
-    ]
-    values = np.fromiter(_threads().map(f, points), float, len(points)).reshape(-1, 4)
-    hess = np.outer(h, h)
-    for (i, j), (pp, pm, mp, mm) in zip(pairs, values, strict=True):
-        hess[i, j] = (pp - pm - (mp - mm)) / (4.0 * hess[i, j])
-        hess[j, i] = hess[i, j]
-    return hess
 
 
 @dataclass(frozen=True)
@@ -812,16 +734,12 @@ def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
 
     point = np.concatenate([[nat[name] for name in rocket], x0[k:]])
     hess = numerical_hessian(lambda values: _negloglike_natural(data, trial(values)), point)
-    try:
-        cov: FloatArray | None = np.asarray(np.linalg.inv(hess), dtype=float)
-    except np.linalg.LinAlgError:
-        cov = None
-    return _Information(rocket, point, cov, trial)
+    return _Information(rocket, point, covariance(hess), trial)
 
 
 def _rocket_estimates(info: _Information, model: str) -> tuple[dict[str, float], dict[str, float]]:
     """Standard errors and correlations of the rocket's parameters
-    (:func:`identification.methods.statistics.standard_errors`; ``a_per_s`` names the constant
+    (:func:`~identification.estimation.likelihood.standard_errors`; ``a_per_s`` names the constant
     damping, ``beta_bar_per_s`` eq. 48's)."""
     rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
     return standard_errors(info.cov, [rename.get(n, n) for n in info.rocket])
@@ -894,7 +812,7 @@ class _Search:
         self, model: str, order: int, warm: dict[str, Any]
     ) -> tuple[float, dict[str, Any], bool, str]:
         layout = _layout(self.data, model, order, warm)
-        result = _minimize(self.data, layout, warm)
+        result = maximise(_Roll(self.data, layout), [warm])
         # Each call of the objective is one value and one forward difference per parameter.
         self.nfev += int(result.nfev) * (result.x.size + 1)
         return (
@@ -993,7 +911,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
             break
     fun, nat, converged, message = search.order(model, best)
     parts = _parts(data, nat)
-    if parts is None or not fun < _OUTSIDE:
+    if parts is None or not fun < OUTSIDE:
         raise IdentificationError(
             f"{data.name}: maximum likelihood found no stable model ({message})"
         )
@@ -1059,9 +977,10 @@ def _result(
         orders=orders,
         converged=converged,
         nfev=nfev,
-        u_d_mean_deg=readonly_array(u_mean),
+        u_d_deg=readonly_array(u_mean),
         u_d_sd_deg=readonly_array(np.sqrt(u_var)),
         time_s=readonly_array(data.time_s),
+        interval_s=float(data.time_s[1] - data.time_s[0]),
         _state_space=ss,
         _smoothed=smoothed,
     )
@@ -1209,7 +1128,7 @@ def delay_search(inputs: Measurements, model: str, delays: Sequence[int]) -> Del
     for d in (top - 1, top, top + 1):  # the screen's peak leans towards none: its neighbours
         if d in screened and d not in fitted:
             data = _prepare(delayed_fin(inputs, d))
-            result = _minimize(data, _layout(data, model, base.ar.size, nat), nat)
+            result = maximise(_Roll(data, _layout(data, model, base.ar.size, nat)), [nat])
             fitted[d] = max(-float(result.fun), screened[d])
     best = max(fitted, key=lambda d: fitted[d])
     return DelaySearch(best, inputs.grid.step_s, base.loglike, fitted[best], screened)
@@ -1304,7 +1223,7 @@ def quadratic_search(
             # the linear fit's parameters, its gain given back the rate's mean damping
             gain = float(quadratic_growth(mean_speed, c))
             warm = {**nat, "alpha": nat["alpha"] * gain}
-            result = _minimize(damped, _layout(damped, model, base.ar.size, nat), warm)
+            result = maximise(_Roll(damped, _layout(damped, model, base.ar.size, nat)), [warm])
             profile[c] = max(-float(result.fun), -_negloglike_natural(damped, warm))
         return -profile[c]
 
@@ -1353,21 +1272,6 @@ def quadratic_fit(
         aic=fitted.aic + 2.0,
         orders={k: v + 2.0 for k, v in fitted.orders.items()},
     )
-
-
-def posterior_traces(fit: MLFit, size: int, seed: int = 0) -> FloatArray:
-    """``size`` draws of the whole ``u_d`` trace from its posterior given the recording.
-
-    Durbin–Koopman simulation smoothing
-    (:func:`identification.estimation.statespace.simulation_smoother`):
-    each draw is a realisation of the fitted turbulence process consistent
-    with the data.  Returns shape ``(size, n - 1)``, ° per sample interval.
-    """
-    if size < 1:
-        raise ValueError(f"size must be at least 1, got {size}")
-    rng = np.random.default_rng(seed)
-    draws = simulation_smoother(fit._state_space, fit._smoothed, rng, size)
-    return np.asarray(draws[:, :-1, 2], dtype=float)
 
 
 #: Lags of the innovations' autocorrelation and Ljung-Box test.
@@ -1467,7 +1371,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
                 metrics,
                 settings,
                 u_d_sd_deg=found.u_d_sd_deg,
-                sample_posterior=functools.partial(posterior_traces, found),
+                sample_posterior=found.posterior_draws,
             )
         )
     return fits

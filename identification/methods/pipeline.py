@@ -24,7 +24,6 @@ from identification.methods.steps import (
     BilinearFit,
     DampingFit,
     DampingVsFin,
-    Disturbance,
     FineGrid,
     IdentificationError,
     PiecewiseLinearFit,
@@ -46,7 +45,7 @@ from identification.methods.steps import (
     resimulate,
     smoothing_spread_s,
 )
-from identification.model import RollParams, check_model, damping
+from identification.model import Disturbance, RollParams, check_model, damping
 from identification.recordings.recording import Recording, StatedRig
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError

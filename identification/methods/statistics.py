@@ -16,7 +16,6 @@ the sample autocorrelation falls below :data:`DECORRELATION`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +24,7 @@ from numpy.typing import ArrayLike
 from scipy import stats
 from scipy.fft import next_fast_len
 
-from identification.methods.steps import Disturbance
+from identification.model import Disturbance
 from rocketroll_common.arrays import FloatArray
 
 __all__ = [
@@ -34,7 +33,6 @@ __all__ = [
     "decorrelation_stride",
     "newey_west_meat",
     "ols_newey_west",
-    "standard_errors",
     "trace_statistics",
 ]
 
@@ -62,29 +60,6 @@ def newey_west_meat(scores: FloatArray, lags: int) -> FloatArray:
     start = np.concatenate([np.repeat(zero, lags, axis=1), total[:, :n]], axis=1)
     running = end - start  # column t < n + L: Σ_{s=t-L..t} z_s (zero outside the record)
     return np.asarray(running @ running.T / (lags + 1))
-
-
-def standard_errors(
-    cov: FloatArray | None, names: Sequence[str]
-) -> tuple[dict[str, float], dict[str, float]]:
-    """Standard errors and correlations of estimates ``names`` from their covariance
-    (the first ``len(names)`` rows and columns of ``cov``): each SE (NaN where its variance
-    is not positive, or ``cov`` is None) and each pair's correlation, ``"a~b"`` (empty
-    unless every variance is positive)."""
-    k = len(names)
-    if cov is None:
-        return {name: float("nan") for name in names}, {}
-    block = np.asarray(cov, dtype=float)[:k, :k]
-    var = np.diag(block)
-    ok = np.isfinite(var) & (var > 0)
-    sd = np.sqrt(np.where(ok, var, np.nan))
-    se = {name: float(v) for name, v in zip(names, sd, strict=True)}
-    if not np.all(ok):
-        return se, {}
-    corr = block / np.outer(sd, sd)
-    return se, {
-        f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)
-    }
 
 
 def ols_newey_west(x: FloatArray, y: FloatArray, lags: int) -> tuple[FloatArray, ...]:

@@ -39,7 +39,17 @@ from scipy.linalg import lapack
 from scipy.ndimage import uniform_filter1d
 
 from identification.compiled import linkage_path
-from identification.model import Linkage, RollParams, Servo, damping, servo_path, simulate
+from identification.model import (
+    TIME_TOL,
+    Disturbance,
+    Linkage,
+    RollParams,
+    Servo,
+    damping,
+    interval_index,
+    servo_path,
+    simulate,
+)
 from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
@@ -48,7 +58,6 @@ __all__ = [
     "BilinearFit",
     "DampingFit",
     "DampingVsFin",
-    "Disturbance",
     "FineGrid",
     "PiecewiseLinearFit",
     "Resimulation",
@@ -82,19 +91,9 @@ class IdentificationError(RocketrollError, ValueError):
     """A recording that the pipeline cannot identify (too few steps, too short, ...)."""
 
 
-#: Tolerance when comparing sample times with step and interval boundaries, s.
-_TIME_TOL = 1e-9
-
-
-def _interval_index(edges: ArrayLike, time_s: ArrayLike) -> IntArray:
-    """Index ``k`` with ``edges[k] <= t < edges[k+1]`` (-1 before the first edge)."""
-    found = np.searchsorted(edges, np.asarray(time_s, dtype=float) + _TIME_TOL, side="right")
-    return np.asarray(found - 1, dtype=np.intp)
-
-
 def _first_at(time_s: FloatArray, t: float) -> int:
     """Index of the first sample at or after ``t``."""
-    return int(np.searchsorted(time_s, t - _TIME_TOL))
+    return int(np.searchsorted(time_s, t - TIME_TOL))
 
 
 # --------------------------------------------------------------------------- step 1
@@ -356,7 +355,7 @@ class PiecewiseLinearFit:
         """The fitted angle at ``time_s`` (extrapolated at both ends), °."""
         t = np.asarray(time_s, dtype=float)
         last = self.slopes_dps.size - 1
-        k = np.clip(_interval_index(self.bounds_s, t), 0, last)
+        k = np.clip(interval_index(self.bounds_s, t), 0, last)
         return np.asarray(self.intercepts_deg[k] + self.slopes_dps[k] * t, dtype=float)
 
 
@@ -385,9 +384,9 @@ def fit_piecewise_linear(
     y = np.asarray(angle_deg, dtype=float)
     bounds = np.asarray(bounds_s, dtype=float)
     m = bounds.size - 1
-    use = (t >= bounds[0] - _TIME_TOL) & (t <= bounds[-1] + _TIME_TOL)
+    use = (t >= bounds[0] - TIME_TOL) & (t <= bounds[-1] + TIME_TOL)
     t, y = t[use], y[use]
-    seg = np.clip(_interval_index(bounds, t), 0, m - 1)
+    seg = np.clip(interval_index(bounds, t), 0, m - 1)
     counts = np.bincount(seg, minlength=m)
     if np.any(counts < 2):
         raise IdentificationError(
@@ -673,7 +672,7 @@ def bilinear_velocity(
     """
     t = grid.time_s
     bounds = segments.bounds_s
-    step = _interval_index(bounds, t)
+    step = interval_index(bounds, t)
     step = np.where(step >= segments.n_steps, segments.n_steps - 1, step)
     v = np.full(t.size, np.nan)
     after = step >= 0
@@ -939,37 +938,6 @@ def _largest_outlier(x: FloatArray, a: FloatArray) -> tuple[int, float]:
 
 
 # --------------------------------------------------------------------------- step 8
-
-
-@dataclass(frozen=True, eq=False)
-class Disturbance:
-    """Identified disturbance ``u_d(t)`` for one model (eq. 35-44).
-
-    Attributes
-    ----------
-    model : str
-        ``constant`` (``u_d,constant``, eq. 50) or ``theta`` (``u_d,θ``, eq. 51).
-    params : RollParams
-        The model it was identified with.
-    interval_s : float
-        Δt, the length over which ``u_d`` is constant (0.1 s).
-    start_s : ndarray, shape (N_total,)
-        ``t_{i-1}`` of each interval, s.
-    u_d_deg : ndarray, shape (N_total,)
-        ``u_d,i``, ° of equivalent fin angle (eq. 44).
-    """
-
-    model: str
-    params: RollParams
-    interval_s: float
-    start_s: FloatArray
-    u_d_deg: FloatArray
-
-    def at(self, time_s: ArrayLike) -> FloatArray:
-        """The piecewise-constant ``u_d(t)`` of eq. 44 (held past the last interval), °."""
-        t = np.asarray(time_s, dtype=float)
-        k = _interval_index(self.start_s, t)
-        return np.asarray(self.u_d_deg[np.clip(k, 0, self.u_d_deg.size - 1)], dtype=float)
 
 
 def disturbance_system(

@@ -80,6 +80,7 @@ __all__ = [
     "RecordingError",
     "StatedRig",
     "load_recording",
+    "quantum_of",
     "read_text",
     "save_recording",
     "small_fins",
@@ -251,6 +252,21 @@ def _descent_hint(name: str, values: NDArray[np.float64], time: NDArray[np.float
 
 def _sample(lines: NDArray[np.int64] | None, index: int) -> str:
     return "" if lines is not None else f"sample {index}: "
+
+
+def quantum_of(values: FloatArray) -> float:
+    """The encoder's resolution: the step of the grid the angle values lie on (0 if none)."""
+    levels = np.unique(values)
+    if levels.size < 3:
+        return 0.0
+    steps = np.diff(levels)
+    q = float(np.min(steps))
+    if q <= 0.0:
+        return 0.0
+    ratio = steps / q
+    if float(np.max(np.abs(ratio - np.round(ratio)))) > 1e-3:
+        return 0.0  # not on a grid: an unquantised (or already processed) angle
+    return q
 
 
 def small_fins(columns: Mapping[str, FloatArray | None]) -> dict[str, float]:

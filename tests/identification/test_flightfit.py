@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from identification.estimation.likelihood import negloglike
 from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_at
 from identification.instruments.reference import Effects
 from identification.instruments.tunnel import TunnelSpec, run_tunnel
@@ -20,8 +21,8 @@ from identification.methods.flightfit import (
     MACH_LIMIT,
     MIN_DAMPING,
     FlightFit,
+    _Flights,
     _Layout,
-    _negloglike,
     apogee_index,
     c_coefficients,
     flight_adequacy,
@@ -391,11 +392,11 @@ def test_the_likelihood_prefers_the_truth_to_a_wrong_gain(
     assert paper_fit.scaling_measured
     best = dict(paper_fit.estimates)
     assert best["alpha"] == paper_fit.params.alpha
-    at_best = _negloglike(layout.vector(best), [inputs], layout)
+    at_best = negloglike(_Flights([inputs], layout), layout.vector(best))
     assert at_best == pytest.approx(-paper_fit.loglike)
     for factor in (0.9, 1.1):
-        wrong = _negloglike(
-            layout.vector({**best, "alpha": factor * best["alpha"]}), [inputs], layout
+        wrong = negloglike(
+            _Flights([inputs], layout), layout.vector({**best, "alpha": factor * best["alpha"]})
         )
         assert wrong > at_best + 10.0
 
@@ -583,7 +584,7 @@ def test_flights_of_one_rocket_fitted_together_narrow_its_coefficients():
         assert together[0].std_errors[key] < 0.85 * min(f.std_errors[key] for f in alone)
     # The joint likelihood is the flights' sum; each flight keeps its own u_d.
     layout = _Layout(theta_model=False, gyro=True, scaling=None)
-    joint = _negloglike(layout.vector(together[0].estimates), flights, layout)
+    joint = negloglike(_Flights(flights, layout), layout.vector(together[0].estimates))
     assert joint == pytest.approx(-sum(f.loglike for f in together))
     for one, rec in zip(together, recordings, strict=True):
         assert np.corrcoef(one.u_d_deg, col(rec, "ud_true_deg")[:-1])[0, 1] > 0.95
@@ -679,7 +680,7 @@ def test_a_failed_flight_fit_names_what_failed(
     stopped and after how many iterations (not a bare 'ABNORMAL')."""
     import identification.methods.flightfit as flightfit
 
-    monkeypatch.setattr(flightfit, "_negloglike", lambda x, flights, layout: 1e12)
+    monkeypatch.setattr(flightfit._Flights, "loglike", lambda self, nat: -math.inf)
     with pytest.raises(IdentificationError) as caught:
         identify_flight(flight_inputs(paper_flight), "constant")
     message = str(caught.value)

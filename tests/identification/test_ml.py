@@ -12,6 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from identification.estimation.likelihood import numerical_hessian
 from identification.estimation.statespace import loglike
 from identification.instruments.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from identification.methods import fit
@@ -22,9 +23,7 @@ from identification.methods.ml import (
     _state_space,
     interval_maps,
     maximum_likelihood,
-    numerical_hessian,
     posterior_given,
-    posterior_traces,
 )
 from identification.methods.pipeline import IdentifyOptions, identify, measurements
 from identification.model import RollParams, simulate
@@ -178,7 +177,7 @@ def check_recovery(rec: Recording, spec: TunnelSpec, found: object) -> None:
     assert within(p.beta_bar_per_s, truth.beta_bar_per_s, se["beta_bar_per_s"]), (p, se)
     # Posterior of u_d: the truth lies in the 90 % band about 90 % of the time.
     ud = np.asarray(rec.ud_true_deg)[:-1]
-    err = found.u_d_mean_deg - ud  # type: ignore[attr-defined]
+    err = found.u_d_deg - ud  # type: ignore[attr-defined]
     coverage = float(np.mean(np.abs(err) <= 1.645 * found.u_d_sd_deg))  # type: ignore[attr-defined]
     assert 0.82 <= coverage <= 0.97, coverage
 
@@ -197,23 +196,23 @@ def test_its_disturbance_is_closer_to_the_truth_than_the_papers(negative: tuple)
     rec, found = negative
     paper = identify(rec, IdentifyOptions(noise_runs=0)).disturbances["theta"].u_d_deg
     ud = np.asarray(rec.ud_true_deg)[:-1]
-    ml_mae = float(np.mean(np.abs(found.u_d_mean_deg - ud)))
+    ml_mae = float(np.mean(np.abs(found.u_d_deg - ud)))
     paper_mae = float(np.mean(np.abs(paper - ud[: paper.size])))
     assert ml_mae < 0.9 * paper_mae, (ml_mae, paper_mae)
 
 
-def test_posterior_traces_are_turbulence_of_the_right_size_and_reproducible(
+def test_posterior_draws_are_turbulence_of_the_right_size_and_reproducible(
     negative: tuple,
 ) -> None:
     rec, found = negative
-    draws = posterior_traces(found, 20, seed=4)
+    draws = found.posterior_draws(20, seed=4)
     assert draws.shape == (20, rec.n_samples - 1)
-    np.testing.assert_array_equal(draws, posterior_traces(found, 20, seed=4))
-    assert not np.array_equal(draws, posterior_traces(found, 20, seed=5))
+    np.testing.assert_array_equal(draws, found.posterior_draws(20, seed=4))
+    assert not np.array_equal(draws, found.posterior_draws(20, seed=5))
     true_sd = float(np.std(np.asarray(rec.ud_true_deg)))
     assert float(np.mean(draws.std(axis=1))) == pytest.approx(true_sd, rel=0.1)
     # Each draw is rougher than the posterior mean: it carries the fast part.
-    assert float(np.mean(draws.std(axis=1))) > 1.1 * float(np.std(found.u_d_mean_deg))
+    assert float(np.mean(draws.std(axis=1))) > 1.1 * float(np.std(found.u_d_deg))
 
 
 @pytest.mark.parametrize(
@@ -333,11 +332,11 @@ def test_the_band_carries_the_parameters_uncertainty_on_a_short_record() -> None
         assert np.mean(found.u_d_sd_deg) > 1.2 * np.mean(plug_in.u_d_sd_deg)
         # the mean is kept (to the last bits only where numpy's loops round both smoothers'
         # sums alike: with AVX-512 they differ by ~1e-11°)
-        np.testing.assert_allclose(found.u_d_mean_deg, plug_in.u_d_mean_deg, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(found.u_d_deg, plug_in.u_d_deg, rtol=0, atol=1e-9)
         assert set(found.correlations) >= {"alpha~theta_bar", "alpha_bar~beta_bar_per_s"}
         assert all(-1.0 <= r <= 1.0 for r in found.correlations.values())
         assert rec.ud_true_deg is not None
-        u = np.asarray(found.u_d_mean_deg)
+        u = np.asarray(found.u_d_deg)
         inside += int(np.sum(np.abs(u - rec.ud_true_deg[: u.size]) <= 1.645 * found.u_d_sd_deg))
         total += u.size
     assert 0.8 < inside / total < 0.97

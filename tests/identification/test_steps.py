@@ -37,7 +37,6 @@ from identification.methods.statistics import (
 )
 from identification.methods.steps import (
     PAPER_SERVO,
-    Disturbance,
     FineGrid,
     IdentificationError,
     bilinear_velocity,
@@ -55,7 +54,7 @@ from identification.methods.steps import (
     resimulate,
     smooth3,
 )
-from identification.model import PAPER_THETA, RollParams, Servo, servo_path, simulate
+from identification.model import PAPER_THETA, Disturbance, RollParams, Servo, servo_path, simulate
 from identification.recordings.recording import Recording
 
 DT = 0.1  # the paper's 10 Hz log
