@@ -57,13 +57,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_at
-from identification.methods.flightfit import (
-    _model_only_r2,
-    flight_inputs,
-    flight_window,
-    held_out_prediction,
-    identify_flights,
-)
+from identification.methods.flight import flight_window, held_out_prediction, model_only_r2_of
+from identification.methods.flightfit import flight_inputs, identify_flights
 from identification.methods.pipeline import IdentifyOptions
 
 #: Name -> (FlightLogSpec settings, what it tests).
@@ -113,7 +108,7 @@ def one(
     """Fly, identify, compare: flights ``seed·joint`` to ``seed·joint + joint - 1``, fitted
     together (:func:`identification.methods.flightfit.identify_flights`), the first one's fit;
     ``extra`` recorder settings on top of the truth's.  Each flight is fitted on the part
-    ``identify`` fits (:func:`identification.methods.flightfit.flight_window`: to apogee, at or
+    ``identify`` fits (:func:`identification.methods.flight.flight_window`: to apogee, at or
     below Mach 0.8), or ``whole``."""
     settings, _ = TRUTHS[truth]
     settings = {**settings, **(extra or {})}
@@ -157,7 +152,7 @@ def one(
         r2 = out[spec.model].get("rate_r2", math.nan)
         if late is not None:
             true_here = truth_at(recordings[0], late.v_ref_mps, late.rho_ref_kgm3)
-            own = _model_only_r2(late, true_here, spec.scaling())
+            own = model_only_r2_of(late, true_here, spec.scaling())
             row["held_out_ratio"] = r2 / own if own > 0 else math.nan
         else:
             row["held_out_ratio"] = math.nan

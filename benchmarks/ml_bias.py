@@ -35,7 +35,7 @@ from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
 from identification.instruments.tunnel import run_tunnel
-from identification.methods import ml
+from identification.methods import ml, rollspace
 from identification.model import damping
 
 VARIANTS = ("quantised", "white", "exact")
@@ -56,7 +56,7 @@ def offsets(truth: str, seed: int) -> list[float]:
     out = []
     for variant, rec in zip(VARIANTS, (quantised, white, exact), strict=True):
         if variant == "white":  # the filter told the resolution the noise stands for
-            with mock.patch.object(ml, "quantum_of", lambda values: q):
+            with mock.patch.object(rollspace, "quantum_of", lambda values: q):
                 found = ml.maximum_likelihood(rec, "theta")
         else:
             found = ml.maximum_likelihood(rec, "theta")

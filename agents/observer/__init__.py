@@ -14,8 +14,8 @@ run forward in real time:
 * :class:`RollObserver` -- a Kalman filter on ``[v, ψ, u_d[k], ...,
   u_d[k-p+1], b]``: roll rate, angle relative to the setpoint, the AR lags
   and the offset.  Its time update is the ML model's
-  (:func:`identification.methods.ml.interval_maps` over the fin path the servo takes
-  to the command, :func:`identification.methods.ml.roll_transition`,
+  (:func:`identification.compiled.interval_maps` over the fin path the servo takes
+  to the command, :func:`identification.methods.rollspace.roll_transition`,
   :func:`identification.estimation.statespace.predict`), its measurement update the
   ML's for the gyro (:func:`identification.estimation.statespace.update`, the
   multiplicative noise of eq. 52 as ``g²·(v̂² + P_vv)``); the encoder as a

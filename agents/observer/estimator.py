@@ -13,8 +13,10 @@ from statsmodels.tsa.arima_process import ArmaProcess
 
 from agents.nominal import NominalModel
 from disturbances.bank import TraceBank
+from identification.compiled import interval_maps
 from identification.estimation.statespace import predict, update
-from identification.methods.ml import MAX_ORDER, interval_maps, roll_transition, stationary_cov
+from identification.methods.ml import MAX_ORDER
+from identification.methods.rollspace import roll_transition, stationary_cov
 from identification.model import Rig, RollParams, linkage_step
 from rocketroll_common.arrays import FloatArray
 from rollenv.core import RollConfig, wrap_deg

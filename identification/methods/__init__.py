@@ -26,8 +26,9 @@ The methods live beside the registry: the paper's steps
 (:mod:`~identification.methods.steps`, eq. by eq.), its pipeline
 (:mod:`~identification.methods.pipeline`), its noise study and statistics;
 output error (:mod:`~identification.methods.baselines`); maximum likelihood in the
-tunnel (:mod:`~identification.methods.ml`) and in flight
-(:mod:`~identification.methods.flightfit`), both on the estimation core; the
+tunnel (:mod:`~identification.methods.ml` on :mod:`~identification.methods.rollspace`) and in
+flight (:mod:`~identification.methods.flight` on :mod:`~identification.methods.flightfit`),
+both on the estimation core; the
 fin's linkage, latency and quadratic damping (:mod:`~identification.methods.actuation`);
 and every fit's adequacy (:mod:`~identification.methods.adequacy`).
 """
@@ -486,7 +487,7 @@ register_method(
 )
 register_method(
     "flight",
-    "identification.methods.flightfit:flight_method",
+    "identification.methods.flight:flight_method",
     summary="a flight (a recording with airspeed_mps): maximum likelihood of a, α at a "
     "reference airspeed (--v-ref) with the airspeed scaling measured (fin torque ∝ ρV^n, "
     "damping ∝ ρV^m) and eq. 4-8 tested, the turbulence a field flown through; u_d from "

@@ -195,7 +195,8 @@ def identify_actuation(
 ) -> Actuation:
     """The linkage (from a measured fin column), the sensors' latency and a quadratic
     damping (from the roll response, by maximum likelihood), each admitted at ``level``."""
-    from identification.methods.ml import delay_search, model_inputs, quadratic_search
+    from identification.methods.ml import delay_search, quadratic_search
+    from identification.methods.pipeline import model_inputs
 
     opts = IdentifyOptions() if options is None else options
     # What the data show, whatever the user states: the search starts from the model's rig.

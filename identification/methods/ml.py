@@ -13,7 +13,7 @@ The turbulence is a zero-mean autoregressive process of order ``p`` on the
 sample grid, ``u_d[k+1] = Σ a_i·u_d[k+1-i] + η[k]`` (its mean cannot be told
 from the asymmetry θ̄: θ̄ carries it, as in the paper).  With the state
 ``[v, φ, u_d[k], ..., u_d[k-p+1]]`` this is a linear Gaussian state-space
-model (:mod:`identification.estimation.statespace`) whose measurements are the
+model (written in :mod:`identification.methods.rollspace`) whose measurements are the
 recording's columns: the encoder angle with its quantisation (variance
 ``q²/12``, ``q`` read off the data), the rate gyro with the multiplicative
 noise of eq. 52 (its level estimated), or both.  Real sensors are noisier
@@ -26,8 +26,9 @@ carried by the turbulence, and the fit runs away.
 
 The parameters -- α, θ̄, the damping (``a``, or ᾱ and β̄), the AR
 coefficients, the innovation SD and the gyro's noise level -- maximise the
-Kalman filter's likelihood (``scipy.optimize.minimize``, L-BFGS-B); their
-standard errors come from the Hessian of the log-likelihood.  The order
+Kalman filter's likelihood (the estimation core,
+:mod:`identification.estimation.likelihood`: L-BFGS-B); their standard errors come
+from the Hessian of the log-likelihood.  The order
 ``p`` is the one of smallest AIC up to :data:`MAX_ORDER`.  The smoother gives
 ``E[u_d | data]`` and its pointwise SD; :meth:`MLFit.posterior_draws` draws whole
 traces from ``p(u_d | data)`` with the simulation smoother -- turbulence with
@@ -40,23 +41,20 @@ alike, from the angle, the rate or both.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
-from scipy import linalg, optimize, stats
+from scipy import optimize, stats
 
-from identification.compiled import UNSCALED, interval_maps, interval_maps_kernel
+from identification.compiled import UNSCALED
 from identification.estimation.likelihood import (
     OUTSIDE,
     StateSpaceFit,
     covariance,
     maximise,
-    negloglike_at,
     numerical_hessian,
     posterior_states,
     standard_errors,
@@ -67,7 +65,6 @@ from identification.estimation.statespace import (
     filtered_means,
     smooth,
     standardized_innovations,
-    update,
 )
 from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.methods.pipeline import (
@@ -77,6 +74,22 @@ from identification.methods.pipeline import (
     measurements,
     model_inputs,
 )
+from identification.methods.rollspace import (
+    MIN_DAMPING,
+    RollData,
+    RollLayout,
+    RollLikelihood,
+    RollParts,
+    count_params,
+    layout_for,
+    negloglike_natural,
+    pacf_from_ar,
+    prepare,
+    roll_loglike,
+    roll_parts,
+    roll_system,
+    stationary_cov,
+)
 from identification.methods.steps import IdentificationError, resimulate
 from identification.model import (
     QUADRATIC_RATE_DPS,
@@ -85,7 +98,7 @@ from identification.model import (
     check_model,
     quadratic_growth,
 )
-from identification.recordings.recording import Recording, quantum_of
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
@@ -95,480 +108,19 @@ __all__ = [
     "QuadraticSearch",
     "delay_search",
     "delayed_fin",
-    "interval_maps",
     "maximum_likelihood",
     "ml_method",
     "posterior_given",
     "quadratic_fit",
     "quadratic_search",
     "rate_damped",
-    "roll_transition",
-    "stationary_cov",
 ]
 
 #: Highest AR order of the turbulence tried.
 MAX_ORDER = 3
-#: Smallest damping the optimiser may visit, 1/s.
-MIN_DAMPING = 0.01
-#: Variance floor of a measurement, (° or °/s)², so an ideal sensor stays regular.
-_VAR_FLOOR = 1e-8
 
 
-@dataclass(frozen=True)
-class _Data:
-    """What the likelihood needs from a recording, prepared once."""
-
-    name: str
-    time_s: FloatArray
-    theta_fine: FloatArray
-    per: int
-    h: float
-    y: FloatArray  # (n, d): columns in the order of ``observed``
-    observed: np.ndarray  # state index of each column: 0 rate, 1 angle
-    angle_var: float  # encoder quantisation variance, or NaN without an encoder
-    has_gyro: bool
-    angle_noise: float  # the angle's noise SD beyond its grid read off the data, ° (0: none)
-    theta_min: float
-    theta_max: float
-    #: Per substep: the gain's and the damping's multipliers (empty: none), as in flight.
-    gain_scale: FloatArray = field(default_factory=lambda: UNSCALED)
-    damping_scale: FloatArray = field(default_factory=lambda: UNSCALED)
-
-    @property
-    def n(self) -> int:
-        return int(self.y.shape[0])
-
-
-#: The angle's sample-to-sample noise, as a multiple of its grid's ``q/√12``, beyond
-#: which it is not an encoder's quantisation alone and its SD is a parameter.
-_BEYOND_GRID = 2.0
-
-
-def _noise_beyond_grid(angle: FloatArray, grid_var: float) -> float:
-    """The angle's white-noise SD as its second differences show it (``SD(Δ²φ)/√6``),
-    where that is more than :data:`_BEYOND_GRID` times what the grid explains; else 0.
-
-    An encoder's reading scatters by its quantisation only (``q²/12``); an analogue
-    angle (a potentiometer, an attitude estimate, a converted log) has noise of its
-    own, which read as exact would make the turbulence carry it.
-    """
-    sd = float(np.std(np.diff(angle, 2))) / math.sqrt(6.0)
-    return sd if sd > _BEYOND_GRID * math.sqrt(grid_var) else 0.0
-
-
-def _prepare(inputs: Measurements) -> _Data:
-    rec = inputs.recording
-    # A validated recording has at least 50 samples and a fin that moves.
-    theta = np.asarray(inputs.theta_fine, dtype=float)
-    columns, observed = [], []
-    angle_var = math.nan
-    angle_noise = 0.0
-    if rec.roll_rate_dps is not None:
-        columns.append(np.asarray(rec.roll_rate_dps, dtype=float))
-        observed.append(0)
-    if rec.roll_deg is not None:
-        roll = np.asarray(rec.roll_deg, dtype=float)
-        q = quantum_of(roll)
-        angle_var = max(q * q / 12.0, _VAR_FLOOR)
-        angle_noise = _noise_beyond_grid(roll, angle_var)
-        columns.append(roll)
-        observed.append(1)
-    return _Data(
-        name=rec.name,
-        time_s=np.asarray(rec.time_s, dtype=float),
-        theta_fine=theta,
-        per=int(inputs.grid.per_sample),
-        h=float(inputs.grid.step_s),
-        y=np.column_stack(columns),
-        observed=np.asarray(observed, dtype=np.intp),
-        angle_var=angle_var,
-        has_gyro=rec.roll_rate_dps is not None,
-        angle_noise=angle_noise,
-        theta_min=float(theta.min()),
-        theta_max=float(theta.max()),
-    )
-
-
-# ----------------------------------------------------------------------------- parameters
-@dataclass(frozen=True)
-class _Layout:
-    """Names of the unconstrained vector the optimiser moves, for one model and order.
-
-    The θ-dependent damping is moved as its value ``a_mid`` at the typical
-    deflection ``|θ + θ̄| = pivot`` and its change ``slope = ᾱ·pivot`` across
-    it: ᾱ and β̄ themselves are nearly collinear, which slows the optimiser.
-    """
-
-    model: str
-    order: int
-    gyro: bool
-    pivot: float = 1.0
-    angle: bool = False  # the angle's noise beyond its grid is a parameter
-    floor: bool = False  # the gyro's additive noise is a parameter
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        damping = ("a",) if self.model == "constant" else ("a_mid", "slope")
-        ar = tuple(f"ar{i + 1}" for i in range(self.order))
-        return (
-            "alpha",
-            "theta_bar",
-            *damping,
-            *ar,
-            "sd",
-            *(("gyro",) if self.gyro else ()),
-            *(("angle",) if self.angle else ()),
-            *(("floor",) if self.floor else ()),
-        )
-
-    @property
-    def bounds(self) -> None:
-        """None: the vector is unbounded (the transforms below keep it in the model)."""
-        return None
-
-    def natural(self, x: FloatArray) -> dict[str, Any]:
-        """Parameters from the optimiser's vector: AR coefficients stationary by
-        construction (partial autocorrelations through tanh), SDs positive (log), both
-        held in a box (:data:`_PACF_BOX`, :data:`_LOG_SD_BOX`) where they stay regular."""
-        values = dict(zip(self.names, x.tolist(), strict=True))
-        pacf = np.tanh(np.clip([values[f"ar{i + 1}"] for i in range(self.order)], *_PACF_BOX))
-        out: dict[str, Any] = {
-            "alpha": values["alpha"],
-            "theta_bar": values["theta_bar"],
-            "ar": _ar_from_pacf(pacf),
-            "innovation_sd": _level(values["sd"]),
-            "gyro": _level(values["gyro"]) if self.gyro else 0.0,
-            "angle_sd": _level(values["angle"]) if self.angle else 0.0,
-            "gyro_floor": _level(values["floor"]) if self.floor else 0.0,
-        }
-        if self.model == "constant":
-            out["alpha_bar"], out["beta_bar"] = 0.0, values["a"]
-        else:
-            out["alpha_bar"] = values["slope"] / self.pivot
-            out["beta_bar"] = values["a_mid"] - values["slope"]
-        return out
-
-    def vector(self, nat: dict[str, Any]) -> FloatArray:
-        """The optimiser's vector for natural parameters (inverse of :meth:`natural`)."""
-        pacf = _pacf_from_ar(np.asarray(nat["ar"], dtype=float))
-        slope = nat["alpha_bar"] * self.pivot
-        values = {
-            "alpha": nat["alpha"],
-            "theta_bar": nat["theta_bar"],
-            "a": nat["beta_bar"],
-            "a_mid": nat["beta_bar"] + slope,
-            "slope": slope,
-            "sd": math.log(nat["innovation_sd"]),
-            "gyro": math.log(max(nat["gyro"], 1e-6)),
-            "angle": math.log(max(nat.get("angle_sd", 0.0), 1e-6)),
-            "floor": math.log(max(nat.get("gyro_floor", 0.0), 1e-6)),
-            **{
-                f"ar{i + 1}": float(np.arctanh(np.clip(r, -0.999, 0.999)))
-                for i, r in enumerate(pacf)
-            },
-        }
-        return np.array([values[name] for name in self.names], dtype=float)
-
-
-#: Box of a partial autocorrelation's ``atanh``: ``|pacf| ≤ tanh(7) = 1 - 1.7e-6``.  A
-#: turbulence the data cannot tell from a constant walks towards the unit root, where
-#: ``tanh`` rounds to 1 and its stationary covariance is singular; the box stops it.
-_PACF_BOX = (-7.0, 7.0)
-#: Box of a noise level's natural log (SDs from 2e-9 to 2e4, ° or °/s, or a fraction):
-#: a level the data do not need walks towards 0, where its variance underflows.
-_LOG_SD_BOX = (-20.0, 10.0)
-
-
-def _level(log_sd: float) -> float:
-    """A noise level from its log, held in :data:`_LOG_SD_BOX`."""
-    return math.exp(min(max(log_sd, _LOG_SD_BOX[0]), _LOG_SD_BOX[1]))
-
-
-def _ar_from_pacf(pacf: FloatArray) -> FloatArray:
-    """AR coefficients from partial autocorrelations (Durbin–Levinson; |pacf| < 1: stationary)."""
-    phi = np.zeros(0)
-    for k, r in enumerate(np.asarray(pacf, dtype=float)):
-        phi = np.append(phi - r * phi[::-1], r) if k else np.array([r])
-    return phi
-
-
-def _pacf_from_ar(ar: FloatArray) -> FloatArray:
-    """Partial autocorrelations of a stationary AR polynomial (inverse Durbin–Levinson)."""
-    phi = np.asarray(ar, dtype=float).copy()
-    out = np.empty(phi.size)
-    for k in range(phi.size - 1, -1, -1):
-        r = phi[k]
-        out[k] = r
-        if k:
-            phi = (phi[:k] + r * phi[:k][::-1]) / (1.0 - r * r)
-    return out
-
-
-def stationary_cov(ar: FloatArray, innovation_sd: float) -> FloatArray:
-    """Covariance of ``[u_d[k], ..., u_d[k-p+1]]`` of the stationary AR process."""
-    p = ar.size
-    companion = np.zeros((p, p))
-    companion[0] = ar
-    companion[1:, :-1] = np.eye(p - 1)
-    q = np.zeros((p, p))
-    q[0, 0] = innovation_sd**2
-    cov = linalg.solve_discrete_lyapunov(companion, q)
-    return np.asarray(0.5 * (cov + cov.T), dtype=float)
-
-
-@dataclass(frozen=True, eq=False)
-class _Parts:
-    """The roll model's state-space pieces under one set of parameters."""
-
-    maps: FloatArray  # (n - 1, 6): [E, G, f, A, B, g] per interval
-    ar: FloatArray
-    innovation_var: float
-    gyro_var: float  # g² of eq. 52
-    floor_var: float  # the gyro's additive noise variance, (°/s)²
-    obs_var: FloatArray  # the gyro's columns NaN until a filter pass fills them
-    initial_mean: FloatArray
-    initial_cov: FloatArray
-
-
-def _parts(data: _Data, nat: dict[str, Any]) -> _Parts | None:
-    """The model of ``data`` under natural parameters; None where the damping is not positive."""
-    alpha, theta_bar = nat["alpha"], nat["theta_bar"]
-    alpha_bar, beta_bar = nat["alpha_bar"], nat["beta_bar"]
-    lowest = beta_bar + min(
-        alpha_bar * abs(data.theta_min + theta_bar), alpha_bar * abs(data.theta_max + theta_bar)
-    )
-    if not (lowest >= MIN_DAMPING and alpha != 0.0):
-        return None
-    ar = np.asarray(nat["ar"], dtype=float)
-    m = 2 + ar.size
-    maps = interval_maps_kernel(
-        alpha,
-        theta_bar,
-        beta_bar,
-        alpha_bar,
-        data.theta_fine,
-        data.per,
-        data.h,
-        data.gain_scale,
-        data.damping_scale,
-        -1.0,
-    )
-    obs_var = np.empty(data.y.shape)
-    for j, index in enumerate(data.observed.tolist()):
-        if index == 1:
-            obs_var[:, j] = data.angle_var + nat.get("angle_sd", 0.0) ** 2
-        else:  # eq. 52: Var = g²·v², filled in by the filter (:func:`_roll_loglike`)
-            obs_var[:, j] = math.nan
-    u_cov = stationary_cov(ar, nat["innovation_sd"])
-    initial_mean = np.zeros(m)
-    initial_cov = np.zeros((m, m))
-    initial_cov[2:, 2:] = u_cov
-    initial_mean[0] = alpha * (float(data.theta_fine[0]) + theta_bar)
-    initial_cov[0, 0] = (alpha**2) * u_cov[0, 0] + 1.0
-    angle_col = np.flatnonzero(data.observed == 1)
-    if angle_col.size:
-        # Where the angle starts is not a parameter: a wide prior, pinned by the first reading.
-        initial_mean[1] = data.y[0, angle_col[0]]
-        initial_cov[1, 1] = 1e4
-    else:
-        initial_cov[1, 1] = 1.0
-    return _Parts(
-        maps,
-        ar,
-        nat["innovation_sd"] ** 2,
-        nat["gyro"] ** 2,
-        nat.get("gyro_floor", 0.0) ** 2,
-        obs_var,
-        initial_mean,
-        initial_cov,
-    )
-
-
-def roll_transition(maps: FloatArray, ar: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The transition ``T[k]`` and intercept ``c[k]`` of the state
-    ``[v, φ, u_d[k], ..., u_d[k-p+1]]`` over each interval of ``maps``.
-
-    ``maps`` (n, 6): ``[E, G, f, A, B, g]`` per interval (:func:`interval_maps`);
-    ``ar``: the turbulence's AR coefficients.  Returns arrays of shapes
-    (n, m, m) and (n, m), ``m = 2 + p``.  The one place the model's state-space
-    form is written: the likelihood's sparse kernel (:func:`_predict_roll`) is
-    checked against it, and the observer-based controller of
-    :mod:`agents.observer` runs on it.
-    """
-    maps = np.atleast_2d(np.asarray(maps, dtype=float))
-    n, p = maps.shape[0], ar.size
-    m = 2 + p
-    transition = np.zeros((n, m, m))
-    transition[:, 0, 0] = maps[:, 0]
-    transition[:, 0, 2] = maps[:, 1]
-    transition[:, 1, 0] = maps[:, 3]
-    transition[:, 1, 1] = 1.0
-    transition[:, 1, 2] = maps[:, 4]
-    transition[:, 2, 2:] = ar
-    for i in range(1, p):
-        transition[:, 2 + i, 1 + i] = 1.0
-    intercept = np.zeros((n, m))
-    intercept[:, 0] = maps[:, 2]
-    intercept[:, 1] = maps[:, 5]
-    return transition, intercept
-
-
-def _state_space(data: _Data, parts: _Parts) -> LinearGaussian:
-    """The model as a general :class:`LinearGaussian` (for the smoother)."""
-    m = 2 + parts.ar.size
-    # n samples, n - 1 intervals: the last transition is not used (an all-zero map).
-    maps = np.vstack([parts.maps, np.zeros((1, parts.maps.shape[1]))])
-    transition, intercept = roll_transition(maps, parts.ar)
-    state_cov = np.zeros((m, m))
-    state_cov[2, 2] = parts.innovation_var
-    return LinearGaussian(
-        y=data.y,
-        observed=data.observed,
-        obs_var=parts.obs_var,
-        transition=transition,
-        intercept=intercept,
-        state_cov=state_cov,
-        initial_mean=parts.initial_mean,
-        initial_cov=parts.initial_cov,
-    )
-
-
-@numba.njit(cache=True, nogil=True)
-def _predict_roll(
-    a: FloatArray,
-    p: FloatArray,
-    step: FloatArray,
-    ar: FloatArray,
-    innovation_var: float,
-    work: FloatArray,
-) -> None:
-    """The time update of :func:`identification.estimation.statespace.predict` for the roll model's
-    sparse transition (``step`` = ``[E, G, f, A, B, g]``; AR companion below), in place.
-
-    Row by row, ``T·P`` and then ``(T·P)·T'`` touch only the non-zero entries of ``T``:
-    O(m·p) per row instead of O(m²)."""
-    m = a.size
-    e, g, f, aa, bb, gg = step[0], step[1], step[2], step[3], step[4], step[5]
-    order = ar.size
-    x0 = a[2]
-    new2 = 0.0
-    for j in range(order):
-        new2 += ar[j] * a[2 + j]
-    a1 = a[1] + aa * a[0] + bb * x0 + gg
-    a0 = e * a[0] + g * x0 + f
-    for i in range(m - 1, 2, -1):
-        a[i] = a[i - 1]
-    a[0], a[1], a[2] = a0, a1, new2
-    tp = work  # rows of T·P
-    for s in range(m):
-        tp[0, s] = e * p[0, s] + g * p[2, s]
-        tp[1, s] = aa * p[0, s] + p[1, s] + bb * p[2, s]
-        acc = 0.0
-        for j in range(order):
-            acc += ar[j] * p[2 + j, s]
-        tp[2, s] = acc
-        for i in range(3, m):
-            tp[i, s] = p[i - 1, s]
-    for r in range(m):
-        c0 = e * tp[r, 0] + g * tp[r, 2]
-        c1 = aa * tp[r, 0] + tp[r, 1] + bb * tp[r, 2]
-        acc = 0.0
-        for j in range(order):
-            acc += ar[j] * tp[r, 2 + j]
-        p[r, 0] = c0
-        p[r, 1] = c1
-        p[r, 2] = acc
-        for i in range(3, m):
-            p[r, i] = tp[r, i - 1]
-    p[2, 2] += innovation_var
-    for r in range(m):  # symmetric by construction; keep it exactly so
-        for s in range(r + 1, m):
-            mean = 0.5 * (p[r, s] + p[s, r])
-            p[r, s] = mean
-            p[s, r] = mean
-
-
-@numba.njit(cache=True, nogil=True)
-def _roll_loglike(
-    maps: FloatArray,
-    ar: FloatArray,
-    innovation_var: float,
-    gyro_var: float,
-    floor_var: float,
-    y: FloatArray,
-    observed: np.ndarray,
-    obs_var: FloatArray,
-    a0: FloatArray,
-    p0: FloatArray,
-) -> float:
-    """The Kalman filter's log-likelihood of :func:`_state_space`, with the roll model's
-    sparse time update (what the optimiser calls).
-
-    The gyro's noise is multiplicative (eq. 52: ``y = (1 + g·ε)·v``): its variance
-    ``g²·v²`` is taken at the predicted rate, ``g²·E[v² | y before] = g²·(v̂² + P_vv)``,
-    which makes the update the best linear one (the reading itself would put its
-    own noise into its weight).  The variances used are written into ``obs_var``'s
-    gyro columns, so the smoother runs on the filter's model."""
-    n, d = y.shape
-    m = a0.size
-    gains = np.empty((d, m))
-    work = np.empty((m, m))
-    a = a0.copy()
-    p = p0.copy()
-    ll = 0.0
-    for k in range(n):
-        for j in range(d):
-            if observed[j] == 0:  # the rate is updated first: a, p are the prediction
-                obs_var[k, j] = gyro_var * (a[0] * a[0] + p[0, 0]) + floor_var + _VAR_FLOOR
-        ll += update(a, p, y[k], observed, obs_var[k], gains)
-        if not ll > -np.inf:
-            return -np.inf
-        if k + 1 < n:
-            _predict_roll(a, p, maps[k], ar, innovation_var, work)
-    return ll
-
-
-def _loglike(data: _Data, nat: dict[str, Any]) -> float:
-    """The log-likelihood of ``data`` under natural parameters (``-inf``: no stable model)."""
-    parts = _parts(data, nat)
-    return -math.inf if parts is None else _filter(data, parts)
-
-
-def _negloglike_natural(data: _Data, nat: dict[str, Any]) -> float:
-    return negloglike_at(functools.partial(_loglike, data), nat)
-
-
-@dataclass(frozen=True)
-class _Roll:
-    """The roll model of one recording, as the estimation core fits it (with the sparse
-    kernel's log-likelihood)."""
-
-    data: _Data
-    layout: _Layout
-
-    def loglike(self, nat: dict[str, Any]) -> float:
-        return _loglike(self.data, nat)
-
-
-def _filter(data: _Data, parts: _Parts) -> float:
-    """The log-likelihood of ``data`` under ``parts`` (fills the gyro's variances)."""
-    return float(
-        _roll_loglike(
-            parts.maps,
-            parts.ar,
-            parts.innovation_var,
-            parts.gyro_var,
-            parts.floor_var,
-            data.y,
-            data.observed,
-            parts.obs_var,
-            parts.initial_mean,
-            parts.initial_cov,
-        )
-    )
-
-
-def _start(data: _Data, inputs: Measurements, model: str, order: int) -> dict[str, Any]:
+def _start(data: RollData, inputs: Measurements, model: str, order: int) -> dict[str, Any]:
     """A starting point from the data alone: α and θ̄ from a line through rate
     against fin angle, a = 1 1/s, u_d of the residual's size, lag-one correlation 0.5."""
     fin = np.asarray(inputs.theta_fine[:: data.per], dtype=float)
@@ -581,7 +133,7 @@ def _start(data: _Data, inputs: Measurements, model: str, order: int) -> dict[st
 
 
 def _starting_point(
-    data: _Data, order: int, alpha: float, theta_bar: float, damping: float, residual: FloatArray
+    data: RollData, order: int, alpha: float, theta_bar: float, damping: float, residual: FloatArray
 ) -> dict[str, Any]:
     """Natural parameters to start from: the rocket given (constant damping), ``u_d``
     of the residual's size (at least 0.5°) with lag-one correlation 0.5, the gyro's
@@ -601,7 +153,7 @@ def _starting_point(
     }
 
 
-def _equation_error_start(data: _Data, inputs: Measurements) -> dict[str, Any] | None:
+def _equation_error_start(data: RollData, inputs: Measurements) -> dict[str, Any] | None:
     """A second starting point, from the one-step regression of the smoothed rate on
     itself and the fin (``v[k+1] = e·v[k] + c·θ[k] + d``: the model's sample map with
     ``u_d`` in the residual), for any input; None where it gives no damped rocket.
@@ -696,11 +248,6 @@ class MLFit(StateSpaceFit):
         return np.asarray(draws[:, :-1, 2], dtype=float)
 
 
-def _pivot(data: _Data, theta_bar: float) -> float:
-    """The typical deflection ``mean |θ + θ̄|`` of the recording, ° (at least 1°)."""
-    return max(float(np.mean(np.abs(data.theta_fine + theta_bar))), 1.0)
-
-
 @dataclass(frozen=True)
 class _Information:
     """The observed information at the optimum, over every free parameter: the rocket's
@@ -715,9 +262,9 @@ class _Information:
     trial: Callable[[FloatArray], dict[str, Any]]
 
 
-def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
+def _information(data: RollData, model: str, nat: dict[str, Any]) -> _Information:
     """The Hessian of the log-likelihood over all free parameters, inverted."""
-    layout = _layout(data, model, int(np.size(nat["ar"])), nat)
+    layout = layout_for(data, model, int(np.size(nat["ar"])), nat)
     rocket = (
         ("alpha", "theta_bar", "beta_bar")
         if model == "constant"
@@ -733,7 +280,7 @@ def _information(data: _Data, model: str, nat: dict[str, Any]) -> _Information:
         return out
 
     point = np.concatenate([[nat[name] for name in rocket], x0[k:]])
-    hess = numerical_hessian(lambda values: _negloglike_natural(data, trial(values)), point)
+    hess = numerical_hessian(lambda values: negloglike_natural(data, trial(values)), point)
     return _Information(rocket, point, covariance(hess), trial)
 
 
@@ -749,16 +296,16 @@ def _rocket_estimates(info: _Information, model: str) -> tuple[dict[str, float],
 _BAND_STEP_SE = 0.1
 
 
-def _smoothed_u(data: _Data, nat: dict[str, Any]) -> FloatArray | None:
+def _smoothed_u(data: RollData, nat: dict[str, Any]) -> FloatArray | None:
     """The posterior mean ``u_d`` under ``nat`` (None: no stable model there)."""
-    parts = _parts(data, nat)
+    parts = roll_parts(data, nat)
     if parts is None:
         return None
-    _filter(data, parts)
-    return np.asarray(smooth(_state_space(data, parts)).mean[:-1, 2], dtype=float)
+    roll_loglike(data, parts)
+    return np.asarray(smooth(roll_system(data, parts)).mean[:-1, 2], dtype=float)
 
 
-def _parameter_variance(data: _Data, info: _Information, u: FloatArray) -> FloatArray:
+def _parameter_variance(data: RollData, info: _Information, u: FloatArray) -> FloatArray:
     """The variance the parameters' own uncertainty adds to the posterior mean ``u_d``:
     ``J·C·Jᵀ`` per interval (delta method), ``J`` forward differences of the smoothed
     mean over each free parameter (steps of :data:`_BAND_STEP_SE` of its standard
@@ -782,12 +329,17 @@ def _parameter_variance(data: _Data, info: _Information, u: FloatArray) -> Float
     return np.clip(np.einsum("ti,ij,tj->t", jac, info.cov, jac), 0.0, None)
 
 
+def _maximise(data: RollData, layout: RollLayout, start: dict[str, Any]) -> optimize.OptimizeResult:
+    """The estimation core's fit of the roll model of ``data`` from one start."""
+    return maximise(RollLikelihood(data, layout), [start])
+
+
 @dataclass
 class _Search:
     """Fits of one recording across models and AR orders, shared (the constant
     model's AR(1) fit starts the θ model)."""
 
-    data: _Data
+    data: RollData
     inputs: Measurements
     nfev: int = 0
     found: dict[tuple[str, int], tuple[float, dict[str, Any], bool, str]] = field(
@@ -811,8 +363,8 @@ class _Search:
     def _run(
         self, model: str, order: int, warm: dict[str, Any]
     ) -> tuple[float, dict[str, Any], bool, str]:
-        layout = _layout(self.data, model, order, warm)
-        result = maximise(_Roll(self.data, layout), [warm])
+        layout = layout_for(self.data, model, order, warm)
+        result = _maximise(self.data, layout, warm)
         # Each call of the objective is one value and one forward difference per parameter.
         self.nfev += int(result.nfev) * (result.x.size + 1)
         return (
@@ -848,7 +400,7 @@ class _Search:
         return best[0]
 
 
-def _disagree(data: _Data, found: dict[str, Any], other: dict[str, Any]) -> bool:
+def _disagree(data: RollData, found: dict[str, Any], other: dict[str, Any]) -> bool:
     """Whether a fit and another estimate tell different rockets: gains more than 25 %
     apart (or of opposite sign), or asymmetries more than a quarter of the fin's span."""
     span = max(data.theta_max - data.theta_min, 1e-6)
@@ -869,31 +421,13 @@ _START_GAIN = 1.0
 _FLOOR_GAIN = 0.01
 
 
-def _quiet_noise(data: _Data) -> float:
+def _quiet_noise(data: RollData) -> float:
     """A first guess of the gyro's additive noise SD: ``SD(Δ²y)/√6`` over the fifth of
     the readings nearest zero rate, °/s."""
     rate = data.y[:, int(np.flatnonzero(data.observed == 0)[0])]
     second = np.diff(rate, 2) / math.sqrt(6.0)
     quiet = np.abs(rate[1:-1]) <= np.percentile(np.abs(rate[1:-1]), 20.0)
     return max(float(np.std(second[quiet])), 1e-3)
-
-
-def _layout(data: _Data, model: str, order: int, nat: dict[str, Any]) -> _Layout:
-    """The optimiser's parameters for ``data`` near ``nat``: the recording's sensors, and
-    the gyro's noise chosen by the first fit (:meth:`_Search._first`), decide which
-    noise levels are free."""
-    return _Layout(
-        model,
-        order,
-        data.has_gyro,
-        _pivot(data, nat["theta_bar"]),
-        angle=data.angle_noise > 0.0,
-        floor=nat.get("gyro_floor", 0.0) > 0.0,
-    )
-
-
-def _n_params(data: _Data, model: str, order: int, nat: dict[str, Any]) -> int:
-    return len(_layout(data, model, order, nat).names)
 
 
 def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
@@ -904,13 +438,13 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
     best = 1
     for order in range(1, max_order + 1):
         fun, nat = search.order(model, order)[:2]
-        orders[order] = 2.0 * _n_params(data, model, order, nat) + 2.0 * fun
+        orders[order] = 2.0 * count_params(data, model, order, nat) + 2.0 * fun
         if orders[order] < orders[best]:
             best = order
         elif order > best:
             break
     fun, nat, converged, message = search.order(model, best)
-    parts = _parts(data, nat)
+    parts = roll_parts(data, nat)
     if parts is None or not fun < OUTSIDE:
         raise IdentificationError(
             f"{data.name}: maximum likelihood found no stable model ({message})"
@@ -924,7 +458,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         parts,
         loglike=-fun,
         aic=float(orders[best]),
-        n_params=_n_params(data, model, best, nat),
+        n_params=count_params(data, model, best, nat),
         std_errors=std_errors,
         correlations=correlations,
         orders=orders,
@@ -935,10 +469,10 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
 
 
 def _result(
-    data: _Data,
+    data: RollData,
     model: str,
     nat: dict[str, Any],
-    parts: _Parts,
+    parts: RollParts,
     *,
     loglike: float,
     aic: float,
@@ -952,8 +486,8 @@ def _result(
 ) -> MLFit:
     """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``; its band
     widened by the parameters' uncertainty where their ``information`` is given."""
-    _filter(data, parts)  # the gyro's variances, as the likelihood had them
-    ss = _state_space(data, parts)
+    roll_loglike(data, parts)  # the gyro's variances, as the likelihood had them
+    ss = roll_system(data, parts)
     smoothed = smooth(ss)
     u_mean = np.asarray(smoothed.mean[:-1, 2], dtype=float)
     u_var = np.clip(smoothed.cov[:-1, 2, 2], 0.0, None)
@@ -1020,12 +554,12 @@ def posterior_given(
     coefficients = np.asarray(ar, dtype=float)
     if coefficients.ndim != 1 or coefficients.size < 1:
         raise ValueError("ar must be a sequence of at least one coefficient")
-    if np.any(np.abs(_pacf_from_ar(coefficients)) >= 1.0):
+    if np.any(np.abs(pacf_from_ar(coefficients)) >= 1.0):
         raise ValueError(f"ar {coefficients.tolist()} is not stationary")
     if not sd_deg > 0.0:
         raise ValueError(f"sd_deg must be positive, got {sd_deg!r}")
     opts = IdentifyOptions() if options is None else options
-    data = _prepare(measurements(recording, opts))
+    data = prepare(measurements(recording, opts))
     unit = math.sqrt(stationary_cov(coefficients, 1.0)[0, 0])
     nat = {
         "alpha": params.alpha,
@@ -1036,11 +570,11 @@ def posterior_given(
         "innovation_sd": sd_deg / unit,
         "gyro": gyro_noise,
     }
-    parts = _parts(data, nat)
+    parts = roll_parts(data, nat)
     if parts is None:
         raise IdentificationError(f"{recording.name}: the damping a(θ) is not positive")
     model = "constant" if params.is_constant_damping else "theta"
-    ll = -_negloglike_natural(data, nat)
+    ll = -negloglike_natural(data, nat)
     return _result(
         data,
         model,
@@ -1081,7 +615,7 @@ def maximum_likelihood(
     MLFit
     """
     inputs = model_inputs(recording, model, options)
-    return _fit(_Search(_prepare(inputs), inputs), model, max_order)
+    return _fit(_Search(prepare(inputs), inputs), model, max_order)
 
 
 @dataclass(frozen=True)
@@ -1115,11 +649,11 @@ def delay_search(inputs: Measurements, model: str, delays: Sequence[int]) -> Del
     the screen's best and its two neighbours then fitted from there, the best fit kept (its
     likelihood-ratio statistic against no delay is conservative: the screen may miss a
     better delay, never invent one)."""
-    search = _Search(_prepare(inputs), inputs)
+    search = _Search(prepare(inputs), inputs)
     base = _fit(search, model)
     nat = search.order(model, base.ar.size)[1]
     screened = {
-        int(d): -_negloglike_natural(_prepare(delayed_fin(inputs, int(d))), nat) for d in delays
+        int(d): -negloglike_natural(prepare(delayed_fin(inputs, int(d))), nat) for d in delays
     }
     top = max(screened, key=lambda d: screened[d])
     if top == 0:
@@ -1127,8 +661,8 @@ def delay_search(inputs: Measurements, model: str, delays: Sequence[int]) -> Del
     fitted = {0: base.loglike}
     for d in (top - 1, top, top + 1):  # the screen's peak leans towards none: its neighbours
         if d in screened and d not in fitted:
-            data = _prepare(delayed_fin(inputs, d))
-            result = maximise(_Roll(data, _layout(data, model, base.ar.size, nat)), [nat])
+            data = prepare(delayed_fin(inputs, d))
+            result = _maximise(data, layout_for(data, model, base.ar.size, nat), nat)
             fitted[d] = max(-float(result.fun), screened[d])
     best = max(fitted, key=lambda d: fitted[d])
     return DelaySearch(best, inputs.grid.step_s, base.loglike, fitted[best], screened)
@@ -1174,7 +708,7 @@ class QuadraticSearch:
         }
 
 
-def rate_damped(data: _Data, speed: FloatArray, coefficient: float) -> _Data:
+def rate_damped(data: RollData, speed: FloatArray, coefficient: float) -> RollData:
     """``data`` with the damping ``a(θ)·(1 + q·|v|/QUADRATIC_RATE_DPS)`` (``q`` the
     ``coefficient``, ``|v|`` the ``speed`` per substep) and the gain divided by the same:
     ``dv/dt = -a(θ)·(v - α·(θ + θ̄ + u_d)) - a(θ)·q·v·|v|/QUADRATIC_RATE_DPS``, with ``|v|``
@@ -1204,7 +738,7 @@ def quadratic_search(
     judged against (on the paper's in-model truth it found q ≈ -0.1 at LR 30-80).
     ``search`` is the linear fits' of ``inputs`` where the caller has them."""
     if search is None:
-        search = _Search(_prepare(inputs), inputs)
+        search = _Search(prepare(inputs), inputs)
     data = search.data
     base = _fit(search, model)
     nat = search.order(model, base.ar.size)[1]
@@ -1223,8 +757,8 @@ def quadratic_search(
             # the linear fit's parameters, its gain given back the rate's mean damping
             gain = float(quadratic_growth(mean_speed, c))
             warm = {**nat, "alpha": nat["alpha"] * gain}
-            result = maximise(_Roll(damped, _layout(damped, model, base.ar.size, nat)), [warm])
-            profile[c] = max(-float(result.fun), -_negloglike_natural(damped, warm))
+            result = _maximise(damped, layout_for(damped, model, base.ar.size, nat), warm)
+            profile[c] = max(-float(result.fun), -negloglike_natural(damped, warm))
         return -profile[c]
 
     for end in bounds:  # the profile's ends, which the bounded search does not visit
@@ -1263,7 +797,7 @@ def quadratic_fit(
         return base
     if np.size(found.speed) == 0:
         raise ValueError("the quadratic search carries no |v| path to refit along")
-    damped = rate_damped(_prepare(inputs), np.asarray(found.speed), q)
+    damped = rate_damped(prepare(inputs), np.asarray(found.speed), q)
     fitted = _fit(_Search(damped, inputs), model)
     return dataclasses.replace(  # q is one parameter more, in every order's AIC too
         fitted,
@@ -1315,7 +849,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     smoothed derivative whose error would stay in the angle for good.
     """
     inputs = context.measurements
-    search = _Search(_prepare(inputs), inputs)
+    search = _Search(prepare(inputs), inputs)
     fits = []
     for model in models:
         found = _fit(search, model)

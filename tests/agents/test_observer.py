@@ -13,7 +13,7 @@ from agents.nominal import NominalModel
 from agents.observer import ObserverController, RollObserver, TurbulenceModel
 from agents.registry import CONTROLLERS, make_controller
 from disturbances.bank import TraceBank
-from identification.methods.ml import stationary_cov
+from identification.methods.rollspace import stationary_cov
 from identification.model import RollParams
 from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollConfig
@@ -223,7 +223,8 @@ def test_the_observer_tracks_an_injected_u_d(env_id, default_db):
 
 def test_the_observer_is_a_kalman_filter_of_the_ml_model():
     """With a white encoder model and no offset, one observer step is the ML's state-space
-    step: the transition of identification.methods.ml.roll_transition with the bias column."""
+    step: the transition of identification.methods.rollspace.roll_transition with the bias
+    column."""
     cfg = config(split="test")
     turbulence = TurbulenceModel(np.array([0.8]), 5.0, 0.3, 0.01, 0.1)
     observer = RollObserver(RollParams(0.66, 4.5, 2.3, -0.027), turbulence, cfg)

@@ -298,7 +298,8 @@ def test_a_quadratic_damping_is_not_invented_on_the_papers_rocket() -> None:
     """The paper's 573-s schedule at 10 Hz on the paper's linear rocket: the profile
     interval covers 0 and the term is not admitted (where it is present, the database's
     chain finds it: ``tests/rollenv/test_actuation.py``)."""
-    from identification.methods.ml import model_inputs, quadratic_search
+    from identification.methods.ml import quadratic_search
+    from identification.methods.pipeline import model_inputs
 
     options = IdentifyOptions(noise_runs=0)
     plain = quadratic_search(

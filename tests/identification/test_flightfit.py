@@ -17,21 +17,23 @@ from identification.instruments.flightlog import FlightLogSpec, run_flight, trut
 from identification.instruments.reference import Effects
 from identification.instruments.tunnel import TunnelSpec, run_tunnel
 from identification.methods import default_methods, fit
+from identification.methods.flight import (
+    apogee_index,
+    flight_adequacy,
+    flight_window,
+    subsonic_part,
+)
 from identification.methods.flightfit import (
     MACH_LIMIT,
     MIN_DAMPING,
     FlightFit,
     _Flights,
     _Layout,
-    apogee_index,
     c_coefficients,
-    flight_adequacy,
     flight_inputs,
-    flight_window,
     identify_flight,
     identify_flights,
     rescale,
-    subsonic_part,
 )
 from identification.methods.pipeline import IdentifyOptions
 from identification.methods.steps import IdentificationError

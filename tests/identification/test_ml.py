@@ -12,20 +12,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from identification.compiled import interval_maps
 from identification.estimation.likelihood import numerical_hessian
 from identification.estimation.statespace import loglike
 from identification.instruments.tunnel import TunnelSpec, run_tunnel, spec_from_command
 from identification.methods import fit
-from identification.methods.ml import (
-    _filter,
-    _parts,
-    _prepare,
-    _state_space,
-    interval_maps,
-    maximum_likelihood,
-    posterior_given,
-)
+from identification.methods.ml import maximum_likelihood, posterior_given
 from identification.methods.pipeline import IdentifyOptions, identify, measurements
+from identification.methods.rollspace import prepare, roll_loglike, roll_parts, roll_system
 from identification.model import RollParams, simulate
 from identification.recordings.recording import Recording
 
@@ -95,7 +89,7 @@ def negative() -> tuple[Recording, object]:
 @pytest.mark.parametrize("sensors", ["encoder", "gyro and encoder"])
 def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple, sensors: str) -> None:
     rec = negative[0] if sensors == "encoder" else doublet_recording(gyro=True, encoder=True)
-    data = _prepare(measurements(rec, IdentifyOptions()))
+    data = prepare(measurements(rec, IdentifyOptions()))
     nat = {
         "alpha": 0.7,
         "theta_bar": 1.0,
@@ -105,18 +99,18 @@ def test_the_roll_likelihood_is_the_general_kalman_filter(negative: tuple, senso
         "innovation_sd": 5.0,
         "gyro": 0.0 if sensors == "encoder" else 0.03,
     }
-    parts = _parts(data, nat)
+    parts = roll_parts(data, nat)
     assert parts is not None
-    fast = _filter(data, parts)  # the numba kernel with the roll model's sparse update
+    fast = roll_loglike(data, parts)  # the numba kernel with the roll model's sparse update
     assert np.all(np.isfinite(parts.obs_var))  # the gyro's variances filled in
-    assert fast == pytest.approx(loglike(_state_space(data, parts)), rel=1e-12)
+    assert fast == pytest.approx(loglike(roll_system(data, parts)), rel=1e-12)
 
 
 def test_the_gyro_variance_is_taken_at_the_predicted_rate() -> None:
     """Eq. 52's g²·v² at E[v²] before the reading, not at the reading: a reading's own
     noise must not set its weight."""
     rec = doublet_recording(gyro=True, encoder=False)
-    data = _prepare(measurements(rec, IdentifyOptions()))
+    data = prepare(measurements(rec, IdentifyOptions()))
     nat = {
         "alpha": 0.8,
         "theta_bar": -2.5,
@@ -126,15 +120,15 @@ def test_the_gyro_variance_is_taken_at_the_predicted_rate() -> None:
         "innovation_sd": 5.0,
         "gyro": 0.02,
     }
-    parts = _parts(data, nat)
+    parts = roll_parts(data, nat)
     assert parts is not None
-    _filter(data, parts)
+    roll_loglike(data, parts)
     # Two recordings that differ in one reading only: that reading's variance is the same.
     spiked = data.y.copy()
     spiked[500, 0] *= 1.5
-    again = _parts(data, nat)
+    again = roll_parts(data, nat)
     assert again is not None
-    _filter(replace(data, y=spiked), again)
+    roll_loglike(replace(data, y=spiked), again)
     assert again.obs_var[500, 0] == parts.obs_var[500, 0]
     assert again.obs_var[501, 0] != parts.obs_var[501, 0]  # later ones see it
     # Its size is g²·v² on average.
@@ -145,7 +139,7 @@ def test_the_gyro_variance_is_taken_at_the_predicted_rate() -> None:
 def test_the_interval_maps_are_the_models_simulation(negative: tuple) -> None:
     """The state-space transition is the one closed form, composed over the fine grid."""
     rec, _ = negative
-    data = _prepare(measurements(rec, IdentifyOptions()))
+    data = prepare(measurements(rec, IdentifyOptions()))
     p = RollParams(0.9, -3.3, 2.4, -0.029)
     u = ar1_turbulence(data.n - 1, 9.0, 0.8, seed=0)
     maps = interval_maps(p, data.theta_fine, data.per, data.h)
