@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from agents.actor import ActorChain
 from agents.base import Design, FlightView
-from agents.memory import ErrorIntegral, FlightClock, History, PolicyLayout
+from agents.memory import PolicyLayout, PolicyObservation, observation_names
 from agents.observer import ObserverFeatures
 from agents.registry import COMMITTED, shipped_path
 from disturbances.bank import TraceBank
@@ -117,26 +117,12 @@ class LearnedController:
         self.layout = layout = PolicyLayout.from_settings(settings)
         #: The policy reads the observer's estimate: :meth:`attach_observer` before acting.
         self.needs_observer = layout.observer
-        #: The policy's action is a residual on the observer controller's command, × this.
-        self.residual = layout.residual
-        self.features: ObserverFeatures | None = None
-        #: The policy's action is a change of the last fin command, × this
-        #: (:class:`agents.vecenv.VecIncremental`); 0: the action is the command.
-        self.incremental = layout.incremental
-        #: The policy reads the flight's phase (:class:`agents.memory.FlightClock`), made
-        #: from the environment's flight at :meth:`reset`.
+        #: The policy reads the flight's phase: it flies a flight variant.
         self.needs_clock = layout.flight_clock
-        self.clock: FlightClock | None = None
-        #: The policy reads the observed error's leaky integral: its time constant (s) and
-        #: clip (:class:`agents.memory.ErrorIntegral`), made at :meth:`reset`; 0: it does not.
-        self.integral_s, self.integral_clip = layout.integral, layout.integral_clip
-        self.integral: ErrorIntegral | None = None
-        width = len(Obs) + (ObserverFeatures.SIZE if layout.observer else 0)
-        width += FlightClock.SIZE if self.needs_clock else 0
-        width += ErrorIntegral.SIZE if self.integral_s else 0
-        self.history: History | None = None
-        if layout.history:
-            self.history = History(1, width, 1, layout.history)
+        self.features: ObserverFeatures | None = None
+        #: What the policy sees and sends (:class:`agents.memory.PolicyObservation`, as in
+        #: training), made at :meth:`reset` from the environment (None before).
+        self.observation: PolicyObservation | None = None
         self._dim = int(np.prod(model.observation_space.shape))
         model.policy.set_training_mode(False)
         #: The actor's layers, evaluated alike on every processor (None: torch acts); a copy
@@ -158,7 +144,7 @@ class LearnedController:
             ``model.zip`` or ``normalize.json`` (the checkpoint or its ``VecNormalize``
             statistics) is missing.
         """
-        from agents.train import algorithm_class, observation_names
+        from agents.train import algorithm_class
 
         folder = Path(path)
         settings_file = folder / "settings.json"
@@ -205,60 +191,43 @@ class LearnedController:
     def attach_observer(self, config: RollConfig, train_bank: TraceBank) -> None:
         """Build the observer whose estimate the policy reads, on the *train* split (as
         training did); ``--policy`` does this."""
-        self.features = ObserverFeatures.from_bank(config, train_bank, 1, self.residual)
+        self.features = ObserverFeatures.from_bank(config, train_bank, 1, self.layout.residual)
 
     def reset(self, env: FlightView) -> None:
-        """Forget the history and the observer's state (if it has them); checks the task."""
-        self.require_task(env.config.task)
+        """A new episode: what the policy sees starts afresh (its history, the observer's
+        state, the flight's clock, the error's integral); checks the task."""
+        config = env.config
+        self.require_task(config.task)
+        scales = None
         if self.needs_clock:
-            schedule = env.config.flight_schedule
-            if schedule is None:
+            if config.flight_schedule is None:
                 raise ValueError(
                     f"this {self.name} policy reads the flight's phase: it flies a flight "
                     "variant (RocketRollFlight-v0, ...), not the tunnel"
                 )
-            self.clock = FlightClock(schedule.scales[: env.config.max_episode_steps])
-        if self.integral_s:
-            self.integral = ErrorIntegral(env.config.dt_s, self.integral_s, self.integral_clip)
-        if self.history is not None:
-            self.history.clear()
-        if self.features is not None:
-            self.features.clear()
+            scales = config.flight_schedule.scales[: config.max_episode_steps]
+        if self.needs_observer and self.features is None:
+            raise RuntimeError(
+                "this policy reads the observer's estimate: call attach_observer(config, "
+                "train_bank) first (--policy does)"
+            )
+        self.observation = PolicyObservation(
+            self.layout,
+            1,
+            dt_s=config.dt_s,
+            fin_range_deg=config.fin_range_deg,
+            features=self.features,
+            scales=scales,
+        )
+        self.observation.clear()
 
     def act(self, obs: NDArray[np.float32], env: FlightView) -> NDArray[np.float32]:
-        """The deterministic action, float32 of shape (1,) in [-1, 1], for ``obs``."""
-        raw = np.asarray(obs, dtype=np.float32).reshape(1, len(Obs))
-        seen = raw
-        if self.needs_observer:
-            if self.features is None:
-                raise RuntimeError(
-                    "this policy reads the observer's estimate: call attach_observer(config, "
-                    "train_bank) first (--policy does)"
-                )
-            seen = np.concatenate([raw, self.features.one(0, raw[0])[None]], axis=1)
-        if self.needs_clock:
-            if self.clock is None:
-                raise RuntimeError("reset(env) first: the flight's phase comes from its flight")
-            seen = np.concatenate([seen, self.clock.values()], axis=1)
-            self.clock.advance()
-        if self.integral_s:
-            if self.integral is None:
-                raise RuntimeError("reset(env) first: the error's integral starts with it")
-            seen = np.concatenate([seen, self.integral.add(raw)], axis=1)
-        if self.history is not None:
-            seen_now = seen
-            seen = self.history.augment(seen_now)
-        action = self._action(seen)
-        if self.history is not None:
-            self.history.push(seen_now, action.reshape(1, -1))
-        if self.features is not None:  # the command applied (a residual adds the base)
-            return self.features.record(raw, action).reshape(1)
-        if self.incremental:
-            from agents.vecenv import commands
-
-            last = raw[:, Obs.COMMAND].astype(np.float64) / env.config.fin_range_deg
-            return commands(last, action, self.incremental).reshape(1)
-        return action
+        """The fin command, float32 of shape (1,) in [-1, 1], of the deterministic action
+        for ``obs``."""
+        if self.observation is None:
+            raise RuntimeError("reset(env) first: what the policy sees starts with it")
+        seen = self.observation.observe(np.asarray(obs, dtype=np.float32).reshape(1, len(Obs)))
+        return self.observation.command(self._action(seen)).reshape(1)
 
     def _action(self, seen: NDArray[np.float32]) -> NDArray[np.float32]:
         """The deterministic action for the policy's observation ``seen`` (with history)."""

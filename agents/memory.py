@@ -6,13 +6,13 @@ been doing; the PID's integral and the observer's state carry that.  An MLP
 policy gets the same chance from a window of its own past:
 ``[o_t, o_{t-1}, ..., o_{t-k}, a_{t-1}, ..., a_{t-k}]`` (zeros before the
 episode's start).  :class:`History` keeps that window for a batch of
-environments; :class:`agents.vecenv.VecHistory` wraps an SB3 ``VecEnv`` with it for
-training,
-and :class:`agents.learned.LearnedController` keeps one of its own when acting, so the
-policy sees the same vector in training and in the evaluation.  :class:`ErrorIntegral`
-is the PID's own memory made of the same history: a leaky sum of the observed error.
+environments.  :class:`ErrorIntegral` is the PID's own memory made of the same
+history: a leaky sum of the observed error; :class:`FlightClock` the flight's phase.
 :class:`PolicyLayout` records which of these (and the observer's estimate, a residual or an
-incremental action) a trained policy reads and sends.
+incremental action) a trained policy reads and sends, and :class:`PolicyObservation` builds
+them, in one order, for training (:class:`agents.vecenv.VecPolicyObservation` over an SB3
+``VecEnv``) and for acting (:class:`agents.learned.LearnedController`): one stack, so the
+policy sees the same vector in both, and a new observation feature is written once.
 """
 
 from __future__ import annotations
@@ -26,9 +26,18 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from rollenv.layout import Obs
+from rollenv.layout import OBSERVATION_NAMES, Obs
 
-__all__ = ["ErrorIntegral", "FlightClock", "History", "PolicyLayout", "history_space"]
+__all__ = [
+    "ErrorIntegral",
+    "FlightClock",
+    "History",
+    "PolicyLayout",
+    "PolicyObservation",
+    "history_space",
+    "incremental_commands",
+    "observation_names",
+]
 
 Float32Array = NDArray[np.float32]
 
@@ -241,3 +250,185 @@ class PolicyLayout:
             integral=float(hyper.get("integral") or 0.0),
             integral_clip=None if clip is None else float(clip),
         )
+
+
+def incremental_commands(
+    last: NDArray[Any], actions: NDArray[Any], scale: float
+) -> NDArray[np.float32]:
+    """``clip(last + scale·actions, -1, 1)`` as float32 of ``actions``' shape: the fin
+    commands of incremental actions (``last`` the last commands, fractions of the range)."""
+    actions = np.asarray(actions, dtype=np.float64)
+    moved = np.asarray(last, dtype=np.float64).reshape(-1, 1) + scale * actions.reshape(
+        len(actions), -1
+    )
+    return np.clip(moved, -1.0, 1.0).astype(np.float32).reshape(actions.shape)
+
+
+def observation_names(layout: PolicyLayout | None = None) -> list[str]:
+    """The names of the observation a policy of ``layout`` reads: the env's, the observer's
+    estimate, the flight's phase, the error's integral, then the history (``name@t-k``, and
+    ``action@t-k``); None: the env's observation alone.
+
+    Examples
+    --------
+    >>> observation_names(PolicyLayout(history=1))[4:]
+    ['tracking_error@t-1', 'roll_rate_dps@t-1', 'fin_deg@t-1', 'fin_cmd_deg@t-1', 'action@t-1']
+    >>> len(observation_names(PolicyLayout(history=2, observer=True)))  # (4 + 3) x 3 + 2
+    23
+    """
+    layout = layout or PolicyLayout()
+    now = [*OBSERVATION_NAMES]
+    now += list(PolicyObservation.OBSERVER_NAMES) if layout.observer else []
+    now += list(FlightClock.NAMES) if layout.flight_clock else []
+    now += list(ErrorIntegral.NAMES) if layout.integral else []
+    past = [f"{name}@t-{k}" for k in range(1, layout.history + 1) for name in now]
+    return now + past + [f"action@t-{k}" for k in range(1, layout.history + 1)]
+
+
+class PolicyObservation:
+    """What a trained policy reads and sends for ``n`` environments, built from its
+    :class:`PolicyLayout`: the one implementation training and acting share.
+
+    Beside each environment's observation (``Obs``), in this order: the observer's
+    estimate (``features``, an :class:`agents.observer.ObserverFeatures`), the flight's
+    phase (:class:`FlightClock`, from the nominal flight's ``scales``), the observed error's
+    leaky integral (:class:`ErrorIntegral`), then the history of those and of the actions
+    (:class:`History`).  The policy's action becomes the fin command the environment gets:
+    the observer controller's plus a residual (``features``), or a change of the last
+    command (``incremental``), or the action itself.
+
+    Per step: :meth:`observe` the environments' observations (after :meth:`clear` at an
+    episode's start), then :meth:`command` the policy's actions; an episode that ends has
+    its last observation seen through :meth:`terminal` before its row is cleared.
+
+    Parameters
+    ----------
+    layout : PolicyLayout
+        What the policy reads and sends.
+    n : int
+        Environments.
+    dt_s, fin_range_deg : float
+        The control step (s) and the fin's range (°).
+    features : ObserverFeatures, optional
+        The observer's estimate, designed on the train split (required by an ``observer``
+        layout).
+    scales : ndarray, shape (steps, 2), optional
+        The nominal flight's gain and damping multipliers per control step (required by a
+        ``flight_clock`` layout).
+    """
+
+    #: The names of the observer's estimate in the observation.
+    OBSERVER_NAMES = ("v_hat_dps", "psi_hat_deg", "u_d_hat_deg")
+    #: The bounds the observation space gives each part beyond the env's: (low, high).
+    OBSERVER_BOUND = 1e6
+    CLOCK_BOUND = 1e3
+    INTEGRAL_BOUND = 1e6
+
+    def __init__(
+        self,
+        layout: PolicyLayout,
+        n: int,
+        *,
+        dt_s: float,
+        fin_range_deg: float,
+        features: Any = None,
+        scales: NDArray[Any] | None = None,
+    ) -> None:
+        if layout.observer and features is None:
+            raise ValueError("this layout reads the observer's estimate: give its features")
+        if layout.flight_clock and scales is None:
+            raise ValueError("this layout reads the flight's phase: give the flight's scales")
+        self.layout = layout
+        self.n = n
+        self.fin_range = float(fin_range_deg)
+        self.features = features if layout.observer else None
+        self.clock = FlightClock(scales, n) if scales is not None and layout.flight_clock else None
+        self.integral = (
+            ErrorIntegral(dt_s, layout.integral, layout.integral_clip, n)
+            if layout.integral
+            else None
+        )
+        #: Values per observation before the history.
+        self.width = (
+            len(Obs)
+            + (len(self.OBSERVER_NAMES) if self.features is not None else 0)
+            + (FlightClock.SIZE if self.clock is not None else 0)
+            + (ErrorIntegral.SIZE if self.integral is not None else 0)
+        )
+        self.history = History(n, self.width, 1, layout.history) if layout.history else None
+        self._raw: Float32Array | None = None
+        self._now: Float32Array | None = None
+
+    @property
+    def size(self) -> int:
+        """Values per policy observation (with the history)."""
+        return len(observation_names(self.layout))
+
+    def space(self, observation: spaces.Box, action: spaces.Box) -> spaces.Box:
+        """The policy's observation space over the env's ``observation`` and ``action``."""
+        low, high = [observation.low], [observation.high]
+        for present, size, bound, positive in (
+            (self.features is not None, len(self.OBSERVER_NAMES), self.OBSERVER_BOUND, False),
+            (self.clock is not None, FlightClock.SIZE, self.CLOCK_BOUND, True),
+            (self.integral is not None, ErrorIntegral.SIZE, self.INTEGRAL_BOUND, False),
+        ):
+            if present:
+                big = np.full(size, np.float32(bound))
+                low.append(np.zeros(size, np.float32) if positive else -big)
+                high.append(big)
+        now = spaces.Box(
+            np.concatenate(low).astype(np.float32),
+            np.concatenate(high).astype(np.float32),
+            dtype=np.float32,
+        )
+        return history_space(now, action, self.layout.history) if self.history else now
+
+    def clear(self, rows: Any = slice(None)) -> None:
+        """A new episode for ``rows`` (all by default)."""
+        if self.features is not None:
+            self.features.clear(None if rows == slice(None) else rows)
+        for part in (self.clock, self.integral, self.history):
+            if part is not None:
+                part.clear(rows)
+
+    def _present(self, raw: Float32Array, rows: Any = slice(None)) -> Float32Array:
+        """``raw`` (float32, one row per environment of ``rows``) with the values beside it."""
+        parts = [raw]
+        if self.features is not None:
+            first = 0 if rows == slice(None) else rows.start
+            parts.append(np.stack([self.features.one(first + i, o) for i, o in enumerate(raw)]))
+        if self.clock is not None:
+            parts.append(self.clock.values(rows))
+        if self.integral is not None:
+            parts.append(self.integral.add(raw, rows))
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+    def observe(self, obs: Any) -> Float32Array:
+        """The policy's observation of the environments' observations ``obs`` (n, 4)."""
+        self._raw = np.asarray(obs, dtype=np.float32)
+        self._now = self._present(self._raw)
+        return self._now if self.history is None else self.history.augment(self._now)
+
+    def terminal(self, i: int, obs: NDArray[Any]) -> Float32Array:
+        """The policy's observation of environment ``i``'s last of an episode (for value
+        bootstrapping), before :meth:`clear` of its row."""
+        row = slice(i, i + 1)
+        now = self._present(np.asarray(obs, dtype=np.float32).reshape(1, -1), row)
+        return (now if self.history is None else self.history.augment(now, row))[0]
+
+    def command(self, actions: NDArray[Any]) -> NDArray[np.float32]:
+        """The fin commands (fractions of the range) the policy's ``actions`` send, from
+        the observations last observed; the actions go into the history."""
+        if self._raw is None or self._now is None:
+            raise RuntimeError("observe the environments before commanding them")
+        if self.history is not None:
+            self.history.push(self._now, np.clip(np.asarray(actions, dtype=np.float32), -1, 1))
+        out = actions
+        if self.features is not None:
+            out = self.features.record(self._raw, actions)
+        if self.layout.incremental:
+            last = np.asarray(self._raw, dtype=np.float64)[:, Obs.COMMAND] / self.fin_range
+            out = incremental_commands(last, out, self.layout.incremental)
+        if self.clock is not None:
+            self.clock.advance()
+        return out

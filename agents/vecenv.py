@@ -25,23 +25,17 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvWrapper,
 )
 
-from agents.memory import ErrorIntegral, FlightClock, History, history_space
+from agents.memory import PolicyObservation
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, settings_config, variant_config
 from rollenv.core import RollBatch
 from rollenv.env import check_action, make_spaces, reset_arguments
-from rollenv.layout import Obs
 
 __all__ = [
     "ENV_ATTRIBUTES",
     "RollVecEnv",
     "StepReturn",
-    "VecErrorIntegral",
-    "VecFlightClock",
-    "VecHistory",
-    "VecIncremental",
-    "VecObserver",
-    "commands",
+    "VecPolicyObservation",
 ]
 
 #: What ``step`` and ``step_wait`` return: observations, rewards, dones, infos.
@@ -309,202 +303,39 @@ def _same_arguments(a: dict[str, Any], b: dict[str, Any]) -> bool:
     return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
 
 
-def _widened(space: gym.Space[Any], low: NDArray[Any], high: NDArray[Any]) -> spaces.Box:
-    """The observation space ``space`` (a ``Box``) with values in ``[low, high]`` after its own."""
-    assert isinstance(space, spaces.Box)
-    return spaces.Box(
-        np.concatenate([space.low, low]).astype(np.float32),
-        np.concatenate([space.high, high]).astype(np.float32),
-        dtype=np.float32,
-    )
+class VecPolicyObservation(VecEnvWrapper):
+    """An SB3 ``VecEnv`` that a trained policy of a :class:`~agents.memory.PolicyLayout`
+    sees: its observations carry what the layout reads (the observer's estimate, the
+    flight's phase, the error's integral, the history), and its actions become the fin
+    commands the layout sends (a residual on the observer controller's, a change of the
+    last one) -- all by one :class:`~agents.memory.PolicyObservation`, the acting
+    controller's too.
 
-
-class VecHistory(VecEnvWrapper):
-    """An SB3 ``VecEnv`` whose observations carry ``k`` steps of history (:class:`History`).
-
-    An env whose episode ends starts its new one without history; its
-    ``terminal_observation`` carries the history it ended with (for value
-    bootstrapping).
+    An env whose episode ends starts its new one afresh (no history, the observer, the
+    clock and the integral reset); its ``terminal_observation`` is what the policy would
+    have seen of it (for value bootstrapping).
     """
 
-    def __init__(self, venv: VecEnv, k: int) -> None:
+    def __init__(self, venv: VecEnv, stack: PolicyObservation) -> None:
         assert isinstance(venv.observation_space, spaces.Box)
         assert isinstance(venv.action_space, spaces.Box)
-        obs_space, act_space = venv.observation_space, venv.action_space
-        super().__init__(venv, observation_space=history_space(obs_space, act_space, k))
-        self.history = History(
-            venv.num_envs, int(np.prod(obs_space.shape)), int(np.prod(act_space.shape)), k
-        )
-        self._low, self._high = act_space.low, act_space.high
-        self._last: NDArray[np.float32] | None = None
-        self._actions: NDArray[Any] | None = None
+        space = stack.space(venv.observation_space, venv.action_space)
+        super().__init__(venv, observation_space=space)
+        self.stack = stack
 
     def reset(self) -> NDArray[np.float32]:
-        obs = np.asarray(self.venv.reset(), dtype=np.float32)
-        self.history.clear()
-        self._last = obs
-        return self.history.augment(obs)
+        obs = self.venv.reset()
+        self.stack.clear()
+        return self.stack.observe(obs)
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.clip(np.asarray(actions, dtype=np.float32), self._low, self._high)
-        self.venv.step_async(actions)
+        self.venv.step_async(self.stack.command(actions))
 
     def step_wait(self) -> Any:
         obs, rewards, dones, infos = self.venv.step_wait()
-        assert self._last is not None and self._actions is not None
-        self.history.push(self._last, self._actions)
         for i in np.flatnonzero(dones).tolist():
             terminal = infos[i].get("terminal_observation")
             if terminal is not None:
-                infos[i]["terminal_observation"] = self.history.augment(
-                    np.asarray(terminal).reshape(1, -1), slice(i, i + 1)
-                )[0]
-            self.history.clear(i)
-        self._last = np.asarray(obs, dtype=np.float32)
-        return self.history.augment(self._last), rewards, dones, infos
-
-
-class VecObserver(VecEnvWrapper):
-    """An SB3 ``VecEnv`` whose observations carry the observer's estimate
-    (:class:`agents.observer.ObserverFeatures`: ``[v̂, ψ̂, û_d]`` after the 4 values);
-    with a residual ``features``, the env below gets the observer controller's command
-    plus the residual the policy chose."""
-
-    def __init__(self, venv: VecEnv, features: Any) -> None:
-        big = np.full(features.SIZE, np.float32(1e6))
-        observation_space = _widened(venv.observation_space, -big, big)
-        super().__init__(venv, observation_space=observation_space)
-        self.features = features
-        self._size = int(observation_space.shape[0])
-        self._last: NDArray[np.float32] | None = None
-
-    def _with(self, i: int, obs: NDArray[Any]) -> NDArray[np.float32]:
-        obs = np.asarray(obs, dtype=np.float32)
-        return np.concatenate([obs, self.features.one(i, obs)])
-
-    def reset(self) -> NDArray[np.float32]:
-        obs = np.asarray(self.venv.reset(), dtype=np.float32)
-        self.features.clear()
-        self._last = obs
-        return np.stack([self._with(i, o) for i, o in enumerate(obs)])
-
-    def step_async(self, actions: np.ndarray) -> None:
-        assert self._last is not None
-        self.venv.step_async(self.features.record(self._last, actions))
-
-    def step_wait(self) -> Any:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        obs = np.asarray(obs, dtype=np.float32)
-        out = np.empty((obs.shape[0], self._size), dtype=np.float32)
-        for i in range(obs.shape[0]):
-            if dones[i]:
-                terminal = infos[i].get("terminal_observation")
-                if terminal is not None:
-                    infos[i]["terminal_observation"] = self._with(i, terminal)
-                self.features.clear(i)
-            out[i] = self._with(i, obs[i])
-        self._last = obs
-        return out, rewards, dones, infos
-
-
-class VecIncremental(VecEnvWrapper):
-    """An SB3 ``VecEnv`` whose action is a change of the fin command: the env below gets
-    ``clip(c + scale·a, -1, 1)``, ``c`` the last command (the observation's
-    ``Obs.COMMAND``, °, over ``fin_range_deg``), ``a`` the policy's action.  Holding
-    the fin is then the action 0, whatever the angle it holds: a policy need not reproduce
-    its own last command to hold it.  ``scale`` 0.375 is the servo's 15° a control step
-    over the 40° range."""
-
-    def __init__(self, venv: VecEnv, scale: float, fin_range_deg: float) -> None:
-        super().__init__(venv)
-        self.scale = float(scale)
-        self.fin_range = float(fin_range_deg)
-        self._command = np.zeros(venv.num_envs, dtype=np.float64)
-
-    def _remember(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        self._command = np.asarray(obs, dtype=np.float64)[:, Obs.COMMAND] / self.fin_range
-        return obs
-
-    def reset(self) -> NDArray[np.float32]:
-        return self._remember(np.asarray(self.venv.reset(), dtype=np.float32))
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self.venv.step_async(commands(self._command, actions, self.scale))
-
-    def step_wait(self) -> Any:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        return self._remember(np.asarray(obs, dtype=np.float32)), rewards, dones, infos
-
-
-def commands(last: NDArray[Any], actions: NDArray[Any], scale: float) -> NDArray[np.float32]:
-    """``clip(last + scale·actions, -1, 1)`` as float32 of ``actions``' shape: the fin
-    commands of incremental actions (:class:`VecIncremental`, the acting controller)."""
-    actions = np.asarray(actions, dtype=np.float64)
-    moved = np.asarray(last, dtype=np.float64).reshape(-1, 1) + scale * actions.reshape(
-        len(actions), -1
-    )
-    return np.clip(moved, -1.0, 1.0).astype(np.float32).reshape(actions.shape)
-
-
-class VecFlightClock(VecEnvWrapper):
-    """An SB3 ``VecEnv`` of a flight variant whose observations carry the flight's phase
-    (:class:`agents.memory.FlightClock`: the gain and damping multipliers of the coming
-    control step) after the values below; each env's clock restarts with its episode."""
-
-    def __init__(self, venv: VecEnv, scales: NDArray[Any]) -> None:
-        big = np.full(FlightClock.SIZE, np.float32(1e3))
-        zero = np.zeros(FlightClock.SIZE, np.float32)
-        super().__init__(venv, observation_space=_widened(venv.observation_space, zero, big))
-        self.clock = FlightClock(scales, venv.num_envs)
-
-    def reset(self) -> NDArray[np.float32]:
-        obs = np.asarray(self.venv.reset(), dtype=np.float32)
-        self.clock.clear()
-        return np.concatenate([obs, self.clock.values()], axis=1)
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self.venv.step_async(actions)
-
-    def step_wait(self) -> Any:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        self.clock.advance()
-        for i in np.flatnonzero(dones).tolist():
-            terminal = infos[i].get("terminal_observation")
-            if terminal is not None:
-                infos[i]["terminal_observation"] = np.concatenate(
-                    [np.asarray(terminal, dtype=np.float32), self.clock.values(i)[0]]
-                )
-            self.clock.clear(i)
-        obs = np.asarray(obs, dtype=np.float32)
-        return np.concatenate([obs, self.clock.values()], axis=1), rewards, dones, infos
-
-
-class VecErrorIntegral(VecEnvWrapper):
-    """An SB3 ``VecEnv`` whose observations carry the leaky integral of their tracking error
-    (:class:`agents.memory.ErrorIntegral`) after the values below; each env's integral
-    starts from zero with its episode."""
-
-    def __init__(self, venv: VecEnv, integral: ErrorIntegral) -> None:
-        big = np.full(ErrorIntegral.SIZE, np.float32(1e6))
-        super().__init__(venv, observation_space=_widened(venv.observation_space, -big, big))
-        self.integral = integral
-
-    def reset(self) -> NDArray[np.float32]:
-        obs = np.asarray(self.venv.reset(), dtype=np.float32)
-        self.integral.clear()
-        return np.concatenate([obs, self.integral.add(obs)], axis=1)
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self.venv.step_async(actions)
-
-    def step_wait(self) -> Any:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        obs = np.asarray(obs, dtype=np.float32)
-        for i in np.flatnonzero(dones).tolist():
-            terminal = infos[i].get("terminal_observation")
-            if terminal is not None:
-                last = np.asarray(terminal, dtype=np.float32).reshape(1, -1)
-                ended = self.integral.add(last, slice(i, i + 1))
-                infos[i]["terminal_observation"] = np.concatenate([last, ended], axis=1)[0]
-            self.integral.clear(i)
-        return np.concatenate([obs, self.integral.add(obs)], axis=1), rewards, dones, infos
+                infos[i]["terminal_observation"] = self.stack.terminal(i, terminal)
+            self.stack.clear(i)
+        return self.stack.observe(obs), rewards, dones, infos

@@ -45,13 +45,13 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.learned import LearnedController, ObservationNormalizer
+from agents.memory import observation_names
 from agents.registry import make_controller
 from agents.train import (
     algorithm_arguments,
     load_hyperparameters,
     make_env,
     normalization_record,
-    observation_names,
     quiet_logger,
 )
 from rollenv.bank import load_bank, variant_config

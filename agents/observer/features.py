@@ -25,7 +25,7 @@ class ObserverFeatures:
     the observer controller is; per step the filter takes the observation (and
     the step the last command made) and yields ``[v̂, ψ̂, û_d]`` (``ψ̂`` is 0 on
     the rate task, where no encoder anchors it).  Used by
-    :class:`agents.vecenv.VecObserver` in training and by the learned
+    :class:`agents.memory.PolicyObservation` in training and by the learned
     controller when acting, the same code in both.
 
     With ``residual`` the filters are those of one :class:`ObserverController`

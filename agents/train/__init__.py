@@ -36,7 +36,7 @@ Run::
     python -m agents.train --env-id RocketRollRate-v0 --timesteps 2000000   # the same
 """
 
-from agents.train.envs import make_env, normalization_record, observation_names
+from agents.train.envs import make_env, normalization_record
 from agents.train.hyperparams import (
     ALGORITHMS,
     DEFAULT_HYPERPARAMS,
@@ -80,7 +80,6 @@ __all__ = [
     "load_hyperparameters",
     "make_env",
     "normalization_record",
-    "observation_names",
     "parse_args",
     "quiet_logger",
     "recipe_path",

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from agents.memory import PolicyLayout
+from agents.memory import PolicyLayout, PolicyObservation, observation_names
 from agents.train.hyperparams import Hyperparameters
 from rocketroll_common.errors import UsageError
 
@@ -20,10 +20,10 @@ def make_env(
     db: str | os.PathLike[str] | None = None,
     training: bool = True,
 ) -> tuple[Any, Any, Any]:
-    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``, with, from
-    the adapter up, ``VecIncremental``, ``VecObserver``, ``VecFlightClock``,
-    ``VecErrorIntegral`` and ``VecHistory`` when the entry asks for ``incremental``,
-    ``observer``, ``flight_clock``, ``integral`` and ``history``.
+    """The vector env stack of a run: ``VecNormalize(VecMonitor(RollVecEnv))``, with
+    :class:`~agents.vecenv.VecPolicyObservation` over the adapter where the entry's layout
+    reads or sends more than the env's observation and action (``observer``,
+    ``residual``, ``flight_clock``, ``integral``, ``history``, ``incremental``).
 
     The monitor is inside, so it records the raw returns whatever
     ``VecNormalize`` does to rewards.  ``training=False`` (evaluation):
@@ -42,7 +42,7 @@ def make_env(
     """
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from agents.vecenv import RollVecEnv
+    from agents.vecenv import RollVecEnv, VecPolicyObservation
 
     for forbidden in ("split", "task"):
         if forbidden in hp.env_kwargs:
@@ -55,48 +55,8 @@ def make_env(
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{hp.source}, {hp.env_id}: env_kwargs: {exc}") from exc
     env: Any = adapter
-    if hp.layout.incremental:
-        from agents.vecenv import VecIncremental
-
-        env = VecIncremental(env, hp.layout.incremental, adapter.config.fin_range_deg)
-    if hp.layout.observer:
-        from agents.base import design_bank
-        from agents.observer import ObserverFeatures
-        from agents.vecenv import VecObserver
-
-        train_bank = adapter.bank
-        if (
-            split != "train"
-            or adapter.config.flight_schedule is not None
-            or adapter.config.recording is not None
-        ):
-            # the observer is designed on the train split (the replayed recording's part
-            # there, where it has one), as --policy designs it when the policy is
-            # evaluated; in flight on its tunnel traces
-            train_bank = design_bank(adapter.config, db)
-        features = ObserverFeatures.from_bank(
-            adapter.config, train_bank, n_envs, hp.layout.residual
-        )
-        env = VecObserver(env, features)
-    if hp.layout.flight_clock:
-        from agents.vecenv import VecFlightClock
-
-        schedule = adapter.config.flight_schedule
-        if schedule is None:
-            raise UsageError(f"{hp.source}, {hp.env_id}: flight_clock needs a flight")
-        env = VecFlightClock(env, schedule.scales[: adapter.config.max_episode_steps])
-    if hp.layout.integral:
-        from agents.memory import ErrorIntegral
-        from agents.vecenv import VecErrorIntegral
-
-        integral = ErrorIntegral(
-            adapter.config.dt_s, hp.layout.integral, hp.layout.integral_clip, n_envs
-        )
-        env = VecErrorIntegral(env, integral)
-    if hp.layout.history:
-        from agents.vecenv import VecHistory
-
-        env = VecHistory(env, hp.layout.history)
+    if hp.layout.record():
+        env = VecPolicyObservation(env, _policy_observation(hp, adapter, n_envs, split, db))
     env = VecMonitor(env)
     normalize = None
     if hp.normalize is not None:
@@ -109,31 +69,43 @@ def make_env(
     return adapter, env, normalize
 
 
+def _policy_observation(
+    hp: Hyperparameters,
+    adapter: Any,
+    n_envs: int,
+    split: str,
+    db: str | os.PathLike[str] | None,
+) -> PolicyObservation:
+    """The observation and command of the entry's layout for the adapter's ``n_envs``."""
+    config = adapter.config
+    features = None
+    if hp.layout.observer:
+        from agents.base import design_bank
+        from agents.observer import ObserverFeatures
+
+        train_bank = adapter.bank
+        if split != "train" or config.flight_schedule is not None or config.recording is not None:
+            # the observer is designed on the train split (the replayed recording's part
+            # there, where it has one), as --policy designs it when the policy is
+            # evaluated; in flight on its tunnel traces
+            train_bank = design_bank(config, db)
+        features = ObserverFeatures.from_bank(config, train_bank, n_envs, hp.layout.residual)
+    scales = None
+    if hp.layout.flight_clock:
+        if config.flight_schedule is None:
+            raise UsageError(f"{hp.source}, {hp.env_id}: flight_clock needs a flight")
+        scales = config.flight_schedule.scales[: config.max_episode_steps]
+    return PolicyObservation(
+        hp.layout,
+        n_envs,
+        dt_s=config.dt_s,
+        fin_range_deg=config.fin_range_deg,
+        features=features,
+        scales=scales,
+    )
+
+
 # ----------------------------------------------------------------------------- outputs
-def observation_names(layout: PolicyLayout | None = None) -> list[str]:
-    """The names of the observation a policy of ``layout`` reads: the env's, the observer's
-    estimate, the flight's phase, the error's integral, then the history (``name@t-k``, and
-    ``action@t-k``); None: the env's observation alone.
-
-    Examples
-    --------
-    >>> observation_names(PolicyLayout(history=1))[4:]
-    ['tracking_error@t-1', 'roll_rate_dps@t-1', 'fin_deg@t-1', 'fin_cmd_deg@t-1', 'action@t-1']
-    >>> len(observation_names(PolicyLayout(history=2, observer=True)))  # (4 + 3) x 3 + 2
-    23
-    """
-    from agents.memory import ErrorIntegral, FlightClock
-    from rollenv.layout import OBSERVATION_NAMES
-
-    layout = layout or PolicyLayout()
-    now = [*OBSERVATION_NAMES]
-    now += ["v_hat_dps", "psi_hat_deg", "u_d_hat_deg"] if layout.observer else []
-    now += list(FlightClock.NAMES) if layout.flight_clock else []
-    now += list(ErrorIntegral.NAMES) if layout.integral else []
-    past = [f"{name}@t-{k}" for k in range(1, layout.history + 1) for name in now]
-    return now + past + [f"action@t-{k}" for k in range(1, layout.history + 1)]
-
-
 def normalization_record(venv: Any, layout: PolicyLayout | None = None) -> dict[str, Any]:
     """The observation normalisation of a ``VecNormalize`` (or None) as plain JSON data, for
     a policy of ``layout``."""

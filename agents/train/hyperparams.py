@@ -66,7 +66,7 @@ ALGORITHMS = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 #: :class:`agents.observer.ObserverFeatures`, designed on the train split), ``residual``
 #: (a scale in (0, 1]: the action is a residual added to the observer controller's command,
 #: × the scale; implies ``observer``), ``incremental`` (a scale in (0, 1]: the action is
-#: a change of the last fin command, × the scale, :class:`agents.vecenv.VecIncremental`),
+#: a change of the last fin command, × the scale, :class:`agents.memory.PolicyObservation`),
 #: ``flight_clock`` (true, on a flight variant: the
 #: flight's gain and damping multipliers at the coming control step in the observation,
 #: :class:`agents.memory.FlightClock`), ``integral`` (a time constant, s: the leaky

@@ -21,6 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from agents.memory import observation_names
 from agents.replay import (
     check_options,
     db_setting,
@@ -39,7 +40,7 @@ from agents.train.checkpoints import (
     resume_model,
     save_checkpoint,
 )
-from agents.train.envs import make_env, normalization_record, observation_names
+from agents.train.envs import make_env, normalization_record
 from agents.train.hyperparams import (
     ALGORITHMS,
     DEFAULT_HYPERPARAMS,

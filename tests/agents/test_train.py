@@ -431,7 +431,7 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
     """A tiny SAC/TD3 run with 3 steps of history (PPO: 3 steps and the observer's
     estimate): settings.json records them, and the controller, which keeps its own history
     and observer, acts on an episode exactly as the model's predict() on the training
-    stack's observation (VecObserver, VecHistory, VecNormalize)."""
+    stack's observation (VecPolicyObservation, VecNormalize)."""
     from agents.cli import SAC_COMMAND, TD3_COMMAND
     from agents.train import load_hyperparameters, make_env
     from rollenv.bank import load_bank, variant_config
@@ -461,7 +461,7 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
     observer = algo == "ppo"
     assert settings["hyperparameters"].get("observer", False) is observer
     controller = LearnedController.load(out)
-    assert controller.name == algo.upper() and controller.history is not None
+    assert controller.name == algo.upper() and controller.layout.history == 3
     assert controller.needs_observer is observer
     if observer:
         train_config = variant_config("RocketRoll-v0", {"split": "train"})
@@ -487,8 +487,8 @@ def test_runs_with_history_and_observer_act_as_they_were_trained(algo, small_db,
 def test_an_incremental_policy_moves_the_fin_from_its_last_command(small_db, tmp_path):
     """``incremental: S``: the env gets the last command plus S × the policy's action; the
     acting controller sends, step by step, the command the training stack applied."""
+    from agents.memory import incremental_commands
     from agents.train import load_hyperparameters, make_env
-    from agents.vecenv import commands
     from rollenv.layout import Obs
 
     hyperparams = tmp_path / "inc.yml"
@@ -500,7 +500,7 @@ def test_an_incremental_policy_moves_the_fin_from_its_last_command(small_db, tmp
     with contextlib.redirect_stdout(io.StringIO()):
         assert run_command(COMMAND, [*argv, "--no-progress-bar"], "rocketroll train ppo") == 0
     controller = LearnedController.load(out)
-    assert controller.incremental == 0.375
+    assert controller.layout.incremental == 0.375
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
     _use_statistics(normalize, out)
@@ -520,7 +520,7 @@ def test_an_incremental_policy_moves_the_fin_from_its_last_command(small_db, tmp
         moved.append(abs(float(sent[0]) - float(expected[0] - 0.375 * action.reshape(1)[0])))
     assert max(moved) > 0  # the actions moved the fin
     np.testing.assert_array_equal(
-        commands(np.array([0.9, -0.5]), np.array([[1.0], [0.2]]), 0.375),
+        incremental_commands(np.array([0.9, -0.5]), np.array([[1.0], [0.2]]), 0.375),
         np.array([[1.0], [-0.425]], dtype=np.float32),
     )
 
@@ -552,7 +552,7 @@ def test_an_integral_policy_reads_the_leaky_integral_of_its_observed_error(small
     names = json.loads((out / "normalize.json").read_text())["observation_names"]
     assert names[4] == "error_integral" and names[9] == "error_integral@t-1"
     controller = LearnedController.load(out)
-    assert (controller.integral_s, controller.integral_clip) == (2.0, 3.0)
+    assert (controller.layout.integral, controller.layout.integral_clip) == (2.0, 3.0)
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
     options = {"episode_s": 2.0}  # 20 steps: the loop crosses into a second episode
     hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **options})
@@ -710,13 +710,13 @@ def test_a_residual_policy_adds_its_action_to_the_observer_controllers(residual_
     settings = json.loads((out / "settings.json").read_text())
     assert settings["hyperparameters"]["residual"] == 0.25
     controller = LearnedController.load(out)
-    assert controller.residual == 0.25 and controller.needs_observer
+    assert controller.layout.residual == 0.25 and controller.needs_observer
     reference, (train_config, bank) = _observer_on_train(small_db)
     controller.attach_observer(train_config, bank)
     hp = load_hyperparameters(hyperparams, "RocketRoll-v0")
     assert hp.layout.observer and hp.layout.residual == 0.25
     _, stack, normalize = make_env(hp, 1, 5, split="test", db=small_db, training=False)
-    assert isinstance(stack.venv.venv.features, ObserverFeatures)
+    assert isinstance(stack.venv.venv.stack.features, ObserverFeatures)
     _use_statistics(normalize, out)
     seen = stack.reset()
     assert seen.shape == (1, 7)
@@ -839,5 +839,5 @@ def test_a_flight_policy_reads_the_flights_phase_as_in_training(tmp_path, defaul
     flown.write_text(TINY.replace("RocketRoll-v0", "RocketRollFlight-v0") + "  residual: 0.5\n")
     hp = load_hyperparameters(flown, "RocketRollFlight-v0", "ppo")
     _, stack, _ = make_env(hp, 2, 5, split="test", db=default_db, training=False)
-    features = stack.venv.venv.features
+    features = stack.venv.venv.stack.features
     assert all(c.schedule is not None for c in features.controllers)

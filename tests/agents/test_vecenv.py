@@ -331,3 +331,68 @@ def test_attribute_and_method_access():
         venv.get_images()
     assert venv.unwrapped is venv
     venv.close()
+
+
+class _ConstantFeatures:
+    """An observer's estimate stand-in: three constants per env, the action as the command."""
+
+    def __init__(self, n: int) -> None:
+        self.cleared: list[int | None] = []
+        self.n = n
+
+    def clear(self, i: int | None = None) -> None:
+        self.cleared.append(i)
+
+    def one(self, i: int, obs: Any) -> np.ndarray:
+        return np.array([1.0, 2.0, 3.0 + i], dtype=np.float32)
+
+    def record(self, obs: Any, actions: Any) -> np.ndarray:
+        return np.asarray(actions, dtype=np.float32).reshape(-1, 1)
+
+
+@pytest.mark.parametrize(
+    "layout",
+    [
+        {"history": 2},
+        {"observer": True, "history": 1},
+        {"integral": 2.0, "integral_clip": 3.0},
+        {"flight_clock": True, "integral": 1.0, "history": 3},
+        {"incremental": 0.375},
+    ],
+    ids=str,
+)
+def test_the_policy_observation_its_names_and_its_space_agree(layout: dict[str, Any]) -> None:
+    """Every layout's observation has as many values as its names, inside its space, in
+    training's wrapper and in the acting controller alike (one PolicyObservation); a
+    terminal observation is the policy's view of it, and an ended episode starts afresh."""
+    from agents.memory import PolicyLayout, PolicyObservation, observation_names
+    from agents.vecenv import VecPolicyObservation
+
+    policy = PolicyLayout(**layout)
+    env = adapter(2)
+    scales = np.repeat(1.0 + np.arange(40.0)[:, None], 2, axis=1)  # step k reads 1 + k
+    stack = PolicyObservation(
+        policy,
+        2,
+        dt_s=env.config.dt_s,
+        fin_range_deg=env.config.fin_range_deg,
+        features=_ConstantFeatures(2) if policy.observer else None,
+        scales=scales if policy.flight_clock else None,
+    )
+    wrapped = VecPolicyObservation(env, stack)
+    names = observation_names(policy)
+    assert wrapped.observation_space.shape == (len(names),) == (stack.size,)
+    env.seed(3)
+    seen = wrapped.reset()
+    assert seen.shape == (2, len(names)) and seen.dtype == np.float32
+    for _ in range(25):  # 20-step episodes: both envs end and start again
+        seen, _, dones, infos = wrapped.step(np.array([[0.5], [-0.5]], dtype=np.float32))
+        assert wrapped.observation_space.contains(seen[0]) and seen.shape == (2, len(names))
+        for i in np.flatnonzero(dones):
+            assert infos[i]["terminal_observation"].shape == (len(names),)
+            if policy.history:  # the new episode's history is empty
+                assert not np.any(seen[i, stack.width :])
+    if policy.flight_clock:  # the clock restarted with the episode: 5 steps into it
+        assert seen[0, names.index("flight_gain")] == 6.0
+    if policy.observer:
+        assert seen[1, names.index("u_d_hat_deg")] == 4.0
