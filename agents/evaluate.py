@@ -47,6 +47,7 @@ from agents.replay import (
     unreliable_note,
 )
 from disturbances.bank import TraceBank
+from rocketroll_common import tables
 from rocketroll_common.arrays import nan_to_none
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting, to_argv
@@ -370,12 +371,20 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
     :func:`unsettled_note`."""
     unit = "°" if config.task == "angle" else "°/s"
     reference = pid_result(results)
-    head = (
-        f"| controller | **regulation RMS** ({unit}) | vs PID ({unit}) | time to settle (s) "
-        f"| settled RMS ({unit}) | RMS error ({unit}) | max error ({unit}) "
-        f"| fin travel (°/s) | at rate limit (%) | at range limit (%) | return |"
-    )
-    lines = [head, "|" + "---|" * 11]
+    header = [
+        "controller",
+        f"**regulation RMS** ({unit})",
+        f"vs PID ({unit})",
+        "time to settle (s)",
+        f"settled RMS ({unit})",
+        f"RMS error ({unit})",
+        f"max error ({unit})",
+        "fin travel (°/s)",
+        "at rate limit (%)",
+        "at range limit (%)",
+        "return",
+    ]
+    rows = []
     for r in results:
         a = r.aggregate
 
@@ -391,13 +400,23 @@ def markdown_table(results: Sequence[Evaluation], config: RollConfig) -> str:
             if not np.isnan(sem):
                 z = f" ({abs(mean) / sem:.1f} SEM)" if sem >= 0.005 else ""
                 versus = f"{mean:+.2f} ± {sem:.2f}{z}"
-        lines.append(
-            f"| {r.name} | {cell(HEADLINE)} | {versus} | {cell('settle_time_s', 1)} "
-            f"| {cell('settled_rms_error')} | {cell('rms_error')} | {cell('max_error', 1)} "
-            f"| {cell('fin_travel_dps', 1)} | {cell('rate_limit_pct', 1)} "
-            f"| {cell('range_limit_pct', 1)} | {cell('return', 1)} |"
+        rows.append(
+            [
+                r.name,
+                cell(HEADLINE),
+                versus,
+                cell("settle_time_s", 1),
+                cell("settled_rms_error"),
+                cell("rms_error"),
+                cell("max_error", 1),
+                cell("fin_travel_dps", 1),
+                cell("rate_limit_pct", 1),
+                cell("range_limit_pct", 1),
+                cell("return", 1),
+            ]
         )
     unsettled = unsettled_note(results)
+    lines = tables.markdown_table(header, rows)
     return "\n".join(lines) + "\n" + ("" if unsettled is None else f"\n{unsettled}\n")
 
 

@@ -62,6 +62,7 @@ from agents.replay import (
     replay_config,
     unreliable_note,
 )
+from rocketroll_common import tables
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv.bank import load_bank
@@ -140,8 +141,7 @@ def markdown_table(
     scores: dict[str, dict[str, np.ndarray]], conditions: Sequence[str], unit: str
 ) -> str:
     """Rows: controllers; columns: conditions; cells: headline mean ± SEM (× default)."""
-    head = "| controller | " + " | ".join(f"{c} ({unit})" for c in conditions) + " |"
-    lines = [head, "|" + "---|" * (len(conditions) + 1)]
+    rows = []
     for name, per in scores.items():
         base = per["default"].mean() if "default" in per else None
         cells = []
@@ -151,8 +151,9 @@ def markdown_table(
             if base is not None and c != "default" and base > 0:
                 cell += f" (×{x.mean() / base:.1f})"
             cells.append(cell)
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([name, *cells])
+    header = ["controller", *(f"{c} ({unit})" for c in conditions)]
+    return "\n".join(tables.markdown_table(header, rows)) + "\n"
 
 
 def plot(

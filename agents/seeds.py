@@ -67,6 +67,7 @@ from agents.replay import (
     replay_config,
     unreliable_note,
 )
+from rocketroll_common import tables
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 
@@ -273,11 +274,17 @@ def markdown_table(
     learners: Sequence[LearnerStats], references: Sequence[Evaluation], unit: str
 ) -> str:
     """The learners' statistics and the references' headline, as a Markdown table."""
-    head = (
-        f"| controller | runs | mean ({unit}) [95 % CI] | IQM ({unit}) [95 % CI] "
-        f"| P(beats PID) [95 % CI] | per run ({unit}) | train wall (s) | env-steps/s |"
-    )
-    lines = [head, "|" + "---|" * 8]
+    header = [
+        "controller",
+        "runs",
+        f"mean ({unit}) [95 % CI]",
+        f"IQM ({unit}) [95 % CI]",
+        "P(beats PID) [95 % CI]",
+        f"per run ({unit})",
+        "train wall (s)",
+        "env-steps/s",
+    ]
+    rows = []
 
     def num(x: float | None, digits: int) -> str:
         return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
@@ -288,17 +295,22 @@ def markdown_table(
             p = f"{s.p_beats:.2f} [{num(s.p_beats_ci[0], 2)}, {num(s.p_beats_ci[1], 2)}]"
         walls = [w for w in s.train_seconds if w is not None]
         rates = [r for r in s.env_steps_per_s if r is not None]
-        lines.append(
-            f"| {s.name} | {len(s.runs)} | {s.mean:.2f} [{num(s.mean_ci[0], 2)}, "
-            f"{num(s.mean_ci[1], 2)}] | {s.iqm:.2f} [{num(s.iqm_ci[0], 2)}, "
-            f"{num(s.iqm_ci[1], 2)}] | {p} | {', '.join(f'{x:.2f}' for x in s.run_means)} "
-            f"| {num(float(np.mean(walls)) if walls else None, 0)} "
-            f"| {num(float(np.mean(rates)) if rates else None, 0)} |"
+        rows.append(
+            [
+                s.name,
+                str(len(s.runs)),
+                f"{s.mean:.2f} [{num(s.mean_ci[0], 2)}, {num(s.mean_ci[1], 2)}]",
+                f"{s.iqm:.2f} [{num(s.iqm_ci[0], 2)}, {num(s.iqm_ci[1], 2)}]",
+                p,
+                ", ".join(f"{x:.2f}" for x in s.run_means),
+                num(float(np.mean(walls)) if walls else None, 0),
+                num(float(np.mean(rates)) if rates else None, 0),
+            ]
         )
     for r in references:
         score = headline_scores(r)
-        lines.append(f"| {r.name} | 1 | {score.mean():.2f} | {iqm(score):.2f} | – | – | – | – |")
-    return "\n".join(lines) + "\n"
+        rows.append([r.name, "1", f"{score.mean():.2f}", f"{iqm(score):.2f}", *["–"] * 4])
+    return "\n".join(tables.markdown_table(header, rows)) + "\n"
 
 
 def plot(

@@ -38,6 +38,8 @@ from pathlib import Path
 
 from _against import REPO, checkout
 
+from rocketroll_common.tables import Column, text_table
+
 TARGET_S = 0.3
 REFERENCE = "python -c pass (reference)"
 FROM_SOURCE = "tunnel --help, its own parser"
@@ -99,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 times.setdefault((name, side), []).append(took)
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPU(s); {ns.runs} processes each")
     width = max(map(len, tasks)) + 1
-    print(f"\n{'task':<{width}} {'median s':>9} {'min s':>7} {'target s':>9}  verdict")
+    rows = []
     missed = False
     for name in tasks:
         runs = times[(name, "here")]
@@ -110,7 +112,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == FROM_SOURCE:
             verdict = "-"
         missed |= verdict == "FAIL"
-        print(f"{name:<{width}} {median:>9.3f} {min(runs):>7.3f} {target:>9}  {verdict}")
+        rows.append([name, f"{median:.3f}", f"{min(runs):.3f}", target, verdict])
+    columns = (
+        Column("task", width, "<"),
+        Column("median s", 9, gap=" "),
+        Column("min s", 7, gap=" "),
+        Column("target s", 9, gap=" "),
+        Column("verdict", gap="  "),
+    )
+    print("\n" + "\n".join(text_table(columns, rows)))
     if "against" in trees:
         print(f"\nthis checkout against {ns.against}, the same processes alternating:")
         for name in tasks:

@@ -53,7 +53,6 @@ import functools
 import itertools
 import math
 import time
-import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,6 +68,7 @@ from identification.methods.pipeline import IdentifyOptions
 from identification.model import RollParams, damping
 from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
+from rocketroll_common.tables import Column, text_table
 
 #: Posterior sample traces drawn per seed for the SD and autocorrelation checks.
 POSTERIOR_DRAWS = 50
@@ -283,17 +283,6 @@ def stats_of(values: Sequence[float]) -> Stats:
     )
 
 
-def ljust(text: str, width: int) -> str:
-    """``str.ljust`` by displayed width (θ̄ is θ plus a combining macron)."""
-    shown = sum(not unicodedata.combining(c) for c in text)
-    return text + " " * max(0, width - shown)
-
-
-def rjust(text: str, width: int) -> str:
-    shown = sum(not unicodedata.combining(c) for c in text)
-    return " " * max(0, width - shown) + text
-
-
 def fmt(value: float, unit: str) -> str:
     if not np.isfinite(value):
         return "-"
@@ -307,13 +296,15 @@ def fmt(value: float, unit: str) -> str:
 def print_table(per_seed: dict[str, list[dict[str, float]]]) -> dict[tuple[str, str], Stats]:
     """One block per method; rows the metrics it has; columns over seeds."""
     cols = ("mean|e|", "SD", "bias", "worst")
-    width = 8
-    header = f"{'metric':36s} {'unit':>6s} | " + " ".join(f"{c:>{width}s}" for c in cols)
+    columns = (
+        Column("metric", 36, "<", display=True),
+        Column("unit", 6, ">", " ", display=True),
+        *(Column(c, 8, ">", " | " if i == 0 else " ") for i, c in enumerate(cols)),
+    )
     table: dict[tuple[str, str], Stats] = {}
     for method, rows in per_seed.items():
         print(f"{method}: {METHODS.entry(method).summary}")
-        print(header)
-        print("-" * len(header))
+        lines = []
         for metric in METRICS:
             values = [row[metric.key] for row in rows if metric.key in row]
             if not values:
@@ -326,11 +317,9 @@ def print_table(per_seed: dict[str, list[dict[str, float]]]) -> dict[tuple[str, 
                 fmt(s.bias, metric.unit),
                 fmt(s.worst, metric.unit),
             )
-            print(
-                f"{ljust(metric.label, 36)} {rjust(metric.unit, 6)} | "
-                + " ".join(f"{v:>{width}s}" for v in cells)
-            )
-        print()
+            lines.append([metric.label, metric.unit, *cells])
+        header, *body = text_table(columns, lines)
+        print("\n".join([header, "-" * len(header), *body]) + "\n")
     return table
 
 

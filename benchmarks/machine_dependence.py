@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rocketroll_common.numerics import MACHINE_SETTINGS, MARKER, with_settings
+from rocketroll_common.tables import markdown_table
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -150,15 +151,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                 ]
             rows.append(cells)
             print(f"  {name}: {time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
-    print(
-        "\n| setting | database built as it is: differs from this machine's "
-        "(identifications, traces, largest relative change of a parameter) | flight, tunnel-gain "
-        "PID (°) | tables | database built pinned: differs | flight, tunnel-gain PID (°) | "
-        "tables |"
-    )
-    print("|---|---|---|---|---|---|---|")
-    for cells in rows:
-        print("| " + " | ".join(cells) + " |")
+    header = [
+        "setting",
+        "database built as it is: differs from this machine's (identifications, traces, "
+        "largest relative change of a parameter)",
+        "flight, tunnel-gain PID (°)",
+        "tables",
+        "database built pinned: differs",
+        "flight, tunnel-gain PID (°)",
+        "tables",
+    ]
+    print("\n" + "\n".join(markdown_table(header, rows)))
     stable = all(cells[-1] == "identical" and cells[4].startswith("0/") for cells in rows)
     print(
         "\npinned: the database and the tables are the same under every setting"

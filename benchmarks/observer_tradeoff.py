@@ -26,6 +26,7 @@ import numpy as np
 
 from agents.observer import ObserverController, make_observer
 from agents.registry import Design
+from rocketroll_common.tables import markdown_table
 from rollenv.bank import variant_config
 
 
@@ -86,12 +87,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     t = base.turbulence
     print(f"train split of {args.method}: {t.source}, AR {np.round(t.ar, 3).tolist()}, ")
     print(f"  innovation {t.innovation_sd:.2f}° per {t.dt_s:g}-s step; perfect sensors")
-    print("| move weight | RMS angle error (°) | fin travel (°/s) |")
-    print("|---|---|---|")
+    rows = []
     for weight in args.moves:
         controller = ObserverController(config, base.rocket, t, {"move": weight})
         rms, travel = simulate(controller, args.steps, args.seed)
-        print(f"| {weight:g} | {rms:.3f} | {travel:.1f} |")
+        rows.append([f"{weight:g}", f"{rms:.3f}", f"{travel:.1f}"])
+    header = ["move weight", "RMS angle error (°)", "fin travel (°/s)"]
+    print("\n".join(markdown_table(header, rows)))
     return 0
 
 

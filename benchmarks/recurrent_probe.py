@@ -37,6 +37,7 @@ from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.registry import make_controller
 from agents.train import algorithm_arguments, load_hyperparameters, make_env, quiet_logger
 from rocketroll_common.errors import UsageError
+from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
 
 
@@ -190,10 +191,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         scorer.curve.append((model.num_timesteps, score(model, normalize)))
     cells = ", ".join(f"{n / 1e6:g} M: {h:.2f}" for n, h in scorer.curve)
     print()
-    print(f"| seed | env-steps/s | headline ({unit}) at each env-step count | PID |")
-    print("|---|---|---|---|")
     rate = model.num_timesteps / train_s
-    print(f"| {args.seed} | {rate:,.0f} | {cells} | {pid:.2f} |")
+    header = ["seed", "env-steps/s", f"headline ({unit}) at each env-step count", "PID"]
+    print(
+        "\n".join(markdown_table(header, [[str(args.seed), f"{rate:,.0f}", cells, f"{pid:.2f}"]]))
+    )
     return 0
 
 

@@ -41,6 +41,7 @@ from agents.evaluate import HEADLINE, evaluate, protocol_episodes
 from agents.registry import make_controller
 from identification.instruments.reference import Effects
 from identification.model import Rig
+from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
 from rollenv.core import RollConfig
 
@@ -134,11 +135,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 rows[label] = headlines(env_id, level_rig(case, level), stated, args.episodes)
                 print(f"  {label}: done ({time.perf_counter() - began:.0f} s)", flush=True)
         names = list(next(iter(rows.values())))
-        print("| controller | " + " | ".join(rows) + " |")
-        print("|---" * (len(rows) + 1) + "|")
-        for name in names:
-            cells = " | ".join(f"{r[name]:.3f}" for r in rows.values())
-            print(f"| {name} | {cells} |")
+        table = [[name, *(f"{r[name]:.3f}" for r in rows.values())] for name in names]
+        print("\n".join(markdown_table(["controller", *rows], table)))
         for label, row in rows.items():
             for policy in ("observer", "mpc"):
                 ideal, rigged = row[f"{policy}, ideal rig"], row[f"{policy}, on the rig"]

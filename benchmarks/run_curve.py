@@ -41,6 +41,7 @@ from agents.base import design_bank
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
 from agents.learned import LearnedController
 from agents.registry import make_controller
+from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
 
 _STEPS = re.compile(r"_(\d+)_steps\.zip$")
@@ -160,11 +161,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             curves.append((label, run, curve))
 
     print()
-    print(f"| run | headline ({unit}) at each checkpoint, env-steps |")
-    print("|---|---|")
-    for label, run, curve in curves:
-        cells = ", ".join(f"{n / 1e6:g} M: {h:.2f}" for n, h in curve)
-        print(f"| {label} ({run}) | {cells} |")
+    rows = [
+        [f"{label} ({run})", ", ".join(f"{n / 1e6:g} M: {h:.2f}" for n, h in curve)]
+        for label, run, curve in curves
+    ]
+    header = ["run", f"headline ({unit}) at each checkpoint, env-steps"]
+    print("\n".join(markdown_table(header, rows)))
     print()
     labels = list(dict.fromkeys(label for label, _, _ in curves))
     for label in labels:

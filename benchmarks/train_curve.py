@@ -54,6 +54,7 @@ from agents.train import (
     normalization_record,
     quiet_logger,
 )
+from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
 
 
@@ -184,28 +185,38 @@ def main(argv: Sequence[str] | None = None) -> int:
                 flush=True,
             )
     print()
-    print(
-        "| recipe | threads | seed | env-steps/s | "
-        + " | ".join(f"wall to {n} ({references[n]:.2f} {unit})" for n in names)
-        + f" | best ({unit}) at |"
-    )
-    print("|---|---|---|---|" + "---|" * len(names) + "---|")
+    header = [
+        "recipe",
+        "threads",
+        "seed",
+        "env-steps/s",
+        *(f"wall to {n} ({references[n]:.2f} {unit})" for n in names),
+        f"best ({unit}) at",
+    ]
+    table = []
     for recipe in recipes:
         for seed, rate, reach, (wall, steps, head) in rows[recipe.label]:
-            cells = " | ".join(
-                "not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names
-            )
+            reached = ["not reached" if reach[n] is None else f"{reach[n]:.0f} s" for n in names]
             at = f"{head:.2f} at {wall:.0f} s ({steps:,})"
-            print(f"| {recipe.label} | {recipe.threads} | {seed} | {rate:,.0f} | {cells} | {at} |")
+            table.append(
+                [recipe.label, str(recipe.threads), str(seed), f"{rate:,.0f}", *reached, at]
+            )
         if len(args.seeds) > 1:
             runs = rows[recipe.label]
             rate = statistics.median(r[1] for r in runs)
-            cells = " | ".join(_median_time([r[2][n] for r in runs]) for n in names)
+            medians = [_median_time([r[2][n] for r in runs]) for n in names]
             best_median = statistics.median(r[3][2] for r in runs)
-            print(
-                f"| **{recipe.label}, median of {len(runs)}** | {recipe.threads} | – | "
-                f"{rate:,.0f} | {cells} | {best_median:.2f} |"
+            table.append(
+                [
+                    f"**{recipe.label}, median of {len(runs)}**",
+                    str(recipe.threads),
+                    "–",
+                    f"{rate:,.0f}",
+                    *medians,
+                    f"{best_median:.2f}",
+                ]
             )
+    print("\n".join(markdown_table(header, table)))
     if args.png is not None:
         seeds = ", ".join(map(str, args.seeds))
         write_curves(

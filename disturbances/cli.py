@@ -28,6 +28,7 @@ from identification.model import MODEL_NAMES, QUADRATIC_RATE_DPS
 from identification.recordings.recording import SOURCES, Recording
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
+from rocketroll_common.tables import Column, text_table
 
 if TYPE_CHECKING:
     from disturbances.rows import TraceRow
@@ -496,19 +497,25 @@ class ListArgs:
 def _trace_table(rows: list[TraceRow], accepted: set[tuple[str, str, str]]) -> str:
     """The listing; a trace whose identification is among ``accepted`` (its recording stored
     although every fit of it is judged unreliable) has its verdict marked."""
-    lines = [
-        f"{'id':>4}  {'uid':<40} {'kind':<10} {'split':<5} {'method':<12} {'model':<8} "
-        f"{'dur s':>6} {'mean °':>7} {'SD °':>6} {'90 % interval °':>17} {'normal p':>8}  "
-        "fit"
+    cells = [
+        [
+            str(i.id),
+            i.uid,
+            i.kind,
+            i.split,
+            i.method,
+            i.model,
+            f"{i.duration_s:.0f}",
+            f"{i.mean_deg:.2f}",
+            f"{i.sd_deg:.2f}",
+            f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}]",
+            "" if i.normality_p is None else f"{i.normality_p:.3f}",
+            (i.verdict or "-")
+            + (ACCEPTED_MARK if (i.recording_hash, i.method, i.model) in accepted else ""),
+        ]
+        for i in rows
     ]
-    for i in rows:
-        p = "" if i.normality_p is None else f"{i.normality_p:.3f}"
-        lines.append(
-            f"{i.id:>4}  {i.uid:<40} {i.kind:<10} {i.split:<5} {i.method:<12} {i.model:<8} "
-            f"{i.duration_s:>6.0f} {i.mean_deg:>7.2f} {i.sd_deg:>6.2f} "
-            f"[{i.q05_deg:>6.2f}, {i.q95_deg:>6.2f}] {p:>8}  {i.verdict or '-'}"
-            + (ACCEPTED_MARK if (i.recording_hash, i.method, i.model) in accepted else "")
-        )
+    lines = text_table(_TRACE_COLUMNS, cells)
     if any((i.recording_hash, i.method, i.model) in accepted for i in rows):
         lines.append(
             "accepted: stored with db add --accept-unreliable, although every fit of its "
@@ -519,6 +526,21 @@ def _trace_table(rows: list[TraceRow], accepted: set[tuple[str, str, str]]) -> s
 
 #: How ``db list`` marks the verdict of a fit stored with ``db add --accept-unreliable``.
 ACCEPTED_MARK = ", accepted"
+#: ``db list``'s columns (the interval's title is as wide as its cells and a space).
+_TRACE_COLUMNS = (
+    Column("id", 4),
+    Column("uid", 40, "<", "  "),
+    Column("kind", 10, "<", " "),
+    Column("split", 5, "<", " "),
+    Column("method", 12, "<", " "),
+    Column("model", 8, "<", " "),
+    Column("dur s", 6, ">", " "),
+    Column("mean °", 7, ">", " "),
+    Column("SD °", 6, ">", " "),
+    Column("  90 % interval °", 16, ">", " "),
+    Column("normal p", 8, ">", " "),
+    Column("fit", gap="  "),
+)
 
 
 def _row_json(row: TraceRow) -> dict[str, Any]:

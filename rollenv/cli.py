@@ -12,6 +12,7 @@ import numpy as np
 
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
+from rocketroll_common.tables import Column, text_table
 from rollenv import task_of
 
 __all__ = ["COMMANDS", "AscentArgs", "RolloutArgs", "rollout", "show_ascent"]
@@ -167,16 +168,28 @@ def run_rollout(args: RolloutArgs) -> int:
     )
     unit = "°/s" if task_of(args.env_id) == "rate" else "°"
     print(f"{args.env_id}, policy {args.policy}, seed {args.seed}")
-    print(
-        f"{'episode':>7} {'steps':>6} {'return':>10} {'RMS error':>11} {'fin travel':>12} "
-        f"{'mean |u_d|':>11}  trace (start)"
+    columns = (
+        Column("episode", 7),
+        Column("steps", 6, gap=" "),
+        Column("return", 10, gap=" "),
+        Column("RMS error", 11, gap=" "),
+        Column("fin travel", 12, gap=" "),
+        Column("mean |u_d|", 11, gap=" "),
+        Column("trace (start)", gap="  "),
     )
-    for s in summaries:
-        print(
-            f"{int(s['episode']):>7} {int(s['steps']):>6} {s['return']:>10.1f} "
-            f"{s['rms_error']:>8.2f} {unit:<2} {s['fin_travel_dps']:>8.1f} °/s "
-            f"{s['mean_abs_u_d_deg']:>9.2f} °  {s['trace']} ({s['start_s']:g} s)"
-        )
+    rows = [
+        [
+            str(int(s["episode"])),
+            str(int(s["steps"])),
+            f"{s['return']:.1f}",
+            f"{s['rms_error']:>8.2f} {unit:<2}",
+            f"{s['fin_travel_dps']:>8.1f} °/s",
+            f"{s['mean_abs_u_d_deg']:>9.2f} °",
+            f"{s['trace']} ({s['start_s']:g} s)",
+        ]
+        for s in summaries
+    ]
+    print("\n".join(text_table(columns, rows)))
     if args.frames is not None:
         print(f"frames: {args.frames}")
     return 0

@@ -54,6 +54,7 @@ from agents.train.hyperparams import (
 from rocketroll_common.errors import Interrupted, SettingError, UsageError
 from rocketroll_common.files import check_folder_files, record_outputs, write_all_atomic
 from rocketroll_common.settings import check, parse, setting, to_argv
+from rocketroll_common.tables import Column, text_table
 
 
 def _variant_ids() -> tuple[str, ...]:
@@ -227,11 +228,11 @@ def _jsonable(value: Any) -> Any:
 def _print_table(rows: list[tuple[str, Any]]) -> None:
     """``name | value`` rows as a plain-text table."""
     width = max(len(name) for name, _ in rows)
-    print(f"{'setting':<{width}} | value")
-    print(f"{'-' * width}-+-{'-' * 40}")
-    for name, value in rows:
-        print(f"{name:<{width}} | {value}")
-    print()
+    header, *lines = text_table(
+        (Column("setting", width, "<"), Column("value", gap=" | ")),
+        [(name, str(value)) for name, value in rows],
+    )
+    print("\n".join([header, f"{'-' * width}-+-{'-' * 40}", *lines]) + "\n")
 
 
 # ----------------------------------------------------------------------------- training

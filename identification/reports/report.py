@@ -62,6 +62,7 @@ from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import UsageError
 from rocketroll_common.files import write_all_atomic
 from rocketroll_common.plotting import new_figure, png_bytes
+from rocketroll_common.tables import markdown_table
 
 __all__ = ["FIGURES", "REPORT_NAME", "render_report", "write_report"]
 
@@ -736,17 +737,6 @@ def _fig21(result: Identification) -> Figure:
 # --------------------------------------------------------------------------- report.md
 
 
-def _cell(text: str) -> str:
-    return text.replace("|", "\\|")
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    lines = ["| " + " | ".join(_cell(h) for h in header) + " |"]
-    lines.append("|" + "|".join("---" for _ in header) + "|")
-    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
-    return lines
-
-
 def _fmt(value: float | None, spec: str) -> str:
     if value is None or not np.isfinite(value):
         return "—"
@@ -794,7 +784,7 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
             row.append(_fmt(truth.get(key), spec))
         row.append(PAPER_PARAMETERS[key])
         rows.append(row)
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     if truth is not None and truth.get("alpha_bar_per_deg_s", 0.0) != 0.0:
         lines += [
             "",
@@ -830,7 +820,7 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
         else:
             row.append("no")
         rows.append(row)
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     outlier = (
         "no step was left out"
         if vs.outlier is None
@@ -858,7 +848,7 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
             ]
         )
         rows.append([f"{_MODEL_LABEL[name]}, paper", *PAPER_RESIMULATION[name]])
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     lines += [
         "",
         "Errors are |simulated − measured| at the recording's samples, against the smoothed "
@@ -914,7 +904,7 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
                 "—",
             ]
         )
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     stride = max(st.theta.stride, st.constant.stride)
     lines += [
         "",
@@ -949,7 +939,7 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
                     f"{PAPER_NOISE_10[1]:.2f}" if paper else "—",
                 ]
             )
-        lines += _table(header, rows)
+        lines += markdown_table(header, rows)
         lines += [
             "",
             "With noise drawn independently at every 100 Hz sample the paper's 0.62° cannot be "

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import unicodedata
 from collections.abc import Mapping
 from typing import Any
 
@@ -13,14 +12,9 @@ from identification import paper
 from identification.methods import ModelFit
 from identification.methods.adequacy import FIN_ERROR_MATERIAL
 from identification.methods.pipeline import Identification
+from rocketroll_common.tables import Column, text_table
 
 __all__ = ["adequacy_table", "flight_table", "methods_table", "parameter_table", "scaling_line"]
-
-
-def _pad(text: str, width: int) -> str:
-    """Left-justify ``text`` to a display width (combining marks take no column)."""
-    shown = sum(not unicodedata.combining(ch) for ch in text)
-    return text + " " * max(0, width - shown)
 
 
 def parameter_table(result: Identification) -> str:
@@ -46,13 +40,20 @@ def parameter_table(result: Identification) -> str:
         f"  angle: {result.angle_source}; velocity: {result.velocity_source}",
         f"  fin angle: {result.theta_source}",
         "",
-        f"{'parameter':<26}{'identified':>12}{'truth' if truth else '':>12}{'paper':>10}",
     ]
+    rows = []
     for key, value in result.parameters().items():
         true = "" if truth is None or key not in truth else f"{truth[key]:.4g}"
         if truth is not None and key in ("a_per_s", "b_per_s2") and true:
             true += "*"
-        lines.append(f"{_pad(labels[key], 26)}{value:>12.4g}{true:>12}{reference[key]:>10.4g}")
+        rows.append([labels[key], f"{value:.4g}", true, f"{reference[key]:.4g}"])
+    columns = (
+        Column("parameter", 26, "<", display=True),
+        Column("identified", 12),
+        Column("truth" if truth else "", 12),
+        Column("paper", 10),
+    )
+    lines += text_table(columns, rows)
     if truth is not None and truth["alpha_bar_per_deg_s"] != 0.0:
         lines.append("  * θ-dependent truth: a(θ) averaged over the step fin levels")
     dvf = result.damping_vs_fin
@@ -103,21 +104,43 @@ def methods_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
 
     ``fits`` is ``{method: {model: ModelFit}}`` (:func:`identification.methods.fit`).
     """
-    lines = [
-        f"{'method':<14}{'model':<10}{'α (°/s)/°':>11}{'θ̄ °':>9}{'β̄ or a 1/s':>13}"
-        f"{'ᾱ 1/(s·°)':>12}{'rate MAE °/s':>14}{'angle MAE °':>13}"
+    rows = [
+        [
+            method,
+            model,
+            f"{f.params.alpha:.4f}",
+            f"{f.params.theta_bar_deg:.3f}",
+            f"{f.params.beta_bar_per_s:.4f}",
+            f"{f.params.alpha_bar_per_deg_s:.4f}",
+            _blank(f.metrics.get("resim_rate_mae_dps"), ".3f"),
+            _blank(f.metrics.get("resim_angle_mae_deg"), ".3f"),
+        ]
+        for method, by_model in fits.items()
+        for model, f in by_model.items()
     ]
-    for method, by_model in fits.items():
-        for model, f in by_model.items():
-            p = f.params
-            rate = f.metrics.get("resim_rate_mae_dps")
-            angle = f.metrics.get("resim_angle_mae_deg")
-            lines.append(
-                f"{method:<14}{model:<10}{p.alpha:>11.4f}{p.theta_bar_deg:>9.3f}"
-                f"{p.beta_bar_per_s:>13.4f}{p.alpha_bar_per_deg_s:>12.4f}"
-                f"{_blank(rate, '.3f'):>14}{_blank(angle, '.3f'):>13}"
-            )
-    return "\n".join(lines + _beyond_lines(fits))
+    return "\n".join(text_table(_METHOD_COLUMNS, rows) + _beyond_lines(fits))
+
+
+#: The method and the model that begin each row of the methods' tables.
+_FIT = (Column("method", 14, "<"), Column("model", 10, "<"))
+_METHOD_COLUMNS = (
+    *_FIT,
+    Column("α (°/s)/°", 11),
+    Column("θ̄ °", 9),
+    Column("β̄ or a 1/s", 13),
+    Column("ᾱ 1/(s·°)", 12),
+    Column("rate MAE °/s", 14),
+    Column("angle MAE °", 13),
+)
+_ADEQUACY_COLUMNS = (
+    *_FIT,
+    Column("rate R²", 9),
+    Column("ahead R²", 10),
+    Column("fin→u_d", 9),
+    Column("|u_d|/range", 13),
+    Column("α SE %", 8),
+    Column("verdict", gap="  "),
+)
 
 
 def _beyond_lines(fits: Mapping[str, Mapping[str, ModelFit]]) -> list[str]:
@@ -145,26 +168,28 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
     against the raw rate, its prediction a time constant ahead, the share of ``u_d``
     the fin explains, ``|u_d|`` against the fins' range, α's standard error, and the
     verdict with its reasons below the table.  Fits without figures are left out."""
-    lines = [
-        f"{'method':<14}{'model':<10}{'rate R²':>9}{'ahead R²':>10}{'fin→u_d':>9}"
-        f"{'|u_d|/range':>13}{'α SE %':>8}  verdict"
-    ]
-    reasons = []
+    rows, reasons = [], []
     for method, by_model in fits.items():
         for model, f in by_model.items():
             a = f.metrics.get("adequacy")
             if not a:
                 continue
             se = None if a["alpha_rel_se"] is None else 100 * a["alpha_rel_se"]
-            lines.append(
-                f"{method:<14}{model:<10}{_blank(a['rate_r2'], '.3f'):>9}"
-                f"{_blank(a['ahead_r2'], '.3f'):>10}{_fin_share_cell(a):>9}"
-                f"{_blank(a['ud_range_fraction'], '.2f'):>13}{_blank(se, '.1f'):>8}"
-                f"  {a['verdict']}"
+            rows.append(
+                [
+                    method,
+                    model,
+                    _blank(a["rate_r2"], ".3f"),
+                    _blank(a["ahead_r2"], ".3f"),
+                    _fin_share_cell(a),
+                    _blank(a["ud_range_fraction"], ".2f"),
+                    _blank(se, ".1f"),
+                    a["verdict"],
+                ]
             )
             reasons += [f"  {method} {model}: {reason}" for reason in a["reasons"]]
             reasons += [f"  {method} {model}: suspected: {s}" for s in a.get("suspected") or ()]
-    return "\n".join(lines + reasons)
+    return "\n".join(text_table(_ADEQUACY_COLUMNS, rows) + reasons)
 
 
 def scaling_line(metrics: Mapping[str, Any]) -> str:

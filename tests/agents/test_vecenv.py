@@ -386,7 +386,8 @@ def test_the_policy_observation_its_names_and_its_space_agree(layout: dict[str, 
     seen = wrapped.reset()
     assert seen.shape == (2, len(names)) and seen.dtype == np.float32
     for _ in range(25):  # 20-step episodes: both envs end and start again
-        seen, _, dones, infos = wrapped.step(np.array([[0.5], [-0.5]], dtype=np.float32))
+        stepped, _, dones, infos = wrapped.step(np.array([[0.5], [-0.5]], dtype=np.float32))
+        seen = np.asarray(stepped)
         assert wrapped.observation_space.contains(seen[0]) and seen.shape == (2, len(names))
         for i in np.flatnonzero(dones):
             assert infos[i]["terminal_observation"].shape == (len(names),)
