@@ -20,8 +20,8 @@ IAAFT (:func:`iaaft`)
 
 AR (:func:`fit_ar`, :func:`ar_surrogate`)
     An autoregressive model ``u_t = c + sum_k a_k u_{t-k} + e_t`` whose order
-    is chosen by AIC (``statsmodels`` ``ar_select_order`` then ``AutoReg``
-    [2]_), simulated with innovations either Gaussian with the fitted
+    is chosen by AIC among ``statsmodels``' ``AutoReg`` fits, as ``ar_select_order``
+    chooses it [2]_, simulated with innovations either Gaussian with the fitted
     innovation SD (the default) or resampled from the fitted residuals
     (bootstrap; it keeps more of a non-Gaussian marginal).  The spectrum is the
     AR's (a smooth parametric estimate of the source's); the marginal is
@@ -60,8 +60,9 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
-from statsmodels.tsa.ar_model import AutoReg, ar_select_order
+from statsmodels.tsa.ar_model import AutoReg
 
+from identification.estimation.likelihood import select_order
 from identification.methods.statistics import decorrelation_stride
 from rocketroll_common.arrays import readonly_array
 
@@ -452,9 +453,10 @@ def fit_ar(x: ArrayLike, *, max_order: int = 30) -> ARModel:
 
     Notes
     -----
-    ``statsmodels.tsa.ar_model.ar_select_order(x, max_order, ic="aic",
-    trend="c")`` chooses the order (all candidates are fitted on the same
-    sample, the first ``max_order`` values held back), then
+    The order is the one of least AIC (:func:`identification.estimation.likelihood.select_order`,
+    the toolkit's one order selection) among ``statsmodels``' ``AutoReg(x, p, trend="c")``
+    fits, all on the same sample (the first ``max_order`` values held back), as
+    ``ar_select_order(x, max_order, ic="aic", trend="c")`` chooses it; then
     ``AutoReg(x, lags, trend="c")`` refits on all the data [1]_.
 
     References
@@ -464,11 +466,13 @@ def fit_ar(x: ArrayLike, *, max_order: int = 30) -> ARModel:
     """
     _check_max_order(max_order)
     source = _trace(x, min_samples=_ar_min_samples(max_order))
-    lags: list[int] | None = None
-    if max_order > 0:
-        selected = ar_select_order(source, maxlag=max_order, ic="aic", trend="c")
-        lags = list(selected.ar_lags) if selected.ar_lags else None
-    order = len(lags) if lags else 0
+
+    def held_back(order: int) -> tuple[float, int]:
+        # every order on the same sample: the first max_order values held back
+        return float(AutoReg(source, lags=order, trend="c", hold_back=max_order).fit().aic), order
+
+    order = select_order(held_back, range(max_order + 1))[0]
+    lags = list(range(1, order + 1))
     result = AutoReg(source, lags=lags if lags else 0, trend="c").fit()
     params = np.asarray(result.params, dtype=np.float64)
     return ARModel(

@@ -14,6 +14,7 @@ from statsmodels.tsa.arima_process import ArmaProcess
 from agents.nominal import NominalModel
 from disturbances.bank import TraceBank
 from identification.compiled import interval_maps
+from identification.estimation.likelihood import select_order
 from identification.estimation.statespace import predict, update
 from identification.methods.ml import MAX_ORDER
 from identification.methods.rollspace import roll_transition, stationary_cov
@@ -136,8 +137,8 @@ class TurbulenceModel:
             u = u[: u.size // k * k].reshape(-1, k).mean(axis=1)
             offsets.append(params.theta_bar_deg + u.mean() - nominal.theta_bar_deg)
             series.append(u - u.mean())
-        best: tuple[float, FloatArray, float] | None = None
-        for p in range(1, max_order + 1):
+
+        def pooled(p: int) -> tuple[float, tuple[FloatArray, float]]:
             rows = [
                 np.column_stack([s[p - 1 - i : s.size - 1 - i] for i in range(p)]) for s in series
             ]
@@ -145,11 +146,9 @@ class TurbulenceModel:
             y = np.concatenate([s[p:] for s in series])
             coef, *_ = np.linalg.lstsq(x, y, rcond=None)
             var = float(np.mean((y - x @ coef) ** 2))
-            aic = y.size * math.log(var) + 2 * (p + 1)
-            if best is None or aic < best[0]:
-                best = (aic, coef, var)
-        assert best is not None
-        _, coef, var = best
+            return y.size * math.log(var) + 2 * (p + 1), (coef, var)
+
+        _, _, (coef, var) = select_order(pooled, range(1, max_order + 1))
         return cls(
             ar=coef,
             innovation_sd=math.sqrt(var),

@@ -33,7 +33,7 @@ import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from scipy import optimize
@@ -53,6 +53,7 @@ __all__ = [
     "negloglike_at",
     "numerical_hessian",
     "posterior_states",
+    "select_order",
     "standard_errors",
 ]
 
@@ -213,6 +214,39 @@ def standard_errors(
     return se, {
         f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)
     }
+
+
+_Fit = TypeVar("_Fit")
+
+
+def select_order(
+    fit: Callable[[int], tuple[float, _Fit]],
+    orders: Sequence[int],
+    *,
+    stop_when_worse: bool = False,
+) -> tuple[int, dict[int, float], _Fit]:
+    """The model order of least AIC: the one AR-order selection of the turbulence's fits.
+
+    Each of ``orders`` is tried in turn, ``fit(order)`` giving its AIC and its fit; the
+    first of equal AICs is kept.  ``stop_when_worse``: stop at the first order past the
+    best whose AIC does not improve on it (for costly fits of nested models).  Returns the
+    best order, the AIC of each order tried and the best order's fit.
+
+    >>> select_order(lambda p: ((p - 2) ** 2, f"AR({p})"), range(1, 6), stop_when_worse=True)
+    (2, {1: 1, 2: 0, 3: 1}, 'AR(2)')
+    """
+    aics: dict[int, float] = {}
+    fits: dict[int, _Fit] = {}
+    best: int | None = None
+    for order in orders:
+        aics[order], fits[order] = fit(order)
+        if best is None or aics[order] < aics[best]:
+            best = order
+        elif stop_when_worse and order > best:
+            break
+    if best is None:
+        raise ValueError("select_order needs at least one order")
+    return best, aics, fits[best]
 
 
 def posterior_states(

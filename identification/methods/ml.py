@@ -57,6 +57,7 @@ from identification.estimation.likelihood import (
     maximise,
     numerical_hessian,
     posterior_states,
+    select_order,
     standard_errors,
 )
 from identification.estimation.statespace import (
@@ -434,16 +435,14 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
     """The model's fit at the AR order of least AIC (orders tried upwards until AIC rises)."""
     check_model(model)
     data = search.data
-    orders: dict[int, float] = {}
-    best = 1
-    for order in range(1, max_order + 1):
-        fun, nat = search.order(model, order)[:2]
-        orders[order] = 2.0 * count_params(data, model, order, nat) + 2.0 * fun
-        if orders[order] < orders[best]:
-            best = order
-        elif order > best:
-            break
-    fun, nat, converged, message = search.order(model, best)
+
+    def aic(order: int) -> tuple[float, tuple[float, dict[str, Any], bool, str]]:
+        found = search.order(model, order)
+        return 2.0 * count_params(data, model, order, found[1]) + 2.0 * found[0], found
+
+    best, orders, (fun, nat, converged, message) = select_order(
+        aic, range(1, max_order + 1), stop_when_worse=True
+    )
     parts = roll_parts(data, nat)
     if parts is None or not fun < OUTSIDE:
         raise IdentificationError(

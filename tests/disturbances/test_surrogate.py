@@ -120,6 +120,25 @@ def test_fit_ar_recovers_a_known_model() -> None:
         model.coefs[0] = 0.0
 
 
+def test_fit_ar_chooses_the_order_statsmodels_ar_select_order_chooses(
+    traces: dict[str, FloatArray],
+) -> None:
+    """The toolkit's one order selection (select_order over AutoReg fits on one held-back
+    sample) picks, on the bundled traces and on AR series of orders 1-3, the order
+    statsmodels' ar_select_order(ic="aic", trend="c") picks."""
+    from statsmodels.tsa.ar_model import ar_select_order
+
+    series = list(traces.values())
+    for seed, poles in enumerate(([0.9], [0.6, -0.3], [0.5, 0.2, -0.4], [-0.7])):
+        e = rng(10 + seed).normal(0.0, 1.0, 1500)
+        series.append(signal.lfilter([1.0], [1.0, *(-np.asarray(poles))], e)[200:] + 3.0)
+    for x in series:
+        for max_order in (3, 12):
+            selected = ar_select_order(x, maxlag=max_order, ic="aic", trend="c")
+            expected = len(selected.ar_lags) if selected.ar_lags else 0
+            assert fit_ar(x, max_order=max_order).order == expected
+
+
 def test_fit_ar_on_the_bundled_trace(traces: dict[str, FloatArray]) -> None:
     x = traces[GAUSSIAN]
     model = fit_ar(x)
