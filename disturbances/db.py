@@ -59,7 +59,14 @@ from disturbances.rows import (
     RecordingRow,
     TraceRow,
 )
-from disturbances.schema import APPLICATION_ID, SCHEMA, SCHEMA_VERSION, TABLES, migrate
+from disturbances.schema import (
+    APPLICATION_ID,
+    SCHEMA,
+    SCHEMA_VERSION,
+    TABLES,
+    migrate,
+    write_transaction,
+)
 from identification.methods import METHODS
 from identification.methods.adequacy import VERDICTS
 from identification.model import MODEL_NAMES, Rig, RollParams
@@ -288,8 +295,7 @@ class DisturbanceDB:
         if version == 0 and app == 0 and not tables:
             # A new file.  Another process may be creating it too: decide under the
             # write lock, and only one of them makes the schema.
-            conn.execute("BEGIN IMMEDIATE")
-            try:
+            with write_transaction(conn):
                 version, app = self._version(conn)
                 tables = self._tables(conn)
                 if version == 0 and app == 0 and not tables:
@@ -306,11 +312,6 @@ class DisturbanceDB:
                         ],
                     )
                     version, app, tables = SCHEMA_VERSION, APPLICATION_ID, set(TABLES)
-                conn.execute("COMMIT")
-            except BaseException:
-                if conn.in_transaction:
-                    conn.execute("ROLLBACK")
-                raise
         if app != APPLICATION_ID:
             raise self._fail(
                 "an SQLite database, but not a rocketroll disturbance database "
@@ -406,15 +407,8 @@ class DisturbanceDB:
     @contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:
         """One write transaction: all of it is committed, or none of it."""
-        with self._errors():
-            self._conn.execute("BEGIN IMMEDIATE")
-            try:
-                yield self._conn
-            except BaseException:
-                if self._conn.in_transaction:  # SQLite may have rolled back already
-                    self._conn.execute("ROLLBACK")
-                raise
-            self._conn.execute("COMMIT")
+        with self._errors(), write_transaction(self._conn) as conn:
+            yield conn
 
     def _query(self, sql: str, params: Sequence[Any] = ()) -> list[sqlite3.Row]:
         with self._errors():

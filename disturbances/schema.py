@@ -31,10 +31,19 @@ import os
 import sqlite3
 import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["APPLICATION_ID", "SCHEMA", "SCHEMA_VERSION", "TABLES", "backup_path", "migrate"]
+__all__ = [
+    "APPLICATION_ID",
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "TABLES",
+    "backup_path",
+    "migrate",
+    "write_transaction",
+]
 
 #: Version of the schema this package writes and reads.
 SCHEMA_VERSION = 5
@@ -239,6 +248,20 @@ def _backup(path: Path, version: int) -> Path:
     return target
 
 
+@contextmanager
+def write_transaction(conn: sqlite3.Connection) -> Iterator[sqlite3.Connection]:
+    """One write transaction under the database's write lock (``BEGIN IMMEDIATE``): all of
+    it committed, or, on any error (the commit's too), none of it."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        yield conn
+        conn.execute("COMMIT")
+    except BaseException:
+        if conn.in_transaction:  # SQLite may have rolled back already
+            conn.execute("ROLLBACK")
+        raise
+
+
 def migrate(conn: sqlite3.Connection, path: Path, version: int) -> Path | None:
     """Upgrade the database on ``conn`` from ``version`` to :data:`SCHEMA_VERSION`.
 
@@ -265,11 +288,9 @@ def migrate(conn: sqlite3.Connection, path: Path, version: int) -> Path | None:
         raise ValueError(f"no migration from schema version {version}")
     conn.execute("PRAGMA foreign_keys = OFF")  # (outside a transaction, or it is ignored)
     try:
-        conn.execute("BEGIN IMMEDIATE")
-        try:
+        with write_transaction(conn):
             current = int(conn.execute("PRAGMA user_version").fetchone()[0])
             if current >= SCHEMA_VERSION:  # another process upgraded it while this one waited
-                conn.execute("COMMIT")
                 return None
             if conn.execute("PRAGMA foreign_key_check").fetchall():
                 raise sqlite3.IntegrityError(
@@ -283,11 +304,6 @@ def migrate(conn: sqlite3.Connection, path: Path, version: int) -> Path | None:
             if bad:
                 raise sqlite3.IntegrityError(f"foreign keys broken by the migration: {bad[:3]}")
             conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
-            conn.execute("COMMIT")
-        except BaseException:
-            if conn.in_transaction:
-                conn.execute("ROLLBACK")
-            raise
     finally:
         conn.execute("PRAGMA foreign_keys = ON")
     return backup

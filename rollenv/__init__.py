@@ -21,23 +21,14 @@ line (``--env-id``), training, tuning and the evaluation read it from
 
 from __future__ import annotations
 
-from rollenv.variants import (
-    register_variant,
-    task_of,
-    unregister_variant,
-    variant_ids,
-    variant_options,
-)
+from rollenv import variants
+from rollenv.variants import register_variant as register_variant
+from rollenv.variants import task_of as task_of
+from rollenv.variants import unregister_variant as unregister_variant
+from rollenv.variants import variant_ids as variant_ids
+from rollenv.variants import variant_options as variant_options
 
-__all__ = [
-    "RocketRollEnv",
-    "RocketRollVectorEnv",
-    "register_variant",
-    "task_of",
-    "unregister_variant",
-    "variant_ids",
-    "variant_options",
-]
+__all__ = ["RocketRollEnv", "RocketRollVectorEnv", *variants.__all__]
 
 
 def __getattr__(name: str) -> object:

@@ -63,11 +63,13 @@ from identification.instruments.tunnel import (
     check_rocket,
     rocket_params,
     rocket_setting,
+    synthetic_recording,
+    truth_items,
 )
 from identification.model import MODEL_NAMES, RollParams, Servo
 from identification.model import simulate as simulate_roll
 from identification.recordings.flight import SITE_ELEVATION_KEY
-from identification.recordings.recording import Recording, metadata_items
+from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError, SettingError
 from rocketroll_common.settings import check, setting, to_argv
@@ -391,12 +393,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         ("flight.ascent", profile.source),
         ("flight.start_s", round(start, 9)),
         ("flight.apogee_s", round(profile.apogee_s, 9)),
-        ("truth.model", spec.model),
-        ("truth.alpha", params.alpha),
-        ("truth.beta_dps", params.beta_dps),
-        ("truth.theta_bar_deg", params.theta_bar_deg),
-        ("truth.alpha_bar_per_deg_s", params.alpha_bar_per_deg_s),
-        ("truth.beta_bar_per_s", params.beta_bar_per_s),
+        *truth_items(spec.model, params),
         ("truth.v_ref_mps", spec.v_ref),
         ("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3),
         ("truth.torque_exponent", scaling.torque_exponent),
@@ -432,13 +429,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         meta.append((SITE_ELEVATION_KEY, float(profile.altitude_m[0])))
     if spec.split is not None:
         meta.append(("split", spec.split))
-    return Recording(
-        name=spec.default_name(),
-        source="synthetic",
-        time_s=time,
-        metadata=metadata_items(meta),
-        **columns,
-    )
+    return synthetic_recording(spec.default_name(), time, meta, columns)
 
 
 def truth_reference(recording: Recording) -> FlightReference:

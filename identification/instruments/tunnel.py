@@ -94,6 +94,8 @@ __all__ = [
     "Turbulence",
     "fin_schedule",
     "run_tunnel",
+    "synthetic_recording",
+    "truth_items",
 ]
 
 Distribution = Literal["gaussian", "laplace", "student-t"]
@@ -820,12 +822,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         ("seed", spec.seed),
         ("tunnel.schedule", spec.schedule),
         ("tunnel.substeps", spec.substeps),
-        ("truth.model", spec.model),
-        ("truth.alpha", params.alpha),
-        ("truth.beta_dps", params.beta_dps),
-        ("truth.theta_bar_deg", params.theta_bar_deg),
-        ("truth.alpha_bar_per_deg_s", params.alpha_bar_per_deg_s),
-        ("truth.beta_bar_per_s", params.beta_bar_per_s),
+        *truth_items(spec.model, params),
         ("truth.servo_rate_dps", servo.rate_limit_dps),
         ("truth.fin_range_deg", servo.range_deg),
         ("truth.turbulence", turbulence.distribution),
@@ -846,12 +843,28 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     if spec.state_rig:
         stated = StatedRig(effects.servo_lag_s, effects.backlash_deg, effects.latency_s)
         meta += list(stated.metadata().items())
+    return synthetic_recording(spec.default_name(), time, meta, columns)
+
+
+def truth_items(model: str, params: RollParams) -> list[tuple[str, object]]:
+    """The rocket a virtual instrument flew, as a recording's ``truth.*`` metadata."""
+    return [
+        ("truth.model", model),
+        ("truth.alpha", params.alpha),
+        ("truth.beta_dps", params.beta_dps),
+        ("truth.theta_bar_deg", params.theta_bar_deg),
+        ("truth.alpha_bar_per_deg_s", params.alpha_bar_per_deg_s),
+        ("truth.beta_bar_per_s", params.beta_bar_per_s),
+    ]
+
+
+def synthetic_recording(
+    name: str, time: FloatArray, meta: list[tuple[str, object]], columns: dict[str, Any]
+) -> Recording:
+    """A virtual instrument's recording: its columns, its metadata (truth, sensors, the
+    command that made it)."""
     return Recording(
-        name=spec.default_name(),
-        source="synthetic",
-        time_s=time,
-        metadata=metadata_items(meta),
-        **columns,
+        name=name, source="synthetic", time_s=time, metadata=metadata_items(meta), **columns
     )
 
 

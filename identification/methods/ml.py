@@ -91,7 +91,7 @@ from identification.methods.rollspace import (
     roll_system,
     stationary_cov,
 )
-from identification.methods.steps import IdentificationError, resimulate
+from identification.methods.steps import IdentificationError
 from identification.model import (
     QUADRATIC_RATE_DPS,
     TERM_LEVEL,
@@ -859,15 +859,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             if term.p < TERM_LEVEL:
                 found = quadratic_fit(inputs, model, term, found)
         dist = found.disturbance()
-        resim = resimulate(
-            dist,
-            inputs.recording,
-            inputs.grid,
-            inputs.theta_fine,
-            inputs.velocity_dps,
-            inputs.angle_deg,
-            initial=found.initial_state,
-        )
+        resim = inputs.resimulate(dist, found.initial_state)
         metrics = {
             "sources": {
                 "angle": inputs.angle_source,

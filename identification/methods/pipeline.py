@@ -476,6 +476,21 @@ class Measurements:
             raise IdentificationError(str(self.steps_found))
         return self.steps_found
 
+    def resimulate(
+        self, dist: Disturbance, initial: tuple[float, float] | None = None
+    ) -> Resimulation:
+        """Step 9 (§3.5): the model driven by ``dist`` against these measurements, from the
+        measured state or ``initial`` (rate °/s, angle °)."""
+        return resimulate(
+            dist,
+            self.recording,
+            self.grid,
+            self.theta_fine,
+            self.velocity_dps,
+            self.angle_deg,
+            initial=initial,
+        )
+
     def require_steps(self) -> None:
         """Refuse a recording with fewer than two fin steps: nothing to fit α and θ̄ on."""
         if self.segments.n_steps < 2:
@@ -597,15 +612,7 @@ def recover_disturbance(
         inputs.velocity_fine,
         interval_s=options.ud_interval_s,
     )
-    resim = resimulate(
-        dist,
-        inputs.recording,
-        inputs.grid,
-        inputs.theta_fine,
-        inputs.velocity_dps,
-        inputs.angle_deg,
-    )
-    return dist, resim
+    return dist, inputs.resimulate(dist)
 
 
 def identify(recording: Recording, options: IdentifyOptions | None = None) -> Identification:
