@@ -1,4 +1,5 @@
-"""``rocketroll identify`` and ``rocketroll db ...``: identification and the database.
+"""``rocketroll db ...``: the database's commands, and the database helpers
+``rocketroll identify`` (:mod:`disturbances.identify`) shares with them.
 
 Every database command takes ``--db LOCATION``; without it the default
 database is used (``$ROCKETROLL_DB``, else the user's cache folder), built
@@ -6,16 +7,15 @@ from the bundled recordings the first time it is needed.  A database of an
 older schema is upgraded when opened (a copy is kept; ``rocketroll db
 migrate`` does it explicitly).  Each command is a settings dataclass and a
 function (:mod:`rocketroll_common.settings`); no library module imports this
-one.
+one (a command module may).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import sys
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -34,7 +34,17 @@ if TYPE_CHECKING:
     from disturbances.rows import TraceRow
     from disturbances.stores import Store
 
-__all__ = ["COMMANDS", "TraceFilters"]
+__all__ = [
+    "COMMANDS",
+    "TraceFilters",
+    "check_methods",
+    "check_posterior_methods",
+    "check_quadratic",
+    "db_setting",
+    "methods_help",
+    "new_database",
+    "open_store",
+]
 
 _DB_HELP = (
     "database: a file, or SCHEME://... of a registered store (default: $ROCKETROLL_DB, else "
@@ -42,7 +52,7 @@ _DB_HELP = (
 )
 
 
-def _db_setting(new: bool = False) -> Any:
+def db_setting(new: bool = False) -> Any:
     return setting(
         None,
         _DB_HELP + ("; created if missing" if new else ""),
@@ -52,7 +62,7 @@ def _db_setting(new: bool = False) -> Any:
     )
 
 
-def _methods_help(text: str, flight: bool = False) -> Callable[[], str]:
+def methods_help(text: str, flight: bool = False) -> Callable[[], str]:
     """Help listing the registered methods when the parser is made (plugins included);
     ``flight``: the default for a flight is named too."""
 
@@ -70,7 +80,7 @@ def _default_methods() -> list[str]:
     return list(default_methods())
 
 
-def _check_quadratic(options: IdentifyOptions, methods: list[str], recording: Recording) -> None:
+def check_quadratic(options: IdentifyOptions, methods: list[str], recording: Recording) -> None:
     """``--fit-quadratic-damping`` where a method runs that searches it: ml, on a tunnel run."""
     if not options.fit_quadratic_damping:
         return
@@ -84,7 +94,7 @@ def _check_quadratic(options: IdentifyOptions, methods: list[str], recording: Re
         )
 
 
-def _check_posterior_methods(methods: list[str]) -> None:
+def check_posterior_methods(methods: list[str]) -> None:
     """``--posterior`` needs a method with a posterior among ``methods``."""
     if not any(has_posterior(m) for m in methods):
         raise UsageError(
@@ -93,7 +103,7 @@ def _check_posterior_methods(methods: list[str]) -> None:
         )
 
 
-def _check_methods(methods: list[str]) -> None:
+def check_methods(methods: list[str]) -> None:
     for method in methods:
         try:
             METHODS.check(method)
@@ -104,7 +114,7 @@ def _check_methods(methods: list[str]) -> None:
         raise UsageError(f"--method {repeated[0]} is given twice")
 
 
-def _open(db: str | None, *, create: bool = False) -> Store:
+def open_store(db: str | None, *, create: bool = False) -> Store:
     """``--db`` (or the default database), with version notices as one stderr line each."""
     from disturbances.default import open_database
     from disturbances.stores import open_store
@@ -122,7 +132,7 @@ def _open(db: str | None, *, create: bool = False) -> Store:
 
 
 @contextmanager
-def _new_database(db: str | None) -> Iterator[None]:
+def new_database(db: str | None) -> Iterator[None]:
     """A database file that does not exist yet, with missing folders: if the block fails,
     leave neither the file nor the folders behind."""
     if db is None or "://" in db:
@@ -140,223 +150,6 @@ def _new_database(db: str | None) -> Iterator[None]:
                 for suffix in ("", "-wal", "-shm"):
                     Path(f"{path}{suffix}").unlink(missing_ok=True)
             raise
-
-
-# --------------------------------------------------------------------------- identify
-def _report_files(args: IdentifyArgs) -> list[str]:
-    """The files ``--report`` may write, known before the fits: ``report.md``, a figure per
-    method asked for (the tunnel's defaults when none is), the paper's figures with its
-    method, and a flight's figure."""
-    from identification.reports.fitreport import figure_name
-    from identification.reports.flightreport import FIGURE_NAME
-    from identification.reports.report import FIGURES, REPORT_NAME
-
-    methods = args.method or list(default_methods())
-    names = [REPORT_NAME, *(figure_name(m) for m in methods if not traits(m).flight)]
-    if "paper" in methods:
-        names += list(FIGURES)
-    if not args.method or any(traits(m).flight for m in methods):
-        names.append(FIGURE_NAME)
-    return names
-
-
-@dataclass(frozen=True)
-class IdentifyArgs:
-    """``rocketroll identify``."""
-
-    recording: Path = setting(help="recording file (CSV, format v1)", positional=True, input=True)
-    json: Path | None = setting(
-        None, "also write machine-readable results (JSON) here", output="file", kind="json"
-    )
-    report: Path | None = setting(
-        None,
-        "also write PNG figures and report.md into this folder: every method's fit judged "
-        "(its model without u_d against the rate, u_d beside the fin), and with the paper's "
-        "method the paper's figures",
-        output="folder",
-        files=_report_files,
-    )
-    method: list[str] = setting(
-        default_factory=list,
-        help=_methods_help("identification method to run (a flight: flight)"),
-        metavar="METHOD",
-    )
-    db: str | None = setting(
-        None,
-        "also store the results (every method, both models) in this disturbance database; "
-        "created if missing (not for a flight)",
-        metavar="DB",
-        input=True,
-        kind="sqlite",
-    )
-    together: list[Path] = setting(
-        default_factory=list,
-        help="another flight of the same rocket, fitted together with RECORDING by the flight "
-        "method (one rocket, one turbulence's statistics, one gyro; repeatable)",
-        metavar="FLIGHT",
-        input=True,
-    )
-    actuation: bool = setting(
-        False,
-        "also look for what lies outside the model: a servo lag and backlash (from a measured "
-        "fin column), a sensor latency and a damping growing with the roll rate (from the roll "
-        "response), each admitted at p < 0.01 (a tunnel run; about 30 s a 100-Hz minute)",
-    )
-    options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
-
-    def __post_init__(self) -> None:
-        check(self)
-        _check_methods(self.method)
-
-
-def _fit_each(context: Any, methods: Sequence[str]) -> tuple[dict[str, Any], dict[str, str]]:
-    """Each method's fits, and the reason of each method that cannot fit the recording (its
-    :class:`~identification.methods.steps.IdentificationError`: the paper's method on a recording
-    without held fin steps, ...); when none can, the first one's error."""
-    from identification.methods import fit
-    from identification.methods.steps import IdentificationError
-
-    fits: dict[str, Any] = {}
-    refused: dict[str, str] = {}
-    first: IdentificationError | None = None
-    for method in methods:
-        try:
-            fits[method] = fit(context, method, traits(method).models)
-        except IdentificationError as exc:
-            refused[method] = str(exc)
-            first = first or exc
-    if not fits and first is not None:
-        if "needs fin steps" in str(first) and "ml" not in methods:
-            raise IdentificationError(f"{first}; --method ml reads no fin steps") from None
-        raise first
-    return fits, refused
-
-
-def identify(args: IdentifyArgs) -> int:
-    """Identify a recording by every method asked for; print, write and store the results."""
-    import dataclasses
-
-    from identification.methods import Context, is_flight_method
-    from identification.recordings.recording import load_recording
-    from identification.reports.tables import (
-        adequacy_table,
-        flight_table,
-        methods_table,
-        parameter_table,
-    )
-    from rocketroll_common.files import write_all_atomic
-
-    if args.db is not None and "://" not in args.db:
-        from rocketroll_common.files import check_output
-
-        check_output(args.db, "--db", kind="sqlite")  # before the work, as every output
-    options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
-    recording = load_recording(args.recording)
-    together = [load_recording(path) for path in args.together]
-    methods = args.method or list(default_methods(recording))
-    if args.report is not None and "paper" in methods and recording.is_flight:
-        raise UsageError(
-            f"--report: the paper's report is of a tunnel run; {args.recording} is a flight"
-        )
-    if args.actuation and recording.is_flight:
-        raise UsageError(f"--actuation: looks at a tunnel run; {args.recording} is a flight")
-    _check_quadratic(options, methods, recording)
-    context = Context(recording, options, together=together)
-    fits, refused = _fit_each(context, methods)
-    found = None
-    if args.actuation:
-        from identification.methods.actuation import identify_actuation
-
-        found = identify_actuation(recording, options)
-    result = context.paper if "paper" in fits else None
-    outputs: dict[str | os.PathLike[str], str | bytes] = {}
-    if args.json is not None:
-        data = {} if result is None else result.to_dict()
-        data["methods"] = {
-            method: {
-                model: {"params": asdict(f.params), "metrics": dict(f.metrics)}
-                for model, f in by_model.items()
-            }
-            for method, by_model in fits.items()
-        }
-        if found is not None:
-            data["actuation"] = {t.name: asdict(t) for t in found.terms}
-        outputs[args.json] = json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n"
-    tunnel_fits = {method: f for method, f in fits.items() if not is_flight_method(method)}
-    if args.report is not None and tunnel_fits:
-        from identification.reports.fitreport import render_fit_report
-
-        paper_report = None
-        if result is not None:
-            from identification.reports.report import render_report
-
-            paper_report = render_report(result)
-        for name, content in render_fit_report(context, tunnel_fits, paper_report).items():
-            outputs[args.report / name] = content
-    elif args.report is not None and "flight" in fits:
-        from identification.reports.flightreport import render_flight_report
-
-        table = flight_table({"flight": fits["flight"]})
-        for name, content in render_flight_report(recording, fits["flight"], table).items():
-            outputs[args.report / name] = content
-    stored = None
-    if args.db is not None:  # before any file is written: all or nothing
-        from disturbances.ingest import add_identification
-
-        # The fits made above are stored, not made again; a fit with other flights
-        # (--together) is not this recording's alone, which is what is stored.
-        made = None if together else context
-        with _new_database(args.db), _open(args.db, create=True) as db:
-            fitted = list(fits)  # a method that refused the recording adds nothing
-            if result is not None:
-                added = add_identification(db, result, methods=fitted, context=made)
-            else:
-                from disturbances.ingest import add_recording
-
-                added = add_recording(db, recording, options, methods=fitted, context=made)
-        stored = (
-            f"{args.db}: this recording is already stored (same samples); nothing added"
-            if added.recordings == 0 and added.traces == 0
-            else f"stored in {args.db}: {added.identifications} identifications, "
-            f"{added.traces} traces (ids {', '.join(map(str, added.trace_ids))})"
-        )
-    write_all_atomic(outputs, folder=args.report, what="--report")  # all or nothing
-    for method, reason in refused.items():  # the others ran
-        print(f"rocketroll identify: method {method} cannot fit it: {reason}", file=sys.stderr)
-    if result is not None:
-        print(parameter_table(result))
-    flown = {method: f for method, f in fits.items() if is_flight_method(method)}
-    tunnel = tunnel_fits
-    if flown:
-        print(flight_table(flown))
-    if any(method != "paper" for method in tunnel):
-        print("\nidentification methods (parameters; re-simulation of each one's u_d, §3.5)")
-        print(methods_table(tunnel))
-    if tunnel or flown:
-        print("\nfit adequacy (the model without u_d against the raw rate, the fin in u_d)")
-        print(adequacy_table({**tunnel, **flown}))
-    rig = recording.rig_with(options.rig)
-    if not rig.ideal:
-        print(f"\nthe rig assumed (stated: the recording's rig.* lines or the flags): "
-              f"{rig.describe()}")  # fmt: skip
-    if found is not None:
-        print()
-        print("\n".join(found.lines()))
-    if stored:
-        print(stored)
-    if args.json is not None:
-        print(f"wrote {args.json}")
-    if args.report is not None:
-        figures = sum(str(path).endswith(".png") for path in outputs)
-        plural = "" if figures == 1 else "s"
-        print(f"wrote {args.report / 'report.md'} and {figures} figure{plural}")
-    return 0
-
-
-def _json_safe(value: Any) -> Any:
-    from disturbances.rows import json_safe
-
-    return json_safe(value)
 
 
 # --------------------------------------------------------------------------- db
@@ -407,7 +200,7 @@ class TraceFilters:
 class BuildArgs:
     """``rocketroll db build``."""
 
-    db: str | None = _db_setting()
+    db: str | None = db_setting()
     force: bool = setting(False, "rebuild even if up to date")
     surrogates: int = setting(2, "IAAFT surrogates per paper-method trace", ge=0, le=1000)
     posterior: int = setting(
@@ -489,7 +282,7 @@ def build(args: BuildArgs) -> int:
 class ListArgs:
     """``rocketroll db list``."""
 
-    db: str | None = _db_setting()
+    db: str | None = db_setting()
     filters: TraceFilters = setting(default_factory=TraceFilters, flatten=True)
     json: bool = setting(False, "print JSON instead of a table")
 
@@ -574,7 +367,7 @@ def _row_json(row: TraceRow) -> dict[str, Any]:
 
 def list_traces(args: ListArgs) -> int:
     """List traces."""
-    with _open(args.db) as db:
+    with open_store(args.db) as db:
         try:
             rows = db.traces(**args.filters.query())
         except ValueError as exc:
@@ -604,7 +397,7 @@ class ShowArgs:
     """``rocketroll db show``."""
 
     trace: str = setting(help="trace id or uid", positional=True)
-    db: str | None = _db_setting()
+    db: str | None = db_setting()
     json: bool = setting(False, "print JSON")
     plot: Path | None = setting(
         None, "write a PNG: the trace, its histogram and PSD", output="file", kind="png"
@@ -613,7 +406,7 @@ class ShowArgs:
 
 def show(args: ShowArgs) -> int:
     """Show one trace: provenance, parameters, statistics."""
-    with _open(args.db) as db:
+    with open_store(args.db) as db:
         trace = db.trace(_key(args.trace))
         (ident,) = db.identifications(
             recording_hash=trace.recording_hash, method=trace.method, model=trace.model
@@ -688,10 +481,10 @@ class AddArgs:
     """``rocketroll db add``."""
 
     recording: Path = setting(help="recording file (CSV, format v1)", positional=True, input=True)
-    db: str | None = _db_setting(new=True)
+    db: str | None = db_setting(new=True)
     method: list[str] = setting(
         default_factory=list,
-        help=_methods_help("identification method to store", flight=True),
+        help=methods_help("identification method to store", flight=True),
         metavar="METHOD",
     )
     surrogates: int = setting(
@@ -731,14 +524,14 @@ class AddArgs:
 
     def __post_init__(self) -> None:
         check(self)
-        _check_methods(self.method)
+        check_methods(self.method)
         if self.holdout is not None and (self.split is not None or self.surrogates):
             raise UsageError(
                 "--holdout splits the run between the train and test splits itself, without "
                 "surrogates: drop " + ("--split" if self.split is not None else "--surrogates")
             )
         if self.posterior and self.method:
-            _check_posterior_methods(self.method)
+            check_posterior_methods(self.method)
         for kind in self.surrogate_kind:
             if kind not in SURROGATE_KINDS:
                 raise UsageError(
@@ -758,14 +551,14 @@ def add(args: AddArgs) -> int:
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording)
     methods = args.method or list(default_methods(recording))
-    _check_quadratic(options, methods, recording)
+    check_quadratic(options, methods, recording)
     if args.posterior:
-        _check_posterior_methods(methods)
+        check_posterior_methods(methods)
     if args.split is not None:
         recording = dataclasses.replace(
             recording, metadata={**recording.metadata, "split": args.split}
         )
-    with _new_database(args.db), _open(args.db, create=True) as db:
+    with new_database(args.db), open_store(args.db, create=True) as db:
         result = add_recording(
             db,
             recording,
@@ -821,7 +614,7 @@ class SurrogateArgs:
     """``rocketroll db surrogate``."""
 
     trace: str = setting(help="trace id or uid (an identified trace)", positional=True)
-    db: str | None = _db_setting()
+    db: str | None = db_setting()
     kind: Literal["iaaft", "ar"] = setting("iaaft", "surrogate method")
     count: int = setting(1, "how many", ge=1, le=10_000)
     seed: int = setting(0, "seed of the first", ge=0, le=2**63 - 1)
@@ -831,7 +624,7 @@ def surrogate(args: SurrogateArgs) -> int:
     """Make and store surrogates of a stored trace."""
     from disturbances.ingest import add_surrogates
 
-    with _open(args.db) as db:
+    with open_store(args.db) as db:
         uid = db.trace(_key(args.trace)).uid
         result = add_surrogates(db, uid, args.kind, args.count, args.seed)
         added = db.traces_by_uid([db.trace(i).uid for i in result.trace_ids])
@@ -854,7 +647,7 @@ class ExportArgs:
 
     format: Literal["csv", "npz", "parquet"] = setting(help="format of the sample files")
     out: Path = setting(help="folder to create (must not exist, or be empty)", output="folder")
-    db: str | None = _db_setting()
+    db: str | None = db_setting()
     filters: TraceFilters = setting(default_factory=TraceFilters, flatten=True)
 
     def __post_init__(self) -> None:
@@ -867,7 +660,7 @@ def export(args: ExportArgs) -> int:
     """Export traces, parameters and a manifest to a folder."""
     from disturbances.exchange import write_export
 
-    with _open(args.db) as db:
+    with open_store(args.db) as db:
         try:
             counts = write_export(db, args.out, args.format, **args.filters.query())
         except ValueError as exc:
@@ -886,7 +679,7 @@ class ImportArgs:
     folder: Path = setting(
         help="a folder written by `rocketroll db export`", positional=True, input=True
     )
-    db: str | None = _db_setting(new=True)
+    db: str | None = db_setting(new=True)
 
 
 def import_(args: ImportArgs) -> int:
@@ -894,7 +687,7 @@ def import_(args: ImportArgs) -> int:
     from disturbances.exchange import import_export, read_export
 
     read_export(args.folder)  # every file checked before the database is touched
-    with _new_database(args.db), _open(args.db, create=True) as db:
+    with new_database(args.db), open_store(args.db, create=True) as db:
         db.check_version(writing=True)
         result = import_export(db, args.folder)
     print(
@@ -908,7 +701,7 @@ def import_(args: ImportArgs) -> int:
 class MigrateArgs:
     """``rocketroll db migrate``."""
 
-    db: str | None = _db_setting()
+    db: str | None = db_setting()
 
 
 def migrate(args: MigrateArgs) -> int:
@@ -917,7 +710,7 @@ def migrate(args: MigrateArgs) -> int:
 
     # As every command opens it: the default database by its rules (one built from the
     # bundled recordings by an older rocketroll is rebuilt), any other upgraded in place.
-    with _open(args.db) as db:
+    with open_store(args.db) as db:
         version = db.schema_version
         path = db.path
     print(f"{path}: schema version {version} (this rocketroll's: {SCHEMA_VERSION}), up to date")
@@ -966,16 +759,6 @@ _DB_COMMANDS = (
 
 #: The commands of this layer, by name.
 COMMANDS: dict[str, Command] = {
-    "identify": Command(
-        "identify",
-        "identify roll parameters and the disturbance u_d(t) from a recording",
-        IdentifyArgs,
-        identify,
-        "Run the paper's identification (steps 1-6 of Fig. 9, the Monte Carlo noise study and "
-        "the disturbance statistics) and the other identification methods on a recording and "
-        "print the parameters (beside the ground truth of a synthetic recording).  Defaults "
-        "are the paper's.",
-    ),
     "db": Command(
         "db",
         "the disturbance database: build, list, show, add, surrogate, export, import, migrate",

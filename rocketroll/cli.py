@@ -30,7 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "import-csv": ("identification.cli", "convert a foreign CSV/text log into a recording"),
     "info": ("identification.cli", "validate a recording and print its summary"),
     "identify": (
-        "disturbances.cli",
+        "disturbances.identify",
         "identify roll parameters and the disturbance u_d(t) from a recording",
     ),
     "db": (

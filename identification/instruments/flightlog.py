@@ -270,6 +270,86 @@ def _turbulence(
     return np.asarray(gust / (spec.params().alpha * np.maximum(gain_mid, 1e-3)))
 
 
+def _logged(spec: FlightLogSpec) -> tuple[FlightProfile, float, float, FloatArray]:
+    """The flight's profile, the logged window's start and end (s) and the sample times."""
+    try:
+        profile = flight_profile(spec.ascent, spec.descent)
+        # Dryden's rolling gust does not fade with the airspeed while the fins' authority
+        # does: near apogee its equivalent fin angle grows without bound, so a Dryden log
+        # ends where the airspeed falls back below v_ref (the tunnel's law holds the flow
+        # angle at the tunnel's scale there, defined to apogee).
+        until = "slow" if spec.turbulence == "dryden" else "apogee"
+        start, end = profile.window(spec.v_ref, until=until)
+    except ValueError as exc:
+        raise AscentError(str(exc)) from None
+    if spec.descent > 0.0:
+        end = float(profile.t_s[-1])  # apogee + descent
+    n = math.floor((end - start) / spec.log_dt + 1e-9)
+    if n < 50:
+        raise AscentError(
+            f"flight: {profile.source} spends {end - start:.2f} s above --v-ref "
+            f"{spec.v_ref:g} m/s: fewer than 50 samples of {spec.log_dt:g} s"
+        )
+    time: FloatArray = np.asarray(start + spec.log_dt * np.arange(n + 1), dtype=np.float64)
+    return profile, start, end, time
+
+
+def _metadata(
+    spec: FlightLogSpec,
+    profile: FlightProfile,
+    start: float,
+    params: RollParams,
+    scaling: AirspeedScaling,
+    servo: Servo,
+) -> list[tuple[str, object]]:
+    """A virtual flight's metadata: the command, the flight, the truth and the sensors."""
+    effects = spec.effects
+    meta: list[tuple[str, object]] = [
+        ("notes", "virtual flight (synthetic data with known ground truth)"),
+        ("command", spec.command()),
+        ("seed", spec.seed),
+        ("flight.ascent", profile.source),
+        ("flight.start_s", round(start, 9)),
+        ("flight.apogee_s", round(profile.apogee_s, 9)),
+        *truth_items(spec.model, params),
+        ("truth.v_ref_mps", spec.v_ref),
+        ("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3),
+        ("truth.torque_exponent", scaling.torque_exponent),
+        ("truth.damping_exponent", scaling.damping_exponent),
+        ("truth.servo_rate_dps", servo.rate_limit_dps),
+        ("truth.turbulence", "tunnel-flown" if spec.turbulence == "tunnel" else "dryden"),
+    ]
+    if spec.descent > 0.0:
+        meta.append(("flight.descent", "tail-first after apogee: the fins' torque reversed"))
+    if effects.any:  # the truth outside the model
+        meta += effects.metadata("flight")
+    if profile.max_mach > MACH_LIMIT:
+        meta.append(
+            ("flight.compressibility", "fin torque x fin_compressibility(Mach) above Mach 0.8")
+        )
+    if spec.turbulence == "tunnel":
+        meta += [
+            ("flight.turbulence_distribution", spec.distribution),
+            ("truth.turbulence_sd_deg", spec.turbulence_sd),
+            ("truth.turbulence_tau_s", spec.correlation_time),
+        ]
+    else:
+        meta.append(("flight.gust_severity", spec.severity))
+    if not spec.no_gyro:
+        meta += [
+            ("sensor.gyro_noise_pct", spec.gyro_noise),
+            ("sensor.gyro_floor_dps", spec.gyro_floor),
+            ("sensor.gyro_bias_dps", spec.gyro_bias),
+        ]
+    if spec.encoder_counts:
+        meta.append(("sensor.encoder_counts", spec.encoder_counts))
+    if spec.altitude_above_ground and not spec.no_altitude:
+        meta.append((SITE_ELEVATION_KEY, float(profile.altitude_m[0])))
+    if spec.split is not None:
+        meta.append(("split", spec.split))
+    return meta
+
+
 def run_flight(spec: FlightLogSpec) -> Recording:
     """Fly the virtual flight and log it.
 
@@ -290,25 +370,8 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     """
     children = np.random.SeedSequence(spec.seed).spawn(3)
     rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
-    try:
-        profile = flight_profile(spec.ascent, spec.descent)
-        # Dryden's rolling gust does not fade with the airspeed while the fins' authority
-        # does: near apogee its equivalent fin angle grows without bound, so a Dryden log
-        # ends where the airspeed falls back below v_ref (the tunnel's law holds the flow
-        # angle at the tunnel's scale there, defined to apogee).
-        until = "slow" if spec.turbulence == "dryden" else "apogee"
-        start, end = profile.window(spec.v_ref, until=until)
-    except ValueError as exc:
-        raise AscentError(str(exc)) from None
-    if spec.descent > 0.0:
-        end = float(profile.t_s[-1])  # apogee + descent
-    n = math.floor((end - start) / spec.log_dt + 1e-9)
-    if n < 50:
-        raise AscentError(
-            f"flight: {profile.source} spends {end - start:.2f} s above --v-ref "
-            f"{spec.v_ref:g} m/s: fewer than 50 samples of {spec.log_dt:g} s"
-        )
-    time: FloatArray = np.asarray(start + spec.log_dt * np.arange(n + 1), dtype=np.float64)
+    profile, start, end, time = _logged(spec)
+    n = time.size - 1
     steps = math.ceil((end - start) / spec.dwell_min) + 1
     schedule = FinSchedule.staircase(
         rng_schedule,
@@ -386,49 +449,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         columns["altitude_m"] = np.asarray(at.altitude_m) - pad
     columns["ud_true_deg"] = np.append(u_d, u_d[-1])
 
-    meta: list[tuple[str, object]] = [
-        ("notes", "virtual flight (synthetic data with known ground truth)"),
-        ("command", spec.command()),
-        ("seed", spec.seed),
-        ("flight.ascent", profile.source),
-        ("flight.start_s", round(start, 9)),
-        ("flight.apogee_s", round(profile.apogee_s, 9)),
-        *truth_items(spec.model, params),
-        ("truth.v_ref_mps", spec.v_ref),
-        ("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3),
-        ("truth.torque_exponent", scaling.torque_exponent),
-        ("truth.damping_exponent", scaling.damping_exponent),
-        ("truth.servo_rate_dps", servo.rate_limit_dps),
-        ("truth.turbulence", "tunnel-flown" if spec.turbulence == "tunnel" else "dryden"),
-    ]
-    if spec.descent > 0.0:
-        meta.append(("flight.descent", "tail-first after apogee: the fins' torque reversed"))
-    if effects.any:  # the truth outside the model
-        meta += effects.metadata("flight")
-    if profile.max_mach > MACH_LIMIT:
-        meta.append(
-            ("flight.compressibility", "fin torque x fin_compressibility(Mach) above Mach 0.8")
-        )
-    if spec.turbulence == "tunnel":
-        meta += [
-            ("flight.turbulence_distribution", spec.distribution),
-            ("truth.turbulence_sd_deg", spec.turbulence_sd),
-            ("truth.turbulence_tau_s", spec.correlation_time),
-        ]
-    else:
-        meta.append(("flight.gust_severity", spec.severity))
-    if not spec.no_gyro:
-        meta += [
-            ("sensor.gyro_noise_pct", spec.gyro_noise),
-            ("sensor.gyro_floor_dps", spec.gyro_floor),
-            ("sensor.gyro_bias_dps", spec.gyro_bias),
-        ]
-    if spec.encoder_counts:
-        meta.append(("sensor.encoder_counts", spec.encoder_counts))
-    if spec.altitude_above_ground and not spec.no_altitude:
-        meta.append((SITE_ELEVATION_KEY, float(profile.altitude_m[0])))
-    if spec.split is not None:
-        meta.append(("split", spec.split))
+    meta = _metadata(spec, profile, start, params, scaling, servo)
     return synthetic_recording(spec.default_name(), time, meta, columns)
 
 

@@ -744,6 +744,23 @@ def _fmt(value: float | None, spec: str) -> str:
 
 
 def _markdown(result: Identification, figures: Sequence[str]) -> str:
+    lines = [
+        *_parameters_section(result),
+        *_steps_section(result),
+        *_resimulation_section(result),
+        *_statistics_section(result),
+        *_noise_section(result),
+        "",
+        "## Figures",
+        "",
+    ]
+    for name in figures:
+        lines += [f"### {FIGURES[name]}", "", f"![{FIGURES[name]}]({name})", ""]
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _parameters_section(result: Identification) -> list[str]:
+    """The recording, its data sources and the intrinsic parameters beside the paper's."""
     rec = result.recording
     seg = result.segments
     truth = result.truth()
@@ -792,7 +809,14 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
             "its truth is a(θ) averaged over the steps' fin levels (and b = that mean · α).",
         ]
 
-    lines += ["", "## Per-step values (Table 1)", ""]
+    return lines
+
+
+def _steps_section(result: Identification) -> list[str]:
+    """Table 1: each step's values (and the true damping), and the outlier rule."""
+    rec = result.recording
+    seg = result.segments
+    lines = ["", "## Per-step values (Table 1)", ""]
     header = ["step", "period (s)", "fin angle (°)", "v_ss (°/s)", "t0 (s)", "a_i (1/s)"]
     header.append("b_i (1/s²)")
     true_params = rec.truth()
@@ -830,10 +854,13 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
         "",
         f"Outlier rule of step 7 (the paper drops “the clear outlier” of its Fig. 12): "
         f"{vs.rule}.  Here {outlier}.  The paper's outlier is its 3rd step (26.67°, a = 3.2439).",
-        "",
-        "## Re-simulation with the identified disturbance (§3.5)",
-        "",
     ]
+    return lines
+
+
+def _resimulation_section(result: Identification) -> list[str]:
+    """§3.5: the re-simulation's errors beside the paper's."""
+    lines = ["", "## Re-simulation with the identified disturbance (§3.5)", ""]
     header = ["model", "rate MAE (°/s)", "rate SD (°/s)", "angle MAE (°)", "angle SD (°)"]
     rows = []
     for name in ("constant", "theta"):
@@ -854,10 +881,14 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
         "Errors are |simulated − measured| at the recording's samples, against the smoothed "
         "measured velocity and the measured angle.  ¹ The paper gives a *median* absolute "
         "error for this one.",
-        "",
-        "## Disturbance statistics (§3.2, §3.4)",
-        "",
     ]
+    return lines
+
+
+def _statistics_section(result: Identification) -> list[str]:
+    """§3.2, §3.4: the disturbance's statistics beside the paper's (and the truth's)."""
+    rec = result.recording
+    lines = ["", "## Disturbance statistics (§3.2, §3.4)", ""]
     st = result.statistics
     header = [
         "trace",
@@ -911,10 +942,13 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
         f"Two-sample Kolmogorov-Smirnov test u_d,θ vs u_d,constant (every {stride}th value): "
         f"D = {st.ks_stat:.4f}, p = {st.ks_p:.3g}.  The tests see the traces thinned to "
         "roughly independent values (first lag with autocorrelation below 0.1).",
-        "",
-        "## Noise study (§3.3, eq. 52)",
-        "",
     ]
+    return lines
+
+
+def _noise_section(result: Identification) -> list[str]:
+    """§3.3: the noise study, where one was run."""
+    lines = ["", "## Noise study (§3.3, eq. 52)", ""]
     noise = result.noise
     if noise is None:
         lines.append("Not run (`noise_runs = 0`).")
@@ -945,7 +979,4 @@ def _markdown(result: Identification, figures: Sequence[str]) -> str:
             "With noise drawn independently at every 100 Hz sample the paper's 0.62° cannot be "
             "reproduced; see `identification/methods/noise.py`.",
         ]
-    lines += ["", "## Figures", ""]
-    for name in figures:
-        lines += [f"### {FIGURES[name]}", "", f"![{FIGURES[name]}]({name})", ""]
-    return "\n".join(lines).rstrip("\n") + "\n"
+    return lines
