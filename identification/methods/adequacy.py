@@ -377,6 +377,53 @@ def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
     return ModelOnly(v, phi, rate, source, maps)
 
 
+def _ahead(
+    model: ModelOnly, smoothed: FloatArray, params: RollParams, fin: FloatArray, dt: float
+) -> tuple[int, float]:
+    """The model's prediction ``k`` readings ahead of each measured velocity (``k`` its time
+    constant in readings): ``k`` and the R² of the prediction against the measured rate."""
+    e, f = model.maps[:, 0], model.maps[:, 2]
+    rate = model.measured_rate_dps
+    n = rate.size
+    a_mean = float(np.mean(damping(params, fin)))
+    k = max(1, round(1.0 / (a_mean * dt))) if a_mean > 0 else 1
+    k = min(k, n - 2)
+    ahead = smoothed[: n - k].copy()
+    for j in range(k):
+        ahead = e[j : n - k + j] * ahead + f[j : n - k + j]
+    return k, r_squared(ahead, rate[k:])
+
+
+def _method_findings(found: Findings, metrics: Mapping[str, Any], method: str) -> float:
+    """What a method's own figures say against its fit (innovations that are not white; the
+    paper's steps without a damping or a steady state); the innovations' largest |ACF|."""
+    innovations = metrics.get("innovations") or {}
+    innovation_acf = float(innovations.get("max_acf", math.nan))
+    if (
+        innovation_acf >= max(INNOVATION_ACF, 4.0 / math.sqrt(max(innovations.get("n", 1), 1)))
+        and innovations.get("ljung_box_p", 1.0) < FIN_SHARE_P
+    ):
+        found.weak.append(
+            f"its {innovations.get('sensor', 'sensor')}'s innovations are not white (|ACF| "
+            f"up to {innovation_acf:.2f}, Ljung-Box p = {innovations['ljung_box_p']:.2g}): "
+            "the model leaves something predictable"
+        )
+    if method == "paper":
+        steps = metrics.get("steps") or []
+        negative = [s for s in steps if isinstance(s, dict) and not s.get("a_per_s", 1.0) > 0.0]
+        if negative:
+            found.bad.append(
+                f"{len(negative)} of {len(steps)} steps give a damping a_i <= 0: the dwells "
+                "are not the steps from rest to a steady state the method assumes"
+            )
+        ss = metrics.get("steady_state_r2")
+        if ss is not None and ss < STEADY_STATE_R2:
+            found.weak.append(
+                f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate"
+            )
+    return innovation_acf
+
+
 def adequacy(
     inputs: Measurements,
     params: RollParams,
@@ -407,11 +454,9 @@ def adequacy(
     metrics = metrics or {}
     grid = inputs.grid
     model = model_only(inputs, params)
-    e, f = model.maps[:, 0], model.maps[:, 2]
     smoothed = np.asarray(inputs.velocity_dps, dtype=float)
     rate, source = model.measured_rate_dps, model.rate_source
     v, phi = model.rate_dps, model.angle_deg
-    n = rate.size
     rate_r2 = r_squared(v, rate)
     rate_mae = float(np.mean(np.abs(v - rate)))
     angle_mae = (
@@ -419,16 +464,9 @@ def adequacy(
         if rec.roll_deg is not None
         else float("nan")
     )
-    # Ahead: k readings from each measured velocity.
     fin = np.asarray(inputs.theta_fine[:: grid.per_sample], dtype=float)
     dt = float(np.median(np.diff(rec.time_s)))
-    a_mean = float(np.mean(damping(params, fin)))
-    k = max(1, round(1.0 / (a_mean * dt))) if a_mean > 0 else 1
-    k = min(k, n - 2)
-    ahead = smoothed[: n - k].copy()
-    for j in range(k):
-        ahead = e[j : n - k + j] * ahead + f[j : n - k + j]
-    ahead_r2 = r_squared(ahead, rate[k:])
+    k, ahead_r2 = _ahead(model, smoothed, params, fin, dt)
     # u_d against the fin and the fins' range.
     u = disturbance.at(np.asarray(rec.time_s)[:-1])
     # The model's own distance from its steady state, in fin degrees: input-driven only.
@@ -443,7 +481,7 @@ def adequacy(
         rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) else math.inf
 
     found = Findings()
-    weak, bad, check = found.weak, found.bad, found.check
+    check = found.check
     found.fin_unit(rec)
     found.rate_r2(rate_r2)
     check(
@@ -466,28 +504,7 @@ def adequacy(
         True,
     )
     check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
-    innovations = metrics.get("innovations") or {}
-    innovation_acf = float(innovations.get("max_acf", math.nan))
-    if (
-        innovation_acf >= max(INNOVATION_ACF, 4.0 / math.sqrt(max(innovations.get("n", 1), 1)))
-        and innovations.get("ljung_box_p", 1.0) < FIN_SHARE_P
-    ):
-        weak.append(
-            f"its {innovations.get('sensor', 'sensor')}'s innovations are not white (|ACF| "
-            f"up to {innovation_acf:.2f}, Ljung-Box p = {innovations['ljung_box_p']:.2g}): "
-            "the model leaves something predictable"
-        )
-    if method == "paper":
-        steps = metrics.get("steps") or []
-        negative = [s for s in steps if isinstance(s, dict) and not s.get("a_per_s", 1.0) > 0.0]
-        if negative:
-            bad.append(
-                f"{len(negative)} of {len(steps)} steps give a damping a_i <= 0: the dwells "
-                "are not the steps from rest to a steady state the method assumes"
-            )
-        ss = metrics.get("steady_state_r2")
-        if ss is not None and ss < STEADY_STATE_R2:
-            weak.append(f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate")
+    innovation_acf = _method_findings(found, metrics, method)
     # What the model lacks, named: the fin's delay, the turbulence's wandering intensity.
     ar = metrics.get("ar")
     if ar is None:  # an AR(1) of u_d itself where the method fits no turbulence model
