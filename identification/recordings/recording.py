@@ -283,37 +283,15 @@ def small_fins(columns: Mapping[str, FloatArray | None]) -> dict[str, float]:
     return found
 
 
-def validate_samples(
+def _check_column_set(
     columns: Mapping[str, FloatArray],
-    *,
-    path: str = "<recording>",
-    lines: NDArray[np.int64] | None = None,
-    header_line: int | None = None,
-    source: str | None = None,
-    version: str | None = None,
-    time_read: str = "time_s",
+    path: str,
+    header_line: int | None,
+    source: str | None,
+    version: str | None,
 ) -> None:
-    """Check the sample columns of a recording; raise :class:`RecordingError`.
-
-    Parameters
-    ----------
-    columns : mapping of str to ndarray
-        Column name (from :data:`COLUMNS`) to 1-D float array, all one length.
-    path : str
-        File named in error messages.
-    lines : ndarray of int, optional
-        1-based file line of each sample, for error messages.  Without it,
-        messages name the sample index.
-    header_line : int, optional
-        Line of the header, for column-level problems.
-    source : str, optional
-        The recording's source; ``ud_true_deg`` needs ``"synthetic"``.
-    version : str, optional
-        The file's declared format; the flight columns need :data:`FORMAT`.
-    time_read : str
-        How the times were read, for messages about their unit (an importer:
-        its time column and the unit it was read in).
-    """
+    """The columns a recording has: known ones, the required ones, the flight's with its
+    format, the altitude with the airspeed, the truth only in synthetic data."""
     unknown = [c for c in columns if c not in COLUMNS]
     if unknown:
         raise RecordingError(
@@ -354,6 +332,14 @@ def validate_samples(
             f"column 'ud_true_deg' is only allowed when source is synthetic, not {source!r}",
         )
 
+
+def _check_values(
+    columns: Mapping[str, FloatArray],
+    path: str,
+    lines: NDArray[np.int64] | None,
+    header_line: int | None,
+) -> None:
+    """Every column one length, finite, plausible, and a flight's within its range."""
     n = len(columns["time_s"])
     for name, values in columns.items():
         if values.ndim != 1 or len(values) != n:
@@ -387,12 +373,12 @@ def validate_samples(
                     f"{_sample(lines, i)}{name} is {values[i]:g}: outside [{low:g}, {high:g}]"
                     + _descent_hint(name, values, columns["time_s"], i),
                 )
-    if n < MIN_SAMPLES:
-        raise RecordingError(
-            path, None, f"too few samples: {n} (at least {MIN_SAMPLES} are needed)"
-        )
 
-    time = columns["time_s"]
+
+def _check_sampling(
+    time: FloatArray, path: str, lines: NDArray[np.int64] | None, time_read: str
+) -> FloatArray:
+    """Times strictly increasing, in seconds and evenly spaced; the intervals."""
     dt = np.diff(time)
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
@@ -416,6 +402,51 @@ def validate_samples(
             f"(from {time[i - 1]:g} s to {time[i]:g} s) differs from the median interval "
             f"{median:g} s by more than {SAMPLING_RTOL:.0%}",
         )
+
+    return dt
+
+
+def validate_samples(
+    columns: Mapping[str, FloatArray],
+    *,
+    path: str = "<recording>",
+    lines: NDArray[np.int64] | None = None,
+    header_line: int | None = None,
+    source: str | None = None,
+    version: str | None = None,
+    time_read: str = "time_s",
+) -> None:
+    """Check the sample columns of a recording; raise :class:`RecordingError`.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray
+        Column name (from :data:`COLUMNS`) to 1-D float array, all one length.
+    path : str
+        File named in error messages.
+    lines : ndarray of int, optional
+        1-based file line of each sample, for error messages.  Without it,
+        messages name the sample index.
+    header_line : int, optional
+        Line of the header, for column-level problems.
+    source : str, optional
+        The recording's source; ``ud_true_deg`` needs ``"synthetic"``.
+    version : str, optional
+        The file's declared format; the flight columns need :data:`FORMAT`.
+    time_read : str
+        How the times were read, for messages about their unit (an importer:
+        its time column and the unit it was read in).
+    """
+    _check_column_set(columns, path, header_line, source, version)
+    n = len(columns["time_s"])
+    _check_values(columns, path, lines, header_line)
+    if n < MIN_SAMPLES:
+        raise RecordingError(
+            path, None, f"too few samples: {n} (at least {MIN_SAMPLES} are needed)"
+        )
+
+    time = columns["time_s"]
+    dt = _check_sampling(time, path, lines, time_read)
 
     if "roll_deg" in columns:
         jump = np.abs(np.diff(columns["roll_deg"])) / dt
