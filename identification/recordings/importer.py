@@ -306,11 +306,69 @@ def import_csv(
     return read_csv(path, settings)
 
 
+def _converted(
+    data: FloatArray, roles: list[str], settings: ImportSettings, index: int | None
+) -> dict[str, FloatArray]:
+    """The read columns in the recording's units (``index``: the time column's; None: times
+    from ``--rate``), scaled, offset, the altitude above sea level, the angle unwrapped."""
+    out: dict[str, FloatArray] = {}
+    if index is None:
+        assert settings.rate_hz is not None
+        out["time_s"] = np.arange(data.shape[0]) / settings.rate_hz
+    else:
+        out["time_s"] = data[:, index] * settings.column_unit("time")
+    for j, role in enumerate(roles):
+        target = ROLES[role]
+        if target is not None and target != "time_s":
+            out[target] = data[:, j] * settings.column_unit(role)
+    timed = ["time"] if index is not None else []  # a time column, by role or by name
+    for role in {*roles, *timed}:
+        target = ROLES[role]
+        if target is not None and (role in settings.scale or role in settings.offset):
+            out[target] = out[target] * settings.scale.get(role, 1.0) + settings.offset.get(
+                role, 0.0
+            )
+    if settings.site_elevation and "altitude_m" in out:
+        out["altitude_m"] = out["altitude_m"] + settings.site_elevation
+    if settings.unwrap and "roll_deg" in out:
+        out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
+    return out
+
+
+def _import_metadata(
+    where: str, roles: list[str], settings: ImportSettings, out: dict[str, FloatArray]
+) -> dict[str, str]:
+    """How a log was imported, as its recording's metadata (and the user's notes, rig and
+    split)."""
+    meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
+    meta["import.units"] = settings.units
+    for field in ("unit", "scale", "offset"):
+        given = getattr(settings, field)
+        if given:
+            meta[f"import.{field}"] = ",".join(f"{k}={v}" for k, v in given.items())
+    if settings.time_from is not None:
+        meta["import.from_s"] = repr(settings.time_from)
+    if settings.time_to is not None:
+        meta["import.to_s"] = repr(settings.time_to)
+    if "airspeed_mps" in out:
+        meta["import.speed_unit"] = str(settings.unit.get("airspeed", settings.speed_unit))
+    if "altitude_m" in out:
+        meta["import.altitude_unit"] = str(settings.unit.get("altitude", settings.altitude_unit))
+    if settings.site_elevation:
+        meta["import.site_elevation_m"] = repr(settings.site_elevation)
+    if settings.notes:
+        meta["notes"] = settings.notes
+    meta.update(settings.rig.metadata())  # what the user states of the rig (format 1.2)
+    if settings.split is not None:
+        meta["split"] = settings.split
+    return meta
+
+
 def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recording:
     """:func:`import_csv` with its settings as one :class:`ImportSettings`."""
     where = os.fspath(path)
     roles = list(settings.columns)
-    header, units, rate_hz = settings.header, settings.units, settings.rate_hz
+    header, rate_hz = settings.header, settings.rate_hz
     time_column, time_unit, delimiter = settings.time_column, settings.time_unit, settings.delimiter
     if not roles:
         raise RecordingError(where, None, "--columns is empty: give one role per input column")
@@ -378,36 +436,22 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         raise RecordingError(where, None, "no data rows")
 
     data = np.array(rows, dtype=float)
-    out: dict[str, FloatArray] = {}
-    if rate_hz is not None:
-        out["time_s"] = np.arange(len(rows)) / rate_hz
-    else:
+    index = None
+    if rate_hz is None:
         index = (
             roles.index("time")
             if time_column is None
             else _time_index(where, time_column, names, roles, header_line)
         )
-        out["time_s"] = data[:, index] * settings.column_unit("time")
-    for j, role in enumerate(roles):
-        target = ROLES[role]
-        if target is not None and target != "time_s":
-            out[target] = data[:, j] * settings.column_unit(role)
-    timed = ["time"] if rate_hz is None else []  # a time column, by role or by name
-    for role in {*roles, *timed}:
-        target = ROLES[role]
-        if target is not None and (role in settings.scale or role in settings.offset):
-            out[target] = out[target] * settings.scale.get(role, 1.0) + settings.offset.get(
-                role, 0.0
-            )
-    if settings.site_elevation and "altitude_m" in out:
-        out["altitude_m"] = out["altitude_m"] + settings.site_elevation
-    if settings.unwrap and "roll_deg" in out:
-        out["roll_deg"] = np.unwrap(out["roll_deg"], period=360.0)
+    # A value that overflows in its unit's conversion (1e308 rad) becomes inf, which the
+    # validation below refuses, naming its line.
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = _converted(data, roles, settings, index)
     kept = np.asarray(lines, dtype=np.int64)
     if settings.time_from is not None or settings.time_to is not None:
         out, kept = _window(where, out, kept, settings.time_from, settings.time_to)
 
-    if rate_hz is not None:
+    if index is None:
         time_read = f"--rate {rate_hz:g} Hz"
     else:
         label = names[index] if names is not None else f"column {index + 1}"
@@ -420,27 +464,7 @@ def read_csv(path: str | os.PathLike[str], settings: ImportSettings) -> Recordin
         time_read=time_read,
     )
     _check_rate_unit(where, out, settings)
-    meta = {"imported_from": Path(where).name, "import.columns": ",".join(roles)}
-    meta["import.units"] = units
-    for field in ("unit", "scale", "offset"):
-        given = getattr(settings, field)
-        if given:
-            meta[f"import.{field}"] = ",".join(f"{k}={v}" for k, v in given.items())
-    if settings.time_from is not None:
-        meta["import.from_s"] = repr(settings.time_from)
-    if settings.time_to is not None:
-        meta["import.to_s"] = repr(settings.time_to)
-    if "airspeed_mps" in out:
-        meta["import.speed_unit"] = str(settings.unit.get("airspeed", settings.speed_unit))
-    if "altitude_m" in out:
-        meta["import.altitude_unit"] = str(settings.unit.get("altitude", settings.altitude_unit))
-    if settings.site_elevation:
-        meta["import.site_elevation_m"] = repr(settings.site_elevation)
-    if settings.notes:
-        meta["notes"] = settings.notes
-    meta.update(settings.rig.metadata())  # what the user states of the rig (format 1.2)
-    if settings.split is not None:
-        meta["split"] = settings.split
+    meta = _import_metadata(where, roles, settings, out)
     return Recording(
         name=settings.name or Path(where).stem, source=settings.source, metadata=meta, **out
     )

@@ -21,8 +21,13 @@ from identification.instruments.tunnel import TunnelSpec, run_tunnel
 from identification.methods.adequacy import Adequacy, adequacy
 from identification.methods.ml import MLFit, maximum_likelihood
 from identification.methods.pipeline import model_inputs
-from identification.recordings.importer import angle_on_integrated_rate
-from identification.recordings.recording import Recording, load_recording, small_fins
+from identification.recordings.importer import angle_on_integrated_rate, import_csv
+from identification.recordings.recording import (
+    Recording,
+    RecordingError,
+    load_recording,
+    small_fins,
+)
 from rocketroll.cli import main
 from tests.identification.test_adequacy import PRBS
 
@@ -242,3 +247,18 @@ def test_a_wrapping_angle_beside_a_rate_in_rad_per_s_is_refused_at_import(
     assert err.count("\n") == 1 and "give --unit roll_rate=rad" in err and not out.exists()
     assert main([*argv, "--unit", "roll_rate=rad"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_a_value_that_overflows_in_its_unit_is_refused_naming_its_line(tmp_path: Path) -> None:
+    """1e308 in a column read in radians is beyond any float in degrees: one error naming
+    the line and the column, no numpy warning (hypothesis found it)."""
+    import warnings
+
+    path = tmp_path / "log.csv"
+    rows = [f"{0.01 * k:.2f},{0.5 if k > 50 else 0.0},{k * 0.001}" for k in range(120)]
+    rows[7] = "0.07,0.0,1e308"
+    path.write_text("\n".join(["t,fin,rate", *rows]) + "\n", encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(RecordingError, match=r"log.csv:9: roll_rate_dps is inf \(not finite\)"):
+            import_csv(path, ["time", "fin", "roll_rate"], units="rad")
