@@ -302,34 +302,15 @@ def _run_files(
     return results, library + [p.relative_to(out) for p in checkpoints]
 
 
-def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, Any]:
-    """Train PPO as ``args`` says; write the output folder; return ``settings.json``'s data.
-
-    Ctrl-C saves a resumable checkpoint (the model and its ``VecNormalize``
-    statistics, under ``checkpoints/``) and raises
-    :class:`~rocketroll_common.errors.Interrupted` naming it; ``--resume`` it
-    to go on.  No ``model.zip`` is written unless training finished.
-
-    Raises
-    ------
-    UsageError
-        A bad argument or hyperparameter (named).
-    """
-    started = time.perf_counter()
-    algo = args.ALGO
-    hp = load_hyperparameters(args.hyperparams, args.env_id, algo)
-    settings, episode_note = fitted_settings(args.env_id, args.settings, args.recording, args.db)
-    if episode_note:
-        print(episode_note)
-    if settings:  # the replay and options of --set, over the entry's env_kwargs
-        options_config(args.env_id, settings, "train")  # a bad one is named as --set
-        hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **settings})
-    n_envs = args.envs if args.envs is not None else hp.n_envs
-    timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
-    if timesteps is None:
-        raise UsageError(f"--timesteps is needed: {hp.source}, {hp.env_id} has no n_timesteps")
-    algo_kwargs = algorithm_arguments(hp)
-    algo_kwargs.setdefault("device", "cpu")
+def _planned(
+    args: Args,
+    hp: Hyperparameters,
+    algo: str,
+    n_envs: int,
+    timesteps: int,
+    algo_kwargs: dict[str, Any],
+) -> int:
+    """The env-steps the run will train: PPO's whole rollouts, checked against its batch."""
     planned = timesteps
     if algo == "ppo":
         n_steps = int(algo_kwargs.get("n_steps", 2048))
@@ -347,29 +328,19 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 "fewer --envs"
             )
         planned = -(-timesteps // rollout) * rollout  # PPO trains whole rollouts
-    _check_size(args, hp, algo, n_envs, planned, algo_kwargs)
-    out = (
-        args.out if args.out is not None else Path("runs") / algo / args.env_id / f"seed{args.seed}"
-    )
-    out = Path(out)
-    # Every file the run writes into the folder, before the work: one the user put there
-    # is refused, unless --force (a resumed run's checkpoints: once its steps are read).
-    results, library = _run_files(out, args, hp, n_envs, 0, planned)
-    check_folder_files(out, results + (library if args.resume is None else []), "--out")
+    return planned
 
-    import torch
-    from stable_baselines3.common.callbacks import CallbackList
 
-    # Seeding: torch and SB3 (python, numpy, torch, the action space, the env) and the
-    # adapters' generators; PPO(seed=...) reseeds the training adapter before its first reset.
-    torch.set_num_threads(args.torch_threads)
-    torch.manual_seed(args.seed)
-
-    adapter, train_env, normalize = make_env(hp, n_envs, args.seed, split="train", db=args.db)
-    eval_adapter, eval_env, _ = make_env(
-        hp, args.eval_episodes, args.eval_seed, split="test", db=args.db, training=False
-    )
-
+def _setting_rows(
+    args: Args,
+    hp: Hyperparameters,
+    out: Path,
+    n_envs: int,
+    planned: int,
+    timesteps: int,
+    database: str,
+) -> list[tuple[str, Any]]:
+    """The run's settings as the table printed before training."""
     rows: list[tuple[str, Any]] = [
         ("env_id", args.env_id),
         (
@@ -413,31 +384,55 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         *((("action noise", f"{hp.noise[0]}, sd {hp.noise[1]}"),) if hp.noise else ()),
         *((k, hp.algo_kwargs[k]) for k in hp.algo_kwargs),
         ("env_kwargs", hp.env_kwargs or "-"),
-        ("database", adapter.bank.description),
+        ("database", database),
     ]
-    print(f"{ALGORITHMS[algo]} on {args.env_id}")
-    _print_table(rows)
+    return rows
 
-    if args.resume is not None:  # refused before the output folder is made
-        model = resume_model(args.resume, train_env, normalize, algo_kwargs["device"], algo)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "eval").mkdir(exist_ok=True)
-    if args.resume is None:
-        if hp.noise is not None:
-            from stable_baselines3.common.noise import NormalActionNoise
 
-            dims = int(np.prod(train_env.action_space.shape))
-            algo_kwargs["action_noise"] = NormalActionNoise(
-                np.zeros(dims), np.full(dims, hp.noise[1])
-            )
-        model = algorithm_class(algo)(
-            hp.policy, train_env, seed=args.seed, verbose=args.verbose, **algo_kwargs
-        )
-    start_steps = int(model.num_timesteps)
-    if args.resume is not None:
-        _, library = _run_files(out, args, hp, n_envs, start_steps, planned - start_steps)
-        check_folder_files(out, library, "--out")
-    model.set_logger(_logger(out, args, algo_kwargs.get("tensorboard_log"), start_steps))
+def _record(
+    args: Args,
+    hp: Hyperparameters,
+    algo: str,
+    n_envs: int,
+    timesteps: int,
+    config: Any,
+    database: str,
+) -> dict[str, Any]:
+    """What ``settings.json`` says of the run's settings (its outcome comes after)."""
+    return {
+        "env_id": args.env_id,
+        "algorithm": algo,
+        "result": "model.zip is the final model; the test split was not used to select it",
+        "args": _jsonable(dataclasses.asdict(args)),
+        "hyperparameters": _jsonable(
+            {
+                "n_envs": n_envs,
+                "n_timesteps": timesteps,
+                "policy": hp.policy,
+                "normalize": hp.normalize,
+                "env_kwargs": hp.env_kwargs,
+                **hp.layout.record(),
+                **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
+                **hp.algo_kwargs,
+            }
+        ),
+        "hyperparameter_file": hp.source,
+        "env_settings": _jsonable(dataclasses.asdict(config)),
+        "database": database,
+    }
+
+
+def _callbacks(
+    args: Args,
+    algo: str,
+    out: Path,
+    n_envs: int,
+    eval_env: Any,
+    eval_adapter: Any,
+    normalize: Any,
+) -> tuple[Any, list[Any]]:
+    """The held-out evaluation and, with ``--checkpoint-freq``, the checkpoints: the
+    evaluation's callback and the list of both."""
     held_out = make_eval_callback_class()(
         eval_env,
         eval_adapter,
@@ -448,8 +443,6 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         deterministic=True,
         verbose=1,
     )
-    if args.resume is not None:
-        held_out.continue_from(start_steps)
     callbacks: list[Any] = [held_out]
     if args.checkpoint_freq:
         callbacks.append(
@@ -462,7 +455,23 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
                 recorded_in=out,
             )
         )
-    learn_started = time.perf_counter()
+    return held_out, callbacks
+
+
+def _learn(
+    model: Any,
+    args: Args,
+    algo: str,
+    out: Path,
+    timesteps: int,
+    callbacks: list[Any],
+    normalize: Any,
+    library: list[Path],
+) -> None:
+    """``model.learn`` to ``timesteps``; Ctrl-C saves a resumable checkpoint and raises
+    :class:`~rocketroll_common.errors.Interrupted` naming it."""
+    from stable_baselines3.common.callbacks import CallbackList
+
     try:
         with warnings.catch_warnings():
             if args.progress_bar:  # tqdm's rich bar announces itself as experimental
@@ -497,6 +506,79 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     except BaseException:
         record_outputs(out, library)  # what SB3 wrote before the failure is the run's
         raise
+
+
+def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, Any]:
+    """Train PPO as ``args`` says; write the output folder; return ``settings.json``'s data.
+
+    Ctrl-C saves a resumable checkpoint (the model and its ``VecNormalize``
+    statistics, under ``checkpoints/``) and raises
+    :class:`~rocketroll_common.errors.Interrupted` naming it; ``--resume`` it
+    to go on.  No ``model.zip`` is written unless training finished.
+
+    Raises
+    ------
+    UsageError
+        A bad argument or hyperparameter (named).
+    """
+    started = time.perf_counter()
+    algo = args.ALGO
+    hp = load_hyperparameters(args.hyperparams, args.env_id, algo)
+    settings, episode_note = fitted_settings(args.env_id, args.settings, args.recording, args.db)
+    if episode_note:
+        print(episode_note)
+    if settings:  # the replay and options of --set, over the entry's env_kwargs
+        options_config(args.env_id, settings, "train")  # a bad one is named as --set
+        hp = dataclasses.replace(hp, env_kwargs={**hp.env_kwargs, **settings})
+    n_envs = args.envs if args.envs is not None else hp.n_envs
+    timesteps = args.timesteps if args.timesteps is not None else hp.n_timesteps
+    if timesteps is None:
+        raise UsageError(f"--timesteps is needed: {hp.source}, {hp.env_id} has no n_timesteps")
+    algo_kwargs = algorithm_arguments(hp)
+    algo_kwargs.setdefault("device", "cpu")
+    planned = _planned(args, hp, algo, n_envs, timesteps, algo_kwargs)
+    _check_size(args, hp, algo, n_envs, planned, algo_kwargs)
+    out = (
+        args.out if args.out is not None else Path("runs") / algo / args.env_id / f"seed{args.seed}"
+    )
+    out = Path(out)
+    # Every file the run writes into the folder, before the work: one the user put there
+    # is refused, unless --force (a resumed run's checkpoints: once its steps are read).
+    results, library = _run_files(out, args, hp, n_envs, 0, planned)
+    check_folder_files(out, results + (library if args.resume is None else []), "--out")
+
+    import torch
+
+    # Seeding: torch and SB3 (python, numpy, torch, the action space, the env) and the
+    # adapters' generators; PPO(seed=...) reseeds the training adapter before its first reset.
+    torch.set_num_threads(args.torch_threads)
+    torch.manual_seed(args.seed)
+
+    adapter, train_env, normalize = make_env(hp, n_envs, args.seed, split="train", db=args.db)
+    eval_adapter, eval_env, _ = make_env(
+        hp, args.eval_episodes, args.eval_seed, split="test", db=args.db, training=False
+    )
+
+    rows = _setting_rows(args, hp, out, n_envs, planned, timesteps, adapter.bank.description)
+    print(f"{ALGORITHMS[algo]} on {args.env_id}")
+    _print_table(rows)
+
+    if args.resume is not None:  # refused before the output folder is made
+        model = resume_model(args.resume, train_env, normalize, algo_kwargs["device"], algo)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "eval").mkdir(exist_ok=True)
+    if args.resume is None:
+        model = _new_model(args, hp, algo, train_env, algo_kwargs)
+    start_steps = int(model.num_timesteps)
+    if args.resume is not None:
+        _, library = _run_files(out, args, hp, n_envs, start_steps, planned - start_steps)
+        check_folder_files(out, library, "--out")
+    model.set_logger(_logger(out, args, algo_kwargs.get("tensorboard_log"), start_steps))
+    held_out, callbacks = _callbacks(args, algo, out, n_envs, eval_env, eval_adapter, normalize)
+    if args.resume is not None:
+        held_out.continue_from(start_steps)
+    learn_started = time.perf_counter()
+    _learn(model, args, algo, out, timesteps, callbacks, normalize, library)
     train_s = time.perf_counter() - learn_started
     trained = int(model.num_timesteps) - start_steps  # by this run (a resumed one: since then)
 
@@ -518,25 +600,7 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     final = evaluate_held_out(model, eval_env, eval_adapter, args.eval_seed)
     wall_s = time.perf_counter() - started
     settings = {
-        "env_id": args.env_id,
-        "algorithm": algo,
-        "result": "model.zip is the final model; the test split was not used to select it",
-        "args": _jsonable(dataclasses.asdict(args)),
-        "hyperparameters": _jsonable(
-            {
-                "n_envs": n_envs,
-                "n_timesteps": timesteps,
-                "policy": hp.policy,
-                "normalize": hp.normalize,
-                "env_kwargs": hp.env_kwargs,
-                **hp.layout.record(),
-                **({"noise_type": hp.noise[0], "noise_std": hp.noise[1]} if hp.noise else {}),
-                **hp.algo_kwargs,
-            }
-        ),
-        "hyperparameter_file": hp.source,
-        "env_settings": _jsonable(dataclasses.asdict(adapter.config)),
-        "database": adapter.bank.description,
+        **_record(args, hp, algo, n_envs, timesteps, adapter.config, adapter.bank.description),
         "command_line": shlex.join(sys.argv if command_line is None else command_line),
         "equivalent_command": command_of(args),
         "versions": _versions(),
@@ -560,9 +624,37 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
     record_outputs(out, library)
     train_env.close()
     eval_env.close()
+    _print_done(settings, out, normalize is not None, train_s, wall_s)
+    return settings
+
+
+def _new_model(
+    args: Args, hp: Hyperparameters, algo: str, train_env: Any, algo_kwargs: dict[str, Any]
+) -> Any:
+    """The algorithm's model on the training stack, seeded (and its action noise, where the
+    entry asks for one)."""
+    if hp.noise is not None:
+        from stable_baselines3.common.noise import NormalActionNoise
+
+        dims = int(np.prod(train_env.action_space.shape))
+        algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, hp.noise[1]))
+    return algorithm_class(algo)(
+        hp.policy, train_env, seed=args.seed, verbose=args.verbose, **algo_kwargs
+    )
+
+
+def _print_done(
+    settings: dict[str, Any], out: Path, vecnormalize: bool, train_s: float, wall_s: float
+) -> None:
+    """What a finished run says: its steps and speed (``train_s`` learning, ``wall_s`` in
+    all), its final test, what it wrote."""
+    trained = settings["env_steps"] - (settings["resumed_at_env_steps"] or 0)
     resumed = ""
-    if args.resume is not None:
-        resumed = f" (resumed at {start_steps:,}: {model.num_timesteps:,} in all)"
+    if settings["resumed_at_env_steps"] is not None:
+        resumed = (
+            f" (resumed at {settings['resumed_at_env_steps']:,}: {settings['env_steps']:,} in all)"
+        )
+    final = settings["final_test_eval"]
     print(
         f"\ntrained {trained:,} env-steps{resumed} in {train_s:.1f} s "
         f"({trained / train_s:,.0f} env-steps/s); wall time {wall_s:.1f} s"
@@ -572,10 +664,9 @@ def train(args: Args, command_line: Sequence[str] | None = None) -> dict[str, An
         f"{final['mean_reward']:.1f}, RMS tracking error {final['rms_tracking_error']:.3f}"
     )
     written = ["model.zip", "normalize.json", "settings.json"]
-    if normalize is not None:
+    if vecnormalize:
         written.insert(2, VECNORMALIZE_FILE)
     print(f"wrote {out}/{', '.join(written)}")
-    return settings
 
 
 def _logger(out: Path, args: Args, tensorboard_log: str | None, start_steps: int = 0) -> Any:
