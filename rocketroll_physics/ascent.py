@@ -543,6 +543,68 @@ def _liftoff_s(spec: AscentSpec) -> float:
     return float(brentq(lambda t: float(excess(t)), grid[k - 1], grid[k], xtol=1e-12))
 
 
+def _sampled(
+    pieces: list[tuple[float, float, Any]],
+    dt_s: float,
+    apogee_s: float,
+    end_s: float,
+    pad_m: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The solver's dense pieces ``(start, end, solution)`` on the grid of ``dt_s`` from
+    ignition, with the apogee and the end: times, altitude (the pad's before liftoff) and
+    airspeed (``|V|`` falling)."""
+    n = int(np.floor(end_s / dt_s * (1 + 1e-12)))
+    grid = dt_s * np.arange(n + 1)
+    t: FloatArray = np.unique(np.append(grid[grid < end_s - 1e-9 * dt_s], [apogee_s, end_s]))
+    altitude = np.full(t.shape, pad_m)
+    speed = np.zeros(t.shape)
+    for start, end, dense in pieces:
+        inside = (t >= start) & (t <= end)
+        if np.any(inside):
+            states = dense(t[inside])
+            altitude[inside] = states[0]
+            speed[inside] = states[1]
+    speed[t == apogee_s] = 0.0  # the apogee event: V = 0 to the solver's tolerance
+    speed = np.where(t > apogee_s, np.abs(speed), np.maximum(speed, 0.0))
+    return t, altitude, speed
+
+
+def _simulated_profile(
+    spec: AscentSpec,
+    t: FloatArray,
+    altitude: FloatArray,
+    speed: FloatArray,
+    apogee_s: float,
+    apogee_m: float,
+) -> FlightProfile:
+    """A simulated flight's profile from its sampled altitude and airspeed."""
+    if altitude.max() > ISA_MAX_ALTITUDE_M:
+        raise UsageError(
+            f"AscentSpec: the rocket climbs to {altitude.max():.0f} m, above the standard "
+            f"atmosphere's {ISA_MAX_ALTITUDE_M:g} m"
+        )
+    air = isa(altitude)
+    density = np.asarray(air.density_kgm3)
+    return FlightProfile(
+        t_s=t,
+        altitude_m=altitude,
+        airspeed_mps=speed,
+        mass_kg=spec.mass_at(t),
+        density_kgm3=density,
+        dynamic_pressure_pa=0.5 * density * speed**2,
+        mach=speed / np.asarray(air.speed_of_sound_mps),
+        burnout_s=spec.burnout_s,
+        apogee_s=apogee_s,
+        apogee_m=apogee_m,
+        max_speed_mps=float(speed.max()),
+        source=(
+            f"simulated: 1-D vertical ascent, {spec.liftoff_mass_kg:g} kg, "
+            f"{spec.total_impulse_ns:.0f} N·s, C_D {spec.drag_coefficient:g}, "
+            f"d {spec.diameter_m * 1000:g} mm"
+        ),
+    )
+
+
 def simulate_ascent(
     spec: AscentSpec = DEFAULT_ASCENT, dt_s: float = 0.01, descent_s: float = 0.0
 ) -> FlightProfile:
@@ -653,44 +715,8 @@ def simulate_ascent(
         fall = solve_ivp(rhs, (apogee_s, end_s), top, dense_output=True, **options)
         pieces.append((apogee_s, end_s, fall.sol))
 
-    n = int(np.floor(end_s / dt_s * (1 + 1e-12)))
-    grid = dt_s * np.arange(n + 1)
-    t: FloatArray = np.unique(np.append(grid[grid < end_s - 1e-9 * dt_s], [apogee_s, end_s]))
-    altitude = np.full(t.shape, spec.launch_altitude_m)
-    speed = np.zeros(t.shape)
-    for start, end, dense in pieces:
-        inside = (t >= start) & (t <= end)
-        if np.any(inside):
-            states = dense(t[inside])
-            altitude[inside] = states[0]
-            speed[inside] = states[1]
-    speed[t == apogee_s] = 0.0  # the apogee event: V = 0 to the solver's tolerance
-    speed = np.where(t > apogee_s, np.abs(speed), np.maximum(speed, 0.0))
-    if altitude.max() > ISA_MAX_ALTITUDE_M:
-        raise UsageError(
-            f"AscentSpec: the rocket climbs to {altitude.max():.0f} m, above the standard "
-            f"atmosphere's {ISA_MAX_ALTITUDE_M:g} m"
-        )
-    air = isa(altitude)
-    density = np.asarray(air.density_kgm3)
-    return FlightProfile(
-        t_s=t,
-        altitude_m=altitude,
-        airspeed_mps=speed,
-        mass_kg=spec.mass_at(t),
-        density_kgm3=density,
-        dynamic_pressure_pa=0.5 * density * speed**2,
-        mach=speed / np.asarray(air.speed_of_sound_mps),
-        burnout_s=spec.burnout_s,
-        apogee_s=apogee_s,
-        apogee_m=float(coast.y_events[0][0][0]),
-        max_speed_mps=float(speed.max()),
-        source=(
-            f"simulated: 1-D vertical ascent, {spec.liftoff_mass_kg:g} kg, "
-            f"{spec.total_impulse_ns:.0f} N·s, C_D {spec.drag_coefficient:g}, "
-            f"d {spec.diameter_m * 1000:g} mm"
-        ),
-    )
+    t, altitude, speed = _sampled(pieces, dt_s, apogee_s, end_s, spec.launch_altitude_m)
+    return _simulated_profile(spec, t, altitude, speed, apogee_s, float(coast.y_events[0][0][0]))
 
 
 # --------------------------------------------------------------------------- user files
