@@ -70,18 +70,36 @@ def code_lines(source: str, tree: ast.AST) -> int:
     return len(lines)
 
 
-def _is_kernel(node: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
-    return any("numba" in ast.unparse(d) or "njit" in ast.unparse(d) for d in node.decorator_list)
+def _is_kernel(node: ast.FunctionDef | ast.AsyncFunctionDef, compiled: set[str]) -> bool:
+    """Decorated by numba, or compiled by name (``numba.njit(...)(function)``)."""
+    decorated = any(
+        "numba" in ast.unparse(d) or "njit" in ast.unparse(d) for d in node.decorator_list
+    )
+    return decorated or node.name in compiled
+
+
+def _compiled_by_name(tree: ast.AST) -> set[str]:
+    """The functions a module hands to numba by name: ``njit(...)(name)``."""
+    return {
+        node.args[0].id
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call)
+        and "njit" in ast.unparse(node.func)
+        and node.args
+        and isinstance(node.args[0], ast.Name)
+    }
 
 
 def functions(tree: ast.AST, module: str) -> list[Function]:
     """Every function of ``tree`` with its length (first decorator to last line)."""
     found = []
+    compiled = _compiled_by_name(tree)
     for node in ast.walk(tree):
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
             first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
             length = (node.end_lineno or node.lineno) - first + 1
-            found.append(Function(f"{module}:{node.lineno} {node.name}", length, _is_kernel(node)))
+            kernel = _is_kernel(node, compiled)
+            found.append(Function(f"{module}:{node.lineno} {node.name}", length, kernel))
     return found
 
 
