@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.history import EpisodeHistory
 

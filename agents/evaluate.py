@@ -53,7 +53,7 @@ from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting, to_argv
 from rollenv import variant_ids
 from rollenv.bank import load_bank
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.history import EpisodeHistory, HistoryRecorder
 

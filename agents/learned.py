@@ -18,7 +18,7 @@ from agents.memory import PolicyLayout, PolicyObservation, observation_names
 from agents.observer import ObserverFeatures
 from agents.registry import COMMITTED, shipped_path
 from disturbances.bank import TraceBank
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.layout import Obs
 
 __all__ = [

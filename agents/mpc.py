@@ -49,7 +49,7 @@ from scipy import sparse
 from agents.base import Design, FlightView
 from agents.nominal import NominalModel
 from agents.observer import ObserverController, TurbulenceModel, designed_on, scheduling
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 __all__ = ["DEFAULT_HORIZON", "MAX_HORIZON", "MPCController", "check_horizon", "make_mpc"]
 

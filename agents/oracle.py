@@ -16,7 +16,8 @@ from agents.base import Design, train_bank
 from agents.nominal import NominalModel
 from agents.pid import PIDGains
 from disturbances.bank import TraceBank
-from rollenv.core import RollBatch, RollConfig
+from rollenv.config import RollConfig
+from rollenv.core import RollBatch
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Cfg, Cursor, State
 

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from agents.base import Design, FlightView
 from agents.nominal import NominalModel
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.layout import Obs
 
 __all__ = [

@@ -8,7 +8,7 @@ import numpy as np
 
 from agents.base import Evaluation
 from rocketroll_common.plotting import new_figure, png_bytes
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 __all__ = ["plot_episode", "plot_errors", "typical_episode"]
 

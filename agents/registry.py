@@ -25,7 +25,7 @@ from pathlib import Path
 
 from agents.base import Controller, Design
 from rocketroll_common.registry import Registry
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 __all__ = [
     "COMMITTED",

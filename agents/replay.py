@@ -5,7 +5,7 @@ run`` take the same ``--set KEY=VALUE`` environment options and read them
 the same way, through :func:`options_config`: the replay (``method``: whose
 rockets and ``u_d`` traces; ``disturbance``: identified traces, posterior
 draws, surrogates or none; ``model``; ``recording``: one recording of the
-split by name) and any other option of :class:`rollenv.core.RollConfig`.
+split by name) and any other option of :class:`rollenv.config.RollConfig`.
 A database that lacks the selection says so in one line, with what it holds
 and the command that adds the rest (:class:`disturbances.bank.BankError`).
 
@@ -24,7 +24,7 @@ from rocketroll_common.settings import setting
 
 if TYPE_CHECKING:
     from disturbances.bank import TraceBank
-    from rollenv.core import RollConfig
+    from rollenv.config import RollConfig
 
 __all__ = [
     "FIXED_OPTIONS",

@@ -66,7 +66,7 @@ from rocketroll_common import tables
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv.bank import load_bank
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 __all__ = ["COMMAND", "CONDITIONS", "Args", "run"]
 

@@ -32,7 +32,7 @@ from agents.replay import (
 from rocketroll_common.settings import Command, check, run_command, setting
 from rollenv import variant_ids
 from rollenv.bank import find_bank
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 __all__ = ["COMMAND", "TuneArgs", "tune", "tune_bandwidth"]
 

@@ -90,7 +90,7 @@ class RollVecEnv(VecEnv):
     seed : int, optional
         Seed of the generator until :meth:`seed` reseeds it.
     **settings
-        Any field of :class:`rollenv.core.RollConfig` (``split``,
+        Any field of :class:`rollenv.config.RollConfig` (``split``,
         ``episode_s``, ``setpoint``, ...), as for ``gym.make``.
 
     Notes

@@ -23,7 +23,8 @@ import numpy as np
 from disturbances.bank import TraceBank
 from identification.instruments.reference import Effects, advance, fine_steps
 from identification.model import RollParams
-from rollenv.core import RollConfig, observe_kernel, step_reward
+from rollenv.config import RollConfig
+from rollenv.core import observe_kernel, step_reward
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Cfg, Cursor, State
 

@@ -92,7 +92,7 @@ from identification.model import RIG_LIMITS, Rig, RollParams
 from identification.recordings.recording import Recording, StatedRig
 from rocketroll_common.arrays import FloatArray
 from rollenv.bank import variant_config
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.env import RocketRollEnv
 
 #: name -> (environment id, settings on top of it)

@@ -350,7 +350,7 @@ def _has_rig() -> bool:
     """Whether this checkout's environments take a rig and a rocket's quadratic damping (an
     --against checkout may not)."""
     from identification.model import RollParams
-    from rollenv.core import RollConfig
+    from rollenv.config import RollConfig
 
     return "servo_lag_s" in {f.name for f in dataclasses.fields(RollConfig)} and (
         "quadratic_damping" in {f.name for f in dataclasses.fields(RollParams)}

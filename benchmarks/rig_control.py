@@ -43,7 +43,7 @@ from identification.instruments.reference import Effects
 from identification.model import Rig
 from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 #: Rig cases -> the Rig fields they set (at the virtual tunnel's mismatch levels).
 RIGS: dict[str, tuple[str, ...]] = {

@@ -12,7 +12,7 @@ from typing import Any
 
 from disturbances.bank import TraceBank
 from disturbances.default import open_database
-from rollenv.core import RollConfig, config_fields
+from rollenv.config import RollConfig, config_fields
 from rollenv.flight import stored_flight_name
 
 __all__ = [
@@ -72,7 +72,7 @@ def load_bank(config: RollConfig, db: str | os.PathLike[str] | None) -> TraceBan
     Banks are cached per file state and selection, so a vector of
     environments in one process loads the traces once.  For a flight
     (``config.flight``) the bank holds the flights
-    (:meth:`rollenv.core.RollConfig.flights`): one trace per flight, exactly
+    (:meth:`rollenv.config.RollConfig.flights`): one trace per flight, exactly
     one episode long.
     """
     kind = {"surrogate": "surrogate", "posterior": "posterior"}.get(

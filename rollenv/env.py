@@ -15,7 +15,8 @@ from numpy.typing import NDArray
 
 from disturbances.bank import TraceBank
 from rollenv.bank import load_bank, make_config, settings_config
-from rollenv.core import RollBatch, RollConfig, observation_bounds
+from rollenv.config import RollConfig, observation_bounds
+from rollenv.core import RollBatch
 from rollenv.history import EpisodeHistory, HistoryRecorder
 from rollenv.layout import State
 
@@ -184,7 +185,7 @@ class RocketRollEnv(EpisodeLengthSpec, gym.Env[ObsType, ActType]):
 
     ``gym.make("RocketRoll-v0", **options)`` (``import rollenv`` first, or
     ``gym.make("rollenv:RocketRoll-v0")``), with any field of
-    :class:`rollenv.core.RollConfig` as a keyword:
+    :class:`rollenv.config.RollConfig` as a keyword:
 
     * ``task`` "angle" | "rate"; ``split`` "train" | "test";
       ``method`` "paper" (default) | "output-error" | any registered

@@ -1,6 +1,6 @@
 """The rocket in flight: the identified roll model carried along an ascent (the paper's §4).
 
-A flight environment (``flight=`` of :class:`rollenv.core.RollConfig`) is the
+A flight environment (``flight=`` of :class:`rollenv.config.RollConfig`) is the
 tunnel's environment with three things changed, all decided here once per
 configuration:
 

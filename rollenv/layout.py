@@ -17,7 +17,7 @@ checks that they agree.
 * :class:`Link` -- columns of :attr:`RollBatch.link <rollenv.core.RollBatch.link>`,
   each env's rig (the fin's linkage and the sensors' latency);
 * :class:`Cfg` -- the scalars of :meth:`RollConfig.kernel_settings
-  <rollenv.core.RollConfig.kernel_settings>`.
+  <rollenv.config.RollConfig.kernel_settings>`.
 """
 
 from __future__ import annotations
@@ -136,7 +136,7 @@ class Cursor(IntEnum):
 
 
 class Cfg(IntEnum):
-    """The scalars the kernels read (:meth:`rollenv.core.RollConfig.kernel_settings`)."""
+    """The scalars the kernels read (:meth:`rollenv.config.RollConfig.kernel_settings`)."""
 
     SUBSTEPS = 0  #: substeps per control step
     H = 1  #: substep length, s

@@ -49,7 +49,7 @@ def register_variant(
         The single and the vector environment (``"module:Class"``).
     **options
         What the variant fixes: ``task`` ("angle" or "rate") and any
-        :class:`rollenv.core.RollConfig` field.  As with ``gym.make``, a
+        :class:`rollenv.config.RollConfig` field.  As with ``gym.make``, a
         setting given by the user overrides an option (but not ``task``).
 
     Notes

@@ -17,7 +17,7 @@ from agents.observer.estimator import OFFSET_POLE, RollObserver, TurbulenceModel
 from disturbances.bank import TraceBank
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.flight import tunnel_frame
 from rollenv.layout import Obs
 

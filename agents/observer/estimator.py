@@ -20,7 +20,8 @@ from identification.methods.ml import MAX_ORDER
 from identification.methods.rollspace import roll_transition, stationary_cov
 from identification.model import Rig, RollParams, linkage_step
 from rocketroll_common.arrays import FloatArray
-from rollenv.core import RollConfig, wrap_deg
+from rollenv.config import RollConfig
+from rollenv.core import wrap_deg
 from rollenv.layout import Obs
 
 #: Variance floor of a measurement (an ideal sensor stays regular), as in the ML.

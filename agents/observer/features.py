@@ -13,7 +13,7 @@ from agents.nominal import NominalModel
 from agents.observer.controller import ObserverController, clone, designed_on, scheduling
 from agents.observer.estimator import TurbulenceModel
 from disturbances.bank import TraceBank
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.layout import Obs
 
 

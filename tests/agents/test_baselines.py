@@ -13,7 +13,7 @@ from agents.nominal import NominalModel, TrimController
 from agents.oracle import OracleController
 from agents.pid import DEFAULT_BANDWIDTH, PIDController, PIDGains
 from rollenv.bank import load_bank, make_config
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 NOMINAL = NominalModel(a_per_s=3.0, alpha=0.66, theta_bar_deg=4.5)
 

@@ -16,7 +16,7 @@ from disturbances.bank import TraceBank
 from identification.methods.rollspace import stationary_cov
 from identification.model import RollParams
 from rollenv.bank import load_bank, variant_config
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.layout import Obs
 
 

@@ -129,7 +129,7 @@ def test_a_stored_flights_rocket_flies_another_ascent_its_u_d_flown_anew(
 
     import rollenv  # noqa: F401  (registers the variants)
     from identification.recordings.recording import load_recording
-    from rollenv.core import RollConfig
+    from rollenv.config import RollConfig
     from rollenv.flight import FlightSchedule
 
     with DisturbanceDB(stored, create=False) as db:
@@ -188,7 +188,7 @@ def test_model_based_designs_on_a_stored_flight_model_its_turbulence_in_the_tunn
     from agents.observer.controller import designed_on
     from agents.observer.estimator import TurbulenceModel, stationary_cov
     from agents.registry import make_controller
-    from rollenv.core import RollConfig
+    from rollenv.config import RollConfig
     from rollenv.flight import tunnel_frame
 
     def sd(model: TurbulenceModel) -> float:

@@ -15,7 +15,7 @@ from identification.instruments.bundled import bundled_path
 from identification.instruments.flightlog import FlightLogSpec, run_flight
 from identification.recordings.recording import save_recording
 from rocketroll.cli import main
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 
 #: The flight's window: shorter than the default ascent's 21.2 s from 50 km/h to apogee.
 WINDOW_S = 6.0

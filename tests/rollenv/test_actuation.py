@@ -21,7 +21,7 @@ import pytest
 
 from identification.instruments.reference import Effects
 from identification.model import Rig
-from rollenv.core import RollConfig
+from rollenv.config import RollConfig
 from rollenv.env import RocketRollEnv
 from rollenv.layout import Obs, State
 from rollenv.vector import RocketRollVectorEnv

@@ -20,7 +20,8 @@ import rollenv  # noqa: F401  (registers the variants)
 from disturbances.bank import TraceBank
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
 from rocketroll_physics.scaling import TUNNEL_AIRSPEED_MPS, roll_scales
-from rollenv.core import RollBatch, RollConfig
+from rollenv.config import RollConfig
+from rollenv.core import RollBatch
 from rollenv.env import RocketRollEnv
 from rollenv.flight import MIN_SCALE, flight_schedule, turbulence_of
 from rollenv.layout import Obs, State

@@ -25,7 +25,8 @@ from agents.nominal import NominalModel
 from agents.pid import PIDController, PIDGains
 from disturbances.bank import TraceBank
 from identification.model import RollParams
-from rollenv.core import RollBatch, RollConfig, observation_bounds
+from rollenv.config import RollConfig, observation_bounds
+from rollenv.core import RollBatch
 from rollenv.env import RocketRollEnv
 from rollenv.history import HistoryRecorder
 from rollenv.layout import (
