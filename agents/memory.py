@@ -5,7 +5,7 @@ say where the rocket is within an encoder count, nor what the turbulence has
 been doing; the PID's integral and the observer's state carry that.  An MLP
 policy gets the same chance from a window of its own past:
 ``[o_t, o_{t-1}, ..., o_{t-k}, a_{t-1}, ..., a_{t-k}]`` (zeros before the
-episode's start).  :class:`History` keeps that window for a batch of
+episode's start).  :class:`ObservationWindow` keeps that window for a batch of
 environments.  :class:`ErrorIntegral` is the PID's own memory made of the same
 history: a leaky sum of the observed error; :class:`FlightClock` the flight's phase.
 :class:`PolicyLayout` records which of these (and the observer's estimate, a residual or an
@@ -31,7 +31,7 @@ from rollenv.layout import OBSERVATION_NAMES, Obs
 __all__ = [
     "ErrorIntegral",
     "FlightClock",
-    "History",
+    "ObservationWindow",
     "PolicyLayout",
     "PolicyObservation",
     "history_space",
@@ -49,10 +49,10 @@ def history_space(observation: spaces.Box, action: spaces.Box, k: int) -> spaces
     return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
 
-class History:
+class ObservationWindow:
     """The last ``k`` observations and actions of ``n`` environments.
 
-    >>> h = History(n=1, obs_dim=2, act_dim=1, k=2)
+    >>> h = ObservationWindow(n=1, obs_dim=2, act_dim=1, k=2)
     >>> h.augment(np.array([[1.0, 2.0]])).tolist()
     [[1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]]
     >>> h.push(np.array([[1.0, 2.0]]), np.array([[0.5]]))
@@ -194,7 +194,7 @@ class PolicyLayout:
     Attributes
     ----------
     history : int
-        Steps of past observations and actions beside the observation (:class:`History`).
+        Steps of past observations and actions beside the observation (:class:`ObservationWindow`).
     observer : bool
         The observer's estimate in the observation (implied by ``residual``).
     residual : float
@@ -293,7 +293,7 @@ class PolicyObservation:
     estimate (``features``, an :class:`agents.observer.ObserverFeatures`), the flight's
     phase (:class:`FlightClock`, from the nominal flight's ``scales``), the observed error's
     leaky integral (:class:`ErrorIntegral`), then the history of those and of the actions
-    (:class:`History`).  The policy's action becomes the fin command the environment gets:
+    (:class:`ObservationWindow`).  The policy's action becomes the fin command the environment gets:
     the observer controller's plus a residual (``features``), or a change of the last
     command (``incremental``), or the action itself.
 
@@ -355,7 +355,9 @@ class PolicyObservation:
             + (FlightClock.SIZE if self.clock is not None else 0)
             + (ErrorIntegral.SIZE if self.integral is not None else 0)
         )
-        self.history = History(n, self.width, 1, layout.history) if layout.history else None
+        self.history = (
+            ObservationWindow(n, self.width, 1, layout.history) if layout.history else None
+        )
         self._raw: Float32Array | None = None
         self._now: Float32Array | None = None
 

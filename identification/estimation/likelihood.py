@@ -2,7 +2,7 @@
 
 statsmodels' ``MLEModel`` in miniature.  A model is
 
-* a **layout** (:class:`Layout`): the names of the vector the optimiser moves,
+* a **parameter map** (:class:`ParameterMap`): the names of the vector the optimiser moves,
   its map to the natural parameters (``natural``) and back (``vector``), and its
   bounds (None: unbounded);
 * its **log-likelihood** at natural parameters (:class:`Likelihood`'s
@@ -22,7 +22,7 @@ The tunnel's ``ml`` method (:mod:`identification.methods.ml`: the turbulence an
 AR state, a fast kernel of its own) and the ``flight`` method
 (:mod:`identification.methods.flightfit`: the turbulence a field flown through,
 its system changing with the airspeed) are two such models; each keeps only its
-layout, its system, its starts and its searches.
+parameter map, its system, its starts and its searches.
 """
 
 from __future__ import annotations
@@ -44,8 +44,8 @@ from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
     "OUTSIDE",
-    "Layout",
     "Likelihood",
+    "ParameterMap",
     "StateSpaceFit",
     "covariance",
     "maximise",
@@ -67,7 +67,7 @@ _HESS_STEP = float(np.finfo(float).eps) ** 0.25
 MAX_ITERATIONS = 500
 
 
-class Layout(Protocol):
+class ParameterMap(Protocol):
     """The unconstrained vector the optimiser moves and its map to natural parameters."""
 
     @property
@@ -84,10 +84,10 @@ class Layout(Protocol):
 
 
 class Likelihood(Protocol):
-    """A model with its data: its layout and its log-likelihood at natural parameters."""
+    """A model with its data: its parameter map and its log-likelihood at natural parameters."""
 
     @property
-    def layout(self) -> Layout: ...
+    def parameters(self) -> ParameterMap: ...
 
     def loglike(self, nat: dict[str, Any]) -> float:
         """The log-likelihood at ``nat``; ``-inf`` where ``nat`` is no model."""
@@ -103,7 +103,7 @@ def negloglike_at(loglike: Callable[[dict[str, Any]], float], nat: dict[str, Any
 
 def negloglike(model: Likelihood, x: FloatArray) -> float:
     """Minus the model's log-likelihood at the optimiser's vector ``x``."""
-    return negloglike_at(model.loglike, model.layout.natural(x))
+    return negloglike_at(model.loglike, model.parameters.natural(x))
 
 
 @functools.cache
@@ -124,15 +124,15 @@ def _value_and_gradient(model: Likelihood, x: FloatArray) -> tuple[float, FloatA
 
 
 def maximise(model: Likelihood, starts: Sequence[dict[str, Any]]) -> optimize.OptimizeResult:
-    """L-BFGS-B from each start (natural parameters, clipped into the layout's bounds); the
+    """L-BFGS-B from each start (natural parameters, clipped into the map's bounds); the
     result of least −log-likelihood (the first of equals).
 
-    The gradient is forward differences: on threads where the layout is unbounded, scipy's
+    The gradient is forward differences: on threads where the map is unbounded, scipy's
     where it has bounds (which steps back from a bound)."""
-    bounds = model.layout.bounds
+    bounds = model.parameters.bounds
     best: optimize.OptimizeResult | None = None
     for start in starts:
-        x0 = model.layout.vector(start)
+        x0 = model.parameters.vector(start)
         if bounds is None:
             result = optimize.minimize(
                 functools.partial(_value_and_gradient, model),

@@ -327,7 +327,7 @@ def interval_maps(
 
 
 @dataclass(frozen=True)
-class _Layout:
+class _FlightParameterMap:
     """Which parameters are free, in the optimiser's coordinates: a log for those that
     are positive; those not free are held at :data:`_FIXED` (or ``scaling``'s exponents)."""
 
@@ -385,7 +385,7 @@ class _Layout:
         )
 
 
-#: The parameters' values where a layout does not free them (the sensor a recording lacks
+#: The parameters' values where a parameter map does not free them (the sensor a recording lacks
 #: has no noise).
 _FIXED = {"alpha_bar": 0.0, "gyro_rel": 0.0, "gyro_abs": 0.0, "gyro_bias": 0.0, "angle_sd": 0.0}
 #: The sensor noises' starts.
@@ -476,7 +476,7 @@ class _Flights:
     Kalman-filter log-likelihood (``-inf`` where the parameters are no rocket)."""
 
     flights: Sequence[FlightInputs]
-    layout: _Layout
+    parameters: _FlightParameterMap
 
     def loglike(self, nat: dict[str, Any]) -> float:
         low, high = EXPONENT_BOUNDS
@@ -538,7 +538,7 @@ _START_SIGMAS = np.geomspace(0.3, 300.0, 10)
 
 
 def _turbulence_starts(
-    flights: Sequence[FlightInputs], layout: _Layout, rough: dict[str, float]
+    flights: Sequence[FlightInputs], pmap: _FlightParameterMap, rough: dict[str, float]
 ) -> list[dict[str, float]]:
     """Two starts for the optimiser: the rocket of the equation-error fit with the
     turbulence ``(T, σ_w)`` of the best likelihood on a grid over four decades of ``T``,
@@ -549,11 +549,11 @@ def _turbulence_starts(
     fixed start falls into it on some flights (half of ten Dryden flights did), a
     survey of a hundred Kalman passes (a fraction of a second) does not.
     """
-    model = _Flights(flights, layout)
+    model = _Flights(flights, pmap)
     rows = []
     for tau in _START_TAUS:
         values = [
-            negloglike(model, layout.vector({**rough, "tau": tau, "sigma_w": sd}))
+            negloglike(model, pmap.vector({**rough, "tau": tau, "sigma_w": sd}))
             for sd in _START_SIGMAS
         ]
         j = int(np.argmin(values))
@@ -680,12 +680,12 @@ def resimulated(
 
 
 def _maximise(
-    flights: Sequence[FlightInputs], layout: _Layout, starts: Sequence[dict[str, float]]
+    flights: Sequence[FlightInputs], pmap: _FlightParameterMap, starts: Sequence[dict[str, float]]
 ) -> optimize.OptimizeResult:
     """The estimation core's L-BFGS-B from each start (:func:`maximise`); the best, or an
     error that says why it is no rocket."""
-    best = maximise(_Flights(flights, layout), starts)
-    nat = layout.natural(best.x)
+    best = maximise(_Flights(flights, pmap), starts)
+    nat = pmap.natural(best.x)
     if _params(nat) is None or best.fun >= 1e12:
         if not all(math.isfinite(v) for v in nat.values()):
             what = "the parameters left the real numbers"
@@ -816,15 +816,15 @@ def eq_4_8_test(loglike_held: float, loglike_measured: float) -> dict[str, Any]:
 
 def _fit_exponents_and_test(
     flights: Sequence[FlightInputs],
-    held_layout: _Layout,
+    held_map: _FlightParameterMap,
     held: optimize.OptimizeResult,
     extra_starts: Sequence[dict[str, float]],
-) -> tuple[_Layout, optimize.OptimizeResult, dict[str, Any]]:
+) -> tuple[_FlightParameterMap, optimize.OptimizeResult, dict[str, Any]]:
     """The exponents freed, from eq. 4-8's optimum (and ``extra_starts``); the test."""
-    layout = dataclasses.replace(held_layout, scaling=None)
-    starts = [held_layout.natural(held.x), *extra_starts]
-    best = _maximise(flights, layout, starts)
-    return layout, best, eq_4_8_test(-float(held.fun), -float(best.fun))
+    pmap = dataclasses.replace(held_map, scaling=None)
+    starts = [held_map.natural(held.x), *extra_starts]
+    best = _maximise(flights, pmap, starts)
+    return pmap, best, eq_4_8_test(-float(held.fun), -float(best.fun))
 
 
 def identify_flights(
@@ -881,7 +881,7 @@ def identify_flights(
             f"recordings {_names(flights)}: prepared at different reference airspeeds or "
             "densities; a joint fit needs one reference"
         )
-    held_layout = _Layout(
+    held_map = _FlightParameterMap(
         theta_model=model == "theta",
         gyro=gyro,
         scaling=scaling or EQ_4_8,
@@ -897,23 +897,23 @@ def identify_flights(
         ):
             raise ValueError("constant must be the constant model's fits to the same inputs")
         start = {**constant[0].estimates, "alpha_bar": 0.0}
-        held = _maximise(flights, held_layout, [start])
+        held = _maximise(flights, held_map, [start])
         extra = [start]
     elif model == "constant":
         rough = {**_equation_error_start(flights), "alpha_bar": 0.0}
-        held = _maximise(flights, held_layout, _turbulence_starts(flights, held_layout, rough))
+        held = _maximise(flights, held_map, _turbulence_starts(flights, held_map, rough))
     else:
         raise ValueError(f"model must be 'constant' or 'theta', not {model!r}")
     test: dict[str, Any] | None = None
     if scaling is None:
-        layout, best, test = _fit_exponents_and_test(flights, held_layout, held, extra)
+        pmap, best, test = _fit_exponents_and_test(flights, held_map, held, extra)
     else:
-        layout, best = held_layout, held
-    nat = layout.natural(best.x)
+        pmap, best = held_map, held
+    nat = pmap.natural(best.x)
     params = _params(nat)
     assert params is not None
-    hess = numerical_hessian(functools.partial(negloglike, _Flights(flights, layout)), best.x)
-    errors = _standard_errors(covariance(hess), layout, params)
+    hess = numerical_hessian(functools.partial(negloglike, _Flights(flights, pmap)), best.x)
+    errors = _standard_errors(covariance(hess), pmap, params)
     fits = []
     for inputs in flights:
         loglike, rate, mean_w, sd_w, _ = _smoothed(inputs, nat)
@@ -939,7 +939,7 @@ def identify_flights(
                 scaling=_scaling(nat),
                 scaling_measured=scaling is None,
                 eq_4_8_test=test,
-                gyro_bias_dps=nat["gyro_bias"] if held_layout.gyro_bias else None,
+                gyro_bias_dps=nat["gyro_bias"] if held_map.gyro_bias else None,
             )
         )
     return fits
@@ -957,12 +957,12 @@ _REPORTED = {
 
 
 def _standard_errors(
-    cov: FloatArray | None, layout: _Layout, params: RollParams
+    cov: FloatArray | None, pmap: _FlightParameterMap, params: RollParams
 ) -> dict[str, float]:
     """The asymptotic standard errors of the model's parameters (and the measured
     exponents) from the estimates' covariance; empty where any is not positive."""
-    names = [name for name in _REPORTED if name in layout.names]
-    index = [layout.names.index(name) for name in names]
+    names = [name for name in _REPORTED if name in pmap.names]
+    index = [pmap.names.index(name) for name in names]
     reported = [_REPORTED[name] for name in names]
     block = None if cov is None else cov[np.ix_(index, index)]
     se, _ = standard_errors(block, [shown for shown, _ in reported])

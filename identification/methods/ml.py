@@ -78,13 +78,13 @@ from identification.methods.pipeline import (
 from identification.methods.rollspace import (
     MIN_DAMPING,
     RollData,
-    RollLayout,
     RollLikelihood,
+    RollParameterMap,
     RollParts,
     count_params,
-    layout_for,
     negloglike_natural,
     pacf_from_ar,
+    parameter_map,
     prepare,
     roll_loglike,
     roll_parts,
@@ -265,18 +265,18 @@ class _Information:
 
 def _information(data: RollData, model: str, nat: dict[str, Any]) -> _Information:
     """The Hessian of the log-likelihood over all free parameters, inverted."""
-    layout = layout_for(data, model, int(np.size(nat["ar"])), nat)
+    pmap = parameter_map(data, model, int(np.size(nat["ar"])), nat)
     rocket = (
         ("alpha", "theta_bar", "beta_bar")
         if model == "constant"
         else ("alpha", "theta_bar", "alpha_bar", "beta_bar")
     )
-    x0 = layout.vector(nat)
+    x0 = pmap.vector(nat)
     k = len(rocket)
 
     def trial(values: FloatArray) -> dict[str, Any]:
         # Rocket parameters in natural units, the turbulence's in the optimiser's.
-        out = layout.natural(np.concatenate([x0[:k], values[k:]]))
+        out = pmap.natural(np.concatenate([x0[:k], values[k:]]))
         out.update(zip(rocket, values[:k].tolist(), strict=True))
         return out
 
@@ -330,9 +330,11 @@ def _parameter_variance(data: RollData, info: _Information, u: FloatArray) -> Fl
     return np.clip(np.einsum("ti,ij,tj->t", jac, info.cov, jac), 0.0, None)
 
 
-def _maximise(data: RollData, layout: RollLayout, start: dict[str, Any]) -> optimize.OptimizeResult:
+def _maximise(
+    data: RollData, pmap: RollParameterMap, start: dict[str, Any]
+) -> optimize.OptimizeResult:
     """The estimation core's fit of the roll model of ``data`` from one start."""
-    return maximise(RollLikelihood(data, layout), [start])
+    return maximise(RollLikelihood(data, pmap), [start])
 
 
 @dataclass
@@ -364,13 +366,13 @@ class _Search:
     def _run(
         self, model: str, order: int, warm: dict[str, Any]
     ) -> tuple[float, dict[str, Any], bool, str]:
-        layout = layout_for(self.data, model, order, warm)
-        result = _maximise(self.data, layout, warm)
+        pmap = parameter_map(self.data, model, order, warm)
+        result = _maximise(self.data, pmap, warm)
         # Each call of the objective is one value and one forward difference per parameter.
         self.nfev += int(result.nfev) * (result.x.size + 1)
         return (
             float(result.fun),
-            layout.natural(result.x),
+            pmap.natural(result.x),
             bool(result.success),
             str(result.message),
         )
@@ -661,7 +663,7 @@ def delay_search(inputs: Measurements, model: str, delays: Sequence[int]) -> Del
     for d in (top - 1, top, top + 1):  # the screen's peak leans towards none: its neighbours
         if d in screened and d not in fitted:
             data = prepare(delayed_fin(inputs, d))
-            result = _maximise(data, layout_for(data, model, base.ar.size, nat), nat)
+            result = _maximise(data, parameter_map(data, model, base.ar.size, nat), nat)
             fitted[d] = max(-float(result.fun), screened[d])
     best = max(fitted, key=lambda d: fitted[d])
     return DelaySearch(best, inputs.grid.step_s, base.loglike, fitted[best], screened)
@@ -756,7 +758,7 @@ def quadratic_search(
             # the linear fit's parameters, its gain given back the rate's mean damping
             gain = float(quadratic_growth(mean_speed, c))
             warm = {**nat, "alpha": nat["alpha"] * gain}
-            result = _maximise(damped, layout_for(damped, model, base.ar.size, nat), warm)
+            result = _maximise(damped, parameter_map(damped, model, base.ar.size, nat), warm)
             profile[c] = max(-float(result.fun), -negloglike_natural(damped, warm))
         return -profile[c]
 

@@ -12,7 +12,7 @@ fine grid's substeps)::
 With the turbulence a zero-mean AR process of order ``p`` on the sample grid
 and the state ``[v, φ, u_d[k], ..., u_d[k-p+1]]``, this module writes the
 model once: the recording's measurements and their noise (:func:`prepare`), the
-optimiser's parameters (:class:`RollLayout`), the system for given parameters
+optimiser's parameters (:class:`RollParameterMap`), the system for given parameters
 (:func:`roll_parts`, :func:`roll_transition`, :func:`roll_system`) and its
 log-likelihood by a sparse compiled Kalman filter (:func:`roll_loglike`), which
 the estimation core (:mod:`identification.estimation.likelihood`) maximises
@@ -40,15 +40,15 @@ from rocketroll_common.arrays import FloatArray
 __all__ = [
     "MIN_DAMPING",
     "RollData",
-    "RollLayout",
     "RollLikelihood",
+    "RollParameterMap",
     "RollParts",
     "ar_from_pacf",
     "count_params",
-    "layout_for",
     "loglike",
     "negloglike_natural",
     "pacf_from_ar",
+    "parameter_map",
     "pivot",
     "prepare",
     "roll_loglike",
@@ -144,7 +144,7 @@ def prepare(inputs: Measurements) -> RollData:
 
 # ----------------------------------------------------------------------------- parameters
 @dataclass(frozen=True)
-class RollLayout:
+class RollParameterMap:
     """Names of the unconstrained vector the optimiser moves, for one model and order.
 
     The θ-dependent damping is moved as its value ``a_mid`` at the typical
@@ -499,7 +499,7 @@ class RollLikelihood:
     kernel's log-likelihood)."""
 
     data: RollData
-    layout: RollLayout
+    parameters: RollParameterMap
 
     def loglike(self, nat: dict[str, Any]) -> float:
         return loglike(self.data, nat)
@@ -528,11 +528,11 @@ def pivot(data: RollData, theta_bar: float) -> float:
     return max(float(np.mean(np.abs(data.theta_fine + theta_bar))), 1.0)
 
 
-def layout_for(data: RollData, model: str, order: int, nat: dict[str, Any]) -> RollLayout:
+def parameter_map(data: RollData, model: str, order: int, nat: dict[str, Any]) -> RollParameterMap:
     """The optimiser's parameters for ``data`` near ``nat``: the recording's sensors, and
     the gyro's noise chosen by the first fit (:meth:`_Search._first`), decide which
     noise levels are free."""
-    return RollLayout(
+    return RollParameterMap(
         model,
         order,
         data.has_gyro,
@@ -543,4 +543,4 @@ def layout_for(data: RollData, model: str, order: int, nat: dict[str, Any]) -> R
 
 
 def count_params(data: RollData, model: str, order: int, nat: dict[str, Any]) -> int:
-    return len(layout_for(data, model, order, nat).names)
+    return len(parameter_map(data, model, order, nat).names)

@@ -27,8 +27,8 @@ from identification.methods.flightfit import (
     MACH_LIMIT,
     MIN_DAMPING,
     FlightFit,
+    _FlightParameterMap,
     _Flights,
-    _Layout,
     c_coefficients,
     flight_inputs,
     identify_flight,
@@ -390,15 +390,15 @@ def test_the_likelihood_prefers_the_truth_to_a_wrong_gain(
     paper_flight: Recording, paper_fit: FlightFit
 ):
     inputs = flight_inputs(paper_flight)
-    layout = _Layout(theta_model=True, gyro=True, scaling=None)
+    pmap = _FlightParameterMap(theta_model=True, gyro=True, scaling=None)
     assert paper_fit.scaling_measured
     best = dict(paper_fit.estimates)
     assert best["alpha"] == paper_fit.params.alpha
-    at_best = negloglike(_Flights([inputs], layout), layout.vector(best))
+    at_best = negloglike(_Flights([inputs], pmap), pmap.vector(best))
     assert at_best == pytest.approx(-paper_fit.loglike)
     for factor in (0.9, 1.1):
         wrong = negloglike(
-            _Flights([inputs], layout), layout.vector({**best, "alpha": factor * best["alpha"]})
+            _Flights([inputs], pmap), pmap.vector({**best, "alpha": factor * best["alpha"]})
         )
         assert wrong > at_best + 10.0
 
@@ -585,8 +585,8 @@ def test_flights_of_one_rocket_fitted_together_narrow_its_coefficients():
     for key in ("alpha", "beta_bar_per_s"):
         assert together[0].std_errors[key] < 0.85 * min(f.std_errors[key] for f in alone)
     # The joint likelihood is the flights' sum; each flight keeps its own u_d.
-    layout = _Layout(theta_model=False, gyro=True, scaling=None)
-    joint = negloglike(_Flights(flights, layout), layout.vector(together[0].estimates))
+    pmap = _FlightParameterMap(theta_model=False, gyro=True, scaling=None)
+    joint = negloglike(_Flights(flights, pmap), pmap.vector(together[0].estimates))
     assert joint == pytest.approx(-sum(f.loglike for f in together))
     for one, rec in zip(together, recordings, strict=True):
         assert np.corrcoef(one.u_d_deg, col(rec, "ud_true_deg")[:-1])[0, 1] > 0.95
