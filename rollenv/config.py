@@ -23,6 +23,7 @@ from identification.model import (
     Rig,
     Servo,
 )
+from rocketroll_common.settings import check, setting
 from rollenv.flight import STORED_PREFIX, FlightSchedule, flight_schedule, for_flight
 from rollenv.layout import (
     Cfg,
@@ -197,68 +198,45 @@ class RollConfig:
         :class:`identification.model.Rig`), none for a rocket without one.
     """
 
-    task: str = "angle"
-    dt_s: float = 0.1
-    substep_s: float = 0.01
-    episode_s: float | None = None
-    rate_limit_dps: float = Servo().rate_limit_dps
-    fin_range_deg: float = Servo().range_deg
-    sensors: bool = True
-    encoder_counts: int = 256
-    gyro_noise_pct: float = 2.0
-    gyro_range_dps: float = 250.0
-    angle_sensor: str = "encoder"
-    flight: str | None = None
-    flight_turbulence: str = "tunnel"
-    profile: str | None = None
-    gust_severity: str = "light"
-    disturbance: str | None = None
-    disturbance_scale: float = 1.0
-    model: str = "theta"
-    method: str = "ml"
-    split: str = "train"
-    recording: str | None = None
-    domain_randomization: bool = False
-    setpoint: str = "steps"
-    setpoint_period_s: float = 10.0
-    setpoint_range: float | None = None
-    initial_angle_deg: float = 0.0
-    error_scale: float | None = None
-    rate_scale_dps: float = 10.0
-    rate_weight: float = 0.1
-    fin_weight: float = 0.1
-    servo_lag_s: float | None = None
-    backlash_deg: float | None = None
-    sensor_latency_s: float | None = None
+    task: str = setting("angle", choices=TASKS, cli=False)
+    dt_s: float = setting(0.1, gt=0, cli=False)
+    substep_s: float = setting(0.01, gt=0, cli=False)
+    episode_s: float | None = setting(None, gt=0, cli=False)
+    rate_limit_dps: float = setting(Servo().rate_limit_dps, gt=0, cli=False)
+    fin_range_deg: float = setting(Servo().range_deg, gt=0, cli=False)
+    sensors: bool = setting(True, cli=False)
+    encoder_counts: int = setting(256, ge=0, cli=False)
+    gyro_noise_pct: float = setting(2.0, ge=0, le=_UPPER["gyro_noise_pct"], cli=False)
+    gyro_range_dps: float = setting(250.0, gt=0, cli=False)
+    angle_sensor: str = setting("encoder", choices=ANGLE_SENSORS, cli=False)
+    flight: str | None = setting(None, cli=False)
+    flight_turbulence: str = setting("tunnel", choices=FLIGHT_TURBULENCE, cli=False)
+    profile: str | None = setting(None, cli=False)
+    gust_severity: str = setting("light", choices=GUST_SEVERITIES, cli=False)
+    disturbance: str | None = setting(None, choices=DISTURBANCES, cli=False)
+    disturbance_scale: float = setting(1.0, ge=0, le=_UPPER["disturbance_scale"], cli=False)
+    model: str = setting("theta", choices=MODEL_NAMES, cli=False)
+    method: str = setting("ml", cli=False)
+    split: str = setting("train", choices=SPLITS, cli=False)
+    recording: str | None = setting(None, cli=False)
+    domain_randomization: bool = setting(False, cli=False)
+    setpoint: str = setting("steps", choices=SETPOINTS, cli=False)
+    setpoint_period_s: float = setting(10.0, gt=0, cli=False)
+    setpoint_range: float | None = setting(None, gt=0, cli=False)
+    initial_angle_deg: float = setting(0.0, ge=0, le=_UPPER["initial_angle_deg"], cli=False)
+    error_scale: float | None = setting(None, gt=0, cli=False)
+    rate_scale_dps: float = setting(10.0, gt=0, cli=False)
+    rate_weight: float = setting(0.1, ge=0, cli=False)
+    fin_weight: float = setting(0.1, ge=0, cli=False)
+    servo_lag_s: float | None = setting(None, cli=False)
+    backlash_deg: float | None = setting(None, cli=False)
+    sensor_latency_s: float | None = setting(None, cli=False)
 
     def __post_init__(self) -> None:
         if self.disturbance is None:
             resolved = "posterior" if has_posterior(self.method) else "replay"
             object.__setattr__(self, "disturbance", resolved)
-        for f in fields(self):
-            value = getattr(self, f.name)
-            numeric = f.type in ("float", "float | None", "int")
-            if (
-                numeric
-                and value is not None
-                and (isinstance(value, bool) or not isinstance(value, numbers.Real))
-            ):
-                raise TypeError(f"{f.name} must be a number, not {type(value).__name__}")
-        for name, allowed in (
-            ("task", TASKS),
-            ("disturbance", DISTURBANCES),
-            ("model", MODEL_NAMES),
-            ("setpoint", SETPOINTS),
-            ("split", SPLITS),
-            ("angle_sensor", ANGLE_SENSORS),
-            ("flight_turbulence", FLIGHT_TURBULENCE),
-            ("gust_severity", GUST_SEVERITIES),
-        ):
-            value = getattr(self, name)
-            if value not in allowed:
-                raise ValueError(
-                    f"{name} must be one of {', '.join(map(repr, allowed))}, not {value!r}"
-                )
+        check(self)  # types, choices and bounds, as the fields declare them
         if self.recording is not None and not (
             isinstance(self.recording, str) and self.recording.strip()
         ):
@@ -266,43 +244,10 @@ class RollConfig:
         if self.flight is not None and not isinstance(self.flight, str):
             raise TypeError(f"flight must be a profile name or path, got {self.flight!r}")
         self._resolve_episode()
-        positive = (
-            "dt_s",
-            "substep_s",
-            "episode_s",
-            "rate_limit_dps",
-            "fin_range_deg",
-            "gyro_range_dps",
-            "setpoint_period_s",
-            "rate_scale_dps",
-        )
-        for name in positive:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name, most in _UPPER.items():
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0 <= value <= most):
-                raise ValueError(f"{name} must be a number in [0, {most:g}], got {value!r}")
         if self.episode_s is not None and self.episode_s > MAX_EPISODE_S:
             raise ValueError(
                 f"episode_s must be at most {MAX_EPISODE_S:g} s, got {self.episode_s!r}"
             )
-        for name in ("rate_weight", "fin_weight"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
-        for name in ("setpoint_range", "error_scale"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number or None, got {value!r}")
-        for name in ("sensors", "domain_randomization"):
-            if not isinstance(getattr(self, name), bool):
-                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        if not isinstance(self.encoder_counts, numbers.Integral):
-            raise TypeError(f"encoder_counts must be an int, got {self.encoder_counts!r}")
-        if self.encoder_counts < 0:
-            raise ValueError(f"encoder_counts must be >= 0, got {self.encoder_counts}")
         Rig.resolved(self._rig_settings(), {})  # the bounds of Rig, named by setting
         try:
             METHODS.check(self.method)
@@ -429,14 +374,14 @@ class RollConfig:
 
     def _rig_settings(self) -> dict[str, float | None]:
         """The rig's settings by name (None: each rocket's own)."""
-        return {setting: getattr(self, setting) for setting, _ in RIG_KEYS.values()}
+        return {name: getattr(self, name) for name, _ in RIG_KEYS.values()}
 
     def rig_of(self, own: Rig) -> Rig:
         """The rig a rocket whose own is ``own`` flies here: each setting given, else its own."""
         given = self._rig_settings()
         chosen: dict[str, float] = {}
-        for f, (setting, _) in RIG_KEYS.items():
-            value = given[setting]
+        for f, (name, _) in RIG_KEYS.items():
+            value = given[name]
             if value is not None:
                 chosen[f] = value
         return dataclasses.replace(own, **chosen)
@@ -444,7 +389,7 @@ class RollConfig:
     def with_rig(self, rig: Rig) -> RollConfig:
         """These settings with every rocket flying ``rig`` (its settings all given)."""
         return dataclasses.replace(
-            self, **{setting: getattr(rig, f) for f, (setting, _) in RIG_KEYS.items()}
+            self, **{name: getattr(rig, f) for f, (name, _) in RIG_KEYS.items()}
         )
 
     @property

@@ -116,12 +116,12 @@ def test_an_environment_option_beyond_reason_is_refused(capsys: pytest.CaptureFi
     refused(
         capsys,
         [*base, "--set", "gyro_noise_pct=1e9"],
-        "gyro_noise_pct must be a number in [0, 100]",
+        "gyro_noise_pct: must be in [0, 100]",
     )
     refused(
         capsys,
         [*base, "--set", "disturbance_scale=50"],
-        "disturbance_scale must be a number in [0, 10]",
+        "disturbance_scale: must be in [0, 10]",
     )
     refused(capsys, [*base, "--set", "episode_s=1e7"], "episode_s must be at most 86400 s")
 

@@ -70,7 +70,7 @@ def test_the_episode_is_the_flight_and_may_be_cut_not_stretched() -> None:
         RollConfig(flight="default", episode_s=60.0)
     with pytest.raises(ValueError, match="flight: 'fast'"):
         RollConfig(flight="fast")
-    with pytest.raises(ValueError, match="angle_sensor must be one of"):
+    with pytest.raises(ValueError, match="angle_sensor: must be one of"):
         RollConfig(angle_sensor="laser")
 
 
