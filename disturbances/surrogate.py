@@ -60,7 +60,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal, stats
-from statsmodels.tsa.ar_model import AutoReg
+from statsmodels.tsa.ar_model import AutoReg, ar_select_order
 
 from identification.estimation.likelihood import select_order
 from identification.methods.statistics import decorrelation_stride
@@ -453,10 +453,11 @@ def fit_ar(x: ArrayLike, *, max_order: int = 30) -> ARModel:
 
     Notes
     -----
-    The order is the one of least AIC (:func:`identification.estimation.likelihood.select_order`,
-    the toolkit's one order selection) among ``statsmodels``' ``AutoReg(x, p, trend="c")``
-    fits, all on the same sample (the first ``max_order`` values held back), as
-    ``ar_select_order(x, max_order, ic="aic", trend="c")`` chooses it; then
+    ``statsmodels.tsa.ar_model.ar_select_order(x, max_order, ic="aic", trend="c")`` gives
+    the AIC of every order, all on the same sample (the first ``max_order`` values held
+    back); the order is the one of least AIC among them
+    (:func:`identification.estimation.likelihood.select_order`, the toolkit's one order
+    selection, the first of equals as statsmodels keeps it); then
     ``AutoReg(x, lags, trend="c")`` refits on all the data [1]_.
 
     References
@@ -466,12 +467,14 @@ def fit_ar(x: ArrayLike, *, max_order: int = 30) -> ARModel:
     """
     _check_max_order(max_order)
     source = _trace(x, min_samples=_ar_min_samples(max_order))
-
-    def held_back(order: int) -> tuple[float, int]:
-        # every order on the same sample: the first max_order values held back
-        return float(AutoReg(source, lags=order, trend="c", hold_back=max_order).fit().aic), order
-
-    order = select_order(held_back, range(max_order + 1))[0]
+    order = 0
+    if max_order > 0:
+        # statsmodels' AIC of every order on one sample (the first max_order values held
+        # back), keyed 0, (1,), (1, 2), ...; the toolkit's one selection picks among them
+        aic = ar_select_order(source, maxlag=max_order, ic="aic", trend="c").aic
+        order = select_order(
+            lambda p: (float(aic[tuple(range(1, p + 1)) or 0]), p), range(max_order + 1)
+        )[0]
     lags = list(range(1, order + 1))
     result = AutoReg(source, lags=lags if lags else 0, trend="c").fit()
     params = np.asarray(result.params, dtype=np.float64)
