@@ -17,6 +17,7 @@ policy sees the same vector in both, and a new observation feature is written on
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -349,12 +350,7 @@ class PolicyObservation:
             else None
         )
         #: Values per observation before the history.
-        self.width = (
-            len(Obs)
-            + (len(self.OBSERVER_NAMES) if self.features is not None else 0)
-            + (FlightClock.SIZE if self.clock is not None else 0)
-            + (ErrorIntegral.SIZE if self.integral is not None else 0)
-        )
+        self.width = len(observation_names(dataclasses.replace(layout, history=0)))
         self.history = (
             ObservationWindow(n, self.width, 1, layout.history) if layout.history else None
         )
