@@ -130,27 +130,24 @@ def maximise(model: Likelihood, starts: Sequence[dict[str, Any]]) -> optimize.Op
     The gradient is forward differences: on threads where the map is unbounded, scipy's
     where it has bounds (which steps back from a bound)."""
     bounds = model.parameters.bounds
+    objective: Callable[[FloatArray], Any]
+    if bounds is None:
+        objective, jac = functools.partial(_value_and_gradient, model), True
+    else:
+        objective, jac = functools.partial(negloglike, model), None
+        low = [-np.inf if lo is None else lo for lo, _ in bounds]
+        high = [np.inf if hi is None else hi for _, hi in bounds]
     best: optimize.OptimizeResult | None = None
     for start in starts:
         x0 = model.parameters.vector(start)
-        if bounds is None:
-            result = optimize.minimize(
-                functools.partial(_value_and_gradient, model),
-                x0,
-                jac=True,
-                method="L-BFGS-B",
-                options={"maxiter": MAX_ITERATIONS},
-            )
-        else:
-            low = [-np.inf if lo is None else lo for lo, _ in bounds]
-            high = [np.inf if hi is None else hi for _, hi in bounds]
-            result = optimize.minimize(
-                functools.partial(negloglike, model),
-                np.clip(x0, low, high),
-                method="L-BFGS-B",
-                bounds=bounds,
-                options={"maxiter": MAX_ITERATIONS},
-            )
+        result = optimize.minimize(
+            objective,
+            x0 if bounds is None else np.clip(x0, low, high),
+            jac=jac,
+            method="L-BFGS-B",
+            bounds=bounds,
+            options={"maxiter": MAX_ITERATIONS},
+        )
         if best is None or result.fun < best.fun:
             best = result
     if best is None:
