@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from disturbances.rows import TraceRow
-from disturbances.stores import Store
+from disturbances.stores import Store, check_filters
 from identification.model import Rig, RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError
@@ -232,6 +232,7 @@ class TraceBank:
             "validated": validated,
             **filters,
         }
+        check_filters(db, filters)
         infos = db.traces(**filters)
         described = ", ".join(f"{k}={v!r}" for k, v in filters.items() if v is not None)
         if not infos:

@@ -369,6 +369,9 @@ def list_traces(args: ListArgs) -> int:
     """List traces."""
     with open_store(args.db) as db:
         try:
+            from disturbances.stores import check_filters
+
+            check_filters(db, args.filters.query())
             rows = db.traces(**args.filters.query())
         except ValueError as exc:
             raise UsageError(str(exc)) from None

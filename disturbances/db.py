@@ -19,9 +19,11 @@ Schema (:mod:`disturbances.schema`, version in ``PRAGMA user_version``)::
                      t0, the u_d samples (float64 blob), their SHA-256, mean, SD,
                      5 % and 95 % quantiles, normality p, validation (JSON)
 
-Names -- methods, models, kinds, sources -- are checked in Python when rows
-are stored (a method must be registered in
-:data:`identification.methods.METHODS`), not by ``CHECK`` constraints.  A
+Names -- models, kinds, sources, verdicts -- are checked in Python by the rows
+themselves (:data:`disturbances.rows.NAMES`), not by ``CHECK`` constraints.  A
+method name is any string to the store: whether it is registered is the
+domain's question, asked above every back end (:func:`disturbances.stores.store_rows`,
+:func:`disturbances.stores.check_filters`).  A
 file of an older schema is upgraded when it is opened (a copy is kept beside
 it; :func:`disturbances.schema.migrate`), with a one-line notice.
 
@@ -45,19 +47,20 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from disturbances.rows import (
-    KINDS,
+    NAMES,
     POSTERIOR_KIND,
-    SPLITS,
     SURROGATE_KINDS,
     ChecksumError,
     IdentificationRow,
     RecordingRow,
     TraceRow,
+    params_from_columns,
+    rig_from_json,
 )
 from disturbances.schema import (
     APPLICATION_ID,
@@ -67,14 +70,13 @@ from disturbances.schema import (
     migrate,
     write_transaction,
 )
-from identification.methods import METHODS
-from identification.methods.adequacy import VERDICTS
-from identification.model import MODEL_NAMES, Rig, RollParams
-from identification.recordings.recording import SOURCES, Recording
 from rocketroll_common import __version__
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 from rocketroll_physics.scaling import AirspeedScaling, FlightReference
+
+if TYPE_CHECKING:
+    from identification.recordings.recording import Recording
 
 __all__ = [
     "APPLICATION_ID",
@@ -114,17 +116,6 @@ def _f64(blob: bytes) -> FloatArray:
 
 def _blob(values: FloatArray) -> bytes:
     return np.ascontiguousarray(values, dtype="<f8").tobytes()
-
-
-def _params(row: sqlite3.Row) -> RollParams:
-    """The roll parameters of an ``identifications`` row (or a join holding its columns)."""
-    return RollParams(
-        row["alpha"],
-        row["theta_bar_deg"],
-        row["beta_bar_per_s"],
-        row["alpha_bar_per_deg_s"],
-        row["quadratic_damping"],
-    )
 
 
 def _nan_to_none(x: float | None) -> float | None:
@@ -473,18 +464,16 @@ class DisturbanceDB:
 
         Recordings are matched by content hash, identifications by
         ``(recording, method, model)``, traces by uid.  A surrogate's source
-        must be stored already or come earlier in ``traces``.  Rows whose
-        names are not known -- a method not registered in
-        :data:`identification.methods.METHODS`, a model, kind or source that
-        does not exist -- are refused (``ValueError``) before anything is
-        written.
+        must be stored already or come earlier in ``traces``.  The rows have
+        checked their names; a method is stored under any name
+        (:func:`disturbances.stores.store_rows` refuses one that is not
+        registered, for every back end).
 
         Returns
         -------
         StoreResult
             Counts; ``recording_id`` is the first recording's row id.
         """
-        _check_names(identifications, traces)
         added_r = added_i = added_t = skipped = 0
         trace_ids: list[int] = []
         with self._transaction() as conn:
@@ -732,7 +721,7 @@ class DisturbanceDB:
                 recording_hash=r["recording_hash"],
                 method=r["method"],
                 model=r["model"],
-                params=_params(r),
+                params=params_from_columns(r),
                 metrics=json.loads(r["metrics"]),
                 options=json.loads(r["options"]),
                 package_version=r["package_version"],
@@ -782,7 +771,7 @@ class DisturbanceDB:
                 created_at=r["created_at"],
                 u_d_deg=samples,
                 n_samples=r["n_samples"],
-                params=_params(r),
+                params=params_from_columns(r),
                 recording=r["recording"],
                 source=r["source"],
                 split=r["split"],
@@ -791,24 +780,22 @@ class DisturbanceDB:
                 id=r["id"],
                 recording_id=r["recording_id"],
                 flight_reference=_reference(r),
-                rig=Rig.resolved(
-                    json.loads(r["options"]).get("rig") or {}, json.loads(r["recording_metadata"])
-                ),
+                rig=rig_from_json(r["options"], r["recording_metadata"]),
             )
         except ChecksumError:
             raise self._corrupt(r["uid"]) from None
         except ValueError as exc:
             raise self._fail(f"corrupt trace {r['uid']}: {exc}") from None
 
-    _FILTERS: Mapping[str, tuple[str, tuple[str, ...] | None]] = {
-        "split": ("r.split", SPLITS),
-        "model": ("i.model", MODEL_NAMES),
-        "method": ("i.method", None),
-        "kind": ("t.kind", (*KINDS, "surrogate")),
-        "source": ("r.source", SOURCES),
-        "recording": ("r.name", None),
-        "recording_hash": ("r.content_hash", None),
-        "verdict": ("i.verdict", VERDICTS),
+    _FILTERS: Mapping[str, str] = {
+        "split": "r.split",
+        "model": "i.model",
+        "method": "i.method",
+        "kind": "t.kind",
+        "source": "r.source",
+        "recording": "r.name",
+        "recording_hash": "r.content_hash",
+        "verdict": "i.verdict",
     }
 
     def methods(self) -> list[str]:
@@ -843,9 +830,7 @@ class DisturbanceDB:
                 continue
             if key not in allowed or key not in self._FILTERS:
                 raise ValueError(f"unknown filter {key!r}; use {', '.join(sorted(allowed))}")
-            column, choices = self._FILTERS[key]
-            if key == "method":
-                choices = _known_methods(self.methods())
+            column, choices = self._FILTERS[key], NAMES.get(key)
             values = [value] if isinstance(value, str) else list(value)
             for v in values:
                 if choices is not None and v not in choices:
@@ -860,8 +845,9 @@ class DisturbanceDB:
         """Stored traces (without their samples) matching every filter given, in insertion order.
 
         Filters (each a value or a list of values): ``split`` (train, test),
-        ``model`` (constant, theta), ``method`` (a registered identification
-        method, or one this database holds), ``kind`` (identified, iaaft, ar,
+        ``model`` (constant, theta), ``method`` (any name: one that is not
+        stored matches nothing; :func:`disturbances.stores.check_filters`
+        refuses one that is neither registered nor stored), ``kind`` (identified, iaaft, ar,
         ``surrogate`` for both, or posterior), ``source`` (synthetic, wind-tunnel,
         flight), ``recording`` (name); ``metadata`` (a mapping of the
         recording's metadata keys to required values), ``min_duration_s``,
@@ -989,25 +975,6 @@ class DisturbanceDB:
             identifications=tuple(sorted(idents.values(), key=lambda i: i.key)),
             traces=tuple(self.load_traces(ordered)),
         )
-
-
-def _known_methods(stored: Sequence[str]) -> tuple[str, ...]:
-    """Registered identification methods, then any other this database holds."""
-    registered = METHODS.names()
-    return (*registered, *(m for m in stored if m not in registered))
-
-
-def _check_names(identifications: Sequence[IdentificationRow], traces: Sequence[TraceRow]) -> None:
-    """Refuse rows with a method that is not registered (models, kinds and sources are
-    checked by the rows themselves)."""
-    for method in sorted({i.method for i in identifications} | {t.method for t in traces}):
-        try:
-            METHODS.check(method)
-        except ValueError as exc:
-            raise ValueError(
-                f"{exc}: register it (identification.methods.register_method) before storing "
-                "its results"
-            ) from None
 
 
 def _reference_columns(

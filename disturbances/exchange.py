@@ -43,7 +43,7 @@ import numpy as np
 
 from disturbances.db import SCHEMA_VERSION, Dump, StoreResult
 from disturbances.rows import IdentificationRow, RecordingRow, TraceRow
-from disturbances.stores import Store
+from disturbances.stores import Store, check_filters, store_rows
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import RocketrollError
@@ -255,6 +255,7 @@ def write_export(
     target = Path(out)
     if target.exists() and (not target.is_dir() or any(target.iterdir())):
         raise ExchangeError(f"{target}: exists and is not an empty folder")
+    check_filters(db, filters)
     dump = db.dump(**filters)
     if not dump.traces:
         raise ExchangeError(f"{db.path}: no traces match the filters; nothing to export")
@@ -496,6 +497,6 @@ def import_export(db: Store, folder: str | os.PathLike[str]) -> StoreResult:
             "database file instead"
         )
     try:
-        return db.store(dump.recordings, dump.identifications, dump.traces)
+        return store_rows(db, dump.recordings, dump.identifications, dump.traces)
     except ValueError as exc:  # a name this rocketroll does not know (a method not registered)
         raise ExchangeError(f"{folder}: {exc}") from None

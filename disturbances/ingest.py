@@ -55,7 +55,7 @@ from disturbances.rows import (
     posterior_uid,
     surrogate_uid,
 )
-from disturbances.stores import Store
+from disturbances.stores import Store, store_rows
 from identification.methods import (
     METHODS,
     Context,
@@ -441,7 +441,8 @@ def add_recording(
             posterior=posterior,
             posterior_seed=posterior_seed,
         )
-        return db.store(recordings, _judged(db, recordings, identifications, unreliable), traces)
+        judged = _judged(db, recordings, identifications, unreliable)
+        return store_rows(db, recordings, judged, traces)
     if surrogates:
         _check_surrogate_length(recording, options or IdentifyOptions())
     recording_hash = content_hash(recording.columns())
@@ -461,7 +462,7 @@ def add_recording(
         for model in traits(source_method).models:
             source = db.trace(identified_uid(recording_hash, source_method, model))
             made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
-        stored = db.store(traces=made)
+        stored = store_rows(db, traces=made)
         return dataclasses.replace(stored, recording_id=stored_id, skipped=stored.skipped + 1)
     return _store(
         db,
@@ -615,7 +616,7 @@ def _store(
         for trace in sources:
             source = db.trace(trace.uid) if db.has_trace(trace.uid) else trace
             made += surrogate_rows(source, surrogate_kinds, surrogates, surrogate_seed)
-    return db.store([recording], identifications, [*traces, *made])
+    return store_rows(db, [recording], identifications, [*traces, *made])
 
 
 def _options_key(options: Any) -> str:
@@ -635,7 +636,7 @@ def add_surrogates(
     if source.kind != "identified":
         raise DatabaseError(f"{db.path}: trace {uid} is itself a surrogate; use its source")
     db.check_version(writing=True)
-    return db.store(traces=surrogate_rows(source, (kind,), count, seed))
+    return store_rows(db, traces=surrogate_rows(source, (kind,), count, seed))
 
 
 def surrogate_rows(

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
@@ -40,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.methods.adequacy import VERDICTS
-from identification.model import Rig, RollParams, check_model
+from identification.model import MODEL_NAMES, Rig, RollParams, check_model
 from identification.recordings.recording import SOURCES, Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
@@ -49,6 +50,7 @@ from rocketroll_physics.scaling import FlightReference
 __all__ = [
     "ACCEPTED_UNRELIABLE",
     "KINDS",
+    "NAMES",
     "POSTERIOR_KIND",
     "SPLITS",
     "SURROGATE_KINDS",
@@ -61,8 +63,10 @@ __all__ = [
     "derived_row",
     "identified_uid",
     "json_safe",
+    "params_from_columns",
     "plain_statistics",
     "posterior_uid",
+    "rig_from_json",
     "split_of",
     "surrogate_uid",
 ]
@@ -75,6 +79,17 @@ POSTERIOR_KIND = "posterior"
 #: surrogate of another trace, or a posterior draw that goes with an identified trace.
 KINDS = ("identified", *SURROGATE_KINDS, POSTERIOR_KIND)
 SPLITS = ("train", "test")
+#: The values a stored name can take, by the column the store filters on.  A method
+#: name is any: which are registered is the domain's to say (:mod:`disturbances.stores`).
+NAMES: Mapping[str, tuple[str, ...]] = MappingProxyType(
+    {
+        "split": SPLITS,
+        "model": MODEL_NAMES,
+        "kind": (*KINDS, "surrogate"),
+        "source": SOURCES,
+        "verdict": VERDICTS,
+    }
+)
 #: Share of recordings (by hash) that go to the test split.
 TEST_FRACTION = 0.25
 #: The metric (``True``) of an identification stored although every fit of its recording was
@@ -571,3 +586,19 @@ def derived_row(
         statistics=plain_statistics(u),
         id=None,
     )
+
+
+def params_from_columns(columns: Any) -> RollParams:
+    """The roll parameters an identification's stored columns hold (``columns[name]``)."""
+    return RollParams(
+        columns["alpha"],
+        columns["theta_bar_deg"],
+        columns["beta_bar_per_s"],
+        columns["alpha_bar_per_deg_s"],
+        columns["quadratic_damping"],
+    )
+
+
+def rig_from_json(options: str, recording_metadata: str) -> Rig:
+    """The rig of an identification's stored options and its recording's metadata (JSON)."""
+    return Rig.resolved(json.loads(options).get("rig") or {}, json.loads(recording_metadata))

@@ -15,6 +15,11 @@ one module with a class that does what :class:`Store` says, registered once::
 after which ``--db postgresql://host/name`` (or ``open_store(...)``) opens
 it: the class is called with the rest of the location and ``create=``.
 A location without ``scheme://`` is an SQLite file.
+
+A store holds any method name.  Which methods exist is the domain's to say,
+so it is asked here, once for every back end: :func:`store_rows` refuses
+rows of a method that is not registered, and :func:`check_filters` refuses a
+method filter that is neither registered nor stored.
 """
 
 from __future__ import annotations
@@ -26,9 +31,10 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from disturbances.db import DatabaseError, DisturbanceDB, Dump
 from disturbances.rows import IdentificationRow, RecordingRow, TraceRow
+from identification.methods import METHODS
 from rocketroll_common.registry import Registry
 
-__all__ = ["STORES", "Store", "open_store", "register_store"]
+__all__ = ["STORES", "Store", "check_filters", "open_store", "register_store", "store_rows"]
 
 
 class Store(Protocol):
@@ -50,6 +56,9 @@ class Store(Protocol):
 
     def recordings(self) -> list[RecordingRow]:
         """Every recording, without samples."""
+
+    def methods(self) -> list[str]:
+        """Methods of the stored identifications."""
 
     def recording_row(self, key: int | str) -> RecordingRow:
         """One recording with its samples."""
@@ -131,6 +140,38 @@ def open_store(location: str | os.PathLike[str], *, create: bool = False) -> Sto
 
 
 register_store("sqlite", "disturbances.db:DisturbanceDB", summary="an SQLite file (the default)")
+
+
+def store_rows(
+    db: Store,
+    recordings: Sequence[RecordingRow] = (),
+    identifications: Sequence[IdentificationRow] = (),
+    traces: Sequence[TraceRow] = (),
+) -> Any:
+    """``db.store(...)`` of rows whose methods are registered (``ValueError`` before
+    anything is written if one is not)."""
+    for method in sorted({i.method for i in identifications} | {t.method for t in traces}):
+        try:
+            METHODS.check(method)
+        except ValueError as exc:
+            raise ValueError(
+                f"{exc}: register it (identification.methods.register_method) before storing "
+                "its results"
+            ) from None
+    return db.store(recordings, identifications, traces)
+
+
+def check_filters(db: Store, filters: Mapping[str, Any]) -> None:
+    """Refuse a ``method`` filter that is neither registered nor stored in ``db``
+    (``ValueError``); a registered method that is not stored matches nothing."""
+    value = filters.get("method")
+    if value is None:
+        return
+    registered = METHODS.names()
+    known = (*registered, *(m for m in db.methods() if m not in registered))
+    for v in [value] if isinstance(value, str) else list(value):
+        if v not in known:
+            raise ValueError(f"filter method={v!r}: must be one of {', '.join(known)}")
 
 
 if TYPE_CHECKING:  # the type checker proves the SQLite store is a Store

@@ -27,6 +27,7 @@ from agents.base import Design
 from agents.registry import CONTROLLERS, register_controller
 from disturbances.db import DisturbanceDB
 from disturbances.default import build_database, fingerprint
+from disturbances.stores import check_filters, store_rows
 from identification.instruments.bundled import bundled_path
 from identification.methods import (
     METHODS,
@@ -169,18 +170,27 @@ def test_a_default_method_joins_the_default_recipe(registered: None, tmp_path: P
 
 
 def test_an_unregistered_method_is_refused_by_name(toy_db: Path, tmp_path: Path) -> None:
-    """The store checks names in Python (no CHECK constraint), and so do the env options."""
+    """Names are checked in Python above the store (no CHECK constraint, no registry in
+    the store), and so do the env options."""
     with DisturbanceDB(toy_db, create=False) as db:
         (ident,) = db.identifications(recording="tunnel-paper-seed0", method="toy", model="theta")
     copy = tmp_path / "copy.sqlite"
     copy.write_bytes(toy_db.read_bytes())
+    stray = dataclasses.replace(ident, method="no-such", id=None)
     with DisturbanceDB(copy, create=False) as db:
-        stray = dataclasses.replace(ident, method="no-such", id=None)
         with pytest.raises(ValueError, match="unknown identification method 'no-such'"):
-            db.store(identifications=[stray])
+            store_rows(db, identifications=[stray])
         assert "no-such" not in db.methods()
+        with pytest.raises(ValueError, match="filter method='no-such': must be one of paper"):
+            check_filters(db, {"method": "no-such"})
+        check_filters(db, {"method": ["toy", "ml"]})  # stored, and registered but not stored
+        assert db.traces(method="ml") == []
     with pytest.raises(ValueError, match="unknown identification method 'no-such'"):
         RocketRollEnv(method="no-such")
+    # The store itself only stores: a name it is handed is kept, and found again.
+    with DisturbanceDB(copy, create=False) as db:
+        assert db.store(identifications=[stray]).identifications == 1
+        assert db.identifications(method="no-such")[0].params == ident.params
 
 
 @pytest.fixture

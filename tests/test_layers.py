@@ -38,6 +38,16 @@ def test_no_sub_package_imports_a_higher_one() -> None:
     ]
 
 
+def test_the_store_only_stores() -> None:
+    """The SQLite store imports no domain module but the recording type it returns (an
+    annotation): the rows check their names, and the registered methods are asked above
+    it (``disturbances.stores``), once for every back end."""
+    graph = module_graph()
+    domain = {m for m in graph["disturbances.db"] if m.startswith("identification")}
+    assert domain == {"identification.recordings.recording"}
+    assert "identification.methods" in graph["disturbances.stores"]
+
+
 def test_the_modules_import_one_another_without_a_cycle() -> None:
     assert cycles(module_graph()) == []
 

@@ -33,6 +33,7 @@ import pytest
 
 from disturbances.db import DatabaseError, DisturbanceDB
 from disturbances.schema import SCHEMA_VERSION, backup_path
+from disturbances.stores import store_rows
 from identification.methods import METHODS, register_method
 from rocketroll.cli import main as rocketroll
 
@@ -144,7 +145,7 @@ def test_after_the_upgrade_any_registered_method_is_accepted(v1: Path) -> None:
             (ident,) = db.identifications(
                 recording="tunnel-staircase-seed1", method="paper", model="theta"
             )
-            added = db.store(identifications=[dataclasses.replace(ident, method="schema-test")])
+            added = store_rows(db, [], [dataclasses.replace(ident, method="schema-test")])
             assert added.identifications == 1 and "schema-test" in db.methods()
     finally:
         METHODS.unregister("schema-test")
