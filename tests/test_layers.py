@@ -48,6 +48,18 @@ def test_the_store_only_stores() -> None:
     assert "identification.methods" in graph["disturbances.stores"]
 
 
+def test_each_command_lives_in_the_lowest_package_that_imports_what_it_uses() -> None:
+    """A command's module imports its own package: with only lower packages' modules
+    imported it would belong lower down."""
+    from rocketroll.cli import COMMANDS
+
+    graph = module_graph()
+    for module in {m for m, _ in COMMANDS.values()}:
+        package = module.split(".")[0]
+        own = {m for m in graph[module] if m.split(".")[0] == package}
+        assert own, f"{module} uses nothing of {package}"
+
+
 def test_the_modules_import_one_another_without_a_cycle() -> None:
     assert cycles(module_graph()) == []
 
