@@ -355,6 +355,25 @@ def _surrogate_method(methods: Sequence[str], surrogate_method: str | None) -> s
     return "paper" if "paper" in methods else methods[0]
 
 
+def _add_holdout(
+    db: Store,
+    context: Context,
+    holdout: float,
+    chosen: Sequence[str],
+    posterior: int,
+    posterior_seed: int,
+    unreliable: Literal["store", "refuse", "accept"],
+) -> StoreResult:
+    """:func:`add_recording` of a run split for a held-out evaluation."""
+    _check_new_run(db, context.recording)
+    db.check_version(writing=True)
+    recordings, identifications, traces = holdout_rows(
+        context, holdout, chosen, posterior=posterior, posterior_seed=posterior_seed
+    )
+    judged = _judged(db, recordings, identifications, unreliable)
+    return store_rows(db, recordings, judged, traces)
+
+
 def add_recording(
     db: Store,
     recording: Recording,
@@ -432,17 +451,9 @@ def add_recording(
     if holdout:
         if surrogates:
             raise ValueError("a run split for a held-out evaluation gets no surrogates")
-        _check_new_run(db, recording)
-        db.check_version(writing=True)
-        recordings, identifications, traces = holdout_rows(
-            Context(recording, options),
-            holdout,
-            chosen,
-            posterior=posterior,
-            posterior_seed=posterior_seed,
+        return _add_holdout(
+            db, Context(recording, options), holdout, chosen, posterior, posterior_seed, unreliable
         )
-        judged = _judged(db, recordings, identifications, unreliable)
-        return store_rows(db, recordings, judged, traces)
     if surrogates:
         _check_surrogate_length(recording, options or IdentifyOptions())
     recording_hash = content_hash(recording.columns())
