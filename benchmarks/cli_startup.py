@@ -37,6 +37,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from _against import REPO, checkout
+from _records import emit
 
 from rocketroll_common.tables import Column, text_table
 
@@ -113,6 +114,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             verdict = "-"
         missed |= verdict == "FAIL"
         rows.append([name, f"{median:.3f}", f"{min(runs):.3f}", target, verdict])
+        emit(
+            f"{name}: median",
+            median,
+            "s",
+            target=("<=", TARGET_S) if judged else None,
+            note=f"min {min(runs):.3f} s over {len(runs)} processes",
+        )
     columns = (
         Column("task", width, "<"),
         Column("median s", 9, gap=" "),

@@ -28,6 +28,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from _records import emit
+
 from rocketroll.help import PACKAGES
 
 REPO = Path(__file__).resolve().parent.parent
@@ -141,6 +143,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         share = f"{100 * size['lines'] / shipped:6.1f}%" if package in PACKAGES else "      -"
         print(f"{package:20s} {size['modules']:8d} {size['lines']:14d} {share}")
     print(f"{'distribution':20s} {'':8s} {shipped:14d}")
+    for package, size in packages.items():
+        emit(f"{package}: lines of code", size["lines"], "lines", note=f"{size['modules']} modules")
+    emit("distribution: lines of code", shipped, "lines")
     long_modules = sorted(
         ((n, s) for n, s in modules.items() if s > args.module_limit), key=lambda x: -x[1]
     )
@@ -151,6 +156,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         (f for f in every if f.lines > args.function_limit), key=lambda f: -f.lines
     )
     kernels = sum(f.kernel for f in long_functions)
+    emit(f"modules over {args.module_limit} lines of code", len(long_modules), "", target=("<=", 0))
+    emit(
+        f"functions over {args.function_limit} lines, numba kernels aside",
+        len(long_functions) - kernels,
+        "",
+        note=", ".join(f.where for f in long_functions if not f.kernel),
+    )
     print(
         f"\nfunctions over {args.function_limit} lines: {len(long_functions)} "
         f"({kernels} numba kernels)"

@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from _against import SERVE, serve, start_against
+from _records import emit
 
 from disturbances.bank import TraceBank
 from disturbances.db import DatabaseError
@@ -313,6 +314,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(
             f"{t.name:34s} {t.draws:7d} {t.median_us:10.2f} {t.mean_us:9.2f} {t.p99_us:9.2f} "
             f"{t.min_us:8.2f} {t.max_us:9.2f} {target} {ratio:8.2f}  {mark}"
+        )
+        emit(
+            f"{t.name}: p99" if judged else f"{t.name}: median",
+            t.p99_us if judged else t.median_us,
+            "µs",
+            target=("<=", TARGET_US) if judged else None,
+            note=f"median {t.median_us:.2f} µs, p99 {t.p99_us:.2f} µs over {t.draws} draws; "
+            f"{ratio:.2f}x the bank",
         )
 
     row(batches, True)

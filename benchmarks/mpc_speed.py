@@ -24,6 +24,7 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
+from _records import emit
 
 from agents.base import FlightView
 from agents.evaluate import env_on, protocol_episodes
@@ -81,6 +82,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         for policy in ("observer", mpc):
             t = 1e3 * step_times(env_id, policy, args.episodes, settings)
             medians[policy] = float(np.median(t))
+            emit(
+                f"{env_id}, {policy}: median per step",
+                medians[policy],
+                "ms",
+                target=("<=", TARGET_MS) if policy == mpc else None,
+                note=f"p99 {np.percentile(t, 99):.3f} ms, worst {t.max():.3f} ms, {t.size} steps",
+            )
             print(
                 f"{env_id:<20} {policy:<10} {np.median(t):8.3f} {np.percentile(t, 99):8.3f} "
                 f"{t.max():8.3f} {t.size:7d}"

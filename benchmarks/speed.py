@@ -53,6 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from _against import SERVE, Remote, serve, start_against
+from _records import emit
 
 from identification.instruments.bundled import load_bundled
 from identification.methods.baselines import output_error
@@ -327,6 +328,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(
             f"{t.name:30s} {len(t.samples_ms):3d} {t.median_ms:10.1f} {t.iqr_ms:8.1f} "
             f"{t.min_ms:8.1f} {t.first_ms:8.1f} {target_text} {ratio:10.2f}  {mark}"
+        )
+        emit(
+            f"{t.name}: median",
+            t.median_ms,
+            "ms",
+            target=None if target is None else ("<=", target),
+            note=f"IQR {t.iqr_ms:.1f} ms over {len(t.samples_ms)} calls; {ratio:.2f}x the pipeline",
         )
 
     row(pipeline, PIPELINE_TARGET_MS)

@@ -45,11 +45,15 @@ import numpy as np
 import stable_baselines3
 import torch
 from _recipes import DEFAULT_RECIPES, Recipe, parse_recipe
+from _records import emit
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.train import algorithm_arguments, load_hyperparameters, make_env, quiet_logger
 from agents.vecenv import RollVecEnv
+
+#: The training speed a recipe should reach on this machine (env-steps/s).
+TARGET_STEPS_S = 50_000.0
 
 
 class RolloutTimer(BaseCallback):
@@ -189,6 +193,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{run.ppo_s:>7.1f} {rate:>12,.0f} {run.timer.collect_s / run.ppo_s:>8.0%} "
             f"{1 - run.timer.collect_s / run.ppo_s:>8.0%} {alone_rate:>12,.0f} "
             f"{wrapped_rate:>12,.0f} {steps / wrapped_rate / run.ppo_s:>9.1%} {rate / first:>7.1f}x"
+        )
+        emit(
+            f"{run.recipe.label}, {run.n_envs} envs, {run.recipe.threads} thread(s)",
+            rate,
+            "env-steps/s",
+            target=(">=", TARGET_STEPS_S),
+            note=f"{steps:,} env-steps in {run.ppo_s:.1f} s; environment share "
+            f"{steps / wrapped_rate / run.ppo_s:.1%}",
         )
     spreads = [(max(r) - min(r)) / statistics.median(r) for run in runs for r in run.rates.values()]
     print(

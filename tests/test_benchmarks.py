@@ -421,6 +421,79 @@ def test_the_readme_names_every_script() -> None:
     assert [s for s in scripts if f"| `benchmarks/{s}` |" not in readme] == []
 
 
+def _suite(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "suite.py"), *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env={**os.environ, **(env or {})},
+        check=False,
+    )
+
+
+def test_the_benchmark_page_is_what_the_index_and_records_give() -> None:
+    done = _suite("tables", "--check")
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_the_suite_keeps_a_record_per_figure_of_a_run(tmp_path: Path) -> None:
+    kept = tmp_path / "records.jsonl"
+    done = _suite("run", "--records", str(kept), "code_size.py")
+    assert done.returncode == 0, done.stderr[-3000:]
+    records = [json.loads(line) for line in kept.read_text(encoding="utf-8").splitlines()]
+    by_figure = {r["figure"]: r for r in records}
+    modules = by_figure["modules over 800 lines of code"]
+    assert modules["target"] == {"op": "<=", "bound": 0.0}
+    assert modules["verdict"] == ("PASS" if modules["value"] == 0 else "FAIL")
+    head = subprocess.run(
+        ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    for record in records:  # every record stamped with how, where and when it was measured
+        assert record["script"] == "code_size.py" and record["kind"] == "study"
+        assert record["command"] == ".venv/bin/python benchmarks/code_size.py"
+        assert record["commit"].startswith(head.stdout.strip())
+        assert f"{os.cpu_count()} CPU(s)" in record["machine"] and record["date"]
+    lines = by_figure["distribution: lines of code"]["value"]
+    assert lines == sum(
+        by_figure[f"{p}: lines of code"]["value"]
+        for p in ("rocketroll", "rocketroll_common", "rocketroll_physics", "identification",
+                  "disturbances", "rollenv", "agents")
+    )  # fmt: skip
+    # A failed run keeps nothing; a malformed record is named by file and line.
+    failed = _suite("run", "--records", str(kept), "code_size.py", "--module-limit", "0")
+    assert failed.returncode == 2 and "not kept" in failed.stdout
+    assert len(kept.read_text(encoding="utf-8").splitlines()) == len(records)
+
+
+def test_a_target_gives_the_verdict_and_a_bad_record_is_named(tmp_path: Path) -> None:
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    try:
+        from _records import Target
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+    assert Target(op="<=", bound=50.0).verdict(50.0) == "PASS"
+    assert Target(op="<=", bound=50.0).verdict(50.1) == "FAIL"
+    assert Target(op=">=", bound=1.0).verdict(float("nan")) == "FAIL"
+    assert str(Target(op=">=", bound=1e7)) == "≥ 1e+07"
+    records = (REPO / "benchmarks" / "records.jsonl").read_text(encoding="utf-8").splitlines()
+    broken = tmp_path / "records.jsonl"
+    broken.write_text("\n".join([records[0], records[1].replace('"unit"', '"units"')]) + "\n")
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import suite; suite.read_records(suite.Path(__import__('sys').argv[1]))",
+            str(broken),
+        ],
+        cwd=REPO / "benchmarks",
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 1 and f"{broken}:2: " in done.stderr, done.stderr
+
+
 def _snapshot(folder: Path, database: str, **results: object) -> Path:
     folder.mkdir()
     manifest = {"commit": "0" * 40, "default_database_content_sha256": database}
