@@ -65,27 +65,10 @@ def parameter_table(result: Identification) -> str:
     if dvf.excluded:
         steps = ", ".join(str(i + 1) for i in dvf.excluded)
         lines.append(f"  a(θ): step(s) {steps} left out, a_i <= 0 is not a damping")
-    lines += ["", "step  start s   fin °    v_ss °/s   t0 s    a_i 1/s"]
-    for i in range(result.segments.n_steps):
-        mark = "  outlier" if dvf.outlier == i else ""
-        lines.append(
-            f"{i + 1:>4}{result.segments.time_s[i]:>9.1f}{result.segments.step_levels_deg[i]:>8.2f}"
-            f"{result.piecewise.slopes_dps[i]:>11.2f}{result.bilinear.t0_s[i]:>7.2f}"
-            f"{result.damping.a_steps_per_s[i]:>10.3f}{mark}"
-        )
-    lines += ["", "re-simulation (§3.5)   rate MAE / SD °/s   angle MAE / SD °"]
-    for name, r in result.resimulations.items():
-        lines.append(
-            f"{name + ' damping':<22}{r.rate_mae_dps:>9.3f} / {r.rate_sd_dps:<9.3f}"
-            f"{r.angle_mae_deg:>7.3f} / {r.angle_sd_deg:.3f}"
-        )
+    lines += ["", *_steps_table(result)]
+    lines += ["", *_resimulation_table(result)]
     st = result.statistics
-    lines += ["", "disturbance u_d (§3.4)  90 % interval °     Lilliefors p   normal"]
-    for name, trace in (("theta", st.theta), ("constant", st.constant)):
-        lines.append(
-            f"{'u_d,' + name:<22}[{trace.q05_deg:6.2f}, {trace.q95_deg:6.2f}]"
-            f"{trace.lilliefors_p:>15.3g}   {'yes' if trace.normal else 'no'}"
-        )
+    lines += ["", *_disturbance_table(result)]
     lines.append(f"two-sample KS between them: p = {st.ks_p:.3g}")
     if rec.ud_true_deg is not None:
         q05, q95 = np.percentile(rec.ud_true_deg, [5, 95])
@@ -93,10 +76,80 @@ def parameter_table(result: Identification) -> str:
     if result.noise is not None:
         n = result.noise
         lines += ["", f"noise study (§3.3): {n.runs} runs per level, seed {n.seed}"]
-        lines.append("η %     u_d MAE °   P90 °")
-        for eta, mae, p90 in zip(n.levels_pct, n.mae_deg, n.p90_deg, strict=True):
-            lines.append(f"{eta:<8g}{mae:>9.3f}{p90:>9.3f}")
+        lines += text_table(
+            (Column("η %", 8, "<"), Column("u_d MAE °", 10), Column("P90 °", 9)),
+            (
+                [f"{eta:g}", f"{mae:.3f}", f"{p90:.3f}"]
+                for eta, mae, p90 in zip(n.levels_pct, n.mae_deg, n.p90_deg, strict=True)
+            ),
+        )
     return "\n".join(lines)
+
+
+def _steps_table(result: Identification) -> list[str]:
+    """Per fin step: its start, level, steady rate, delay and damping (steps 2-5)."""
+    seg, outlier = result.segments, result.damping_vs_fin.outlier
+    columns = (
+        Column("step", 4),
+        Column("start s", 9),
+        Column("fin °", 8),
+        Column("v_ss °/s", 11),
+        Column("t0 s", 7),
+        Column("a_i 1/s", 10),
+        Column("", 0, "<"),
+    )
+    rows = (
+        [
+            f"{i + 1}",
+            f"{seg.time_s[i]:.1f}",
+            f"{seg.step_levels_deg[i]:.2f}",
+            f"{result.piecewise.slopes_dps[i]:.2f}",
+            f"{result.bilinear.t0_s[i]:.2f}",
+            f"{result.damping.a_steps_per_s[i]:.3f}",
+            "  outlier" if outlier == i else "",
+        ]
+        for i in range(seg.n_steps)
+    )
+    return text_table(columns, rows)
+
+
+def _resimulation_table(result: Identification) -> list[str]:
+    """Each model's re-simulation errors (§3.5)."""
+    columns = (
+        Column("re-simulation (§3.5)", 22, "<"),
+        Column("rate MAE / SD °/s", 22, "<"),
+        Column("angle MAE / SD °", 0, "<"),
+    )
+    rows = (
+        [
+            f"{name} damping",
+            f"{r.rate_mae_dps:9.3f} / {r.rate_sd_dps:.3f}",
+            f"{r.angle_mae_deg:7.3f} / {r.angle_sd_deg:.3f}",
+        ]
+        for name, r in result.resimulations.items()
+    )
+    return text_table(columns, rows)
+
+
+def _disturbance_table(result: Identification) -> list[str]:
+    """Both models' ``u_d``: its 90 % interval and normality (§3.4)."""
+    st = result.statistics
+    columns = (
+        Column("disturbance u_d (§3.4)", 23, "<"),
+        Column("90 % interval °", 16, "<"),
+        Column("Lilliefors p", 15),
+        Column("normal", 0, "<", gap="   "),
+    )
+    rows = (
+        [
+            f"u_d,{name}",
+            f"[{trace.q05_deg:6.2f}, {trace.q95_deg:6.2f}]",
+            f"{trace.lilliefors_p:.3g}",
+            "yes" if trace.normal else "no",
+        ]
+        for name, trace in (("theta", st.theta), ("constant", st.constant))
+    )
+    return text_table(columns, rows)
 
 
 def methods_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
