@@ -73,10 +73,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{'':14s} {name:14s} {value:9.3f} {ratio:10.3f} {causal:10.3f} "
                   f"{1.0 / causal:10.2f} {closed:>11s}")  # fmt: skip
             emit(
-                f"{row.task}: {name} headline / causal oracle's",
-                1.0 / causal,
+                f"{row.task}: causal oracle's headline / {name}'s",
+                causal,
                 "",
-                target=(">=", 1.0 / (1.0 + ns.tolerance)),
+                target=("<=", 1.0 + ns.tolerance),
                 note=f"headline {value:.3f}"
                 + ("" if name == "pid" else f"; {100 * row.gap_closed(name):.0f} % PID->limit"),
             )
