@@ -175,7 +175,13 @@ def _value(record: Record) -> str:
 def records_table(records: Sequence[Record]) -> str:
     """One run's figures."""
     rows = [
-        [r.figure, _value(r), "" if r.target is None else str(r.target), r.verdict or "", r.note]
+        [
+            r.figure,
+            _value(r),
+            "" if r.target is None else f"{r.target} {r.unit}".strip(),
+            r.verdict or "",
+            r.note,
+        ]
         for r in records
     ]
     return "\n".join(markdown_table(("figure", "value", "target", "verdict", "note"), rows))
