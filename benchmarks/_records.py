@@ -27,19 +27,21 @@ Verdict = Literal["PASS", "FAIL"]
 
 
 class Target(BaseModel):
-    """A figure's target: ``value op bound`` (``<=``: at most, ``>=``: at least)."""
+    """A figure's target: at least ``low`` and/or at most ``high``."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    op: Literal["<=", ">="]
-    bound: float
+    low: float | None = None
+    high: float | None = None
 
     def verdict(self, value: float) -> Verdict:
-        met = value <= self.bound if self.op == "<=" else value >= self.bound
+        met = (self.low is None or value >= self.low) and (self.high is None or value <= self.high)
         return "PASS" if met and math.isfinite(value) else "FAIL"
 
     def __str__(self) -> str:
-        return f"{'≤' if self.op == '<=' else '≥'} {self.bound:g}"
+        if self.low is not None and self.high is not None:
+            return f"{self.low:g} to {self.high:g}"
+        return f"≥ {self.low:g}" if self.low is not None else f"≤ {self.high:g}"
 
 
 class Record(BaseModel):
@@ -66,14 +68,17 @@ def emit(
     value: float,
     unit: str,
     *,
-    target: tuple[Literal["<=", ">="], float] | None = None,
+    at_least: float | None = None,
+    at_most: float | None = None,
     note: str = "",
 ) -> None:
-    """State one measured figure (kept when the suite runs the script; else nothing)."""
+    """State one measured figure and its target if it has one (kept when the suite runs
+    the script; else nothing)."""
     path = os.environ.get(ENV)
     if not path:
         return
-    goal = None if target is None else Target(op=target[0], bound=target[1])
+    has_target = at_least is not None or at_most is not None
+    goal = Target(low=at_least, high=at_most) if has_target else None
     line = {
         "figure": figure,
         "value": float(value),

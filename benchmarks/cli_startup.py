@@ -118,7 +118,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{name}: median",
             median,
             "s",
-            target=("<=", TARGET_S) if judged else None,
+            at_most=TARGET_S if judged else None,
             note=f"min {min(runs):.3f} s over {len(runs)} processes",
         )
     columns = (

@@ -75,6 +75,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from _records import emit
 from _reference_env import ReferenceRollEnv
 from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
@@ -91,6 +92,7 @@ from identification.methods.pipeline import IdentifyOptions
 from identification.model import RIG_LIMITS, Rig, RollParams
 from identification.recordings.recording import Recording, StatedRig
 from rocketroll_common.arrays import FloatArray
+from rocketroll_common.tables import Column, text_table
 from rollenv.bank import variant_config
 from rollenv.config import RollConfig
 from rollenv.env import RocketRollEnv
@@ -404,6 +406,10 @@ def quadratic_lines(rows: Sequence[dict[str, object]]) -> list[str]:
     return lines
 
 
+#: The statistics of each ratio row, after the replay, task, controller and metric.
+RATIO_COLUMNS = ("ratio", "SD", "min", "max")
+
+
 def summarise(values: Sequence[float]) -> tuple[float, float, float, float]:
     x = np.asarray(values, dtype=float)
     sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
@@ -560,10 +566,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             rows.append(row)
     print(f"\n{time.perf_counter() - began:.0f} s\n")
     replays_seen = list(dict.fromkeys(k[0] for k in ratios))
-    header = (
-        f"{'replay':30s} {'task':12s} {'controller':10s} {'metric':18s} {'ratio':>7s} "
-        f"{'SD':>6s} {'min':>6s} {'max':>6s}  in floor"
+    columns = (
+        Column("replay", 30, "<"),
+        Column("task", 12, "<", " "),
+        Column("controller", 10, "<", " "),
+        Column("metric", 18, "<", " "),
+        *(Column(title, 7 if title == "ratio" else 6, ">", " ") for title in RATIO_COLUMNS),
+        Column("in floor", 0, "<", "  "),
     )
+    header = text_table(columns, [])[0]
     print("replay score / true score, per recording, averaged over recordings:")
     print(header)
     print("-" * len(header))
@@ -581,10 +592,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     # The floor holds per truth: the ratio averaged over each truth's seeds.
                     ok = all(low <= float(np.mean(rs)) <= high for rs in by_truth.values())
                     verdicts[replay].append((f"{task}/{policy}/{name}", ok))
-                    print(
-                        f"{replay:30s} {task:12s} {policy:10s} {name:18s} {mean:7.3f} {sd:6.3f} "
-                        f"{lo:6.3f} {hi:6.3f}  {'yes' if ok else 'NO'}"
-                    )
+                    cells = [replay, task, policy, name, *(f"{v:.3f}" for v in (mean, sd, lo, hi))]
+                    print(text_table(columns, [[*cells, "yes" if ok else "NO"]])[1])
         print()
     print(
         "Verdict per replay (floor: deployable controllers within [0.90, 1.10], the oracle within "
@@ -592,6 +601,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     for replay, checks in verdicts.items():
         missed = [c for c, ok in checks if not ok]
+        emit(
+            f"{replay}: share of task/controller/metric cells within the floor",
+            (len(checks) - len(missed)) / len(checks),
+            "",
+            at_least=1.0,
+            note=f"{len(checks) - len(missed)}/{len(checks)}"
+            + (f"; outside: {', '.join(missed[:6])}" if missed else ""),
+        )
         print(
             f"  {replay}: {len(checks) - len(missed)}/{len(checks)} within the floor"
             + (

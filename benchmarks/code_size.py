@@ -156,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         (f for f in every if f.lines > args.function_limit), key=lambda f: -f.lines
     )
     kernels = sum(f.kernel for f in long_functions)
-    emit(f"modules over {args.module_limit} lines of code", len(long_modules), "", target=("<=", 0))
+    emit(f"modules over {args.module_limit} lines of code", len(long_modules), "", at_most=0)
     emit(
         f"functions over {args.function_limit} lines, numba kernels aside",
         len(long_functions) - kernels,

@@ -319,7 +319,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{t.name}: p99" if judged else f"{t.name}: median",
             t.p99_us if judged else t.median_us,
             "µs",
-            target=("<=", TARGET_US) if judged else None,
+            at_most=TARGET_US if judged else None,
             note=f"median {t.median_us:.2f} µs, p99 {t.p99_us:.2f} µs over {t.draws} draws; "
             f"{ratio:.2f}x the bank",
         )

@@ -272,19 +272,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     cart_ratio = vec / med[names[4]]
     ok_single = ratio >= SINGLE_TARGET
     ok_vector = vec >= VECTOR_TARGET
-    emit("RocketRoll-v0 / Pendulum-v1, single env", ratio, "x", target=(">=", SINGLE_TARGET))
+    emit("RocketRoll-v0 / Pendulum-v1, single env", ratio, "x", at_least=SINGLE_TARGET)
     emit(
         f"vector env, {ns.num_envs} envs",
         vec / 1e6,
         "M env-steps/s",
-        target=(">=", VECTOR_TARGET / 1e6),
+        at_least=VECTOR_TARGET / 1e6,
         note=f"{cart_ratio:.2f}x CartPoleVectorEnv in the same run",
     )
     emit(
         f"vector env, {ns.num_envs} envs, parallel=True",
         vec_parallel / 1e6,
         "M env-steps/s",
-        target=(">=", VECTOR_TARGET / 1e6),
+        at_least=VECTOR_TARGET / 1e6,
     )
     print()
     print(
@@ -305,7 +305,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     flight_vector_ratio = med[names[6]] / vec
     ok_flight = min(flight_single_ratio, flight_vector_ratio) >= FLIGHT_TARGET
     for how, value in (("single", flight_single_ratio), ("batched", flight_vector_ratio)):
-        emit(f"{FLIGHT_ID} / RocketRoll-v0, {how}", value, "x", target=(">=", FLIGHT_TARGET))
+        emit(f"{FLIGHT_ID} / RocketRoll-v0, {how}", value, "x", at_least=FLIGHT_TARGET)
     print(
         f"flight: {FLIGHT_ID} / RocketRoll-v0 = {flight_single_ratio:.2f} single, "
         f"{flight_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}): "
@@ -328,8 +328,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         rig_vector_ratio = med[f"RocketRoll-v0, {label} x {ns.num_envs}"] / vec
         ok = min(rig_single_ratio, rig_vector_ratio) >= RIG_TARGET
         ok_rig = ok_rig and ok
-        emit(f"{label} / RocketRoll-v0, single", rig_single_ratio, "x", target=(">=", RIG_TARGET))
-        emit(f"{label} / RocketRoll-v0, batched", rig_vector_ratio, "x", target=(">=", RIG_TARGET))
+        emit(f"{label} / RocketRoll-v0, single", rig_single_ratio, "x", at_least=RIG_TARGET)
+        emit(f"{label} / RocketRoll-v0, batched", rig_vector_ratio, "x", at_least=RIG_TARGET)
         print(
             f"{label} ({words_of[label]}): / RocketRoll-v0 = {rig_single_ratio:.2f} single, "
             f"{rig_vector_ratio:.2f} batched (target >= {RIG_TARGET:g}): "

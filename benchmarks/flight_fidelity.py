@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _records import emit
 
 from agents.evaluate import evaluate, protocol_episodes
 from agents.registry import make_controller
@@ -47,6 +48,7 @@ from disturbances.ingest import identification_rows, trace_summary
 from disturbances.rows import checksum
 from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_reference
 from identification.methods import Context
+from rocketroll_common.tables import Column, text_table
 from rollenv.bank import load_bank, stored_flight_config, variant_config
 
 ENV_ID = "RocketRollFlight-v0"
@@ -142,14 +144,30 @@ def main(argv: Sequence[str] | None = None) -> int:
             for seed in range(args.seeds):
                 rows += one(seed, n, policies, args.episodes, Path(folder))
                 print(f"  flight seed {seed}, n {n:g}: done", file=sys.stderr)
-    print(f"{'n':>4}{'seed':>5}  {'controller':<12}{'truth °':>9}{'posterior °':>12}"
-          f"{'ratio':>7}{'smoothed °':>11}{'ratio':>7}")  # fmt: skip
-    for r in rows:
-        print(
-            f"{r['n']:>4.1f}{r['seed']:>5}  {r['policy']:<12}{r['truth']:>9.3f}"
-            f"{r['posterior']:>12.3f}{r['posterior'] / r['truth']:>7.2f}"
-            f"{r['smoothed']:>11.3f}{r['smoothed'] / r['truth']:>7.2f}"
-        )
+    columns = (
+        Column("n", 4),
+        Column("seed", 5),
+        Column("controller", 12, "<", "  "),
+        Column("truth °", 9),
+        Column("posterior °", 12),
+        Column("ratio", 7),
+        Column("smoothed °", 11),
+        Column("ratio", 7),
+    )
+    cells = (
+        [
+            f"{r['n']:.1f}",
+            f"{r['seed']}",
+            r["policy"],
+            f"{r['truth']:.3f}",
+            f"{r['posterior']:.3f}",
+            f"{r['posterior'] / r['truth']:.2f}",
+            f"{r['smoothed']:.3f}",
+            f"{r['smoothed'] / r['truth']:.2f}",
+        ]
+        for r in rows
+    )
+    print("\n".join(text_table(columns, cells)))
     print(f"\n{len(rows)} scores in {time.perf_counter() - started:.0f} s; ratio replay / truth:")
     for n in args.n:
         for policy in sorted({r["policy"] for r in rows}):
@@ -157,6 +175,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             for replay in ("posterior", "smoothed"):
                 ratios = np.array([r[replay] / r["truth"] for r in mine])
                 within = int(np.sum(np.abs(ratios - 1.0) <= 0.1))
+                emit(
+                    f"n {n:g}, {policy}, {replay} replay: mean ratio replay / truth",
+                    float(ratios.mean()),
+                    "",
+                    at_least=0.9,
+                    at_most=1.1,
+                    note=f"range [{ratios.min():.2f}, {ratios.max():.2f}], {within}/{ratios.size} "
+                    "flights within [0.9, 1.1]",
+                )
                 print(
                     f"  n {n:g}, {policy:<12} {replay:<10} mean {ratios.mean():.2f}, range "
                     f"[{ratios.min():.2f}, {ratios.max():.2f}], within [0.9, 1.1]: "

@@ -54,6 +54,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
+from _records import emit
 from tqdm.auto import tqdm
 
 from identification.instruments.flightlog import FlightLogSpec, run_flight, truth_at
@@ -201,6 +202,20 @@ def verdicts(rows: list[dict[str, Any]]) -> list[str]:
     worst_alpha = max(abs(r["alpha_pct"]) for r in rows)
     worst_beta = max(abs(r["beta_bar_pct"]) for r in rows)
     worst_resim = max(r["resim_pct"] for r in rows)
+    emit(
+        "coefficients α₀ and β̄₀ within 5 %: share of fits",
+        len(coefficient) / n,
+        "",
+        at_least=1.0,
+        note=f"{n} fits; worst α₀ {worst_alpha:.2f} %, worst β̄₀ {worst_beta:.2f} %",
+    )
+    emit(
+        "re-simulated rate MAE under 2 % of mean |rate|: share of fits",
+        len(resim) / n,
+        "",
+        at_least=1.0,
+        note=f"{n} fits; worst {worst_resim:.2f} %",
+    )
     return [
         f"coefficients α₀ and β̄₀ within 5 %: {len(coefficient)}/{n} fits "
         f"(worst α₀ {worst_alpha:.2f} %, worst β̄₀ {worst_beta:.2f} %) -- "
@@ -263,6 +278,17 @@ def scaling_verdicts(rows: list[dict[str, Any]]) -> list[str]:
     def verdict(ok: bool) -> str:
         return "PASS" if ok else "FAIL"
 
+    note = f"{len(rows)} flights of --scaling"
+    emit("scaling: n within 2 SE, share of flights", n_ok, "", at_least=0.9, note=note)
+    emit("scaling: m within 2 SE, share of flights", m_ok, "", at_least=0.9, note=note)
+    emit("scaling: α₀ and β̄₀ within 5 %, share of flights", coef, "", at_least=0.9, note=note)
+    if fast:
+        emit("scaling: SE(n) at 500 Hz, at most", se_n, "", at_most=0.15)
+    if low:
+        emit("scaling: eq. 4-8 rejected at n 1.3, share", float(np.mean(low)), "", at_least=0.9)
+    if eq:
+        emit("scaling: eq. 4-8 accepted at n 2, m 1, share", float(np.mean(eq)), "", at_least=0.9)
+
     lines = [
         f"n within 2 SE: {n_ok:.2f}, m within 2 SE: {m_ok:.2f} of flights (≥ 0.90) -- "
         f"{verdict(n_ok >= 0.9 and m_ok >= 0.9)}",
@@ -281,6 +307,7 @@ def scaling_verdicts(rows: list[dict[str, Any]]) -> list[str]:
         )
     if "held_out_ratio" in rows[0]:
         share = float(np.mean([r["held_out_ratio"] >= 0.9 for r in rows]))
+        emit("held-out R² ≥ 0.9 × the true model's: share of flights", share, "", at_least=1.0)
         lines.append(
             f"held-out R² ≥ 0.9 × the true model's: {share:.2f} of flights -- "
             f"{verdict(share == 1.0)}"

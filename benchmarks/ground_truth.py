@@ -58,6 +58,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from _records import emit
 from _truths import SHAPE_TRUTHS, SHAPES, TRUTHS, shape_command, spec_of
 from tqdm.auto import tqdm
 
@@ -387,12 +388,29 @@ def print_summary(
             continue
         print(f"Targets, {method}:")
         a_mean = table.get((method, "a_mean_theta"))
+        if a_mean is not None and np.isfinite(a_mean.standard_error) and a_mean.standard_error:
+            emit(
+                f"{method}: a(θ) mean error / its standard error",
+                a_mean.bias / a_mean.standard_error,
+                "",
+                at_least=-2.0,
+                at_most=2.0,
+                note="outside ±2 the RMS target fails: a significant bias",
+            )
         for key, stat, low, high, text in TARGETS:
             s = table.get((method, key))
             if s is None:
                 continue
             value = getattr(s, stat)
             passed = low <= value <= high
+            emit(
+                f"{method}: {text}",
+                value,
+                "",
+                at_least=None if low == 0.0 and stat == "mean_abs" else low,
+                at_most=high,
+                note=f"{stat} over {len(info)} recordings",
+            )
             if key == "a_rms_theta" and a_mean is not None and a_mean.significant:
                 passed, text = False, text + " without significant bias"
             ok &= passed
@@ -458,10 +476,19 @@ def shapes_study(seeds: Sequence[int]) -> bool:
         except Exception as exc:  # a failure is a result: counted and named
             failures.append(f"{truth} {shape[0]} {shape[1]} s seed {seed}: {exc!r}")
     print(f"\nml on the input shapes, 100 Hz, seeds {seeds[0]}-{seeds[-1]} per cell")
-    print(
-        f"{'truth':10}{'shape':10}{'s':>4}{'n':>4}{'α mean|err| %':>15}{'α bias %':>10}"
-        f"{'α SE %':>8}{'SD(err/SE)':>12}{'90 % band':>11}{'good':>6}"
+    columns = (
+        Column("truth", 10, "<"),
+        Column("shape", 10, "<"),
+        Column("s", 4),
+        Column("n", 4),
+        Column("α mean|err| %", 15),
+        Column("α bias %", 10),
+        Column("α SE %", 8),
+        Column("SD(err/SE)", 12),
+        Column("90 % band", 11),
+        Column("good", 6),
     )
+    print(text_table(columns, [])[0])
 
     def summary(values: list[dict[str, float]]) -> tuple[float, float, float, float, float, float]:
         err = np.array([v["alpha_pct"] for v in values])
@@ -483,10 +510,8 @@ def shapes_study(seeds: Sequence[int]) -> bool:
         if not values:
             continue
         m, b, se, z, c, g = summary(values)
-        print(
-            f"{truth:10}{shape:10}{length:>4}{len(values):>4}{m:>15.2f}{b:>+10.2f}{se:>8.2f}"
-            f"{z:>12.2f}{c:>11.3f}{g:>6.2f}"
-        )
+        figures = f"{m:.2f}", f"{b:+.2f}", f"{se:.2f}", f"{z:.2f}", f"{c:.3f}", f"{g:.2f}"
+        print(text_table(columns, [[truth, shape, f"{length}", f"{len(values)}", *figures]])[1])
     pooled = [v for values in rows.values() for v in values]
     if len(pooled) < 2:
         print(f"\n{len(pooled)} fits succeeded: no statistics")
@@ -494,10 +519,8 @@ def shapes_study(seeds: Sequence[int]) -> bool:
             print(f"  failed: {line}")
         return False
     m, b, se, z, c, g = summary(pooled)
-    print(
-        f"{'all':10}{'':10}{'':>4}{len(pooled):>4}{m:>15.2f}{b:>+10.2f}{se:>8.2f}{z:>12.2f}"
-        f"{c:>11.3f}{g:>6.2f}"
-    )
+    figures = f"{m:.2f}", f"{b:+.2f}", f"{se:.2f}", f"{z:.2f}", f"{c:.3f}", f"{g:.2f}"
+    print(text_table(columns, [["all", "", "", f"{len(pooled)}", *figures]])[1])
     # An unbiased estimator whose error is normal with the SD ml reports (the information
     # the records hold) has a mean |error| of √(2/π)·SE: the target is reachable only
     # where that is below it.
@@ -506,6 +529,11 @@ def shapes_study(seeds: Sequence[int]) -> bool:
         f"{math.sqrt(2 / math.pi) * se:.2f} % (the mean SE {se:.2f} % of α)"
     )
     bias_se = float(np.std([v["alpha_pct"] for v in pooled], ddof=1)) / math.sqrt(len(pooled))
+    note = f"ml, all shapes pooled: {len(pooled)} fits, {len(failures)} failed"
+    emit("shapes: α mean |error|", m, "%", at_most=SHAPE_MEAN_ABS_PCT, note=note)
+    emit("shapes: |α bias|", abs(b), "%", at_most=SHAPE_BIAS_PCT, note=f"± {bias_se:.2f} % SEM")
+    emit("shapes: SD(error/SE)", z, "", at_least=SHAPE_Z_SD[0], at_most=SHAPE_Z_SD[1], note=note)
+    emit("shapes: 90 % band coverage", c, "", at_least=SHAPE_COVERAGE[0], at_most=SHAPE_COVERAGE[1])
     checks = [
         (f"α mean |error| {m:.2f} % <= {SHAPE_MEAN_ABS_PCT} %", m <= SHAPE_MEAN_ABS_PCT),
         (

@@ -86,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{env_id}, {policy}: median per step",
                 medians[policy],
                 "ms",
-                target=("<=", TARGET_MS) if policy == mpc else None,
+                at_most=TARGET_MS if policy == mpc else None,
                 note=f"p99 {np.percentile(t, 99):.3f} ms, worst {t.max():.3f} ms, {t.size} steps",
             )
             print(

@@ -76,7 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{row.task}: causal oracle's headline / {name}'s",
                 causal,
                 "",
-                target=("<=", 1.0 + ns.tolerance),
+                at_most=1.0 + ns.tolerance,
                 note=f"headline {value:.3f}"
                 + ("" if name == "pid" else f"; {100 * row.gap_closed(name):.0f} % PID->limit"),
             )

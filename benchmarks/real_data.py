@@ -41,6 +41,7 @@ from identification.methods.steps import IdentificationError
 from identification.model import MODEL_NAMES, RollParams
 from identification.recordings.recording import Recording, RecordingError, load_recording
 from identification.reports.tables import scaling_line
+from rocketroll_common.tables import Column, text_table
 
 
 def thinned(rec: Recording, every: int) -> Recording:
@@ -99,6 +100,23 @@ def _errors(params: RollParams, model: str, truth: dict[str, float]) -> str:
     return "  ".join(parts)
 
 
+#: One fit per line: the parameters, α's standard error and the adequacy figures.
+FIT_COLUMNS = (
+    Column("method", 13, "<", "  "),
+    Column("model", 9, "<"),
+    Column("α", 9),
+    Column("α SE", 8),
+    Column("θ̄ °", 8),
+    Column("a or β̄", 9),
+    Column("ᾱ", 9),
+    Column("rate R²", 9),
+    Column("ahead", 7),
+    Column("fin→u_d", 8),
+    Column("|u_d|/rng", 10),
+    Column("verdict", 0, "<", "  "),
+)
+
+
 def _value(value: float | None, fmt: str) -> str:
     return "" if value is None or not np.isfinite(value) else format(value, fmt)
 
@@ -111,10 +129,7 @@ def report(rec: Recording, methods: Sequence[str], given: dict[str, float] | Non
     truth = truth_of(rec, given)
     if truth and not rec.is_flight:
         print("  truth: " + ", ".join(f"{k} = {v:g}" for k, v in truth.items()))
-    print(
-        f"  {'method':13}{'model':9}{'α':>9}{'α SE':>8}{'θ̄ °':>8}{'a or β̄':>9}{'ᾱ':>9}"
-        f"{'rate R²':>9}{'ahead':>7}{'fin→u_d':>8}{'|u_d|/rng':>10}  verdict"
-    )
+    print(text_table(FIT_COLUMNS, [])[0])
     context = Context(rec)
     for method in methods:
         started = time.perf_counter()
@@ -127,13 +142,21 @@ def report(rec: Recording, methods: Sequence[str], given: dict[str, float] | Non
         for model, found in fits.items():
             p, a = found.params, found.metrics["adequacy"]
             se = (found.metrics.get("std_errors") or {}).get("alpha")
-            print(
-                f"  {method:13}{model:9}{p.alpha:9.4f}{_value(se, '8.4f'):>8}"
-                f"{p.theta_bar_deg:8.3f}{p.beta_bar_per_s:9.4f}{p.alpha_bar_per_deg_s:9.4f}"
-                f"{_value(a['rate_r2'], '9.3f'):>9}{_value(a['ahead_r2'], '7.3f'):>7}"
-                f"{_value(a['fin_share'], '8.2f'):>8}{_value(a['ud_range_fraction'], '10.2f'):>10}"
-                f"  {a['verdict']}"
-            )
+            cells = [
+                method,
+                model,
+                f"{p.alpha:.4f}",
+                _value(se, ".4f"),
+                f"{p.theta_bar_deg:.3f}",
+                f"{p.beta_bar_per_s:.4f}",
+                f"{p.alpha_bar_per_deg_s:.4f}",
+                _value(a["rate_r2"], ".3f"),
+                _value(a["ahead_r2"], ".3f"),
+                _value(a["fin_share"], ".2f"),
+                _value(a["ud_range_fraction"], ".2f"),
+                a["verdict"],
+            ]
+            print(text_table(FIT_COLUMNS, [cells])[1])
             reference = found.metrics.get("v_ref_mps")
             if rec.is_flight:
                 print(f"  {'':22}at V_ref {reference:.1f} m/s; {scaling_line(found.metrics)}")

@@ -333,7 +333,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{t.name}: median",
             t.median_ms,
             "ms",
-            target=None if target is None else ("<=", target),
+            at_most=target,
             note=f"IQR {t.iqr_ms:.1f} ms over {len(t.samples_ms)} calls; {ratio:.2f}x the pipeline",
         )
 

@@ -198,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{run.recipe.label}, {run.n_envs} envs, {run.recipe.threads} thread(s)",
             rate,
             "env-steps/s",
-            target=(">=", TARGET_STEPS_S),
+            at_least=TARGET_STEPS_S,
             note=f"{steps:,} env-steps in {run.ppo_s:.1f} s; environment share "
             f"{steps / wrapped_rate / run.ppo_s:.1%}",
         )

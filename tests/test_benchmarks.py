@@ -444,7 +444,7 @@ def test_the_suite_keeps_a_record_per_figure_of_a_run(tmp_path: Path) -> None:
     records = [json.loads(line) for line in kept.read_text(encoding="utf-8").splitlines()]
     by_figure = {r["figure"]: r for r in records}
     modules = by_figure["modules over 800 lines of code"]
-    assert modules["target"] == {"op": "<=", "bound": 0.0}
+    assert modules["target"] == {"low": None, "high": 0.0}
     assert modules["verdict"] == ("PASS" if modules["value"] == 0 else "FAIL")
     head = subprocess.run(
         ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
@@ -472,10 +472,15 @@ def test_a_target_gives_the_verdict_and_a_bad_record_is_named(tmp_path: Path) ->
         from _records import Target
     finally:
         sys.path.remove(str(REPO / "benchmarks"))
-    assert Target(op="<=", bound=50.0).verdict(50.0) == "PASS"
-    assert Target(op="<=", bound=50.0).verdict(50.1) == "FAIL"
-    assert Target(op=">=", bound=1.0).verdict(float("nan")) == "FAIL"
-    assert str(Target(op=">=", bound=1e7)) == "≥ 1e+07"
+    assert Target(high=50.0).verdict(50.0) == "PASS"
+    assert Target(high=50.0).verdict(50.1) == "FAIL"
+    assert Target(low=1.0).verdict(float("nan")) == "FAIL"
+    assert [Target(low=0.85, high=0.95).verdict(v) for v in (0.84, 0.9, 0.96)] == [
+        "FAIL",
+        "PASS",
+        "FAIL",
+    ]
+    assert (str(Target(low=1e7)), str(Target(low=0.85, high=0.95))) == ("≥ 1e+07", "0.85 to 0.95")
     records = (REPO / "benchmarks" / "records.jsonl").read_text(encoding="utf-8").splitlines()
     broken = tmp_path / "records.jsonl"
     broken.write_text("\n".join([records[0], records[1].replace('"unit"', '"units"')]) + "\n")
