@@ -26,6 +26,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import shlex
 import subprocess
 import sys
@@ -194,7 +195,13 @@ def latest_runs(records: Sequence[Record]) -> dict[str, tuple[list[Record], int]
     for record in records:
         key = (record.command, record.commit, record.date)
         runs.setdefault(record.script, {}).setdefault(key, []).append(record)
-    return {script: (list(by_run.values())[-1], len(by_run) - 1) for script, by_run in runs.items()}
+    latest = {}
+    for script, by_run in runs.items():
+        keys = list(by_run)
+        # the last day's last run (figures measured earlier may be recorded later)
+        last = max(range(len(keys)), key=lambda i: (keys[i][2], i))
+        latest[script] = (by_run[keys[last]], len(keys) - 1)
+    return latest
 
 
 def index_section(index: dict[str, Script]) -> str:
@@ -241,6 +248,27 @@ def records_section(records: Sequence[Record]) -> str:
     return "\n\n".join(parts)
 
 
+def run_section(records: Sequence[Record], script: str, commit: str) -> str:
+    """The figures of ``script``'s runs at ``commit`` (a prefix), a table per command."""
+    runs: dict[str, list[Record]] = {}
+    for record in records:
+        if record.script == script and record.commit.startswith(commit):
+            runs.setdefault(record.command, []).append(record)
+    if not runs:
+        raise SystemExit(f"{PAGE}: no records of {script} at {commit}")
+    parts = []
+    for command, figures in runs.items():
+        first = figures[0]
+        parts.append(
+            f"`{command}` at {first.commit[:12]}, {first.date} ({first.machine}):\n\n"
+            + records_table(figures)
+        )
+    return "\n\n".join(parts)
+
+
+RUN_MARKER = re.compile(r"<!-- suite:run (\S+) ([0-9a-f]+) -->\n.*?<!-- /suite:run -->", re.S)
+
+
 def _between(text: str, name: str, body: str) -> str:
     begin, end = f"<!-- suite:{name} -->", f"<!-- /suite:{name} -->"
     if begin not in text or end not in text:
@@ -252,8 +280,16 @@ def _between(text: str, name: str, body: str) -> str:
 
 def page(text: str) -> str:
     """The benchmark page with its generated sections written from the index and records."""
+    records = read_records()
     text = _between(text, "index", index_section(scripts()))
-    return _between(text, "records", records_section(read_records()))
+    text = _between(text, "records", records_section(records))
+    return RUN_MARKER.sub(
+        lambda m: (
+            f"<!-- suite:run {m[1]} {m[2]} -->\n{run_section(records, m[1], m[2])}\n"
+            "<!-- /suite:run -->"
+        ),
+        text,
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
