@@ -44,6 +44,7 @@ from agents.replay import (
     env_options_setting,
     recording_setting,
     replay_config,
+    split_setting,
     unreliable_note,
 )
 from disturbances.bank import TraceBank
@@ -526,9 +527,7 @@ class Args:
         metavar="POLICY",
         always=True,
     )
-    split: Literal["train", "test"] = setting(
-        "test", "database split the episodes come from (the held-out test split)", always=True
-    )
+    split: Literal["train", "test"] = split_setting()
     episodes: int = setting(20, "number of protocol episodes", ge=1, le=100_000, always=True)
     seed: int = setting(
         0,

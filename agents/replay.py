@@ -37,6 +37,7 @@ __all__ = [
     "recording_setting",
     "replay_config",
     "replay_options",
+    "split_setting",
     "unreliable_note",
 ]
 
@@ -52,6 +53,13 @@ def db_setting() -> Any:
         metavar="DB",
         input=True,
         kind="sqlite",
+    )
+
+
+def split_setting() -> Any:
+    """The ``--split`` setting of the commands that run the protocol's episodes."""
+    return setting(
+        "test", "database split the episodes come from (the held-out test split)", always=True
     )
 
 

@@ -60,6 +60,7 @@ from agents.replay import (
     options_config,
     recording_setting,
     replay_config,
+    split_setting,
     unreliable_note,
 )
 from rocketroll_common import tables
@@ -108,9 +109,7 @@ class Args:
     )
     episodes: int = setting(20, "protocol episodes per condition", ge=2, le=100_000, always=True)
     seed: int = setting(0, "seed of the protocol's episodes", ge=0, le=2**31 - 1, always=True)
-    split: Literal["test", "train"] = setting(
-        "test", "database split the episodes come from", always=True
-    )
+    split: Literal["train", "test"] = split_setting()
     out: Path | None = setting(
         None,
         "folder for robustness.md, robustness.json, robustness.png (none: print only)",

@@ -65,6 +65,7 @@ from agents.replay import (
     env_options_setting,
     recording_setting,
     replay_config,
+    split_setting,
     unreliable_note,
 )
 from rocketroll_common import tables
@@ -212,9 +213,7 @@ class Args:
         metavar="POLICY",
         always=True,
     )
-    split: Literal["train", "test"] = setting(
-        "test", "database split the episodes come from (the held-out test split)", always=True
-    )
+    split: Literal["train", "test"] = split_setting()
     episodes: int = setting(20, "number of protocol episodes", ge=1, le=100_000, always=True)
     seed: int = setting(
         0, "seed of the protocol's episodes and of the bootstrap", ge=0, le=2**31 - 1, always=True
