@@ -36,6 +36,7 @@ from tqdm.auto import tqdm
 
 from identification.instruments.tunnel import run_tunnel
 from identification.methods.actuation import LEVEL, identify_actuation
+from rocketroll_common.tables import Column, text_table
 
 DEFAULT_TRUTHS = ("paper", "negative", "servo-lag", "latency", "quadratic", "mismatch-all")
 #: term -> the truth's value of it (Effects' field)
@@ -45,6 +46,15 @@ TRUE_VALUE = {
     "sensor latency": "latency_s",
     "quadratic damping": "quadratic_damping",
 }
+#: Per truth and term: its true value, how many recordings admitted it, the estimates.
+COLUMNS = (
+    Column("truth", 14, "<"),
+    Column("term", 15, "<", " "),
+    Column("true", 7, ">", " "),
+    Column("admitted", 9, ">", " "),
+    Column("mean estimate", 14, ">", " "),
+    Column("range", 17, ">", " "),
+)
 
 
 def one(
@@ -94,10 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 tqdm(pool.map(one, *zip(*jobs, strict=True)), total=len(jobs), desc="recordings")
             )
     print(f"{time.perf_counter() - began:.0f} s\n")
-    header = (
-        f"{'truth':14s} {'term':15s} {'true':>7s} {'admitted':>9s} {'mean estimate':>14s} "
-        f"{'range':>17s}"
-    )
+    header = text_table(COLUMNS, [])[0]
     print(header)
     print("-" * len(header))
     for truth in truths:
@@ -107,10 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             estimates = np.array([r[k][3] for r in rows if r[k][2]])
             mean = f"{estimates.mean():.4g}" if estimates.size else "-"
             span = f"{estimates.min():.3g}-{estimates.max():.3g}" if estimates.size else "-"
-            print(
-                f"{truth:14s} {name:15s} {true:7.3g} {sum(admitted):4d}/{len(admitted):<4d} "
-                f"{mean:>14s} {span:>17s}"
-            )
+            share = f"{sum(admitted):4d}/{len(admitted):<4d}"
+            print(text_table(COLUMNS, [[truth, name, f"{true:.3g}", share, mean, span]])[1])
             raw = np.array([r[k][4] for r in rows])
             if np.isfinite(raw).any():
                 covered = sum(r[k][5] for r in rows)

@@ -42,6 +42,7 @@ from identification.methods.ml import MLFit, innovation_checks, maximum_likeliho
 from identification.methods.pipeline import model_inputs
 from identification.model import Disturbance, RollParams
 from identification.recordings.recording import Recording
+from rocketroll_common.tables import Column, text_table
 
 
 def metrics_of(found: MLFit) -> dict[str, Any]:
@@ -58,12 +59,19 @@ def metrics_of(found: MLFit) -> dict[str, Any]:
 SUSPECT_TRUTHS = (
     "paper", "negative", "rising", "servo-lag", "latency", "quadratic", "gusty", "mismatch-all",
 )  # fmt: skip
+#: Per truth of :data:`SUSPECT_TRUTHS`: how often each suspect was named, and its figure.
+SUSPECT_COLUMNS = (
+    Column("truth", 14, "<"),
+    Column("delay suspected", 16, ">", " "),
+    Column("mean delay", 11, ">", " "),
+    Column("intensity", 10, ">", " "),
+    Column("mean ratio", 11, ">", " "),
+)
 
 
 def suspects(seeds: range, hz: float | None) -> None:
     """Per truth: how often the fin's delay and the wandering intensity are suspected."""
-    print(f"{'truth':14s} {'delay suspected':>16s} {'mean delay':>11s} {'intensity':>10s} "
-          f"{'mean ratio':>11s}")  # fmt: skip
+    print(text_table(SUSPECT_COLUMNS, [])[0])
     for truth in SUSPECT_TRUTHS:
         delays, ratios, flagged = [], [], [0, 0]
         for seed in seeds:
@@ -81,11 +89,14 @@ def suspects(seeds: range, hz: float | None) -> None:
             flagged[0] += any("the fin acts" in s for s in a.suspected)
             flagged[1] += any("intensity wanders" in s for s in a.suspected)
         n = len(delays)
-        print(
-            f"{truth:14s} {flagged[0]:>12d}/{n:<3d} {1000 * np.mean(delays):8.1f} ms "
-            f"{flagged[1]:>6d}/{n:<3d} {np.mean(ratios):11.2f}",
-            flush=True,
-        )
+        cells = [
+            truth,
+            f"{flagged[0]:>12d}/{n:<3d}",
+            f"{1000 * np.mean(delays):.1f} ms",
+            f"{flagged[1]:>6d}/{n:<3d}",
+            f"{np.mean(ratios):.2f}",
+        ]
+        print(text_table(SUSPECT_COLUMNS, [cells])[1], flush=True)
 
 
 def _line(kind: str, label: str, a: Adequacy) -> str:

@@ -206,6 +206,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise SystemExit(f"--draws ({ns.draws}) must be at least --batch ({ns.batch})")
     if serving:
         return _serve(ns)
+    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+
     remote, commit = start_against(__file__, words, ns.against)
     before: dict[str, list[float]] = {"batch": [], "sql": [], "load": []}
 
@@ -299,22 +301,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"first draw after it: bank {first_draw_us:.1f} µs, SQL {first_sql_us:.0f} µs (untimed "
         "below)"
     )
-    header = (
-        f"{'task':34s} {'draws':>7s} {'median µs':>10s} {'mean µs':>9s} {'p99 µs':>9s} "
-        f"{'min µs':>8s} {'max µs':>9s} {'target µs':>10s} {'x bank':>8s}  verdict"
+    columns = (  # one task per line: its per-draw statistics, the target and the verdict
+        Column("task", 34, "<"),
+        Column("draws", 7, ">", " "),
+        Column("median µs", 10, ">", " "),
+        Column("mean µs", 9, ">", " "),
+        Column("p99 µs", 9, ">", " "),
+        Column("min µs", 8, ">", " "),
+        Column("max µs", 9, ">", " "),
+        Column("target µs", 10, ">", " "),
+        Column("x bank", 8, ">", " "),
+        Column("verdict", 0, "<", "  "),
     )
+    header = text_table(columns, [])[0]
     print()
     print(header)
     print("-" * len(header))
 
     def row(t: Timing, judged: bool, note: str = "") -> None:
         ratio = t.median_us / batches.median_us
-        target = f"{TARGET_US:10.0f}" if judged else f"{'-':>10s}"
+        target = f"{TARGET_US:.0f}" if judged else "-"
         mark = f"{verdict(t.p99_us)} (p99)" if judged else note
-        print(
-            f"{t.name:34s} {t.draws:7d} {t.median_us:10.2f} {t.mean_us:9.2f} {t.p99_us:9.2f} "
-            f"{t.min_us:8.2f} {t.max_us:9.2f} {target} {ratio:8.2f}  {mark}"
-        )
+        cells = [
+            t.name,
+            str(t.draws),
+            f"{t.median_us:.2f}",
+            f"{t.mean_us:.2f}",
+            f"{t.p99_us:.2f}",
+            f"{t.min_us:.2f}",
+            f"{t.max_us:.2f}",
+            target,
+            f"{ratio:.2f}",
+            mark,
+        ]
+        print(text_table(columns, [cells])[1])
         emit(
             f"{t.name}: p99" if judged else f"{t.name}: median",
             t.p99_us if judged else t.median_us,
@@ -343,7 +363,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if remote is not None:
         remote.close()
         print(f"\nthis checkout against {ns.against} ({commit[:12]}), the same work alternating:")
-        print(f"{'task':34s} {'this median':>12s} {'REF median':>12s} {'change':>8s}")
         pairs = (
             (batches.name + " (µs/draw)", batches.median_us, before["batch"]),
             (reference.name + " (µs)", reference.median_us, before["sql"]),
@@ -353,9 +372,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                 [1e3 * x for x in before["load"]],
             ),
         )
+        against = (
+            Column("task", 34, "<"),
+            Column("this median", 12, ">", " "),
+            Column("REF median", 12, ">", " "),
+            Column("change", 8, ">", " "),
+        )
+        rows = []
         for name, here, there in pairs:
             old = float(np.median(there))
-            print(f"{name:34s} {here:12.2f} {old:12.2f} {here / old - 1:+8.1%}")
+            rows.append([name, f"{here:.2f}", f"{old:.2f}", f"{here / old - 1:+.1%}"])
+        print("\n".join(text_table(against, rows)))
     return 1 if ns.strict and missed else 0
 
 

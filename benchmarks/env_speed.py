@@ -240,6 +240,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     warmup = time.perf_counter() - warm
     if serving:
         return serve({name: run for name, (run, _) in tasks.items()})
+    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+
     ours = [
         name
         for name in tasks
@@ -259,13 +261,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     names = list(tasks)
     med = {name: statistics.median(r) for name, r in rates.items()}
     print(f"setup (database, construction) {setup:.1f} s; untimed warm-up pass {warmup:.1f} s\n")
-    header = f"{'task':<38} {'blocks':>6} {'median steps/s':>15} {'best steps/s':>13} {'spread':>7}"
-    print(header)
-    print("-" * len(header))
+    columns = (
+        Column("task", 38, "<"),
+        Column("blocks", 6, ">", " "),
+        Column("median steps/s", 15, ">", " "),
+        Column("best steps/s", 13, ">", " "),
+        Column("spread", 7, ">", " "),
+    )
+    rows = []
     for name in names:
         r = rates[name]
         spread = (max(r) - min(r)) / med[name]
-        print(f"{name:<38} {len(r):>6} {med[name]:>15,.0f} {max(r):>13,.0f} {spread:>6.0%}")
+        rows.append([name, str(len(r)), f"{med[name]:,.0f}", f"{max(r):,.0f}", f"{spread:.0%}"])
+    header, *lines = text_table(columns, rows)
+    print("\n".join([header, "-" * len(header), *lines]))
     ratio = med[names[0]] / med[names[1]]
     vec = med[names[2]]
     vec_parallel = med[names[3]]
@@ -338,16 +347,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     ok_against = True
     if remote is not None:
         print(f"\nthis checkout against {ns.against} ({commit[:12]}), same blocks alternating:")
-        print(f"{'task':<38} {'this steps/s':>14} {'REF steps/s':>13} {'change':>8}  verdict")
+        against = (
+            Column("task", 38, "<"),
+            Column("this steps/s", 14, ">", " "),
+            Column("REF steps/s", 13, ">", " "),
+            Column("change", 8, ">", " "),
+            Column("verdict", 0, "<", "  "),
+        )
+        print(text_table(against, [])[0])
         for name in ours:
             old = statistics.median(before[name])
             change = med[name] / old - 1.0
             ok = change >= -AGAINST_TOLERANCE
             ok_against &= ok
-            print(
-                f"{name:<38} {med[name]:>14,.0f} {old:>13,.0f} {change:>+7.1%}  "
-                f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})"
-            )
+            cells = [
+                name,
+                f"{med[name]:,.0f}",
+                f"{old:,.0f}",
+                f"{change:+.1%}",
+                f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})",
+            ]
+            print(text_table(against, [cells])[1])
     print("spread: (best - worst) / median over the blocks; a large spread means a busy machine")
     passed = ok_single and ok_vector and ok_flight and ok_rig and ok_against
     return 1 if ns.strict and not passed else 0

@@ -61,6 +61,7 @@ from identification.instruments.flightlog import FlightLogSpec, run_flight, trut
 from identification.methods.flight import flight_window, held_out_prediction, model_only_r2_of
 from identification.methods.flightfit import flight_inputs, identify_flights
 from identification.methods.pipeline import IdentifyOptions
+from rocketroll_common.tables import Column, text_table
 
 #: Name -> (FlightLogSpec settings, what it tests).
 TRUTHS: dict[str, tuple[dict[str, Any], str]] = {
@@ -174,10 +175,17 @@ COLUMNS = (
 )
 
 
+#: The table of :func:`table`: the truth, its fits, then each metric of :data:`COLUMNS`.
+TABLE_COLUMNS = (
+    Column("truth", 16, "<"),
+    Column("n", 3),
+    *(Column(label, 22) for _, label in COLUMNS),
+)
+
+
 def table(rows: list[dict[str, Any]]) -> str:
     """Per truth: mean |error| and the worst (signed) error of each metric, and the time."""
-    head = f"{'truth':<16}{'n':>3}" + "".join(f"{label:>22}" for _, label in COLUMNS)
-    lines = [head, f"{'':<19}" + "".join(f"{'mean|e| / worst':>22}" for _ in COLUMNS)]
+    body = [["", "", *("mean|e| / worst" for _ in COLUMNS)]]  # under each metric's title
     for truth in TRUTHS:
         mine = [r for r in rows if r["truth"] == truth]
         if not mine:
@@ -188,7 +196,8 @@ def table(rows: list[dict[str, Any]]) -> str:
             worst = values[np.argmax(np.abs(values))]
             digits = 4 if key == "alpha_bar" else 2
             cells.append(f"{np.mean(np.abs(values)):.{digits}f} / {worst:+.{digits}f}")
-        lines.append(f"{truth:<16}{len(mine):>3}" + "".join(f"{c:>22}" for c in cells))
+        body.append([truth, str(len(mine)), *cells])
+    lines = text_table(TABLE_COLUMNS, body)
     times = [r["seconds"] for r in rows]
     lines.append(f"fit time per flight: median {np.median(times):.1f} s, max {max(times):.1f} s")
     return "\n".join(lines)
@@ -230,35 +239,52 @@ def within_two_se(rows: list[dict[str, Any]], key: str) -> float:
     return float(np.mean([abs(r[f"{key}_err"]) <= 2.0 * r[f"{key}_se"] for r in rows]))
 
 
+#: The table of :func:`scaling_table` (``--held-out`` adds a column).
+SCALING_COLUMNS = (
+    Column("n", 4),
+    Column("m", 5),
+    Column("Hz", 5),
+    Column("flights", 8),
+    Column("n in 2SE", 10),
+    Column("m in 2SE", 10),
+    Column("SE(n)", 8),
+    Column("SE(m)", 8),
+    Column("α₀ 5%", 8),
+    Column("β̄₀ 5%", 8),
+    Column("eq4-8 rej", 10),
+)
+
+
 def scaling_table(rows: list[dict[str, Any]]) -> str:
     """Per (n, m, logging rate): the scaling's recovery, the coefficients, the test."""
     cells: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
     for row in rows:
         cells.setdefault(row["cell"], []).append(row)
     held = "held_out_ratio" in rows[0]
-    head = (
-        f"{'n':>4}{'m':>5}{'Hz':>5}{'flights':>8}{'n in 2SE':>10}{'m in 2SE':>10}"
-        f"{'SE(n)':>8}{'SE(m)':>8}{'α₀ 5%':>8}{'β̄₀ 5%':>8}{'eq4-8 rej':>10}"
-        + (f"{'held-out R² / true':>24}" if held else "")
-    )
-    lines = [head]
+    columns = SCALING_COLUMNS + ((Column("held-out R² / true", 22),) if held else ())
+    body = []
     for cell, mine in sorted(cells.items()):
         c = dict(cell)
         coefficient = np.mean([abs(r["alpha_pct"]) < 5 for r in mine])
         beta = np.mean([abs(r["beta_bar_pct"]) < 5 for r in mine])
-        line = (
-            f"{c['torque_exponent']:>4.1f}{c['damping_exponent']:>5.1f}"
-            f"{1.0 / c['log_dt']:>5.0f}{len(mine):>8}"
-            f"{within_two_se(mine, 'n'):>10.2f}{within_two_se(mine, 'm'):>10.2f}"
-            f"{np.nanmean([r['n_se'] for r in mine]):>8.3f}"
-            f"{np.nanmean([r['m_se'] for r in mine]):>8.3f}"
-            f"{coefficient:>8.2f}{beta:>8.2f}{np.mean([r['rejected'] for r in mine]):>10.2f}"
-        )
+        line = [
+            f"{c['torque_exponent']:.1f}",
+            f"{c['damping_exponent']:.1f}",
+            f"{1.0 / c['log_dt']:.0f}",
+            str(len(mine)),
+            f"{within_two_se(mine, 'n'):.2f}",
+            f"{within_two_se(mine, 'm'):.2f}",
+            f"{np.nanmean([r['n_se'] for r in mine]):.3f}",
+            f"{np.nanmean([r['m_se'] for r in mine]):.3f}",
+            f"{coefficient:.2f}",
+            f"{beta:.2f}",
+            f"{np.mean([r['rejected'] for r in mine]):.2f}",
+        ]
         if held:
             ratios = np.array([r["held_out_ratio"] for r in mine])
-            line += f"{np.nanmin(ratios):>7.3f} min, {np.mean(ratios >= 0.9):.2f} ≥0.9"
-        lines.append(line)
-    return "\n".join(lines)
+            line.append(f"{np.nanmin(ratios):7.3f} min, {np.mean(ratios >= 0.9):.2f} ≥0.9")
+        body.append(line)
+    return "\n".join(text_table(columns, body))
 
 
 def scaling_verdicts(rows: list[dict[str, Any]]) -> list[str]:

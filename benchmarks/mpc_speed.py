@@ -29,9 +29,19 @@ from _records import emit
 from agents.base import FlightView
 from agents.evaluate import env_on, protocol_episodes
 from agents.registry import make_controller
+from rocketroll_common.tables import Column, text_table
 from rollenv.bank import load_bank, variant_config
 
 TARGET_MS = 10.0
+#: One task and controller per line: its times per step (ms) and how many steps.
+COLUMNS = (
+    Column("task", 20, "<"),
+    Column("controller", 10, "<", " "),
+    Column("median", 8, ">", " "),
+    Column("p99", 8, ">", " "),
+    Column("worst", 8, ">", " "),
+    Column("steps", 7, ">", " "),
+)
 
 
 def step_times(
@@ -76,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     missed = False
     rig = ", the rig of --rig" if args.rig else ""
     print(f"time per control step, {args.episodes} test episodes per task{rig} (ms)")
-    print(f"{'task':<20} {'controller':<10} {'median':>8} {'p99':>8} {'worst':>8} {'steps':>7}")
+    print(text_table(COLUMNS, [])[0])
     for env_id in ("RocketRoll-v0", "RocketRollRate-v0", "RocketRollFlight-v0"):
         medians = {}
         for policy in ("observer", mpc):
@@ -89,10 +99,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                 at_most=TARGET_MS if policy == mpc else None,
                 note=f"p99 {np.percentile(t, 99):.3f} ms, worst {t.max():.3f} ms, {t.size} steps",
             )
-            print(
-                f"{env_id:<20} {policy:<10} {np.median(t):8.3f} {np.percentile(t, 99):8.3f} "
-                f"{t.max():8.3f} {t.size:7d}"
-            )
+            cells = [
+                env_id,
+                policy,
+                f"{np.median(t):.3f}",
+                f"{np.percentile(t, 99):.3f}",
+                f"{t.max():.3f}",
+                str(t.size),
+            ]
+            print(text_table(COLUMNS, [cells])[1])
         qp = medians[mpc] - medians["observer"]
         ok = medians[mpc] < TARGET_MS
         missed |= not ok

@@ -29,6 +29,19 @@ from _records import emit
 from tqdm.auto import tqdm
 
 from agents.bounds import TASKS, bound_rows
+from rocketroll_common.tables import Column, text_table
+
+#: Per task: the oracle's and the causal oracle's headlines (the first three columns), then
+#: each deployable controller's, the bounds' ratios to it and its share of PID->limit.
+COLUMNS = (
+    Column("task", 14, "<"),
+    Column("controller", 14, "<", " "),
+    Column("headline", 9, ">", " "),
+    Column("oracle/it", 10, ">", " "),
+    Column("causal/it", 10, ">", " "),
+    Column("it/causal", 10, ">", " "),
+    Column("PID->limit", 11, ">", " "),
+)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -59,19 +72,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         rows = bound_rows(tasks, ns.episodes, ns.seed, progress=tick)
     print(f"{len(tasks)} tasks, {ns.episodes} episodes each, seed {ns.seed}: "
           f"{time.perf_counter() - began:.0f} s\n")  # fmt: skip
-    print(f"{'task':14s} {'controller':14s} {'headline':>9s} {'oracle/it':>10s} "
-          f"{'causal/it':>10s} {'it/causal':>10s} {'PID->limit':>11s}")  # fmt: skip
+    print(text_table(COLUMNS, [])[0])
     failed = []
     for row in rows:
-        print(f"{row.task:14s} {'oracle':14s} {row.oracle:9.3f}")
+        print(text_table(COLUMNS[:3], [[row.task, "oracle", f"{row.oracle:.3f}"]])[1])
         emit(f"{row.task}: oracle headline", row.oracle, "")
         emit(f"{row.task}: causal oracle headline", row.causal, "")
-        print(f"{'':14s} {'causal oracle':14s} {row.causal:9.3f}")
+        print(text_table(COLUMNS[:3], [["", "causal oracle", f"{row.causal:.3f}"]])[1])
         for name, value in row.others.items():
             ratio, causal = row.ratios[name], row.causal_ratios[name]
-            closed = "" if name == "pid" else f"{100 * row.gap_closed(name):10.0f}%"
-            print(f"{'':14s} {name:14s} {value:9.3f} {ratio:10.3f} {causal:10.3f} "
-                  f"{1.0 / causal:10.2f} {closed:>11s}")  # fmt: skip
+            closed = "" if name == "pid" else f"{100 * row.gap_closed(name):.0f}%"
+            cells = [f"{value:.3f}", f"{ratio:.3f}", f"{causal:.3f}", f"{1.0 / causal:.2f}"]
+            print(text_table(COLUMNS, [["", name, *cells, closed]])[1])
             emit(
                 f"{row.task}: causal oracle's headline / {name}'s",
                 causal,

@@ -233,6 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     result = identify(rec, options)
     first_call_ms = (time.perf_counter() - start) * 1e3
     from identification.methods import METHODS, fit, traits  # this checkout's (not in older ones)
+    from rocketroll_common.tables import Column, text_table  # (nor this)
 
     n_levels = len(result.options.noise_levels_pct)
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
@@ -313,22 +314,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     registered = timings[6 : len(timings) - len(judged)]
     judging = timings[len(timings) - len(judged) :]
 
-    header = (
-        f"{'task':30s} {'n':>3s} {'median ms':>10s} {'IQR ms':>8s} {'min ms':>8s} {'1st ms':>8s} "
-        f"{'target ms':>10s} {'x pipeline':>10s}  verdict"
+    columns = (  # one timed task per line: its calls, their statistics, target and verdict
+        Column("task", 30, "<"),
+        Column("n", 3, ">", " "),
+        Column("median ms", 10, ">", " "),
+        Column("IQR ms", 8, ">", " "),
+        Column("min ms", 8, ">", " "),
+        Column("1st ms", 8, ">", " "),
+        Column("target ms", 10, ">", " "),
+        Column("x pipeline", 10, ">", " "),
+        Column("verdict", 0, "<", "  "),
     )
+    header = text_table(columns, [])[0]
     print()
     print(header)
     print("-" * len(header))
 
     def row(t: Timing, target: float | None) -> None:
         ratio = t.median_ms / pipeline.median_ms
-        target_text = f"{target:10.0f}" if target is not None else f"{'-':>10s}"
+        target_text = f"{target:.0f}" if target is not None else "-"
         mark = verdict(t.median_ms, target) if target is not None else "(reference)"
-        print(
-            f"{t.name:30s} {len(t.samples_ms):3d} {t.median_ms:10.1f} {t.iqr_ms:8.1f} "
-            f"{t.min_ms:8.1f} {t.first_ms:8.1f} {target_text} {ratio:10.2f}  {mark}"
-        )
+        cells = [
+            t.name,
+            str(len(t.samples_ms)),
+            f"{t.median_ms:.1f}",
+            f"{t.iqr_ms:.1f}",
+            f"{t.min_ms:.1f}",
+            f"{t.first_ms:.1f}",
+            target_text,
+            f"{ratio:.2f}",
+            mark,
+        ]
+        print(text_table(columns, [cells])[1])
         emit(
             f"{t.name}: median",
             t.median_ms,
@@ -397,10 +414,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("all targets met")
     if before:
         print(f"\nthis checkout against {ns.against} ({commit[:12]}), the same calls alternating:")
-        print(f"{'task':30s} {'this median ms':>15s} {'REF median ms':>14s} {'change':>8s}")
+        against = (
+            Column("task", 30, "<"),
+            Column("this median ms", 15, ">", " "),
+            Column("REF median ms", 14, ">", " "),
+            Column("change", 8, ">", " "),
+        )
+        rows = []
         for t in (pipeline, *peers, monte_carlo):
             old = float(np.median(before[t.name]))
-            print(f"{t.name:30s} {t.median_ms:15.1f} {old:14.1f} {t.median_ms / old - 1:+8.1%}")
+            rows.append(
+                [t.name, f"{t.median_ms:.1f}", f"{old:.1f}", f"{t.median_ms / old - 1:+.1%}"]
+            )
+        print("\n".join(text_table(against, rows)))
     return 1 if ns.strict and missed else 0
 
 

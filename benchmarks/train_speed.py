@@ -51,9 +51,25 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.train import algorithm_arguments, load_hyperparameters, make_env, quiet_logger
 from agents.vecenv import RollVecEnv
+from rocketroll_common.tables import Column, text_table
 
 #: The training speed a recipe should reach on this machine (env-steps/s).
 TARGET_STEPS_S = 50_000.0
+#: One recipe per line: its settings, PPO's speed and shares, and its environment alone.
+COLUMNS = (
+    Column("recipe", 16, "<"),
+    Column("envs", 5, ">", " "),
+    Column("thr", 3, ">", " "),
+    Column("env-steps", 10, ">", " "),
+    Column("wall s", 7, ">", " "),
+    Column("env-steps/s", 12, ">", " "),
+    Column("rollout", 8, ">", " "),
+    Column("updates", 8, ">", " "),
+    Column("env alone/s", 12, ">", " "),
+    Column("+wrappers/s", 12, ">", " "),
+    Column("env share", 9, ">", " "),
+    Column("speed-up", 8, ">", " "),
+)
 
 
 class RolloutTimer(BaseCallback):
@@ -174,13 +190,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             run.ppo_s += time.perf_counter() - t0
     measure()
 
-    header = (
-        f"\n{'recipe':<16} {'envs':>5} {'thr':>3} {'env-steps':>10} {'wall s':>7} "
-        f"{'env-steps/s':>12} {'rollout':>8} {'updates':>8} {'env alone/s':>12} "
-        f"{'+wrappers/s':>12} {'env share':>9} {'speed-up':>8}"
-    )
+    header = text_table(COLUMNS, [])[0]
+    print()
     print(header)
-    print("-" * (len(header) - 1))
+    print("-" * len(header))
     first = 0.0
     for run in runs:
         steps = int(run.model.num_timesteps)
@@ -188,12 +201,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         first = first or rate
         alone_rate = statistics.median(run.rates["alone"])
         wrapped_rate = statistics.median(run.rates["wrapped"])
-        print(
-            f"{run.recipe.label:<16} {run.n_envs:>5} {run.recipe.threads:>3} {steps:>10,} "
-            f"{run.ppo_s:>7.1f} {rate:>12,.0f} {run.timer.collect_s / run.ppo_s:>8.0%} "
-            f"{1 - run.timer.collect_s / run.ppo_s:>8.0%} {alone_rate:>12,.0f} "
-            f"{wrapped_rate:>12,.0f} {steps / wrapped_rate / run.ppo_s:>9.1%} {rate / first:>7.1f}x"
-        )
+        cells = [
+            run.recipe.label,
+            str(run.n_envs),
+            str(run.recipe.threads),
+            f"{steps:,}",
+            f"{run.ppo_s:.1f}",
+            f"{rate:,.0f}",
+            f"{run.timer.collect_s / run.ppo_s:.0%}",
+            f"{1 - run.timer.collect_s / run.ppo_s:.0%}",
+            f"{alone_rate:,.0f}",
+            f"{wrapped_rate:,.0f}",
+            f"{steps / wrapped_rate / run.ppo_s:.1%}",
+            f"{rate / first:.1f}x",
+        ]
+        print(text_table(COLUMNS, [cells])[1])
         emit(
             f"{run.recipe.label}, {run.n_envs} envs, {run.recipe.threads} thread(s)",
             rate,
