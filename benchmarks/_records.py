@@ -34,9 +34,11 @@ class Target(BaseModel):
     low: float | None = None
     high: float | None = None
 
-    def verdict(self, value: float) -> Verdict:
+    def verdict(self, value: float | None) -> Verdict:
+        if value is None or not math.isfinite(value):
+            return "FAIL"
         met = (self.low is None or value >= self.low) and (self.high is None or value <= self.high)
-        return "PASS" if met and math.isfinite(value) else "FAIL"
+        return "PASS" if met else "FAIL"
 
     def __str__(self) -> str:
         if self.low is not None and self.high is not None:
@@ -52,7 +54,7 @@ class Record(BaseModel):
     figure: str = Field(description="what was measured, unique within its script")
     script: str = Field(description="the benchmark script, e.g. speed.py")
     kind: Kind = Field(description="a timing (machine-dependent) or a study (a result)")
-    value: float
+    value: float | None = Field(description="None: not finite (the note says what it was)")
     unit: str
     target: Target | None = None
     verdict: Verdict | None = None
@@ -79,13 +81,16 @@ def emit(
         return
     has_target = at_least is not None or at_most is not None
     goal = Target(low=at_least, high=at_most) if has_target else None
+    number: float | None = float(value)
+    if not math.isfinite(float(value)):  # JSON has no NaN: kept as null, said in the note
+        number, note = None, f"{float(value)}" + (f"; {note}" if note else "")
     line = {
         "figure": figure,
-        "value": float(value),
+        "value": number,
         "unit": unit,
         "target": None if goal is None else goal.model_dump(),
-        "verdict": None if goal is None else goal.verdict(float(value)),
+        "verdict": None if goal is None else goal.verdict(number),
         "note": note,
     }
     with open(path, "a", encoding="utf-8") as out:
-        out.write(json.dumps(line, allow_nan=True) + "\n")
+        out.write(json.dumps(line, allow_nan=False) + "\n")

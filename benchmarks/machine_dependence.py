@@ -29,6 +29,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from _records import emit
+
 from rocketroll_common.numerics import MACHINE_SETTINGS, MARKER, with_settings
 from rocketroll_common.tables import markdown_table
 
@@ -88,7 +90,9 @@ def _tables(env: dict[str, str]) -> dict[str, list[str]]:
     return tables
 
 
-def _compare(digest: dict[str, dict[str, object]], ref: dict[str, dict[str, object]]) -> str:
+def _differences(
+    digest: dict[str, dict[str, object]], ref: dict[str, dict[str, object]]
+) -> tuple[int, int, float]:
     """Identifications and traces that differ, and the largest relative parameter change."""
     ids = [k for k in ref["ids"] if digest["ids"].get(k) != ref["ids"][k]]
     traces = sum(digest["traces"].get(k) != v for k, v in ref["traces"].items())
@@ -97,7 +101,12 @@ def _compare(digest: dict[str, dict[str, object]], ref: dict[str, dict[str, obje
         for a, b in zip(digest["ids"][key], ref["ids"][key], strict=True):  # type: ignore[call-overload]
             if b:
                 worst = max(worst, abs(a / b - 1.0))
-    return f"{len(ids)}/{len(ref['ids'])} ids, {traces}/{len(ref['traces'])} traces, {worst:.1e}"
+    return len(ids), traces, worst
+
+
+def _compare(digest: dict[str, dict[str, object]], ref: dict[str, dict[str, object]]) -> str:
+    ids, traces, worst = _differences(digest, ref)
+    return f"{ids}/{len(ref['ids'])} ids, {traces}/{len(ref['traces'])} traces, {worst:.1e}"
 
 
 def _tunnel_pid(tables: dict[str, list[str]]) -> str:
@@ -105,9 +114,47 @@ def _tunnel_pid(tables: dict[str, list[str]]) -> str:
     return row.split("|")[2].strip().split()[0]
 
 
+def _rows_moved(tables: dict[str, list[str]], ref: dict[str, list[str]]) -> int:
+    return sum(a != b for name in ref for a, b in zip(tables[name], ref[name], strict=True))
+
+
 def _moved(tables: dict[str, list[str]], ref: dict[str, list[str]]) -> str:
-    rows = sum(a != b for name in ref for a, b in zip(tables[name], ref[name], strict=True))
+    rows = _rows_moved(tables, ref)
     return "identical" if rows == 0 else f"{rows} rows differ"
+
+
+def _emit_setting(
+    name: str,
+    pinned: bool,
+    found: tuple[dict[str, dict[str, object]], dict[str, list[str]]],
+    ref: tuple[dict[str, dict[str, object]], dict[str, list[str]]],
+) -> None:
+    """State one setting's figures, built as it is or pinned, against this machine's (pinned:
+    no identification and no table row may differ, the verdict printed at the end)."""
+    (digest, tables), (ref_digest, ref_tables) = found, ref
+    ids, traces, worst = _differences(digest, ref_digest)
+    how = "pinned" if pinned else "built as it is"
+    target = 0 if pinned else None
+    emit(
+        f"{name}, {how}: identifications that differ from this machine's",
+        ids,
+        f"of {len(ref_digest['ids'])}",
+        at_most=target,
+        note=f"{traces}/{len(ref_digest['traces'])} traces differ; largest relative change of "
+        f"a parameter {worst:.1e}",
+    )
+    emit(
+        f"{name}, {how}: evaluation-table rows that differ from this machine's",
+        _rows_moved(tables, ref_tables),
+        "rows",
+        at_most=target,
+        note=f"the {', '.join(TABLES)} tables, 20 episodes, seed 0",
+    )
+    try:
+        pid = float(_tunnel_pid(tables))
+    except ValueError:  # not a number: nothing to state
+        return
+    emit(f"{name}, {how}: flight, tunnel-gain PID headline", pid, "°")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -149,6 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     _tunnel_pid(tables),
                     _moved(tables, ref_tables),
                 ]
+                _emit_setting(name, pinned, found[pinned], ref[pinned])
             rows.append(cells)
             print(f"  {name}: {time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
     header = [
@@ -162,7 +210,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         "tables",
     ]
     print("\n" + "\n".join(markdown_table(header, rows)))
-    stable = all(cells[-1] == "identical" and cells[4].startswith("0/") for cells in rows)
+    same = sum(cells[-1] == "identical" and cells[4].startswith("0/") for cells in rows)
+    stable = same == len(rows)
+    emit(
+        "pinned: settings whose database and tables are this machine's",
+        same,
+        f"of {len(rows)}",
+        at_least=len(rows),
+        note=", ".join(names),
+    )
     print(
         "\npinned: the database and the tables are the same under every setting"
         if stable

@@ -31,12 +31,20 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+from _records import emit
 
-from identification.methods import Context, default_methods, fit, is_flight_method, tunnel_methods
+from identification.methods import (
+    Context,
+    ModelFit,
+    default_methods,
+    fit,
+    is_flight_method,
+    tunnel_methods,
+)
 from identification.methods.steps import IdentificationError
 from identification.model import MODEL_NAMES, RollParams
 from identification.recordings.recording import Recording, RecordingError, load_recording
@@ -121,8 +129,66 @@ def _value(value: float | None, fmt: str) -> str:
     return "" if value is None or not np.isfinite(value) else format(value, fmt)
 
 
-def report(rec: Recording, methods: Sequence[str], given: dict[str, float] | None) -> None:
-    """Print every method's fits of ``rec`` (a flight's by the flight methods)."""
+def _finite(value: float | None) -> bool:
+    return value is not None and bool(np.isfinite(value))
+
+
+def _emit_fit(
+    name: str, model: str, found: ModelFit, truth: Mapping[str, float], flight: bool
+) -> None:
+    """State one fit's figures: α's error (α where no truth is known) and, of the constant
+    model, a's; a flight's measured scaling exponents.  Non-finite figures are left out."""
+    p, a = found.params, found.metrics["adequacy"]
+    se = (found.metrics.get("std_errors") or {}).get("alpha")
+    model_name = f"{'θ' if model == 'theta' else model} model"
+    note = f"α {p.alpha:.3f}; verdict {a['verdict']}"
+    if _finite(se):
+        note += f"; α SE {se:.3f}"
+    if "theta_bar" in truth:
+        note += f"; θ̄ {p.theta_bar_deg - truth['theta_bar']:+.2f}° off the truth's"
+    if flight:
+        note += f"; at V_ref {found.metrics.get('v_ref_mps'):.1f} m/s"
+    if "alpha" in truth:
+        figure, value, unit = "α error", 100 * (p.alpha / truth["alpha"] - 1), "%"
+    else:
+        figure, value, unit = "α", p.alpha, ""
+    if _finite(value):
+        emit(f"{name}: {figure} ({model_name})", value, unit, note=note)
+    a_value = p.beta_bar_per_s
+    if model == "constant" and _finite(a_value):
+        if "a" in truth:
+            a_error = 100 * (a_value / truth["a"] - 1)
+            if _finite(a_error):
+                emit(
+                    f"{name}: a error (constant model)",
+                    a_error,
+                    "%",
+                    note=f"a {a_value:.2f} 1/s against the truth's {truth['a']:g}",
+                )
+        elif not truth:
+            emit(f"{name}: a (constant model)", a_value, "1/s", note=f"verdict {a['verdict']}")
+    if flight and found.metrics.get("scaling_measured"):
+        errors = found.metrics.get("std_errors") or {}
+        test = found.metrics.get("eq_4_8_test")
+        said = (
+            "" if not test else "; eq. 4-8 " + ("rejected" if test["rejected"] else "not rejected")
+        )
+        for key, symbol in (("torque_exponent", "n"), ("damping_exponent", "m")):
+            exponent = found.metrics.get(key, float("nan"))
+            if _finite(exponent):
+                emit(
+                    f"{name}: {key.replace('_', ' ')} {symbol} ({model_name})",
+                    exponent,
+                    "",
+                    note=f"± {errors.get(key, float('nan')):.3f}{said}",
+                )
+
+
+def report(
+    rec: Recording, methods: Sequence[str], given: dict[str, float] | None, where: str = ""
+) -> None:
+    """Print every method's fits of ``rec`` (a flight's by the flight methods); state each
+    fit's figures as ``where``'s (e.g. ``100 Hz``)."""
     print(f"\n{rec!r}")
     if rec.is_flight:
         methods = [m for m in default_methods(rec) if is_flight_method(m)]
@@ -165,6 +231,7 @@ def report(rec: Recording, methods: Sequence[str], given: dict[str, float] | Non
                 print(f"  {'':22}error: {_errors(p, model, truth)}")
             for reason in a["reasons"]:
                 print(f"  {'':22}{reason}")
+            _emit_fit(f"{where}, {method}" if where else method, model, found, truth, rec.is_flight)
         print(f"  {'':22}({seconds:.2f} s for both models)")
 
 
@@ -207,7 +274,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             except RecordingError as exc:
                 print(f"benchmarks/real_data.py: {path} --every {every}: {exc}", file=sys.stderr)
                 return 2
-            report(sampled, methods, args.truth)
+            rate = f"{1 / sampled.dt_s:g} Hz"
+            where = f"{path}, {rate}" if len(args.recording) > 1 else rate
+            report(sampled, methods, args.truth, where)
     return 0
 
 

@@ -31,6 +31,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 import torch
+from _records import emit
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.evaluate import evaluate, headline_scores, protocol_episodes
@@ -162,6 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     pid = score_controller(make_controller("pid", config, args.env_id))
     print(f"{args.env_id}: headline on {args.episodes} {args.split} episodes (seed 0)")
     print(f"  PID {pid:.2f} {unit}")
+    emit("PID headline (same run)", pid, unit, note=f"{args.episodes} {args.split} episodes")
     kwargs = algorithm_arguments(hp)
     kwargs.update(n_steps=args.n_steps, batch_size=args.batch)
     policy_kwargs = dict(kwargs.pop("policy_kwargs", {}) or {})
@@ -195,6 +197,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     header = ["seed", "env-steps/s", f"headline ({unit}) at each env-step count", "PID"]
     print(
         "\n".join(markdown_table(header, [[str(args.seed), f"{rate:,.0f}", cells, f"{pid:.2f}"]]))
+    )
+    emit(
+        f"seed {args.seed}: env-steps/s",
+        rate,
+        "env-steps/s",
+        note=f"{model.num_timesteps:,} env-steps in {train_s:.1f} s, scoring not counted",
+    )
+    (last, final), (best_at, best) = scorer.curve[-1], min(scorer.curve, key=lambda c: c[1])
+    emit(f"seed {args.seed}: headline at {last / 1e6:g} M", final, unit, note=cells)
+    emit(
+        f"seed {args.seed}: best headline",
+        best,
+        unit,
+        note=f"at {best_at / 1e6:g} M env-steps; the PID's {pid:.2f}{unit}",
     )
     return 0
 

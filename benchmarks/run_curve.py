@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from _curves import write_curves
+from _records import emit
 from tqdm.auto import tqdm
 
 from agents.base import design_bank
@@ -147,6 +148,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"{env_id}: headline on {args.episodes} {args.split} episodes (seed {args.seed})")
     for name, value in references.items():
         print(f"  {name:<9} {value:.2f} {unit}")
+        episodes = f"{args.episodes} {args.split} episodes (seed {args.seed})"
+        emit(f"{name.replace('pid', 'PID')} headline (same run)", value, unit, note=episodes)
 
     curves: list[tuple[str, Path, list[tuple[int, float]]]] = []
     work = [
@@ -168,6 +171,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     header = ["run", f"headline ({unit}) at each checkpoint, env-steps"]
     print("\n".join(markdown_table(header, rows)))
     print()
+    for (label, run, curve), row in zip(curves, rows, strict=True):
+        emit(
+            f"{label} ({run}): headline at the last checkpoint ({curve[-1][0] / 1e6:g} M)",
+            curve[-1][1],
+            unit,
+            note=row[1],
+        )
     labels = list(dict.fromkeys(label for label, _, _ in curves))
     for label in labels:
         mine = [curve for lab, _, curve in curves if lab == label]
@@ -184,6 +194,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(
             f"{label}: median of {len(mine)} run(s) {cells}final ({ends}): {final:.2f} {unit}; "
             f"final model below the PID ({references['pid']:.2f}) in {below}/{len(mine)}"
+        )
+        emit(
+            f"{label}, median of {len(mine)} run(s): headline at the last checkpoint",
+            final,
+            unit,
+            note=f"final models at {ends}"
+            + (f"; medians at each checkpoint {cells.removesuffix(', ')}" if medians else ""),
+        )
+        emit(
+            f"{label}: final model below the PID's {references['pid']:.2f}{unit}",
+            below,
+            f"of {len(mine)}",
         )
 
     if args.png is not None:

@@ -40,6 +40,7 @@ from typing import Any
 import torch
 from _curves import write_curves
 from _recipes import DEFAULT_RECIPES, parse_recipe
+from _records import emit
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -56,6 +57,12 @@ from agents.train import (
 )
 from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
+
+#: The target: a recipe reaches the committed angle policy's headline within this much
+#: training wall time (scoring not counted), per seed and as the median over seeds.
+TARGET_S = 30.0
+#: The env id whose committed policy the target is stated for.
+TARGET_ENV = "RocketRoll-v0"
 
 
 class Scorer(BaseCallback):
@@ -104,6 +111,41 @@ def _median_time(times: list[float | None]) -> str:
     return f"{cell} ({reached}/{len(times)})"
 
 
+def _emit_seed(
+    name: str,
+    reach: dict[str, float | None],
+    best: tuple[float, int, float],
+    references: dict[str, float],
+    unit: str,
+    target: float | None,
+) -> None:
+    """One seed's figures: the wall time to the committed policy's headline (the target),
+    or, where it was not reached, the best headline (above the committed policy's)."""
+    committed, pid = references["committed PPO"], references["PID"]
+    wall, steps, head = best
+    to_pid = f"the PID's {pid:.2f}{unit} " + (
+        "not reached" if reach["PID"] is None else f"reached after {reach['PID']:.0f} s"
+    )
+    at = f"at {wall:.0f} s ({steps:,}) env-steps"
+    time_to = reach["committed PPO"]
+    if time_to is not None:
+        emit(
+            f"{name}: wall time to the committed PPO's {committed:.2f}{unit}",
+            time_to,
+            "s",
+            at_most=target,
+            note=f"best {head:.2f} {at}; {to_pid}",
+        )
+    else:  # not reached: the best headline stayed above the committed policy's
+        emit(
+            f"{name}: best headline",
+            head,
+            unit,
+            at_most=None if target is None else committed,
+            note=f"{at}; the committed PPO's {committed:.2f}{unit} not reached; {to_pid}",
+        )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env-id", default="RocketRoll-v0", help="environment id")
@@ -150,6 +192,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     for name, value in references.items():
         print(f"  {name:<14} {value:.2f} {unit}")
+        emit(f"{name} headline (same run)", value, unit, note=f"{args.episodes} test episodes")
+    committed = references["committed PPO"]
+    to_committed = f"the committed PPO's {committed:.2f}{unit}"
+    target = TARGET_S if args.env_id == TARGET_ENV else None
     curves: dict[tuple[str, int], list[tuple[float, int, float]]] = {}
     rows: dict[str, list[tuple[int, float, dict[str, float | None], tuple[float, int, float]]]]
     rows = {r.label: [] for r in recipes}
@@ -184,6 +230,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{cells}; best {best[2]:.2f} {unit}",
                 flush=True,
             )
+            name = f"{recipe.label} ({recipe.threads} thread(s)), seed {seed}"
+            emit(
+                f"{name}: env-steps/s",
+                rate,
+                "env-steps/s",
+                note=f"{model.num_timesteps:,} env-steps in {train_s:.1f} s",
+            )
+            _emit_seed(name, reach, best, references, unit, target)
     print()
     header = [
         "recipe",
@@ -206,6 +260,30 @@ def main(argv: Sequence[str] | None = None) -> int:
             rate = statistics.median(r[1] for r in runs)
             medians = [_median_time([r[2][n] for r in runs]) for n in names]
             best_median = statistics.median(r[3][2] for r in runs)
+            times = [r[2]["committed PPO"] for r in runs]
+            n_reached = sum(t is not None for t in times)
+            median = statistics.median(math.inf if t is None else t for t in times)
+            note = (
+                f"best headline median {best_median:.2f}{unit}; env-steps/s median {rate:,.0f}; "
+                f"median wall time to the PID's: {_median_time([r[2]['PID'] for r in runs])}"
+            )
+            name = f"{recipe.label}, median of {len(runs)}"
+            if math.isfinite(median):
+                emit(
+                    f"{name}: wall time to {committed:.2f}{unit}",
+                    median,
+                    "s",
+                    at_most=target,
+                    note=f"{n_reached} of {len(runs)} seeds reached it; {note}",
+                )
+            else:  # the median seed never reached it: fewer than half did
+                emit(
+                    f"{name}: seeds that reached {to_committed}",
+                    n_reached,
+                    f"of {len(runs)}",
+                    at_least=None if target is None else len(runs) // 2 + 1,
+                    note=f"the median wall time to it: not reached; {note}",
+                )
             table.append(
                 [
                     f"**{recipe.label}, median of {len(runs)}**",

@@ -469,7 +469,7 @@ def test_the_suite_keeps_a_record_per_figure_of_a_run(tmp_path: Path) -> None:
 def test_a_target_gives_the_verdict_and_a_bad_record_is_named(tmp_path: Path) -> None:
     sys.path.insert(0, str(REPO / "benchmarks"))
     try:
-        from _records import Target
+        from _records import ENV, Target, emit
     finally:
         sys.path.remove(str(REPO / "benchmarks"))
     assert Target(high=50.0).verdict(50.0) == "PASS"
@@ -481,6 +481,15 @@ def test_a_target_gives_the_verdict_and_a_bad_record_is_named(tmp_path: Path) ->
         "FAIL",
     ]
     assert (str(Target(low=1e7)), str(Target(low=0.85, high=0.95))) == ("≥ 1e+07", "0.85 to 0.95")
+    # A NaN is no JSON number: kept as null, said in the note, failing its target.
+    kept = tmp_path / "figures.jsonl"
+    os.environ[ENV] = str(kept)
+    try:
+        emit("spread", float("nan"), "", at_most=1.0, note="one seed")
+    finally:
+        del os.environ[ENV]
+    figure = json.loads(kept.read_text(encoding="utf-8"))
+    assert (figure["value"], figure["verdict"], figure["note"]) == (None, "FAIL", "nan; one seed")
     records = (REPO / "benchmarks" / "records.jsonl").read_text(encoding="utf-8").splitlines()
     broken = tmp_path / "records.jsonl"
     broken.write_text("\n".join([records[0], records[1].replace('"unit"', '"units"')]) + "\n")
