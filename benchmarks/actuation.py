@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+from _records import emit
 from _truths import TRUTHS, spec_of
 from tqdm.auto import tqdm
 
@@ -45,6 +46,13 @@ TRUE_VALUE = {
     "backlash": "backlash_deg",
     "sensor latency": "latency_s",
     "quadratic damping": "quadratic_damping",
+}
+#: term -> the unit of its value
+UNIT = {
+    "servo lag": "s",
+    "backlash": "°",
+    "sensor latency": "s",
+    "quadratic damping": "× a(θ)",
 }
 #: Per truth and term: its true value, how many recordings admitted it, the estimates.
 COLUMNS = (
@@ -116,12 +124,33 @@ def main(argv: Sequence[str] | None = None) -> int:
             span = f"{estimates.min():.3g}-{estimates.max():.3g}" if estimates.size else "-"
             share = f"{sum(admitted):4d}/{len(admitted):<4d}"
             print(text_table(COLUMNS, [[truth, name, f"{true:.3g}", share, mean, span]])[1])
+            unit = UNIT.get(name, "")
+            truly = f"true {true:.3g} {unit}".rstrip()
+            emit(
+                f"{truth}, {name}: share of recordings admitting it",
+                sum(admitted) / len(admitted),
+                "",
+                note=f"{sum(admitted)}/{len(admitted)}; {truly}",
+            )
+            if estimates.size:
+                emit(
+                    f"{truth}, {name}: mean estimate where admitted",
+                    float(estimates.mean()),
+                    unit,
+                    note=f"{truly}; range {span}",
+                )
             raw = np.array([r[k][4] for r in rows])
             if np.isfinite(raw).any():
                 covered = sum(r[k][5] for r in rows)
                 print(
                     f"{'':14s} {'':15s} covered {covered}/{len(rows)}; every estimate "
                     f"{', '.join(f'{x:.3g}' for x in raw)}"
+                )
+                emit(
+                    f"{truth}, {name}: share of 95 % intervals covering the truth",
+                    covered / len(rows),
+                    "",
+                    note=f"{covered}/{len(rows)}; {truly}",
                 )
     return 0
 

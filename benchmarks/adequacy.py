@@ -34,6 +34,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from _records import emit
 from _truths import SHAPE_TRUTHS, SHAPES, shape_command, spec_of
 
 from identification.instruments.tunnel import run_tunnel, spec_from_command
@@ -69,6 +70,11 @@ SUSPECT_COLUMNS = (
 )
 
 
+def seeds_of(seeds: range) -> str:
+    """``seeds`` in words, for a figure's note."""
+    return f"seed {seeds.start}" if len(seeds) == 1 else f"seeds {seeds.start}-{seeds.stop - 1}"
+
+
 def suspects(seeds: range, hz: float | None) -> None:
     """Per truth: how often the fin's delay and the wandering intensity are suspected."""
     print(text_table(SUSPECT_COLUMNS, [])[0])
@@ -97,6 +103,17 @@ def suspects(seeds: range, hz: float | None) -> None:
             f"{np.mean(ratios):.2f}",
         ]
         print(text_table(SUSPECT_COLUMNS, [cells])[1], flush=True)
+        note = f"{seeds_of(seeds)}, " + (
+            "as the truth records it" if hz is None else f"{hz:g}-Hz log, 1 % gyro"
+        )
+        figures = (
+            ("share suspecting the fin's delay", flagged[0] / n, "", f"{flagged[0]}/{n}; "),
+            ("mean fin delay", 1000 * float(np.mean(delays)), "ms", ""),
+            ("share suspecting a wandering intensity", flagged[1] / n, "", f"{flagged[1]}/{n}; "),
+            ("mean intensity ratio", float(np.mean(ratios)), "", ""),
+        )
+        for what, value, unit, count in figures:
+            emit(f"suspects, {truth}: {what}", value, unit, note=count + note)
 
 
 def _line(kind: str, label: str, a: Adequacy) -> str:
@@ -153,6 +170,14 @@ def main(argv: list[str] | None = None) -> int:
                    metrics_of(f), model)  # fmt: skip
     (n_right, good), (n_wrong, caught) = counts["right"], counts["wrong"]
     print(f"\nright fits judged good: {good}/{n_right}; wrong ones not good: {caught}/{n_wrong}")
+    over = seeds_of(seeds)
+    emit("right fits judged good: share", good / n_right, "", note=f"{good}/{n_right}; {over}")
+    emit(
+        "wrong fits judged not good: share",
+        caught / n_wrong,
+        "",
+        note=f"{caught}/{n_wrong}; {over}",
+    )
     return 0
 
 

@@ -23,6 +23,7 @@ import argparse
 from collections.abc import Sequence
 
 import numpy as np
+from _records import emit
 
 from agents.observer import ObserverController, make_observer
 from agents.registry import Design
@@ -92,6 +93,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         controller = ObserverController(config, base.rocket, t, {"move": weight})
         rms, travel = simulate(controller, args.steps, args.seed)
         rows.append([f"{weight:g}", f"{rms:.3f}", f"{travel:.1f}"])
+        setting = f"{args.method} replay, move weight {weight:g}"
+        note = f"perfect sensors, {args.steps} steps, seed {args.seed}"
+        emit(f"{setting}: RMS angle error", rms, "°", note=note)
+        emit(f"{setting}: fin travel", travel, "°/s", note=note)
     header = ["move weight", "RMS angle error (°)", "fin travel (°/s)"]
     print("\n".join(markdown_table(header, rows)))
     return 0
