@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from _against import SERVE, serve, start_against
+from _against import SERVE, Remote, serve, start_against
 from _records import emit
 
 from disturbances.bank import TraceBank
@@ -193,7 +193,8 @@ def _serve(ns: argparse.Namespace) -> int:
     return serve({"batch": batch, "sql": one_sql, "load": load})
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parse(argv: Sequence[str] | None) -> tuple[argparse.Namespace, list[str], bool]:
+    """The options, the command-line words (less --serve-blocks) and whether to serve blocks."""
     words = list(sys.argv[1:] if argv is None else argv)
     serving = SERVE in words
     if serving:
@@ -204,103 +205,121 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
     if ns.draws < ns.batch:
         raise SystemExit(f"--draws ({ns.draws}) must be at least --batch ({ns.batch})")
-    if serving:
-        return _serve(ns)
-    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+    return ns, words, serving
 
-    remote, commit = start_against(__file__, words, ns.against)
-    before: dict[str, list[float]] = {"batch": [], "sql": [], "load": []}
 
-    path = ns.db if ns.db is not None else default_path()
-    built = ns.db is None and not path.exists()
+def _open(location: Path | None) -> tuple[Store, bool, float]:
+    """The database, whether it was built now (the default, missing), and ms to open it."""
+    path = location if location is not None else default_path()
+    built = location is None and not path.exists()
     start = time.perf_counter()
     try:
-        db = open_database(ns.db)
+        db = open_database(location)
     except DatabaseError as exc:
         raise SystemExit(f"benchmarks/db_windows.py: {exc}") from None
     open_ms = (time.perf_counter() - start) * 1e3
+    return db, built, open_ms
 
-    with db:
-        start = time.perf_counter()
-        try:
-            bank = TraceBank.from_db(db, **SELECTION)
-        except (ValueError, DatabaseError) as exc:
-            raise SystemExit(f"benchmarks/db_windows.py: {exc}") from None
-        load_ms = (time.perf_counter() - start) * 1e3
-        bank.require(WINDOW_S)
-        counts = db.counts()
-        sql = SqlWindows(db, list(bank.traces), WINDOW_S)
 
-        print(
-            f"database {db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
-            f"{counts['surrogates']} surrogates"
-            + (f" (built now, {open_ms / 1e3:.1f} s)" if built else "")
-        )
-        nbytes = sum(t.samples().nbytes for t in bank.traces)
-        if remote is not None:
-            for _ in range(3):
-                start = time.perf_counter()
-                TraceBank.from_db(db, **SELECTION)
-                before.setdefault("load_here", []).append(time.perf_counter() - start)
-                before["load"].append(remote.block("load"))
-        print(
-            f"selection {', '.join(f'{k}={v}' for k, v in SELECTION.items())}: {len(bank)} traces, "
-            f"{bank.total_duration_s:.0f} s, {nbytes / 1e6:.2f} MB in memory; "
-            f"{WINDOW_S:g}-s windows of {int(bank.samples_for(WINDOW_S)[0])} samples, "
-            f"{sql.total} possible"
-        )
-        print(
-            f"python {platform.python_version()}, numpy {np.__version__}, "
-            f"{os.cpu_count()} CPU(s), {platform.machine()}"
-        )
+def _load_and_describe(
+    db: Store, built: bool, open_ms: float, remote: Remote | None, before: dict[str, list[float]]
+) -> tuple[TraceBank, SqlWindows, float]:
+    """The bank, its SQL reference and ms of the first load, with what they hold printed."""
+    start = time.perf_counter()
+    try:
+        bank = TraceBank.from_db(db, **SELECTION)
+    except (ValueError, DatabaseError) as exc:
+        raise SystemExit(f"benchmarks/db_windows.py: {exc}") from None
+    load_ms = (time.perf_counter() - start) * 1e3
+    bank.require(WINDOW_S)
+    counts = db.counts()
+    sql = SqlWindows(db, list(bank.traces), WINDOW_S)
 
-        check_same_windows(bank, sql, ns.seed)
-        rng = np.random.default_rng(ns.seed)
-        sql_rng = np.random.default_rng(ns.seed + 1)
-        # First draws after the load (the bank plans the window length once).
-        start = time.perf_counter()
-        bank.window(rng, WINDOW_S)
-        first_draw_us = (time.perf_counter() - start) * 1e6
-        start = time.perf_counter()
-        sql.window(sql_rng)
-        first_sql_us = (time.perf_counter() - start) * 1e6
+    print(
+        f"database {db.path}: {counts['recordings']} recordings, {counts['traces']} traces, "
+        f"{counts['surrogates']} surrogates"
+        + (f" (built now, {open_ms / 1e3:.1f} s)" if built else "")
+    )
+    nbytes = sum(t.samples().nbytes for t in bank.traces)
+    if remote is not None:
+        for _ in range(3):
+            start = time.perf_counter()
+            TraceBank.from_db(db, **SELECTION)
+            before.setdefault("load_here", []).append(time.perf_counter() - start)
+            before["load"].append(remote.block("load"))
+    print(
+        f"selection {', '.join(f'{k}={v}' for k, v in SELECTION.items())}: {len(bank)} traces, "
+        f"{bank.total_duration_s:.0f} s, {nbytes / 1e6:.2f} MB in memory; "
+        f"{WINDOW_S:g}-s windows of {int(bank.samples_for(WINDOW_S)[0])} samples, "
+        f"{sql.total} possible"
+    )
+    print(
+        f"python {platform.python_version()}, numpy {np.__version__}, "
+        f"{os.cpu_count()} CPU(s), {platform.machine()}"
+    )
+    return bank, sql, load_ms
 
-        # Bank batches with the SQL draws spread evenly between them.
-        n_batches = ns.draws // ns.batch
-        window = bank.window
-        batch_us: list[float] = []
-        sql_us: list[float] = []
-        sql_done = 0
-        for b in range(n_batches):
-            t0 = time.perf_counter()
-            for _ in range(ns.batch):
-                window(rng, WINDOW_S)
-            batch_us.append((time.perf_counter() - t0) * 1e6 / ns.batch)
-            if remote is not None:
-                before["batch"].append(remote.block("batch") * 1e6 / ns.batch)
-            while sql_done < ns.sql_draws * (b + 1) // n_batches:
-                t0 = time.perf_counter()
-                sql.window(sql_rng)
-                sql_us.append((time.perf_counter() - t0) * 1e6)
-                sql_done += 1
-                if remote is not None:
-                    before["sql"].append(remote.block("sql") * 1e6)
-        single_us: list[float] = []
-        for _ in range(ns.single):
-            t0 = time.perf_counter()
+
+def _first_draws(
+    bank: TraceBank, sql: SqlWindows, rng: np.random.Generator, sql_rng: np.random.Generator
+) -> tuple[float, float]:
+    """µs of the first bank draw and the first SQL draw after the load (untimed below)."""
+    # The bank plans the window length once.
+    start = time.perf_counter()
+    bank.window(rng, WINDOW_S)
+    first_draw_us = (time.perf_counter() - start) * 1e6
+    start = time.perf_counter()
+    sql.window(sql_rng)
+    first_sql_us = (time.perf_counter() - start) * 1e6
+    return first_draw_us, first_sql_us
+
+
+def _time_draws(
+    ns: argparse.Namespace,
+    bank: TraceBank,
+    sql: SqlWindows,
+    rng: np.random.Generator,
+    sql_rng: np.random.Generator,
+    remote: Remote | None,
+    before: dict[str, list[float]],
+) -> tuple[Timing, Timing, Timing]:
+    """The bank's batches with the SQL draws between them, then single bank draws, timed."""
+    # Bank batches with the SQL draws spread evenly between them.
+    n_batches = ns.draws // ns.batch
+    window = bank.window
+    batch_us: list[float] = []
+    sql_us: list[float] = []
+    sql_done = 0
+    for b in range(n_batches):
+        t0 = time.perf_counter()
+        for _ in range(ns.batch):
             window(rng, WINDOW_S)
-            single_us.append((time.perf_counter() - t0) * 1e6)
+        batch_us.append((time.perf_counter() - t0) * 1e6 / ns.batch)
+        if remote is not None:
+            before["batch"].append(remote.block("batch") * 1e6 / ns.batch)
+        while sql_done < ns.sql_draws * (b + 1) // n_batches:
+            t0 = time.perf_counter()
+            sql.window(sql_rng)
+            sql_us.append((time.perf_counter() - t0) * 1e6)
+            sql_done += 1
+            if remote is not None:
+                before["sql"].append(remote.block("sql") * 1e6)
+    single_us: list[float] = []
+    for _ in range(ns.single):
+        t0 = time.perf_counter()
+        window(rng, WINDOW_S)
+        single_us.append((time.perf_counter() - t0) * 1e6)
 
     batches = Timing(f"bank.window, batches of {ns.batch}", tuple(batch_us), n_batches * ns.batch)
     singles = Timing("bank.window, one at a time", tuple(single_us), ns.single)
     reference = Timing("db.trace(uid) + slice (SQL)", tuple(sql_us), len(sql_us))
+    return batches, singles, reference
 
-    print()
-    print(
-        f"first load TraceBank.from_db: {load_ms:.1f} ms (open: {open_ms:.1f} ms); "
-        f"first draw after it: bank {first_draw_us:.1f} µs, SQL {first_sql_us:.0f} µs (untimed "
-        "below)"
-    )
+
+def _print_table(batches: Timing, singles: Timing, reference: Timing) -> None:
+    """One line per task: its per-draw statistics, its ratio to the batches, the verdict."""
+    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+
     columns = (  # one task per line: its per-draw statistics, the target and the verdict
         Column("task", 34, "<"),
         Column("draws", 7, ">", " "),
@@ -347,6 +366,61 @@ def main(argv: Sequence[str] | None = None) -> int:
     row(batches, True)
     row(singles, False, "(tail; not judged)")
     row(reference, False, "(reference)")
+
+
+def _print_against(
+    ref: str, commit: str, batches: Timing, reference: Timing, before: dict[str, list[float]]
+) -> None:
+    """This checkout's medians of the batches, the SQL draws and a load against REF's."""
+    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+
+    print(f"\nthis checkout against {ref} ({commit[:12]}), the same work alternating:")
+    pairs = (
+        (batches.name + " (µs/draw)", batches.median_us, before["batch"]),
+        (reference.name + " (µs)", reference.median_us, before["sql"]),
+        (
+            "TraceBank.from_db (ms)",
+            1e3 * float(np.median(before["load_here"])),
+            [1e3 * x for x in before["load"]],
+        ),
+    )
+    against = (
+        Column("task", 34, "<"),
+        Column("this median", 12, ">", " "),
+        Column("REF median", 12, ">", " "),
+        Column("change", 8, ">", " "),
+    )
+    rows = []
+    for name, here, there in pairs:
+        old = float(np.median(there))
+        rows.append([name, f"{here:.2f}", f"{old:.2f}", f"{here / old - 1:+.1%}"])
+    print("\n".join(text_table(against, rows)))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Time the draws, print the table and the verdict; 1 with --strict if the target is missed."""
+    ns, words, serving = _parse(argv)
+    if serving:
+        return _serve(ns)
+
+    remote, commit = start_against(__file__, words, ns.against)
+    before: dict[str, list[float]] = {"batch": [], "sql": [], "load": []}
+    db, built, open_ms = _open(ns.db)
+    with db:
+        bank, sql, load_ms = _load_and_describe(db, built, open_ms, remote, before)
+        check_same_windows(bank, sql, ns.seed)
+        rng = np.random.default_rng(ns.seed)
+        sql_rng = np.random.default_rng(ns.seed + 1)
+        first_draw_us, first_sql_us = _first_draws(bank, sql, rng, sql_rng)
+        batches, singles, reference = _time_draws(ns, bank, sql, rng, sql_rng, remote, before)
+
+    print()
+    print(
+        f"first load TraceBank.from_db: {load_ms:.1f} ms (open: {open_ms:.1f} ms); "
+        f"first draw after it: bank {first_draw_us:.1f} µs, SQL {first_sql_us:.0f} µs (untimed "
+        "below)"
+    )
+    _print_table(batches, singles, reference)
     print()
     print(
         f"SQL per episode / bank: {reference.median_us / batches.median_us:.0f}x slower "
@@ -362,27 +436,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"missed target: {batches.name}" if missed else "target met")
     if remote is not None:
         remote.close()
-        print(f"\nthis checkout against {ns.against} ({commit[:12]}), the same work alternating:")
-        pairs = (
-            (batches.name + " (µs/draw)", batches.median_us, before["batch"]),
-            (reference.name + " (µs)", reference.median_us, before["sql"]),
-            (
-                "TraceBank.from_db (ms)",
-                1e3 * float(np.median(before["load_here"])),
-                [1e3 * x for x in before["load"]],
-            ),
-        )
-        against = (
-            Column("task", 34, "<"),
-            Column("this median", 12, ">", " "),
-            Column("REF median", 12, ">", " "),
-            Column("change", 8, ">", " "),
-        )
-        rows = []
-        for name, here, there in pairs:
-            old = float(np.median(there))
-            rows.append([name, f"{here:.2f}", f"{old:.2f}", f"{here / old - 1:+.1%}"])
-        print("\n".join(text_table(against, rows)))
+        _print_against(ns.against, commit, batches, reference, before)
     return 1 if ns.strict and missed else 0
 
 

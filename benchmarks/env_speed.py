@@ -59,7 +59,7 @@ from typing import Any
 import gymnasium as gym
 import numba
 import numpy as np
-from _against import SERVE, serve, start_against
+from _against import SERVE, Remote, serve, start_against
 from _records import emit
 from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
@@ -77,6 +77,8 @@ RIG: dict[str, Any] = {"servo_lag_s": 0.05, "backlash_deg": 0.5, "sensor_latency
 #: The quadratic damping each rocket of the rig's rows carries (15 % more at 30 °/s).
 QUADRATIC = 0.15
 RIG_TARGET = 0.7
+#: Every task by its row's name: one timed block's runner and the env-steps of a block.
+Tasks = dict[str, tuple[Callable[[], float], int]]
 
 
 def _single_runner(env_id: str, steps: int, seed: int, **settings: Any) -> Callable[[], float]:
@@ -124,7 +126,8 @@ def _vector_runner(
     return run
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parse(argv: Sequence[str] | None) -> tuple[argparse.Namespace, list[str], bool]:
+    """The options, the command-line words (less --serve-blocks) and whether to serve blocks."""
     words = list(sys.argv[1:] if argv is None else argv)
     serving = SERVE in words
     if serving:
@@ -144,14 +147,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     ns = parser.parse_args(words)
     if (ns.flight_db is None) != (ns.flight_recording is None):
         parser.error("--flight-db and --flight-recording go together")
+    return ns, words, serving
 
-    if not serving:
-        print(
-            f"python {platform.python_version()}, numpy {np.__version__}, gymnasium "
-            f"{gym.__version__}, numba {numba.__version__} ({numba.get_num_threads()} threads), "
-            f"{os.cpu_count()} CPU(s), {platform.machine()}"
+
+def _rig_runners(
+    ns: argparse.Namespace,
+) -> dict[str, tuple[Callable[[], float], Callable[[], float]]]:
+    """The single and batched runners of each rig row by label (none where there is no rig)."""
+    rig_rows: dict[str, dict[str, Any]] = {}
+    if _has_rig():
+        rig_rows = {"rig": RIG, "rig, q": {**RIG, "bank": _quadratic_bank()}}
+    return {
+        label: (
+            _single_runner("RocketRoll-v0", ns.single_steps, ns.seed, **settings),
+            _vector_runner(
+                functools.partial(gym.make_vec, "RocketRoll-v0", num_envs=ns.num_envs, **settings),
+                ns.vector_steps,
+                ns.seed,
+                discrete=False,
+            ),
         )
-    t0 = time.perf_counter()
+        for label, settings in rig_rows.items()
+    }
+
+
+def _build_tasks(ns: argparse.Namespace) -> tuple[Tasks, list[str]]:
+    """Every task by its row's name, with the steps of one block, and the rig rows' labels."""
     single = _single_runner("RocketRoll-v0", ns.single_steps, ns.seed)
     vector = _vector_runner(
         lambda: gym.make_vec("RocketRoll-v0", num_envs=ns.num_envs),
@@ -184,28 +205,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns.seed,
             discrete=False,
         )
-    rigged = _has_rig()
-    rig_rows: dict[str, dict[str, Any]] = {}
-    if rigged:
-        rig_rows = {"rig": RIG, "rig, q": {**RIG, "bank": _quadratic_bank()}}
-    rig_runners = {
-        label: (
-            _single_runner("RocketRoll-v0", ns.single_steps, ns.seed, **settings),
-            _vector_runner(
-                functools.partial(gym.make_vec, "RocketRoll-v0", num_envs=ns.num_envs, **settings),
-                ns.vector_steps,
-                ns.seed,
-                discrete=False,
-            ),
-        )
-        for label, settings in rig_rows.items()
-    }
+    rig_runners = _rig_runners(ns)
     pendulum = _single_runner("Pendulum-v1", ns.single_steps, ns.seed)
     cartpole = _vector_runner(
         lambda: CartPoleVectorEnv(num_envs=ns.num_envs), ns.vector_steps, ns.seed, discrete=True
     )
-    setup = time.perf_counter() - t0
-    tasks: dict[str, tuple[Callable[[], float], int]] = {
+    tasks: Tasks = {
         "RocketRoll-v0 (gym.make)": (single, ns.single_steps),
         "Pendulum-v1 (gym.make)": (pendulum, ns.single_steps),
         f"RocketRoll-v0 x {ns.num_envs} (make_vec)": (vector, ns.vector_steps * ns.num_envs),
@@ -227,40 +232,43 @@ def main(argv: Sequence[str] | None = None) -> int:
             stored_vector,
             ns.vector_steps * ns.num_envs,
         )
-    if rigged:
-        for label, (rig_single, rig_vector) in rig_runners.items():
-            tasks[f"RocketRoll-v0, {label} (gym.make)"] = (rig_single, ns.single_steps)
-            tasks[f"RocketRoll-v0, {label} x {ns.num_envs}"] = (
-                rig_vector,
-                ns.vector_steps * ns.num_envs,
-            )
-    warm = time.perf_counter()
-    for run, _ in tasks.values():  # first calls: numba compile or cache load, page faults
-        run()
-    warmup = time.perf_counter() - warm
-    if serving:
-        return serve({name: run for name, (run, _) in tasks.items()})
-    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+    for label, (rig_single, rig_vector) in rig_runners.items():
+        tasks[f"RocketRoll-v0, {label} (gym.make)"] = (rig_single, ns.single_steps)
+        tasks[f"RocketRoll-v0, {label} x {ns.num_envs}"] = (
+            rig_vector,
+            ns.vector_steps * ns.num_envs,
+        )
+    return tasks, list(rig_runners)
 
-    ours = [
-        name
-        for name in tasks
-        if name.lstrip().startswith(("RocketRoll-v0", "same")) and ", rig" not in name
-    ]
-    remote, commit = start_against(__file__, words, ns.against)
+
+def _warm_up(tasks: Tasks) -> float:
+    """Seconds of one untimed pass over every task (numba compile or cache load, page faults)."""
+    warm = time.perf_counter()
+    for run, _ in tasks.values():
+        run()
+    return time.perf_counter() - warm
+
+
+def _time_blocks(
+    tasks: Tasks, ours: list[str], remote: Remote | None, repeats: int
+) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
+    """Steps/s of every block, tasks interleaved; REF's blocks of ``ours`` right after ours."""
     rates: dict[str, list[float]] = {name: [] for name in tasks}
     before: dict[str, list[float]] = {name: [] for name in ours}
-    for _ in range(ns.repeats):
+    for _ in range(repeats):
         for name, (run, count) in tasks.items():
             rates[name].append(count / run())
             if remote is not None and name in ours:
                 before[name].append(count / remote.block(name))
     if remote is not None:
         remote.close()
+    return rates, before
 
-    names = list(tasks)
-    med = {name: statistics.median(r) for name, r in rates.items()}
-    print(f"setup (database, construction) {setup:.1f} s; untimed warm-up pass {warmup:.1f} s\n")
+
+def _print_table(rates: dict[str, list[float]], med: dict[str, float]) -> None:
+    """The table: each task's blocks, median and best steps/s and their spread."""
+    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+
     columns = (
         Column("task", 38, "<"),
         Column("blocks", 6, ">", " "),
@@ -269,12 +277,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         Column("spread", 7, ">", " "),
     )
     rows = []
-    for name in names:
-        r = rates[name]
+    for name, r in rates.items():
         spread = (max(r) - min(r)) / med[name]
         rows.append([name, str(len(r)), f"{med[name]:,.0f}", f"{max(r):,.0f}", f"{spread:.0%}"])
     header, *lines = text_table(columns, rows)
     print("\n".join([header, "-" * len(header), *lines]))
+
+
+def _verdicts(med: dict[str, float], ns: argparse.Namespace, rig_labels: list[str]) -> bool:
+    """Print and emit each target's figures and verdict; whether all of them passed."""
+    names = list(med)
     ratio = med[names[0]] / med[names[1]]
     vec = med[names[2]]
     vec_parallel = med[names[3]]
@@ -310,8 +322,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"({vec_parallel / vec:.2f} x serial): "
         f"{'PASS' if vec_parallel >= VECTOR_TARGET else 'FAIL'}"
     )
+    ok_flight = _flight_verdicts(med, ns)
+    ok_rig = _rig_verdicts(med, ns.num_envs, rig_labels)
+    return ok_single and ok_vector and ok_flight and ok_rig
+
+
+def _flight_verdicts(med: dict[str, float], ns: argparse.Namespace) -> bool:
+    """Print and emit the flight env's ratios (and the stored flight's); whether they passed."""
+    names = list(med)
     flight_single_ratio = med[names[5]] / med[names[0]]
-    flight_vector_ratio = med[names[6]] / vec
+    flight_vector_ratio = med[names[6]] / med[names[2]]
     ok_flight = min(flight_single_ratio, flight_vector_ratio) >= FLIGHT_TARGET
     for how, value in (("single", flight_single_ratio), ("batched", flight_vector_ratio)):
         emit(f"{FLIGHT_ID} / RocketRoll-v0, {how}", value, "x", at_least=FLIGHT_TARGET)
@@ -330,11 +350,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"single, {stored_vector_ratio:.2f} batched (target >= {FLIGHT_TARGET:g}): "
             f"{'PASS' if ok_stored else 'FAIL'}"
         )
+    return ok_flight
+
+
+def _rig_verdicts(med: dict[str, float], num_envs: int, rig_labels: list[str]) -> bool:
+    """Print and emit each rig row's ratios to the default rows; whether they all passed."""
+    names = list(med)
     ok_rig = True
     words_of = {"rig": "lag, play, latency", "rig, q": "and each rocket's quadratic damping"}
-    for label in rig_runners:
+    for label in rig_labels:
         rig_single_ratio = med[f"RocketRoll-v0, {label} (gym.make)"] / med[names[0]]
-        rig_vector_ratio = med[f"RocketRoll-v0, {label} x {ns.num_envs}"] / vec
+        rig_vector_ratio = med[f"RocketRoll-v0, {label} x {num_envs}"] / med[names[2]]
         ok = min(rig_single_ratio, rig_vector_ratio) >= RIG_TARGET
         ok_rig = ok_rig and ok
         emit(f"{label} / RocketRoll-v0, single", rig_single_ratio, "x", at_least=RIG_TARGET)
@@ -344,32 +370,72 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{rig_vector_ratio:.2f} batched (target >= {RIG_TARGET:g}): "
             f"{'PASS' if ok else 'FAIL'}"
         )
+    return ok_rig
+
+
+def _print_against(
+    ref: str, commit: str, med: dict[str, float], before: dict[str, list[float]]
+) -> bool:
+    """Print this checkout's rows against REF's with the change's verdict; whether all passed."""
+    from rocketroll_common.tables import Column, text_table  # this checkout's (not older ones')
+
     ok_against = True
-    if remote is not None:
-        print(f"\nthis checkout against {ns.against} ({commit[:12]}), same blocks alternating:")
-        against = (
-            Column("task", 38, "<"),
-            Column("this steps/s", 14, ">", " "),
-            Column("REF steps/s", 13, ">", " "),
-            Column("change", 8, ">", " "),
-            Column("verdict", 0, "<", "  "),
+    print(f"\nthis checkout against {ref} ({commit[:12]}), same blocks alternating:")
+    against = (
+        Column("task", 38, "<"),
+        Column("this steps/s", 14, ">", " "),
+        Column("REF steps/s", 13, ">", " "),
+        Column("change", 8, ">", " "),
+        Column("verdict", 0, "<", "  "),
+    )
+    print(text_table(against, [])[0])
+    for name, blocks in before.items():
+        old = statistics.median(blocks)
+        change = med[name] / old - 1.0
+        ok = change >= -AGAINST_TOLERANCE
+        ok_against &= ok
+        cells = [
+            name,
+            f"{med[name]:,.0f}",
+            f"{old:,.0f}",
+            f"{change:+.1%}",
+            f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})",
+        ]
+        print(text_table(against, [cells])[1])
+    return ok_against
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Time every task, print the table and the verdicts; 1 with --strict if a target is missed."""
+    ns, words, serving = _parse(argv)
+    if not serving:
+        print(
+            f"python {platform.python_version()}, numpy {np.__version__}, gymnasium "
+            f"{gym.__version__}, numba {numba.__version__} ({numba.get_num_threads()} threads), "
+            f"{os.cpu_count()} CPU(s), {platform.machine()}"
         )
-        print(text_table(against, [])[0])
-        for name in ours:
-            old = statistics.median(before[name])
-            change = med[name] / old - 1.0
-            ok = change >= -AGAINST_TOLERANCE
-            ok_against &= ok
-            cells = [
-                name,
-                f"{med[name]:,.0f}",
-                f"{old:,.0f}",
-                f"{change:+.1%}",
-                f"{'PASS' if ok else 'FAIL'} (no slowdown beyond {AGAINST_TOLERANCE:.0%})",
-            ]
-            print(text_table(against, [cells])[1])
+    t0 = time.perf_counter()
+    tasks, rig_labels = _build_tasks(ns)
+    setup = time.perf_counter() - t0
+    warmup = _warm_up(tasks)
+    if serving:
+        return serve({name: run for name, (run, _) in tasks.items()})
+
+    ours = [
+        name
+        for name in tasks
+        if name.lstrip().startswith(("RocketRoll-v0", "same")) and ", rig" not in name
+    ]
+    remote, commit = start_against(__file__, words, ns.against)
+    rates, before = _time_blocks(tasks, ours, remote, ns.repeats)
+
+    med = {name: statistics.median(r) for name, r in rates.items()}
+    print(f"setup (database, construction) {setup:.1f} s; untimed warm-up pass {warmup:.1f} s\n")
+    _print_table(rates, med)
+    passed = _verdicts(med, ns, rig_labels)
+    if remote is not None:
+        passed &= _print_against(ns.against, commit, med, before)
     print("spread: (best - worst) / median over the blocks; a large spread means a busy machine")
-    passed = ok_single and ok_vector and ok_flight and ok_rig and ok_against
     return 1 if ns.strict and not passed else 0
 
 

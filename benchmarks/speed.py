@@ -50,6 +50,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from _against import SERVE, Remote, serve, start_against
@@ -60,6 +61,9 @@ from identification.methods.baselines import output_error
 from identification.methods.noise import noise_study
 from identification.methods.pipeline import Identification, IdentifyOptions, identify
 
+if TYPE_CHECKING:
+    from identification.recordings.recording import Recording
+
 RECORDING = "tunnel-paper-seed0"
 PIPELINE_TARGET_MS = 50.0
 MONTE_CARLO_TARGET_MS = 5000.0
@@ -68,6 +72,8 @@ MONTE_CARLO_RUNS = 100
 ML_TARGET_MS = 1000.0
 POSTERIOR_TARGET_MS = 500.0
 POSTERIOR_DRAWS = 100
+#: A timed task: its name, the call, and how many timed calls it gets.
+Task = tuple[str, Callable[[], object], int]
 
 
 @dataclass(frozen=True)
@@ -192,7 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parse(argv: Sequence[str] | None) -> tuple[argparse.Namespace, list[str], bool]:
+    """The options, the command-line words (less --serve-blocks) and whether to serve blocks."""
     words = list(sys.argv[1:] if argv is None else argv)
     serving = SERVE in words
     if serving:
@@ -201,6 +208,224 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("repeats", "peer_repeats", "mc_repeats"):
         if getattr(ns, name) < 1:
             raise SystemExit(f"--{name.replace('_', '-')} must be >= 1")
+    return ns, words, serving
+
+
+def _build_tasks(
+    ns: argparse.Namespace,
+    rec: Recording,
+    options: IdentifyOptions,
+    common: dict[str, Callable[[], object]],
+    result: Identification,
+    mc_name: str,
+) -> tuple[list[Task], list[str]]:
+    """Every timed task ``(name, func, repeats)`` in table order, and the methods judged."""
+    from identification.methods import METHODS, fit, traits  # this checkout's (not in older ones)
+    from identification.methods.ml import maximum_likelihood
+
+    others = [  # the tunnel's methods (a flight method identifies flights only)
+        m for m in METHODS.names() if m != "paper" and not traits(m).flight
+    ]
+    ml_theta = maximum_likelihood(rec, "theta", options=options)
+    from identification.methods import Context
+    from identification.methods.adequacy import adequacy
+
+    context = Context(rec, options)
+    judged = {m: fit(context, m, ["theta"])["theta"] for m in ("paper", *others)}
+    tasks: list[Task] = [
+        ("identify(noise_runs=0)", common["identify(noise_runs=0)"], ns.repeats),
+        *(
+            (
+                f'output_error("{model}")',
+                common[f'output_error("{model}")'],
+                ns.peer_repeats,
+            )
+            for model in ("constant", "theta")
+        ),
+        (mc_name, lambda: run_monte_carlo(result, MONTE_CARLO_RUNS), ns.mc_repeats),
+        (
+            'fit(method="ml", both models)',
+            functools.partial(fit, rec, "ml", ["constant", "theta"], options),
+            ns.peer_repeats,
+        ),
+        (
+            f"posterior_draws({POSTERIOR_DRAWS})",
+            functools.partial(ml_theta.posterior_draws, POSTERIOR_DRAWS, 0),
+            ns.peer_repeats,
+        ),
+        *(
+            (
+                f'fit(method="{method}", "{model}")',
+                functools.partial(fit, rec, method, [model], options),
+                ns.peer_repeats,
+            )
+            for method in others
+            for model in traits(method).models
+        ),
+        *(
+            (
+                f'adequacy("{method}", "theta")',
+                functools.partial(
+                    adequacy,
+                    context.measurements,
+                    found.params,
+                    found.disturbance,
+                    found.metrics,
+                    method=method,
+                ),
+                ns.repeats,
+            )
+            for method, found in judged.items()
+        ),
+    ]
+    return tasks, list(judged)
+
+
+def _time_tasks(
+    ns: argparse.Namespace,
+    words: list[str],
+    tasks: Sequence[Task],
+    common: Sequence[str],
+) -> tuple[list[Timing], dict[str, list[float]], str]:
+    """The tasks timed (``--busy`` cores kept busy), REF's times of ``common``, REF's commit."""
+    spinners = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(ns.busy)
+    ]
+    try:
+        remote, commit = start_against(__file__, words, ns.against)
+        timings, before = time_interleaved(tasks, remote, common)
+        if remote is not None:
+            remote.close()
+    finally:
+        for spinner in spinners:
+            spinner.kill()
+            spinner.wait()
+    return timings, before, commit
+
+
+def _print_table(rows: Sequence[tuple[Timing, float | None]]) -> None:
+    """One line per task, with its target (None: a reference) and its ratio to the first."""
+    from rocketroll_common.tables import Column, text_table  # (not in older checkouts)
+
+    pipeline = rows[0][0]
+    columns = (  # one timed task per line: its calls, their statistics, target and verdict
+        Column("task", 30, "<"),
+        Column("n", 3, ">", " "),
+        Column("median ms", 10, ">", " "),
+        Column("IQR ms", 8, ">", " "),
+        Column("min ms", 8, ">", " "),
+        Column("1st ms", 8, ">", " "),
+        Column("target ms", 10, ">", " "),
+        Column("x pipeline", 10, ">", " "),
+        Column("verdict", 0, "<", "  "),
+    )
+    header = text_table(columns, [])[0]
+    print()
+    print(header)
+    print("-" * len(header))
+    for t, target in rows:
+        ratio = t.median_ms / pipeline.median_ms
+        target_text = f"{target:.0f}" if target is not None else "-"
+        mark = verdict(t.median_ms, target) if target is not None else "(reference)"
+        cells = [
+            t.name,
+            str(len(t.samples_ms)),
+            f"{t.median_ms:.1f}",
+            f"{t.iqr_ms:.1f}",
+            f"{t.min_ms:.1f}",
+            f"{t.first_ms:.1f}",
+            target_text,
+            f"{ratio:.2f}",
+            mark,
+        ]
+        print(text_table(columns, [cells])[1])
+        emit(
+            f"{t.name}: median",
+            t.median_ms,
+            "ms",
+            at_most=target,
+            note=f"IQR {t.iqr_ms:.1f} ms over {len(t.samples_ms)} calls; {ratio:.2f}x the pipeline",
+        )
+    print()
+
+
+def _print_ratios(
+    pipeline: Timing,
+    peers: Sequence[Timing],
+    registered: Sequence[Timing],
+    judged: Sequence[str],
+    judging: Sequence[Timing],
+) -> None:
+    """The adequacy's share of each method's fit, and the output-error peer / the pipeline."""
+    # What the adequacy adds to a fit of both models (fit() judges each model it fits).
+    fitted = {"paper": pipeline.median_ms}
+    for t in registered:
+        name = t.name.split('"')[1]
+        fitted[name] = fitted.get(name, 0.0) + t.median_ms
+    shares = [
+        f"{m} {100 * 2 * j.median_ms / fitted[m]:.0f} %"
+        for m, j in zip(judged, judging, strict=True)
+    ]
+    print(
+        "adequacy of both models / the fit of both models (target <= 20 %): "
+        + ", ".join(shares)
+        + " (the paper's fit: its pipeline, identify())"
+    )
+    peer_total = sum(p.median_ms for p in peers)
+    print(
+        f"peer / pipeline: constant {peers[0].median_ms / pipeline.median_ms:.2f}x, "
+        f"theta {peers[1].median_ms / pipeline.median_ms:.2f}x, "
+        f"both models {peer_total / pipeline.median_ms:.2f}x "
+        "(the pipeline identifies both models plus u_d and the re-simulations)"
+    )
+
+
+def _print_verdicts(
+    targeted: Sequence[tuple[Timing, float]], watched: Sequence[Timing], first_call_ms: float
+) -> list[str]:
+    """The notes under the table, a noise warning for ``watched``; the tasks that missed."""
+    missed = [t.name for t, target in targeted if t.median_ms > target]
+    print(
+        f"first identify() call of the process: {first_call_ms:.0f} ms (one-off costs); "
+        "1st ms: each task's untimed warm-up call after it; verdicts use the median; "
+        "timed calls of all tasks interleaved"
+    )
+    noisy = [t.name for t in watched if t.iqr_ms > 0.25 * t.median_ms]
+    if noisy:
+        print(
+            f"warning: IQR above 25 % of the median for {', '.join(noisy)}: the machine was "
+            "busy or throttled during the run; compare min ms, or rerun"
+        )
+    if missed:
+        print(f"missed targets: {', '.join(missed)}")
+    else:
+        print("all targets met")
+    return missed
+
+
+def _print_against(
+    ref: str, commit: str, common: Sequence[Timing], before: dict[str, list[float]]
+) -> None:
+    """This checkout's medians of the ``common`` tasks against REF's, with the change."""
+    from rocketroll_common.tables import Column, text_table  # (not in older checkouts)
+
+    print(f"\nthis checkout against {ref} ({commit[:12]}), the same calls alternating:")
+    against = (
+        Column("task", 30, "<"),
+        Column("this median ms", 15, ">", " "),
+        Column("REF median ms", 14, ">", " "),
+        Column("change", 8, ">", " "),
+    )
+    rows = []
+    for t in common:
+        old = float(np.median(before[t.name]))
+        rows.append([t.name, f"{t.median_ms:.1f}", f"{old:.1f}", f"{t.median_ms / old - 1:+.1%}"])
+    print("\n".join(text_table(against, rows)))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Time the tasks, print the table and the verdicts; 1 with --strict if a target is missed."""
+    ns, words, serving = _parse(argv)
 
     rec = load_bundled(RECORDING)
     options = IdentifyOptions(noise_runs=0)
@@ -232,201 +457,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = time.perf_counter()
     result = identify(rec, options)
     first_call_ms = (time.perf_counter() - start) * 1e3
-    from identification.methods import METHODS, fit, traits  # this checkout's (not in older ones)
-    from rocketroll_common.tables import Column, text_table  # (nor this)
-
     n_levels = len(result.options.noise_levels_pct)
     mc_name = f"noise_study ({n_levels} x {MONTE_CARLO_RUNS} runs)"
-    from identification.methods.ml import maximum_likelihood
-
-    others = [  # the tunnel's methods (a flight method identifies flights only)
-        m for m in METHODS.names() if m != "paper" and not traits(m).flight
-    ]
-    ml_theta = maximum_likelihood(rec, "theta", options=options)
-    from identification.methods import Context
-    from identification.methods.adequacy import adequacy
-
-    context = Context(rec, options)
-    judged = {m: fit(context, m, ["theta"])["theta"] for m in ("paper", *others)}
-    spinners = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(ns.busy)
-    ]
-    try:
-        remote, commit = start_against(__file__, words, ns.against)
-        timings, before = time_interleaved(
-            [
-                ("identify(noise_runs=0)", common["identify(noise_runs=0)"], ns.repeats),
-                *(
-                    (
-                        f'output_error("{model}")',
-                        common[f'output_error("{model}")'],
-                        ns.peer_repeats,
-                    )
-                    for model in ("constant", "theta")
-                ),
-                (mc_name, lambda: run_monte_carlo(result, MONTE_CARLO_RUNS), ns.mc_repeats),
-                (
-                    'fit(method="ml", both models)',
-                    functools.partial(fit, rec, "ml", ["constant", "theta"], options),
-                    ns.peer_repeats,
-                ),
-                (
-                    f"posterior_draws({POSTERIOR_DRAWS})",
-                    functools.partial(ml_theta.posterior_draws, POSTERIOR_DRAWS, 0),
-                    ns.peer_repeats,
-                ),
-                *(
-                    (
-                        f'fit(method="{method}", "{model}")',
-                        functools.partial(fit, rec, method, [model], options),
-                        ns.peer_repeats,
-                    )
-                    for method in others
-                    for model in traits(method).models
-                ),
-                *(
-                    (
-                        f'adequacy("{method}", "theta")',
-                        functools.partial(
-                            adequacy,
-                            context.measurements,
-                            found.params,
-                            found.disturbance,
-                            found.metrics,
-                            method=method,
-                        ),
-                        ns.repeats,
-                    )
-                    for method, found in judged.items()
-                ),
-            ],
-            remote,
-            [*common, mc_name],
-        )
-        if remote is not None:
-            remote.close()
-    finally:
-        for spinner in spinners:
-            spinner.kill()
-            spinner.wait()
+    tasks, judged = _build_tasks(ns, rec, options, common, result, mc_name)
+    timings, before, commit = _time_tasks(ns, words, tasks, [*common, mc_name])
     pipeline, *peers = timings[:3]
     monte_carlo, ml_both, posterior = timings[3:6]
     registered = timings[6 : len(timings) - len(judged)]
     judging = timings[len(timings) - len(judged) :]
 
-    columns = (  # one timed task per line: its calls, their statistics, target and verdict
-        Column("task", 30, "<"),
-        Column("n", 3, ">", " "),
-        Column("median ms", 10, ">", " "),
-        Column("IQR ms", 8, ">", " "),
-        Column("min ms", 8, ">", " "),
-        Column("1st ms", 8, ">", " "),
-        Column("target ms", 10, ">", " "),
-        Column("x pipeline", 10, ">", " "),
-        Column("verdict", 0, "<", "  "),
-    )
-    header = text_table(columns, [])[0]
-    print()
-    print(header)
-    print("-" * len(header))
-
-    def row(t: Timing, target: float | None) -> None:
-        ratio = t.median_ms / pipeline.median_ms
-        target_text = f"{target:.0f}" if target is not None else "-"
-        mark = verdict(t.median_ms, target) if target is not None else "(reference)"
-        cells = [
-            t.name,
-            str(len(t.samples_ms)),
-            f"{t.median_ms:.1f}",
-            f"{t.iqr_ms:.1f}",
-            f"{t.min_ms:.1f}",
-            f"{t.first_ms:.1f}",
-            target_text,
-            f"{ratio:.2f}",
-            mark,
+    # The tasks with a target, in the table's order (the others are references).
+    targeted = [
+        (pipeline, PIPELINE_TARGET_MS),
+        (monte_carlo, MONTE_CARLO_TARGET_MS),
+        (ml_both, ML_TARGET_MS),
+        (posterior, POSTERIOR_TARGET_MS),
+    ]
+    _print_table(
+        [
+            targeted[0],
+            *((peer, None) for peer in peers),
+            *targeted[1:],
+            *((t, None) for t in (*registered, *judging)),
         ]
-        print(text_table(columns, [cells])[1])
-        emit(
-            f"{t.name}: median",
-            t.median_ms,
-            "ms",
-            at_most=target,
-            note=f"IQR {t.iqr_ms:.1f} ms over {len(t.samples_ms)} calls; {ratio:.2f}x the pipeline",
-        )
-
-    row(pipeline, PIPELINE_TARGET_MS)
-    for peer in peers:
-        row(peer, None)
-    row(monte_carlo, MONTE_CARLO_TARGET_MS)
-    row(ml_both, ML_TARGET_MS)
-    row(posterior, POSTERIOR_TARGET_MS)
-    for method in registered:
-        row(method, None)
-    for one in judging:
-        row(one, None)
-    print()
-    # What the adequacy adds to a fit of both models (fit() judges each model it fits).
-    fitted = {"paper": pipeline.median_ms}
-    for t in registered:
-        name = t.name.split('"')[1]
-        fitted[name] = fitted.get(name, 0.0) + t.median_ms
-    shares = [
-        f"{m} {100 * 2 * j.median_ms / fitted[m]:.0f} %"
-        for m, j in zip(judged, judging, strict=True)
-    ]
-    print(
-        "adequacy of both models / the fit of both models (target <= 20 %): "
-        + ", ".join(shares)
-        + " (the paper's fit: its pipeline, identify())"
     )
-    peer_total = sum(p.median_ms for p in peers)
-    print(
-        f"peer / pipeline: constant {peers[0].median_ms / pipeline.median_ms:.2f}x, "
-        f"theta {peers[1].median_ms / pipeline.median_ms:.2f}x, "
-        f"both models {peer_total / pipeline.median_ms:.2f}x "
-        "(the pipeline identifies both models plus u_d and the re-simulations)"
-    )
-
-    missed = [
-        t.name
-        for t, target in (
-            (pipeline, PIPELINE_TARGET_MS),
-            (monte_carlo, MONTE_CARLO_TARGET_MS),
-            (ml_both, ML_TARGET_MS),
-            (posterior, POSTERIOR_TARGET_MS),
-        )
-        if t.median_ms > target
-    ]
-    print(
-        f"first identify() call of the process: {first_call_ms:.0f} ms (one-off costs); "
-        "1st ms: each task's untimed warm-up call after it; verdicts use the median; "
-        "timed calls of all tasks interleaved"
-    )
-    noisy = [t.name for t in (pipeline, *peers, monte_carlo) if t.iqr_ms > 0.25 * t.median_ms]
-    if noisy:
-        print(
-            f"warning: IQR above 25 % of the median for {', '.join(noisy)}: the machine was "
-            "busy or throttled during the run; compare min ms, or rerun"
-        )
-    if missed:
-        print(f"missed targets: {', '.join(missed)}")
-    else:
-        print("all targets met")
+    _print_ratios(pipeline, peers, registered, judged, judging)
+    missed = _print_verdicts(targeted, [pipeline, *peers, monte_carlo], first_call_ms)
     if before:
-        print(f"\nthis checkout against {ns.against} ({commit[:12]}), the same calls alternating:")
-        against = (
-            Column("task", 30, "<"),
-            Column("this median ms", 15, ">", " "),
-            Column("REF median ms", 14, ">", " "),
-            Column("change", 8, ">", " "),
-        )
-        rows = []
-        for t in (pipeline, *peers, monte_carlo):
-            old = float(np.median(before[t.name]))
-            rows.append(
-                [t.name, f"{t.median_ms:.1f}", f"{old:.1f}", f"{t.median_ms / old - 1:+.1%}"]
-            )
-        print("\n".join(text_table(against, rows)))
+        _print_against(ns.against, commit, [pipeline, *peers, monte_carlo], before)
     return 1 if ns.strict and missed else 0
 
 
