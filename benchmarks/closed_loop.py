@@ -416,7 +416,8 @@ def summarise(values: Sequence[float]) -> tuple[float, float, float, float]:
     return float(np.mean(x)), sd, float(np.min(x)), float(np.max(x))
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line: what to score, how many of each, and what else to replay."""
     parser = argparse.ArgumentParser(
         prog="benchmarks/closed_loop.py",
         description="Closed-loop fidelity of each identification method's replay against the "
@@ -490,6 +491,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="also replay the posterior draws identified with a damping growing with the roll "
         "rate searched, carried where it is admitted (identify --fit-quadratic-damping)",
     )
+    return parser
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a run scores, as the command line states it once checked."""
+
+    truths: list[str]
+    seeds: range
+    methods: tuple[str, ...]
+    policies: list[str]
+    tasks: list[str]
+    stated_factors: tuple[float, ...]
+
+
+def _parse(argv: Sequence[str] | None) -> tuple[argparse.Namespace, Plan]:
+    """The parsed command line and its plan (exit 2 on a setting out of range or unknown)."""
+    parser = _parser()
     ns = parser.parse_args(argv)
     if ns.hz is not None and not 1.0 <= ns.hz <= 1000.0:
         parser.error("--hz: a rate in [1, 1000] Hz")
@@ -516,47 +535,54 @@ def main(argv: Sequence[str] | None = None) -> int:
     for task in tasks:  # the shipped controllers exist (fail here, not in a worker)
         for policy in policies:
             _controller(task, policy)
-
     seeds = range(ns.first_seed, ns.first_seed + ns.seeds)
-    print(
-        f"truths {', '.join(truths)}; seeds {seeds[0]}-{seeds[-1]}; methods {', '.join(methods)}; "
-        f"controllers {', '.join(policies)}; tasks {', '.join(tasks)}; {ns.windows} windows of "
-        f"60 s per recording; {ns.draws} posterior draws"
-    )
-    # ratios[(replay, task, policy, metric)][truth] -> that truth's per-recording ratios
-    ratios: dict[tuple[str, str, str, str], dict[str, list[float]]] = {}
-    rows: list[dict[str, object]] = []
-    began = time.perf_counter()
+    return ns, Plan(truths, seeds, methods, policies, tasks, stated_factors)
+
+
+def _score_recordings(ns: argparse.Namespace, plan: Plan) -> list[list[dict[str, object]]]:
+    """The rows of every recording (truth, then seed), scored here or in ``--jobs`` processes."""
     jobs = [
         (
             truth,
             seed,
-            tuple(methods),
+            plan.methods,
             ns.draws,
-            tuple(tasks),
-            tuple(policies),
+            tuple(plan.tasks),
+            tuple(plan.policies),
             ns.windows,
             ns.reference,
-            stated_factors,
+            plan.stated_factors,
             ns.hz,
             ns.identified,
             ns.rig_design,
             ns.fit_quadratic_damping,
         )
-        for truth in truths
-        for seed in seeds
+        for truth in plan.truths
+        for seed in plan.seeds
     ]
     if ns.jobs == 1:
         done = (recording_rows(*job) for job in jobs)
-        results = list(tqdm(done, total=len(jobs), desc="recordings", unit="rec"))
-    else:
-        # spawn: the parent holds torch's threads, which a fork would copy mid-state.
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(ns.jobs, mp_context=context) as pool:
-            futures = [pool.submit(recording_rows, *job) for job in jobs]
-            for _ in tqdm(as_completed(futures), total=len(jobs), desc="recordings", unit="rec"):
-                pass
-            results = [f.result() for f in futures]
+        return list(tqdm(done, total=len(jobs), desc="recordings", unit="rec"))
+    # spawn: the parent holds torch's threads, which a fork would copy mid-state.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(ns.jobs, mp_context=context) as pool:
+        futures = [pool.submit(recording_rows, *job) for job in jobs]
+        for _ in tqdm(as_completed(futures), total=len(jobs), desc="recordings", unit="rec"):
+            pass
+        return [f.result() for f in futures]
+
+
+#: ratios[(replay, task, policy, metric)][truth] -> that truth's per-recording ratios
+Ratios = dict[tuple[str, str, str, str], dict[str, list[float]]]
+
+
+def _ratios_of(
+    results: Sequence[list[dict[str, object]]],
+) -> tuple[Ratios, list[dict[str, object]]]:
+    """Every recording's ratios gathered per replay, task, controller, metric and truth, and
+    all the rows in order."""
+    ratios: Ratios = {}
+    rows: list[dict[str, object]] = []
     for found in results:
         for row in found:
             key = (str(row["replay"]), str(row["task"]), str(row["controller"]), str(row["metric"]))
@@ -564,7 +590,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             assert isinstance(ratio, float)
             ratios.setdefault(key, {}).setdefault(str(row["truth"]), []).append(ratio)
             rows.append(row)
-    print(f"\n{time.perf_counter() - began:.0f} s\n")
+    return ratios, rows
+
+
+def _print_ratios(
+    ratios: Ratios, tasks: Sequence[str], scored: Sequence[str]
+) -> dict[str, list[tuple[str, bool]]]:
+    """Print the table of ratios averaged over recordings; per replay, each
+    task/controller/metric cell and whether it is within the floor."""
     replays_seen = list(dict.fromkeys(k[0] for k in ratios))
     columns = (
         Column("replay", 30, "<"),
@@ -579,7 +612,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(header)
     print("-" * len(header))
     verdicts: dict[str, list[tuple[str, bool]]] = {r: [] for r in replays_seen}
-    scored = list(dict.fromkeys(k[2] for k in ratios))  # the policies, then the rig designs
     for replay in replays_seen:
         for task in tasks:
             for policy in scored:
@@ -595,6 +627,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     cells = [replay, task, policy, name, *(f"{v:.3f}" for v in (mean, sd, lo, hi))]
                     print(text_table(columns, [[*cells, "yes" if ok else "NO"]])[1])
         print()
+    return verdicts
+
+
+def _print_verdicts(verdicts: dict[str, list[tuple[str, bool]]]) -> None:
+    """Print and emit, per replay, the share of its cells within the floor."""
     print(
         "Verdict per replay (floor: deployable controllers within [0.90, 1.10], the oracle within "
         "[0.80, 1.25], averaged over each truth's seeds, every task and truth):"
@@ -617,18 +654,42 @@ def main(argv: Sequence[str] | None = None) -> int:
                 else ""
             )
         )
+
+
+def _write_csv(path: Path, rows: Sequence[dict[str, object]]) -> None:
+    """Every recording's rows to a CSV, one per task, controller, replay and metric."""
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Score every recording's replays against its truth, print the ratios, the verdicts and
+    the ranking agreement; exit 1 under ``--strict`` if no replay passes."""
+    ns, plan = _parse(argv)
+    seeds = plan.seeds
+    print(
+        f"truths {', '.join(plan.truths)}; seeds {seeds[0]}-{seeds[-1]}; "
+        f"methods {', '.join(plan.methods)}; controllers {', '.join(plan.policies)}; "
+        f"tasks {', '.join(plan.tasks)}; {ns.windows} windows of 60 s per recording; "
+        f"{ns.draws} posterior draws"
+    )
+    began = time.perf_counter()
+    ratios, rows = _ratios_of(_score_recordings(ns, plan))
+    print(f"\n{time.perf_counter() - began:.0f} s\n")
+    scored = list(dict.fromkeys(k[2] for k in ratios))  # the policies, then the rig designs
+    verdicts = _print_ratios(ratios, plan.tasks, scored)
+    _print_verdicts(verdicts)
     print()
-    for line in ranking_lines(rows, tasks, scored):
+    for line in ranking_lines(rows, plan.tasks, scored):
         print(line)
     if ns.fit_quadratic_damping:
         print()
         for line in quadratic_lines(rows):
             print(line)
     if ns.csv is not None:
-        with ns.csv.open("w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        _write_csv(ns.csv, rows)
         print(f"\nwrote {ns.csv}")
     passed = any(all(ok for _, ok in checks) for checks in verdicts.values())
     return 1 if ns.strict and not passed else 0

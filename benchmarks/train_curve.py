@@ -33,13 +33,13 @@ import math
 import os
 import statistics
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import torch
 from _curves import write_curves
-from _recipes import DEFAULT_RECIPES, parse_recipe
+from _recipes import DEFAULT_RECIPES, Recipe, parse_recipe
 from _records import emit
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
@@ -57,6 +57,7 @@ from agents.train import (
 )
 from rocketroll_common.tables import markdown_table
 from rollenv.bank import load_bank, variant_config
+from rollenv.config import RollConfig
 
 #: The target: a recipe reaches the committed angle policy's headline within this much
 #: training wall time (scoring not counted), per seed and as the median over seeds.
@@ -146,7 +147,14 @@ def _emit_seed(
         )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+#: One evaluation on a curve: (training wall s, env-steps, headline).
+Point = tuple[float, int, float]
+#: One seed's row: (seed, env-steps/s, wall time to each reference or None, best point).
+SeedRow = tuple[int, float, dict[str, float | None], Point]
+
+
+def _parse(argv: Sequence[str] | None) -> tuple[argparse.Namespace, list[Recipe]]:
+    """The command line and its recipes (exit 2 on a recipe whose policy reads the observer)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env-id", default="RocketRoll-v0", help="environment id")
     parser.add_argument(
@@ -173,72 +181,149 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"--recipe {recipe.label}: a policy that reads the observer is not scored here "
                 "(train it and score its checkpoints with benchmarks/run_curve.py)"
             )
+    return args, recipes
 
-    config = variant_config(args.env_id, {"split": "test"})
+
+def _protocol(env_id: str, episodes: int) -> tuple[RollConfig, Callable[[Any], float]]:
+    """The test split's config and the scorer of a controller on the protocol: the mean
+    headline over ``episodes`` test episodes (seed 0)."""
+    config = variant_config(env_id, {"split": "test"})
     bank = load_bank(config, None)
-    specs = protocol_episodes(config, args.episodes, 0, bank=bank)
+    specs = protocol_episodes(config, episodes, 0, bank=bank)
 
     def score(controller: Any) -> float:
         return float(headline_scores(evaluate(config, controller, specs, bank=bank)).mean())
 
+    return config, score
+
+
+def _references(
+    args: argparse.Namespace, config: RollConfig, score: Callable[[Any], float], unit: str
+) -> dict[str, float]:
+    """The committed policy's and the PID's headlines, measured in this run, printed and
+    emitted."""
     references = {
         "committed PPO": score(make_controller("ppo", config, args.env_id)),
         "PID": score(make_controller("pid", config, args.env_id)),
     }
-    names = list(references)
-    unit = "°" if config.task == "angle" else "°/s"
     print(
         f"{args.env_id}: headline on {args.episodes} test episodes (seed 0), {os.cpu_count()} CPUs"
     )
     for name, value in references.items():
         print(f"  {name:<14} {value:.2f} {unit}")
         emit(f"{name} headline (same run)", value, unit, note=f"{args.episodes} test episodes")
+    return references
+
+
+def _train_seed(
+    args: argparse.Namespace,
+    recipe: Recipe,
+    seed: int,
+    task: str,
+    score: Callable[[Any], float],
+    references: dict[str, float],
+    unit: str,
+    target: float | None,
+) -> tuple[list[Point], SeedRow]:
+    """Train one recipe on one seed, scoring it every ``--eval-every`` env-steps; print and
+    emit its row; its curve and its row."""
+    hp = load_hyperparameters(recipe.path, args.env_id)
+    steps = int(args.timesteps or hp.n_timesteps or 1_000_000)
+    torch.set_num_threads(recipe.threads)
+    _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
+    model = PPO(hp.policy, venv, seed=seed, device="cpu", **algorithm_arguments(hp))
+    model.set_logger(quiet_logger())
+    scorer = Scorer(args.eval_every, score, normalize, task, hp)
+    began = time.perf_counter()
+    model.learn(total_timesteps=steps, callback=scorer)
+    train_s = time.perf_counter() - began - scorer.paused
+    venv.close()
+    reach = {
+        name: next((w for w, _, h in scorer.curve if h <= value), None)
+        for name, value in references.items()
+    }
+    best = min(scorer.curve, key=lambda c: c[2])
+    rate = model.num_timesteps / train_s
+    cells = ", ".join(
+        f"{n} {'not reached' if reach[n] is None else f'after {reach[n]:.0f} s'}"
+        for n in references
+    )
+    print(
+        f"  {recipe.label} seed {seed}: {model.num_timesteps:,} env-steps in "
+        f"{train_s:.1f} s ({rate:,.0f} env-steps/s, {recipe.threads} thread(s)); "
+        f"{cells}; best {best[2]:.2f} {unit}",
+        flush=True,
+    )
+    name = f"{recipe.label} ({recipe.threads} thread(s)), seed {seed}"
+    emit(
+        f"{name}: env-steps/s",
+        rate,
+        "env-steps/s",
+        note=f"{model.num_timesteps:,} env-steps in {train_s:.1f} s",
+    )
+    _emit_seed(name, reach, best, references, unit, target)
+    return scorer.curve, (seed, rate, reach, best)
+
+
+def _median_row(
+    recipe: Recipe,
+    runs: list[SeedRow],
+    references: dict[str, float],
+    unit: str,
+    target: float | None,
+) -> list[str]:
+    """One recipe's medians over its seeds: emitted (the wall time to the committed policy's
+    headline, or how many seeds reached it) and its table row."""
+    names = list(references)
     committed = references["committed PPO"]
-    to_committed = f"the committed PPO's {committed:.2f}{unit}"
-    target = TARGET_S if args.env_id == TARGET_ENV else None
-    curves: dict[tuple[str, int], list[tuple[float, int, float]]] = {}
-    rows: dict[str, list[tuple[int, float, dict[str, float | None], tuple[float, int, float]]]]
-    rows = {r.label: [] for r in recipes}
-    for seed in args.seeds:
-        for recipe in recipes:
-            hp = load_hyperparameters(recipe.path, args.env_id)
-            steps = int(args.timesteps or hp.n_timesteps or 1_000_000)
-            torch.set_num_threads(recipe.threads)
-            _, venv, normalize = make_env(hp, hp.n_envs, seed, split="train")
-            model = PPO(hp.policy, venv, seed=seed, device="cpu", **algorithm_arguments(hp))
-            model.set_logger(quiet_logger())
-            scorer = Scorer(args.eval_every, score, normalize, config.task, hp)
-            began = time.perf_counter()
-            model.learn(total_timesteps=steps, callback=scorer)
-            train_s = time.perf_counter() - began - scorer.paused
-            venv.close()
-            curves[recipe.label, seed] = scorer.curve
-            reach = {
-                name: next((w for w, _, h in scorer.curve if h <= value), None)
-                for name, value in references.items()
-            }
-            best = min(scorer.curve, key=lambda c: c[2])
-            rate = model.num_timesteps / train_s
-            rows[recipe.label].append((seed, rate, reach, best))
-            cells = ", ".join(
-                f"{n} {'not reached' if reach[n] is None else f'after {reach[n]:.0f} s'}"
-                for n in names
-            )
-            print(
-                f"  {recipe.label} seed {seed}: {model.num_timesteps:,} env-steps in "
-                f"{train_s:.1f} s ({rate:,.0f} env-steps/s, {recipe.threads} thread(s)); "
-                f"{cells}; best {best[2]:.2f} {unit}",
-                flush=True,
-            )
-            name = f"{recipe.label} ({recipe.threads} thread(s)), seed {seed}"
-            emit(
-                f"{name}: env-steps/s",
-                rate,
-                "env-steps/s",
-                note=f"{model.num_timesteps:,} env-steps in {train_s:.1f} s",
-            )
-            _emit_seed(name, reach, best, references, unit, target)
-    print()
+    rate = statistics.median(r[1] for r in runs)
+    medians = [_median_time([r[2][n] for r in runs]) for n in names]
+    best_median = statistics.median(r[3][2] for r in runs)
+    times = [r[2]["committed PPO"] for r in runs]
+    n_reached = sum(t is not None for t in times)
+    median = statistics.median(math.inf if t is None else t for t in times)
+    note = (
+        f"best headline median {best_median:.2f}{unit}; env-steps/s median {rate:,.0f}; "
+        f"median wall time to the PID's: {_median_time([r[2]['PID'] for r in runs])}"
+    )
+    name = f"{recipe.label}, median of {len(runs)}"
+    if math.isfinite(median):
+        emit(
+            f"{name}: wall time to {committed:.2f}{unit}",
+            median,
+            "s",
+            at_most=target,
+            note=f"{n_reached} of {len(runs)} seeds reached it; {note}",
+        )
+    else:  # the median seed never reached it: fewer than half did
+        emit(
+            f"{name}: seeds that reached the committed PPO's {committed:.2f}{unit}",
+            n_reached,
+            f"of {len(runs)}",
+            at_least=None if target is None else len(runs) // 2 + 1,
+            note=f"the median wall time to it: not reached; {note}",
+        )
+    return [
+        f"**{recipe.label}, median of {len(runs)}**",
+        str(recipe.threads),
+        "–",
+        f"{rate:,.0f}",
+        *medians,
+        f"{best_median:.2f}",
+    ]
+
+
+def _print_table(
+    recipes: Sequence[Recipe],
+    rows: dict[str, list[SeedRow]],
+    references: dict[str, float],
+    unit: str,
+    target: float | None,
+    medians: bool,
+) -> None:
+    """Print the table of every recipe's seeds and, with ``medians`` (more than one seed),
+    their medians."""
+    names = list(references)
     header = [
         "recipe",
         "threads",
@@ -255,60 +340,54 @@ def main(argv: Sequence[str] | None = None) -> int:
             table.append(
                 [recipe.label, str(recipe.threads), str(seed), f"{rate:,.0f}", *reached, at]
             )
-        if len(args.seeds) > 1:
-            runs = rows[recipe.label]
-            rate = statistics.median(r[1] for r in runs)
-            medians = [_median_time([r[2][n] for r in runs]) for n in names]
-            best_median = statistics.median(r[3][2] for r in runs)
-            times = [r[2]["committed PPO"] for r in runs]
-            n_reached = sum(t is not None for t in times)
-            median = statistics.median(math.inf if t is None else t for t in times)
-            note = (
-                f"best headline median {best_median:.2f}{unit}; env-steps/s median {rate:,.0f}; "
-                f"median wall time to the PID's: {_median_time([r[2]['PID'] for r in runs])}"
-            )
-            name = f"{recipe.label}, median of {len(runs)}"
-            if math.isfinite(median):
-                emit(
-                    f"{name}: wall time to {committed:.2f}{unit}",
-                    median,
-                    "s",
-                    at_most=target,
-                    note=f"{n_reached} of {len(runs)} seeds reached it; {note}",
-                )
-            else:  # the median seed never reached it: fewer than half did
-                emit(
-                    f"{name}: seeds that reached {to_committed}",
-                    n_reached,
-                    f"of {len(runs)}",
-                    at_least=None if target is None else len(runs) // 2 + 1,
-                    note=f"the median wall time to it: not reached; {note}",
-                )
-            table.append(
-                [
-                    f"**{recipe.label}, median of {len(runs)}**",
-                    str(recipe.threads),
-                    "–",
-                    f"{rate:,.0f}",
-                    *medians,
-                    f"{best_median:.2f}",
-                ]
-            )
+        if medians:
+            table.append(_median_row(recipe, rows[recipe.label], references, unit, target))
     print("\n".join(markdown_table(header, table)))
+
+
+def _write_png(
+    args: argparse.Namespace,
+    curves: dict[tuple[str, int], list[Point]],
+    references: dict[str, float],
+    unit: str,
+) -> None:
+    """Draw headline against training wall time, every seed of every recipe, to ``--png``."""
+    seeds = ", ".join(map(str, args.seeds))
+    write_curves(
+        args.png,
+        [
+            (label, [c[0] for c in curve], [c[2] for c in curve])
+            for (label, _), curve in curves.items()
+        ],
+        references,
+        unit=unit,
+        xlabel=f"training wall time (s, scoring not counted; {os.cpu_count()} cores)",
+        title=f"{args.env_id}: PPO learning curves against wall time (seeds {seeds})",
+    )
+    print(f"wrote {args.png}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Measure the references, train every recipe on every seed (seed by seed), print the
+    table and draw the curves; exit 0."""
+    args, recipes = _parse(argv)
+    config, score = _protocol(args.env_id, args.episodes)
+    unit = "°" if config.task == "angle" else "°/s"
+    references = _references(args, config, score, unit)
+    target = TARGET_S if args.env_id == TARGET_ENV else None
+    curves: dict[tuple[str, int], list[Point]] = {}
+    rows: dict[str, list[SeedRow]] = {r.label: [] for r in recipes}
+    for seed in args.seeds:
+        for recipe in recipes:
+            curve, row = _train_seed(
+                args, recipe, seed, config.task, score, references, unit, target
+            )
+            curves[recipe.label, seed] = curve
+            rows[recipe.label].append(row)
+    print()
+    _print_table(recipes, rows, references, unit, target, medians=len(args.seeds) > 1)
     if args.png is not None:
-        seeds = ", ".join(map(str, args.seeds))
-        write_curves(
-            args.png,
-            [
-                (label, [c[0] for c in curve], [c[2] for c in curve])
-                for (label, _), curve in curves.items()
-            ],
-            references,
-            unit=unit,
-            xlabel=f"training wall time (s, scoring not counted; {os.cpu_count()} cores)",
-            title=f"{args.env_id}: PPO learning curves against wall time (seeds {seeds})",
-        )
-        print(f"wrote {args.png}")
+        _write_png(args, curves, references, unit)
     return 0
 
 

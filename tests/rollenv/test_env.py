@@ -400,7 +400,6 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
     assert steps == round(3.0 / dt)
     scale = 0.0 if options["disturbance"] == "none" else options["disturbance_scale"]
     error_max = 180.0 if options["task"] == "angle" else 500.0
-    setpoint_max = 90.0 if options["task"] == "angle" else 10.0
 
     obs, info = env.reset(seed=seed)
     index = [t.uid for t in env.bank.traces].index(info["trace"])
@@ -408,6 +407,35 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
     start = round(info["start_s"] / trace.dt_s)
     assert start * trace.dt_s == pytest.approx(info["start_s"])
     params = env._batch.roll_params(0)
+    _check_drawn_rocket(env, params, trace, options)
+    _check_trace_name(info, options, from_arrays, method)
+    assert params.is_constant_damping == (options["model"] == "constant")
+
+    u = scale * np.asarray(trace.samples()[start : start + math.ceil(steps * substeps / 10)])
+    _check_starting_state(info, params, u, options)
+
+    history = [info]
+    commands = []
+    for k in range(1, steps + 1):
+        check_observation(env, obs, history[-1], options, error_max)
+        action = np.array([actions[k - 1]], np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        commands.append(float(np.clip(np.float64(action[0]), -1.0, 1.0)) * 40.0)
+        assert (terminated, truncated) == (False, k == steps)
+        _check_step_info(k, info, reward, commands[-1], u, options)
+        travel = _check_servo(info, history[-1], dt)
+        _check_setpoint(k, info, options)
+        _check_tracking_error_and_reward(info, reward, travel, options)
+        history.append(info)
+    check_observation(env, obs, info, options, error_max)
+    with pytest.raises(RuntimeError):
+        env.step(np.zeros(1, np.float32))
+    _check_against_simulate(params, commands, u, history, substeps)
+
+
+def _check_drawn_rocket(env, params, trace, options):
+    """The episode's rocket: with domain randomization, drawn within the bank's box and
+    damped over the whole fin range; without, the trace's own."""
     if options["domain_randomization"]:
         box = np.array(
             [
@@ -427,6 +455,11 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
         assert np.all(params.damping([-40.0, kink, 40.0]) > 0.0)
     else:
         assert params == trace.params
+
+
+def _check_trace_name(info, options, from_arrays, method):
+    """The trace's uid: a surrogate's only where surrogates were asked of the default
+    database, and from the database its method, model and kind."""
     if options["disturbance"] == "surrogate" and not from_arrays:
         assert "-iaaft-" in info["trace"]
     else:
@@ -436,10 +469,10 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
             options["disturbance"], ""
         )
         assert re.fullmatch(rf"[0-9a-f]+-{method}-{options['model']}{suffix}", info["trace"])
-    assert params.is_constant_damping == (options["model"] == "constant")
 
-    # Starting state: fin 0, steady rate, angle within ±initial_angle_deg.
-    u = scale * np.asarray(trace.samples()[start : start + math.ceil(steps * substeps / 10)])
+
+def _check_starting_state(info, params, u, options):
+    """Starting state: fin 0, steady rate, angle within ±initial_angle_deg."""
     assert info["fin_deg"] == info["fin_cmd_deg"] == 0.0
     assert info["u_d_deg"] == u[0]
     assert info["roll_rate_dps"] == pytest.approx(
@@ -447,54 +480,64 @@ def test_episodes_keep_their_invariants(default_db, options, from_arrays, action
     )
     assert abs(info["roll_deg"]) <= options["initial_angle_deg"]
 
-    history = [info]
-    commands = []
-    for k in range(1, steps + 1):
-        check_observation(env, obs, history[-1], options, error_max)
-        action = np.array([actions[k - 1]], np.float32)
-        obs, reward, terminated, truncated, info = env.step(action)
-        commands.append(float(np.clip(np.float64(action[0]), -1.0, 1.0)) * 40.0)
-        assert (terminated, truncated) == (False, k == steps)
-        assert type(reward) is float  # a Python float, not a numpy scalar
-        assert math.isfinite(reward) and reward <= 0.0
-        for key, value in info.items():
-            assert isinstance(value, str) or math.isfinite(value), key
-        assert info["time_s"] == round(k * dt, 9)
-        assert info["fin_cmd_deg"] == commands[-1]
-        # u_d of the step's last substep, from the trace window (0.1-s samples).
-        assert info["u_d_deg"] == u[(k * substeps - 1) // 10]
-        # The servo: within range, at most 150 °/s.
-        travel = abs(info["fin_deg"] - history[-1]["fin_deg"])
-        assert abs(info["fin_deg"]) <= 40.0
-        assert travel <= RATE_LIMIT * dt + 1e-9
-        # Setpoints.
-        sp = info["setpoint"]
-        assert abs(sp) <= setpoint_max
-        if options["setpoint"] == "zero" or k * dt < options["setpoint_period_s"] - 1e-9:
-            assert sp == 0.0
-        # The true tracking error and the reward of the docstring.
-        if options["task"] == "angle":
-            assert abs(wrap(info["tracking_error"] - (sp - info["roll_deg"]))) < 1e-9
-            assert -180.0 <= info["tracking_error"] < 180.0
-            rate_term = 0.1 * (info["roll_rate_dps"] / 10.0) ** 2
-            error_norm = 10.0
-        else:
-            assert info["tracking_error"] == pytest.approx(sp - info["roll_rate_dps"], abs=1e-12)
-            rate_term = 0.0
-            error_norm = 5.0
-        expected = -(
-            (info["tracking_error"] / error_norm) ** 2
-            + rate_term
-            + 0.1 * (travel / (RATE_LIMIT * dt)) ** 2
-        )
-        assert reward == pytest.approx(expected, rel=1e-9, abs=1e-12)
-        history.append(info)
-    check_observation(env, obs, info, options, error_max)
-    with pytest.raises(RuntimeError):
-        env.step(np.zeros(1, np.float32))
 
-    # The truth follows identification.model.simulate driven by the same commands and
-    # u_d on the 0.01-s grid (fin linear within each substep, as in step 9).
+def _check_step_info(k, info, reward, command, u, options):
+    """Step ``k``'s reward and info: finite, on the clock, the command clipped to the fin's
+    range, ``u_d`` from the trace window."""
+    dt = options["dt_s"]
+    substeps = round(dt / 0.01)
+    assert type(reward) is float  # a Python float, not a numpy scalar
+    assert math.isfinite(reward) and reward <= 0.0
+    for key, value in info.items():
+        assert isinstance(value, str) or math.isfinite(value), key
+    assert info["time_s"] == round(k * dt, 9)
+    assert info["fin_cmd_deg"] == command
+    # u_d of the step's last substep, from the trace window (0.1-s samples).
+    assert info["u_d_deg"] == u[(k * substeps - 1) // 10]
+
+
+def _check_servo(info, previous, dt):
+    """The servo: within range, at most 150 °/s; the fin's travel over the step."""
+    travel = abs(info["fin_deg"] - previous["fin_deg"])
+    assert abs(info["fin_deg"]) <= 40.0
+    assert travel <= RATE_LIMIT * dt + 1e-9
+    return travel
+
+
+def _check_setpoint(k, info, options):
+    """Setpoints: within the task's range, zero before the first period ends (or always)."""
+    setpoint_max = 90.0 if options["task"] == "angle" else 10.0
+    sp = info["setpoint"]
+    assert abs(sp) <= setpoint_max
+    if options["setpoint"] == "zero" or k * options["dt_s"] < options["setpoint_period_s"] - 1e-9:
+        assert sp == 0.0
+
+
+def _check_tracking_error_and_reward(info, reward, travel, options):
+    """The true tracking error and the reward of the docstring."""
+    dt = options["dt_s"]
+    sp = info["setpoint"]
+    if options["task"] == "angle":
+        assert abs(wrap(info["tracking_error"] - (sp - info["roll_deg"]))) < 1e-9
+        assert -180.0 <= info["tracking_error"] < 180.0
+        rate_term = 0.1 * (info["roll_rate_dps"] / 10.0) ** 2
+        error_norm = 10.0
+    else:
+        assert info["tracking_error"] == pytest.approx(sp - info["roll_rate_dps"], abs=1e-12)
+        rate_term = 0.0
+        error_norm = 5.0
+    expected = -(
+        (info["tracking_error"] / error_norm) ** 2
+        + rate_term
+        + 0.1 * (travel / (RATE_LIMIT * dt)) ** 2
+    )
+    assert reward == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+def _check_against_simulate(params, commands, u, history, substeps):
+    """The truth follows identification.model.simulate driven by the same commands and
+    u_d on the 0.01-s grid (fin linear within each substep, as in step 9)."""
+    steps = len(commands)
     servo = Servo()
     theta_fine = servo_path(np.repeat(commands, substeps), 0.0, 0.01, servo)
     u_fine = u[np.arange(steps * substeps) // 10]
