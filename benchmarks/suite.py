@@ -331,7 +331,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = ns.args[1:] if ns.args[:1] == ["--"] else ns.args
         return run(ns.script, args, ns.records)
     if ns.check:
-        if page(PAGE.read_text(encoding="utf-8")) != PAGE.read_text(encoding="utf-8"):
+        text = PAGE.read_text(encoding="utf-8")
+        if page(text) != text:
             print(f"{PAGE}: not what the index and records give; run benchmarks/suite.py tables")
             return 1
         print(f"{PAGE}: up to date")

@@ -371,8 +371,9 @@ def list_traces(args: ListArgs) -> int:
         try:
             from disturbances.stores import check_filters
 
-            check_filters(db, args.filters.query())
-            rows = db.traces(**args.filters.query())
+            query = args.filters.query()
+            check_filters(db, query)
+            rows = db.traces(**query)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
         if args.json:
