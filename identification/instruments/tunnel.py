@@ -27,6 +27,11 @@ Ingredients
   (1.41°) the quantisation alone would give a roll-angle error of about
   0.35° MAE, above the paper's re-simulation error of 0.13-0.18°; optional
   rate gyro with the multiplicative noise of eq. 52; optional measured fin.
+* Optionally a flight computer's rate loop on the fins (``--loop-gain``): the command is
+  the schedule (then an excitation on top) plus the gain times minus the gyro's rate read
+  ``--loop-delay`` earlier, saturated at the fins' ``--stops``; flown one logging interval
+  at a time by the reference integrator (:mod:`identification.instruments.reference`),
+  never by the model it is to check, and stated in ``loop.*`` metadata.
 
 Calibration of the default turbulence
 -------------------------------------
@@ -58,7 +63,7 @@ import functools
 import math
 import shlex
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -68,6 +73,8 @@ from scipy import signal, stats
 from identification import paper
 from identification.instruments.reference import (
     Effects,
+    advance,
+    fine_steps,
     gust_factor,
     gust_stream,
     simulate_reference,
@@ -500,12 +507,13 @@ class TunnelSpec:
     seed: int = setting(
         0, "random seed; the same seed gives a byte-identical file", ge=0, le=2**63 - 1, always=True
     )
-    schedule: Literal["paper", "staircase", "ramps", "doublets", "prbs", "chirp"] = setting(
+    schedule: Literal["paper", "staircase", "ramps", "doublets", "prbs", "chirp", "none"] = setting(
         "paper",
-        "fin-command schedule: the paper's Table 1; a random staircase; the staircase's levels "
-        "reached by linear ramps (--ramp); doublets (--pulse); a pseudo-random binary "
-        "sequence (--pulse bits for --duration); a chirp (--chirp-from to --chirp-to Hz over "
-        "--duration)",
+        "fin-command schedule: the paper's Table 1; a random staircase; the staircase's "
+        "levels reached by linear ramps (--ramp); doublets (--pulse); a pseudo-random "
+        "binary sequence (--pulse bits for --duration); a chirp (--chirp-from to "
+        "--chirp-to Hz over --duration); none (0° for --duration, only under "
+        "--loop-gain). Under --loop-gain it is the excitation added to the loop's command",
     )
     steps: int = setting(10, "number of staircase or ramp levels, or of doublets", ge=1, le=200)
     fin_range: float = setting(
@@ -546,6 +554,33 @@ class TunnelSpec:
         gt=0.0,
         le=10_000.0,
         unit="°/s",
+    )
+    loop_gain: float = setting(
+        0.0,
+        "a proportional roll-rate loop on the fins, run at the logging rate: fin command = "
+        "schedule + this × (0 - the roll rate read --loop-delay earlier), saturated at "
+        "--stops (0: open loop, the schedule alone; the sign of --alpha damps the roll, the "
+        "other drives it)",
+        ge=-10.0,
+        le=10.0,
+        unit="°/(°/s)",
+    )
+    loop_delay: float = setting(
+        0.02,
+        "the loop's delay (sensor and computation): it reads the gyro's rate (with its "
+        "--gyro-noise, else noise-free) from this long before each command, to the "
+        "integrator's step (1 ms)",
+        ge=0.0,
+        le=0.5,
+        unit="s",
+    )
+    stops: float = setting(
+        Servo().range_deg,
+        "the fins' mechanical stops: the command saturates at ±this (the logged command is "
+        "the saturated one)",
+        ge=2.0,
+        le=Servo().range_deg,
+        unit="°",
     )
     turbulence: Distribution = setting("gaussian", "marginal distribution of u_d")
     turbulence_sd: float = setting(
@@ -600,6 +635,11 @@ class TunnelSpec:
         check_rocket(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
         if self.no_encoder and self.gyro_noise is None:
             raise SettingError("no_encoder", "needs a rate gyro (give --gyro-noise, e.g. 0)")
+        if self.schedule == "none" and not self.closed_loop:
+            raise SettingError(
+                "schedule",
+                "none leaves the fins at 0° without a loop: give --loop-gain, or a schedule",
+            )
         if self.schedule in ("doublets", "prbs") and self.pulse < self.log_dt:
             raise SettingError(
                 "pulse", f"{self.pulse:g} s is shorter than the logging interval {self.log_dt:g} s"
@@ -630,8 +670,13 @@ class TunnelSpec:
         return rocket_params(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
 
     def servo(self) -> Servo:
-        """Servo model of this run."""
-        return Servo(rate_limit_dps=self.servo_rate)
+        """Servo model of this run: its rate limit, the fins' stops its range."""
+        return Servo(rate_limit_dps=self.servo_rate, range_deg=float(self.stops))
+
+    @property
+    def closed_loop(self) -> bool:
+        """Whether a rate loop flies the fins (``loop_gain`` not 0)."""
+        return self.loop_gain != 0.0
 
     def turbulence_model(self) -> Turbulence:
         """Turbulence process of this run."""
@@ -689,6 +734,8 @@ def fin_schedule(spec: TunnelSpec, rng: np.random.Generator) -> FinSchedule | Sm
         return FinSchedule.prbs(
             rng, spec.duration, spec.fin_range, spec.pulse, spec.lead, spec.log_dt
         )
+    if spec.schedule == "none":
+        return FinSchedule((), (), spec.duration)
     return SmoothSchedule.sweep(
         spec.fin_range, spec.chirp_from, spec.chirp_to, spec.duration, spec.lead
     )
@@ -705,15 +752,19 @@ _LENGTH_SET_BY = {
     "doublets": "--lead, --steps, --pulse and the dwells",
     "prbs": "--lead and --duration",
     "chirp": "--lead and --duration (and 5 s at 0° after it)",
+    "none": "--duration",
 }
 
 
 def _check_schedule(spec: TunnelSpec) -> None:
     """Refuse (``SettingError``, before anything is simulated) a run a recording cannot
-    hold -- its span, its number of samples -- or a command that never changes."""
+    hold -- its span, its number of samples -- or, in open loop, a command that never
+    changes (under a loop the turbulence moves the fins)."""
     from identification.recordings.recording import DURATION_RANGE_S, MIN_SAMPLES
 
-    flag = "duration" if spec.schedule in ("prbs", "chirp") else "steps"
+    flag = "duration" if spec.schedule in ("prbs", "chirp", "none") else "steps"
+    if spec.schedule == "none":
+        _check_samples(spec, spec.duration)
     if spec.schedule in ("prbs", "chirp"):  # known before the sequence is drawn
         _check_samples(spec, spec.lead + spec.duration + (5.0 if spec.schedule == "chirp" else 0))
     schedule = spec.schedule_drawn
@@ -728,13 +779,20 @@ def _check_schedule(spec: TunnelSpec) -> None:
             f"{_LENGTH_SET_BY[spec.schedule]}, and --log-dt)",
         )
     _check_samples(spec, span)
-    command = schedule.command(spec.log_dt * np.arange(n + 1, dtype=float))
+    if spec.closed_loop:
+        return
+    command = _saturated(schedule.command(spec.log_dt * np.arange(n + 1, dtype=float)), spec)
     if np.ptp(command) == 0.0:
         raise SettingError(
             flag,
             f"the {spec.schedule} schedule never moves the fins (at {command[0]:g}° "
             "throughout): give it more steps, a lead or a longer run",
         )
+
+
+def _saturated(command: FloatArray, spec: TunnelSpec) -> FloatArray:
+    """The command at the fins' stops, as the flight computer sends and logs it."""
+    return np.asarray(np.clip(command, -spec.stops, spec.stops), dtype=float)
 
 
 def _check_samples(spec: TunnelSpec, span_s: float) -> None:
@@ -761,7 +819,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         ``source = synthetic``, with ``fin_cmd_deg``, ``roll_deg`` (unless
         ``no_encoder``), the optional ``fin_deg`` and ``roll_rate_dps``, and the
         ground-truth ``ud_true_deg``; the metadata carries the truth and the
-        exact command.
+        exact command (and, under a loop, the controller: ``loop.*``).
 
     Examples
     --------
@@ -774,33 +832,45 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     schedule = spec.schedule_drawn  # from the schedule's stream, drawn once with the spec
     n = round(schedule.end_s / spec.log_dt)
     time = spec.log_dt * np.arange(n + 1, dtype=float)
-    command = schedule.command(time)
+    excitation = schedule.command(time)
     turbulence = spec.turbulence_model()
     u_d = turbulence.sample(n + 1, spec.log_dt, rng_turbulence)
     params = spec.params()
     servo = spec.servo()
     effects = spec.effects
-    # The rocket starts at its steady roll rate for the initial fin angle.
-    rate0 = float(params.steady_rate(command[0], turbulence.mean_deg))
-    if effects.any:  # a rocket outside the model: the reference integrator
+    if effects.any:  # the turbulence's intensity wanders (a no-op unless --gust-sd)
         gust = gust_factor(n + 1, spec.log_dt, effects, gust_stream(spec.seed))
         u_d = turbulence.mean_deg + (u_d - turbulence.mean_deg) * gust
-        ref = simulate_reference(
-            params, spec.log_dt, command[:-1], u_d[:-1], effects,
-            rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg, rate0_dps=rate0,
+    gyro: FloatArray | None = None
+    loop: list[tuple[str, object]] = []
+    if spec.closed_loop:  # the fins under the rate loop: the reference integrator
+        flown = _fly_loop(spec, excitation, u_d, params, rng_sensor)
+        command, fin, rate, angle, gyro = (
+            flown.command, flown.fin, flown.rate, flown.angle, flown.gyro
         )  # fmt: skip
-        fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
+        loop = _loop_items(spec, flown.delay_s)
     else:
-        sim = simulate(
-            params,
-            spec.log_dt,
-            command[:-1],
-            u_d[:-1],
-            rate0_dps=rate0,
-            servo=servo,
-            substeps=spec.substeps,
-        )
-        fin, rate, angle = sim.fin_deg, sim.rate_dps, sim.angle_deg
+        command = _saturated(excitation, spec)
+        # The rocket starts at its steady roll rate for the initial fin angle.
+        rate0 = float(params.steady_rate(command[0], turbulence.mean_deg))
+        if effects.any:  # a rocket outside the model: the reference integrator
+            ref = simulate_reference(
+                params, spec.log_dt, command[:-1], u_d[:-1], effects,
+                rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
+                rate0_dps=rate0,
+            )  # fmt: skip
+            fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
+        else:
+            sim = simulate(
+                params,
+                spec.log_dt,
+                command[:-1],
+                u_d[:-1],
+                rate0_dps=rate0,
+                servo=servo,
+                substeps=spec.substeps,
+            )
+            fin, rate, angle = sim.fin_deg, sim.rate_dps, sim.angle_deg
 
     columns: dict[str, FloatArray] = {"fin_cmd_deg": command}
     if spec.measured_fin:
@@ -812,8 +882,10 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         else:
             columns["roll_deg"] = angle
     if spec.gyro_noise is not None:
-        eps = rng_sensor.standard_normal(rate.size)
-        columns["roll_rate_dps"] = (1.0 + spec.gyro_noise / 100.0 * eps) * rate  # eq. 52
+        if gyro is None:
+            eps = rng_sensor.standard_normal(rate.size)
+            gyro = (1.0 + spec.gyro_noise / 100.0 * eps) * rate  # eq. 52
+        columns["roll_rate_dps"] = gyro
     columns["ud_true_deg"] = u_d
 
     meta: list[tuple[str, object]] = [
@@ -822,6 +894,7 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         ("seed", spec.seed),
         ("tunnel.schedule", spec.schedule),
         ("tunnel.substeps", spec.substeps),
+        *loop,
         *truth_items(spec.model, params),
         ("truth.servo_rate_dps", servo.rate_limit_dps),
         ("truth.fin_range_deg", servo.range_deg),
@@ -844,6 +917,142 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         stated = StatedRig(effects.servo_lag_s, effects.backlash_deg, effects.latency_s)
         meta += list(stated.metadata().items())
     return synthetic_recording(spec.default_name(), time, meta, columns)
+
+
+def _loop_items(spec: TunnelSpec, delay_s: float) -> list[tuple[str, object]]:
+    """The rate loop as the flight computer knows it, as a recording's ``loop.*`` metadata
+    (free text to the recording format): its gain, its delay as flown, the fins' stops, the
+    rate it reads and its law."""
+    sensor = "roll_rate_dps" if spec.gyro_noise is not None else "the true roll rate"
+    return [
+        ("loop.gain", float(spec.loop_gain)),
+        ("loop.delay_s", delay_s),
+        ("loop.stops_deg", float(spec.stops)),
+        ("loop.rate_sensor", sensor),
+        (
+            "loop.law",
+            "fin_cmd_deg(t) = clip(excitation(t) + gain * (0 - rate read at t - delay_s), "
+            "-stops_deg, stops_deg), held until the next sample; excitation: tunnel.schedule",
+        ),
+    ]
+
+
+@dataclass(frozen=True)
+class _Flown:
+    """A closed-loop run at the logging times: the saturated command, the fin, the roll
+    rate and angle as the sensors see them, the gyro's readings (None without a gyro), and
+    the loop's delay as flown (a whole number of the integrator's steps)."""
+
+    command: FloatArray
+    fin: FloatArray
+    rate: FloatArray
+    angle: FloatArray
+    gyro: FloatArray | None
+    delay_s: float
+
+
+def _reading(fine: FloatArray, position: float) -> float:
+    """The value of ``fine`` (one per fine step edge) at a fractional ``position``, from the
+    edges on either side (only the one below where it falls on an edge)."""
+    i = int(position)
+    fraction = position - i
+    if fraction == 0.0:
+        return float(fine[i])
+    return float(fine[i] + fraction * (fine[i + 1] - fine[i]))
+
+
+def _loop_start(
+    params: RollParams, excitation_deg: float, u_mean_deg: float, gain: float, stops: float
+) -> float:
+    """The fin at which the loop holds the rocket steady for a held excitation and mean
+    turbulence: the root of ``θ = clip(e - K·v(θ), ±stops)``, ``v(θ)`` the steady rate
+    (one root where ``α·K`` > 0, the loop damping the roll; one of them where it drives it)."""
+
+    def excess(theta: float) -> float:
+        rate = float(params.steady_rate(theta, u_mean_deg))
+        return theta - min(max(excitation_deg - gain * rate, -stops), stops)
+
+    lo, hi = -stops, stops  # excess(lo) <= 0 <= excess(hi): a root lies between
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if excess(mid) > 0.0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+def _fly_loop(
+    spec: TunnelSpec,
+    excitation: FloatArray,
+    u_d: FloatArray,
+    params: RollParams,
+    rng_sensor: np.random.Generator,
+) -> _Flown:
+    """Fly the rocket under the rate loop, one logging interval at a time through the
+    reference integrator (:func:`~identification.instruments.reference.advance`: RK4 on its
+    fine grid, the servo's rate limit and range, the effects' lag and backlash).
+
+    At each logging time ``t_k`` the controller reads the gyro as it read the rocket
+    ``loop_delay`` earlier -- on the fine grid, the delay rounded to a whole number of fine
+    steps, the effects' sensor latency on top as for the logged gyro -- and commands
+    ``clip(e_k + K·(0 - reading), ±stops)``, held until ``t_{k+1}``.  A reading the log
+    holds (a delay of whole logging intervals) is that logged reading, noise and all; a
+    reading at another instant has its own eq. 52 noise.  Before the run the rocket was
+    steady under the loop (:func:`_loop_start`)."""
+    effects = spec.effects
+    servo = spec.servo()
+    n = excitation.size - 1
+    per, h = fine_steps(spec.log_dt)
+    delay_steps = round(spec.loop_delay / h)
+    logged, between = divmod(delay_steps, per)  # between == 0: a reading the log holds
+    lag = effects.latency_s / h  # the sensors' latency, in fine steps
+    # The steady start with the rocket's quadratic damping, the effects' where they add it.
+    steady = replace(
+        params, quadratic_damping=effects.quadratic_damping or params.quadratic_damping
+    )
+    fin0 = _loop_start(
+        steady, float(excitation[0]), spec.turbulence_mean, spec.loop_gain, spec.stops
+    )
+    rate0 = float(steady.steady_rate(fin0, spec.turbulence_mean))
+    state = np.array([fin0, fin0, fin0, rate0, 0.0])
+    rate_fine = np.empty(n * per + 1)
+    angle_fine = np.empty(n * per + 1)
+    rate_fine[0], angle_fine[0] = rate0, 0.0
+    noisy = spec.gyro_noise is not None
+    sd = (spec.gyro_noise or 0.0) / 100.0
+    eps_log = rng_sensor.standard_normal(n + 1) if noisy else np.zeros(n + 1)
+    eps_own = rng_sensor.standard_normal(n + 1) if noisy else np.zeros(n + 1)
+    fin, seen, gyro, command = (np.empty(n + 1) for _ in range(4))
+    fin[0] = fin0
+
+    def read(rate: float, eps: float) -> float:
+        return (1.0 + sd * eps) * rate if noisy else rate  # eq. 52
+
+    for k in range(n + 1):
+        seen[k] = _reading(rate_fine, max(float(per * k) - lag, 0.0))
+        gyro[k] = read(seen[k], eps_log[k])
+        if between == 0 and k >= logged:
+            reading = gyro[k - logged]
+        else:
+            position = max(float(per * k - delay_steps) - lag, 0.0)
+            reading = read(_reading(rate_fine, position), eps_own[k])
+        loop = excitation[k] + spec.loop_gain * (0.0 - reading)
+        command[k] = min(max(loop, -spec.stops), spec.stops)
+        if k == n:  # the last command is logged, never flown
+            break
+        rate, angle = advance(
+            state, params, effects, command[k], np.full(per, u_d[k]), h,
+            rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
+        )  # fmt: skip
+        rate_fine[k * per : (k + 1) * per + 1] = rate
+        angle_fine[k * per : (k + 1) * per + 1] = angle
+        fin[k + 1] = state[2]
+    angle_seen = np.array([_reading(angle_fine, max(float(per * k) - lag, 0.0))
+                           for k in range(n + 1)])  # fmt: skip
+    return _Flown(
+        command, fin, seen, angle_seen, gyro if noisy else None, round(delay_steps * h, 9)
+    )
 
 
 def truth_items(model: str, params: RollParams) -> list[tuple[str, object]]:
