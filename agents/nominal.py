@@ -28,7 +28,8 @@ class NominalModel:
     a_per_s : float
         Damping at trim, 1/s.
     alpha : float
-        Gain α, (°/s) per °.
+        Gain α, (°/s) per °; negative where a positive fin rolls the rocket negative (an
+        aileron convention), never 0.
     theta_bar_deg : float
         Asymmetry θ̄, ° (trim fin angle ``-θ̄``).
     source : str
@@ -49,10 +50,10 @@ class NominalModel:
     rig: Rig = field(default_factory=Rig)
 
     def __post_init__(self) -> None:
-        for name in ("a_per_s", "alpha"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"NominalModel.{name} must be a positive number, got {value!r}")
+        if not np.isfinite(self.a_per_s) or self.a_per_s <= 0:
+            raise ValueError(f"NominalModel.a_per_s must be positive, got {self.a_per_s!r}")
+        if not np.isfinite(self.alpha) or self.alpha == 0:  # negative: an aileron convention
+            raise ValueError(f"NominalModel.alpha must be a non-zero number, got {self.alpha!r}")
         for name in ("theta_bar_deg", "alpha_bar_per_deg_s"):
             if not np.isfinite(getattr(self, name)):
                 raise ValueError(f"NominalModel.{name} must be finite, got {getattr(self, name)}")

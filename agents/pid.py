@@ -102,7 +102,8 @@ class PIDGains:
         """Gains that put the closed-loop poles of the linearised rocket at ``-ω``.
 
         ``own_damping`` (default): where the rocket is faster than the design its rate
-        gain is held at 0 (below); False places it as the algebra gives, negative there --
+        gain is held at 0 (below); False places it as the algebra gives, of α's opposite
+        sign there --
         for a planner's tail on the exact rocket (:mod:`agents.oracle`), which has no
         sample-and-hold, delay or noise for it to amplify.
 
@@ -139,13 +140,21 @@ class PIDGains:
         **A rocket faster than the design.**  Where ``a > 2ζω`` (rate) or
         ``a > (1 + 2ζ)ω`` (angle) -- in flight, where ``a`` grows to 12× the
         tunnel's -- the placed rate gain (``k_p`` of the rate loop, ``k_d``
-        of the angle loop) would be negative: positive feedback of the
+        of the angle loop) would be of α's opposite sign: positive feedback of the
         measured rate, slowing the rocket to the design, which amplifies the
         turbulence and the gyro's noise through the 0.1-s sample-and-hold.
         That gain is held at 0 there: the rocket keeps its own damping and
         the other gains keep their placed values (on the flight rate task,
         20 train episodes at the tuned ω: 4.54 °/s against 5.48 placed
         unclamped at its own best ω and the trim's 4.86).
+
+        **A negative gain.**  With an aileron convention where a positive fin rolls
+        the rocket negative, α < 0 (θ̄ and ``u_d``, in fin degrees, change sign with
+        it).  The loops above see α only through ``α·k``: every gain, the
+        feedforward and the trim change sign with α, and the controller is the
+        mirror image of the one for ``|α|`` -- the rate gain held at 0 by the sign of
+        ``a·α·k``, the damping it adds, not by the gain's own.  The anti-windup
+        tracking time is ``|T_t|``.
 
         ζ = 1 (default) makes the angle loop a triple pole: no overshoot in
         the linear range.  ω is limited by what the model leaves out: the
@@ -172,8 +181,8 @@ class PIDGains:
             raise ValueError(f"tf_s must be >= 0 (s), got {tf_s!r}")
         a, alpha = model.a_per_s, model.alpha
         if task == "angle":
-            kd = ((1 + 2 * zeta) * w / a - 1) / alpha
-            kd = max(kd, 0.0) if own_damping else kd
+            added = (1 + 2 * zeta) * w / a - 1  # the damping the rate feedback adds, per a
+            kd = added / alpha if added > 0 or not own_damping else 0.0
             kp = (1 + 2 * zeta) * w * w / (a * alpha)
             ki = w**3 / (a * alpha)
             k_ff = 0.0
@@ -181,11 +190,11 @@ class PIDGains:
             tt = math.sqrt(ti * max(kd / kp, 0.0)) or ti
         else:
             kd = 0.0
-            kp = (2 * zeta * w / a - 1) / alpha
-            kp = max(kp, 0.0) if own_damping else kp
+            added = 2 * zeta * w / a - 1
+            kp = added / alpha if added > 0 or not own_damping else 0.0
             ki = w * w / (a * alpha)
             k_ff = 1.0 / alpha
-            tt = abs(kp) / ki or 1.0 / w
+            tt = abs(kp / ki) or 1.0 / w
         return cls(kp, ki, kd, k_ff, -model.theta_bar_deg, tf_s, tt, w, zeta, model)
 
 
@@ -230,8 +239,8 @@ class PIDController:
         """The anti-windup factor ``min(Δt/T_t, 1)/k_i`` of ``gains``: a tracking time
         shorter than the control step (a rate loop placed near the open-loop pole, where
         ``k_p`` nears 0) would overcorrect the integral each step and diverge; at most one
-        step resets it fully."""
-        return min(self._dt / gains.tt_s, 1.0) / gains.ki if gains.ki > 0 else 0.0
+        step resets it fully.  Of ``k_i``'s sign, which is α's."""
+        return min(self._dt / gains.tt_s, 1.0) / gains.ki if gains.ki else 0.0
 
     @classmethod
     def for_env(
