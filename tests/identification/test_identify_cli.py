@@ -197,22 +197,23 @@ def test_single_step_recording_is_a_clear_error(
     )
     path = tmp_path / "one.csv"
     save_recording(rec, path)
-    # Every method refuses it in one line (output error alone once met a NaN start point).
-    for method in ("paper", "output-error"):
+    # The step methods refuse it in one line (output error once met a NaN start point): the
+    # paper's for want of steps, output error for a rate that follows the fin with no lag.
+    for method, why in (("paper", "at least two"), ("output-error", "no lag of the roll rate")):
         assert main(["identify", str(path), "--mc-runs", "0", "--method", method]) == 2
         err = capsys.readouterr().err
-        assert "one-step" in err and "at least two" in err and err.count("\n") == 1
+        assert "one-step" in err and why in err and err.count("\n") == 1
     db = tmp_path / "x.sqlite"
     assert main(["db", "add", str(path), "--db", str(db), "--method", "output-error"]) == 2
-    assert "at least two" in capsys.readouterr().err and not db.exists()
+    assert "no lag of the roll rate" in capsys.readouterr().err and not db.exists()
 
 
 def test_a_method_that_cannot_fit_a_recording_says_so_and_the_others_run(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Doublets have no held fin steps: the paper's method (and output-error, which starts
-    from the first step) refuse them in one line each, ml (which reads no steps) fits them;
-    when every method asked refuses, the first one's line is the error."""
+    """Doublets have no held fin steps: the paper's method refuses them in one line, ml
+    (which reads no steps) fits them; when every method asked refuses, the first one's line
+    is the error."""
     rec = tmp_path / "doublets.csv"
     tunnel = ["tunnel", "--schedule", "doublets", "--steps", "8", "--dwell-min", "2"]
     argv = [*tunnel, "--dwell-max", "4", "--lead", "2", "--log-dt", "0.01", "--gyro-noise", "2"]
