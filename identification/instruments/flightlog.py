@@ -29,6 +29,12 @@ equivalent fin angle grows without bound) -- with
 * optionally a descent past apogee (``descent``): the rocket falls
   tail-first, the flow over its fins reversed and with it their torque --
   outside the flight model, which fits the ascent only;
+* optionally a flight computer's rate loop on the fins (``--loop-gain``), as real
+  roll-controlled flights are flown: the command is the excitation plus the gain times
+  minus the gyro's rate read ``--loop-delay`` earlier, saturated at the fins' ``--stops``
+  (``--schedule none``: the loop alone); flown, like the tunnel's, one logging interval at
+  a time by the reference integrator (:func:`identification.instruments.reference.fly_loop`,
+  the gain and damping per fine step) and stated in ``loop.*`` metadata;
 * flight sensors: a rate gyro with the multiplicative noise of eq. 52, an
   additive floor and a constant bias, optionally an encoder-like quantised
   angle; the airspeed and altitude of the profile (format 1.1), the altitude
@@ -51,7 +57,11 @@ from numpy.typing import ArrayLike
 
 from identification.instruments.reference import (
     Effects,
+    GyroReader,
+    LoopRun,
+    RateLoop,
     fine_steps,
+    fly_loop,
     gust_factor,
     gust_stream,
     simulate_reference,
@@ -61,6 +71,7 @@ from identification.instruments.tunnel import (
     Turbulence,
     check_dwells,
     check_rocket,
+    loop_items,
     rocket_params,
     rocket_setting,
     synthetic_recording,
@@ -142,11 +153,44 @@ class FlightLogSpec:
     servo_rate: float = setting(
         Servo().rate_limit_dps, "servo rate limit (eq. 23)", gt=0.0, le=10_000.0, unit="°/s"
     )
+    schedule: Literal["staircase", "none"] = setting(
+        "staircase",
+        "the excitation: a random fin staircase (--fin-range, --dwell-min, --dwell-max), or "
+        "none (0° throughout, only under --loop-gain). Under --loop-gain it is added to the "
+        "loop's command",
+    )
     fin_range: float = setting(
         20.0, "staircase levels are uniform in ±this", gt=0.5, le=40.0, unit="°"
     )
     dwell_min: float = setting(0.1, "shortest staircase dwell", gt=0.0, le=60.0, unit="s")
     dwell_max: float = setting(0.5, "longest staircase dwell", gt=0.0, le=60.0, unit="s")
+    loop_gain: float = setting(
+        0.0,
+        "a proportional roll-rate loop on the fins (a flight computer's on its canards), run "
+        "at the logging rate: fin command = excitation + this × (0 - the gyro's rate read "
+        "--loop-delay earlier), saturated at --stops (0: open loop, the excitation alone; the "
+        "sign of --alpha damps the roll, the other drives it)",
+        ge=-10.0,
+        le=10.0,
+        unit="°/(°/s)",
+    )
+    loop_delay: float = setting(
+        0.02,
+        "the loop's delay (sensor and computation): it reads the gyro (its noise, floor and "
+        "bias included; the true rate with --no-gyro) from this long before each command, to "
+        "the integrator's step (1 ms)",
+        ge=0.0,
+        le=0.5,
+        unit="s",
+    )
+    stops: float = setting(
+        Servo().range_deg,
+        "the fins' mechanical stops: the command saturates at ±this (the logged command is "
+        "the saturated one)",
+        ge=2.0,
+        le=Servo().range_deg,
+        unit="°",
+    )
     turbulence: Literal["tunnel", "dryden"] = setting(
         "tunnel",
         "turbulence: the tunnel's u_d process flown (Taylor, amplitude V_ref/V), or the "
@@ -211,6 +255,11 @@ class FlightLogSpec:
         if self.no_gyro and self.encoder_counts == 0:
             raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
+        if self.schedule == "none" and not self.closed_loop:
+            raise SettingError(
+                "schedule",
+                "none leaves the fins at 0° without a loop: give --loop-gain, or a schedule",
+            )
         try:  # the name only: reading and simulating the ascent is the flight's work
             check_ascent_name(self.ascent, self.descent)
         except ValueError as exc:
@@ -221,6 +270,19 @@ class FlightLogSpec:
                 "needs --turbulence tunnel (a Dryden log ends where the airspeed falls back "
                 "below --v-ref)",
             )
+
+    @property
+    def closed_loop(self) -> bool:
+        """Whether a rate loop flies the fins (``loop_gain`` not 0)."""
+        return self.loop_gain != 0.0
+
+    def rate_loop(self) -> RateLoop:
+        """The rate loop of this flight (its gain 0 in open loop)."""
+        return RateLoop(float(self.loop_gain), float(self.loop_delay), float(self.stops))
+
+    def servo(self) -> Servo:
+        """The servo of this flight: its rate limit, the fins' stops its range."""
+        return Servo(rate_limit_dps=self.servo_rate, range_deg=float(self.stops))
 
     def scaling(self) -> AirspeedScaling:
         """The truth's airspeed scaling (``n``, ``m``)."""
@@ -301,9 +363,23 @@ def _metadata(
     params: RollParams,
     scaling: AirspeedScaling,
     servo: Servo,
+    flown: LoopRun | None,
 ) -> list[tuple[str, object]]:
-    """A virtual flight's metadata: the command, the flight, the truth and the sensors."""
+    """A virtual flight's metadata: the command, the flight, the loop (``flown``, None in
+    open loop), the truth and the sensors.  The fins' range (``truth.fin_range_deg``) is
+    stated where it is not the eq. 23 servo's, which a log of the servo's rate alone implies
+    (:meth:`~identification.recordings.recording.Recording.fin_range`), and under a loop."""
     effects = spec.effects
+    loop: list[tuple[str, object]] = []
+    if flown is not None:
+        sensor = "the true roll rate" if spec.no_gyro else "roll_rate_dps"
+        loop = [
+            ("flight.schedule", spec.schedule),
+            *loop_items(spec.rate_loop(), flown.delay_s, sensor, "flight.schedule"),
+        ]
+    fins: list[tuple[str, object]] = []
+    if flown is not None or servo.range_deg != Servo().range_deg:
+        fins.append(("truth.fin_range_deg", servo.range_deg))
     meta: list[tuple[str, object]] = [
         ("notes", "virtual flight (synthetic data with known ground truth)"),
         ("command", spec.command()),
@@ -311,12 +387,14 @@ def _metadata(
         ("flight.ascent", profile.source),
         ("flight.start_s", round(start, 9)),
         ("flight.apogee_s", round(profile.apogee_s, 9)),
+        *loop,
         *truth_items(spec.model, params),
         ("truth.v_ref_mps", spec.v_ref),
         ("truth.rho_ref_kgm3", ISA_SEA_LEVEL_DENSITY_KGM3),
         ("truth.torque_exponent", scaling.torque_exponent),
         ("truth.damping_exponent", scaling.damping_exponent),
         ("truth.servo_rate_dps", servo.rate_limit_dps),
+        *fins,
         ("truth.turbulence", "tunnel-flown" if spec.turbulence == "tunnel" else "dryden"),
     ]
     if spec.descent > 0.0:
@@ -360,7 +438,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         (unless ``no_gyro``), the optional ``fin_deg`` and ``roll_deg``,
         ``airspeed_mps``, ``altitude_m`` (unless ``no_altitude``) and the
         ground-truth ``ud_true_deg``; the metadata carries the truth and the
-        exact command.
+        exact command (and, under a loop, the controller: ``loop.*``).
 
     Raises
     ------
@@ -372,17 +450,7 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     rng_schedule, rng_turbulence, rng_sensor = (np.random.default_rng(c) for c in children)
     profile, start, end, time = _logged(spec)
     n = time.size - 1
-    steps = math.ceil((end - start) / spec.dwell_min) + 1
-    schedule = FinSchedule.staircase(
-        rng_schedule,
-        steps,
-        range_deg=spec.fin_range,
-        dwell_s=(spec.dwell_min, spec.dwell_max),
-        lead_s=LEAD_S,
-        min_step_deg=min(5.0, spec.fin_range),
-        grid_s=spec.log_dt,
-    )
-    command = schedule.command(time - start)
+    excitation = _excitation(spec, time - start, end - start, rng_schedule)
     scaling = spec.scaling()
 
     def true_scales(t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -403,32 +471,48 @@ def run_flight(spec: FlightLogSpec) -> Recording:
     )
     u_d = _turbulence(spec, profile, time, np.asarray(gain_mid), rng_turbulence)
     params = spec.params()
-    servo = Servo(rate_limit_dps=spec.servo_rate)
+    servo = spec.servo()
     effects = spec.effects
-    if effects.any:  # a rocket outside the model: the reference integrator, its own grid
+    if effects.any:  # the turbulence's intensity wanders (a no-op unless --gust-sd)
         u_d = u_d * gust_factor(u_d.size, spec.log_dt, effects, gust_stream(spec.seed))
-        per, fine_h = fine_steps(spec.log_dt)
+    per, fine_h = fine_steps(spec.log_dt)
+    gyro: FloatArray | None = None
+    flown: LoopRun | None = None
+    if spec.closed_loop or effects.any:  # the reference integrator, the scales per fine step
         fine_gain, fine_damping = true_scales(start + fine_h * (np.arange(n * per) + 0.5))
-        ref = simulate_reference(
-            params, spec.log_dt, command[:-1], u_d, effects,
-            rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
-            rate0_dps=float(params.steady_rate(command[0], u_d[0]) * gain[0]),  # as below
+    if spec.closed_loop:  # the fins under the rate loop
+        flown = fly_loop(
+            params, effects, spec.rate_loop(), excitation, u_d, spec.log_dt,
+            rate_limit_dps=servo.rate_limit_dps, u_start_deg=float(u_d[0]),
+            gyro=None if spec.no_gyro else _gyro(spec, n, rng_sensor),
             gain=fine_gain, damping=fine_damping,
         )  # fmt: skip
-        fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
+        command, fin, rate, angle, gyro = (
+            flown.command, flown.fin, flown.rate, flown.angle, flown.gyro
+        )  # fmt: skip
     else:
-        sim = simulate_roll(
-            params,
-            spec.log_dt,
-            command[:-1],
-            u_d,
-            servo=servo,
-            substeps=spec.substeps,
-            t0_s=float(time[0]),
-            gain=gain,
-            damping=damping,
-        )
-        fin, rate, angle = sim.fin_deg, sim.rate_dps, sim.angle_deg
+        command = np.asarray(np.clip(excitation, -spec.stops, spec.stops), dtype=float)
+        if effects.any:  # a rocket outside the model: the reference integrator, its own grid
+            ref = simulate_reference(
+                params, spec.log_dt, command[:-1], u_d, effects,
+                rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
+                rate0_dps=float(params.steady_rate(command[0], u_d[0]) * gain[0]),  # as below
+                gain=fine_gain, damping=fine_damping,
+            )  # fmt: skip
+            fin, rate, angle = ref.fin_deg, ref.rate_dps, ref.angle_deg
+        else:
+            sim = simulate_roll(
+                params,
+                spec.log_dt,
+                command[:-1],
+                u_d,
+                servo=servo,
+                substeps=spec.substeps,
+                t0_s=float(time[0]),
+                gain=gain,
+                damping=damping,
+            )
+            fin, rate, angle = sim.fin_deg, sim.rate_dps, sim.angle_deg
     columns: dict[str, FloatArray] = {"fin_cmd_deg": command}
     if spec.measured_fin:
         columns["fin_deg"] = fin
@@ -436,12 +520,14 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         resolution = 360.0 / spec.encoder_counts
         columns["roll_deg"] = np.floor(angle / resolution + 1e-9) * resolution
     if not spec.no_gyro:
-        eps = rng_sensor.standard_normal((2, rate.size))
-        columns["roll_rate_dps"] = (
-            (1.0 + spec.gyro_noise / 100.0 * eps[0]) * rate
-            + spec.gyro_floor * eps[1]
-            + spec.gyro_bias
-        )
+        if gyro is None:
+            eps = rng_sensor.standard_normal((2, rate.size))
+            gyro = (
+                (1.0 + spec.gyro_noise / 100.0 * eps[0]) * rate
+                + spec.gyro_floor * eps[1]
+                + spec.gyro_bias
+            )
+        columns["roll_rate_dps"] = gyro
     at = profile.at(time)
     columns["airspeed_mps"] = np.asarray(at.airspeed_mps)
     if not spec.no_altitude:
@@ -449,8 +535,45 @@ def run_flight(spec: FlightLogSpec) -> Recording:
         columns["altitude_m"] = np.asarray(at.altitude_m) - pad
     columns["ud_true_deg"] = np.append(u_d, u_d[-1])
 
-    meta = _metadata(spec, profile, start, params, scaling, servo)
+    meta = _metadata(spec, profile, start, params, scaling, servo, flown)
     return synthetic_recording(spec.default_name(), time, meta, columns)
+
+
+def _excitation(
+    spec: FlightLogSpec, since_s: FloatArray, span_s: float, rng: np.random.Generator
+) -> FloatArray:
+    """The excitation at each sample, ``since_s`` after the log's start (``span_s`` long):
+    the staircase (from ``rng``), or 0° (``none``)."""
+    if spec.schedule == "none":
+        return np.zeros(since_s.size)
+    steps = math.ceil(span_s / spec.dwell_min) + 1
+    schedule = FinSchedule.staircase(
+        rng,
+        steps,
+        range_deg=spec.fin_range,
+        dwell_s=(spec.dwell_min, spec.dwell_max),
+        lead_s=LEAD_S,
+        min_step_deg=min(5.0, spec.fin_range),
+        grid_s=spec.log_dt,
+    )
+    return np.asarray(schedule.command(since_s))
+
+
+def _gyro(spec: FlightLogSpec, n: int, rng: np.random.Generator) -> GyroReader:
+    """The flight's gyro as the loop reads it: eq. 52's noise, the floor and the bias, from
+    the sensor stream -- the ``n + 1`` logged readings' draws first (the open loop's), then
+    those of the controller's own readings between samples."""
+    eps_log = rng.standard_normal((2, n + 1))
+    eps_own = rng.standard_normal((2, n + 1))
+    noise = spec.gyro_noise / 100.0
+
+    def read(rate: float, k: int, own: bool) -> float:
+        eps = eps_own if own else eps_log
+        return float(
+            (1.0 + noise * eps[0, k]) * rate + spec.gyro_floor * eps[1, k] + spec.gyro_bias
+        )
+
+    return read
 
 
 def truth_reference(recording: Recording) -> FlightReference:

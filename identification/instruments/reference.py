@@ -26,13 +26,15 @@ every effect off the two agree to within 1e-3 °/s on the paper's run;
 ``tests/identification/test_reference.py``).  The virtual tunnel
 (:mod:`identification.instruments.tunnel`) and the flight recorder
 (:mod:`identification.instruments.flightlog`, the gain and damping per step) write their truth with
-it when an effect is on; ``benchmarks/closed_loop.py`` flies it in closed loop.
+it when an effect is on, and fly their rate loop on it (:func:`fly_loop`);
+``benchmarks/closed_loop.py`` flies it in closed loop.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
 
 import numba
 import numpy as np
@@ -46,11 +48,16 @@ __all__ = [
     "QUADRATIC_RATE_DPS",
     "STATE_COLUMNS",
     "Effects",
+    "GyroReader",
+    "LoopRun",
+    "RateLoop",
     "ReferenceRun",
     "advance",
     "fine_steps",
+    "fly_loop",
     "gust_factor",
     "gust_stream",
+    "loop_start",
     "simulate_reference",
 ]
 
@@ -286,16 +293,24 @@ def advance(
     *,
     rate_limit_dps: float,
     fin_range_deg: float,
+    gain: ArrayLike | None = None,
+    damping: ArrayLike | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """One command held over ``len(u_d_deg)`` fine steps of ``h_s`` (one ``u_d`` each):
     ``state`` (:data:`STATE_COLUMNS`) advanced in place; the rate and angle at every fine
     step edge (the first is the start) -- the closed-loop truth of the benchmarks steps the
-    rocket this way."""
+    rocket this way.  ``gain`` and ``damping`` multiply ``α`` and ``a(θ)`` per fine step (the
+    rocket in flight; default ones, the rocket as ``params`` states it)."""
     u = np.ascontiguousarray(u_d_deg, dtype=np.float64)
     command = np.full(u.size, float(command_deg))
-    ones = np.ones(u.size)
+    scale = [
+        np.ones(u.size)
+        if x is None
+        else np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (u.size,)))
+        for x in (gain, damping)
+    ]
     _, rate, angle = _integrate(
-        command, u, 1, h_s, rocket_tuple(params, effects), ones, ones, rate_limit_dps,
+        command, u, 1, h_s, rocket_tuple(params, effects), scale[0], scale[1], rate_limit_dps,
         fin_range_deg, effects.servo_lag_s, effects.backlash_deg, state,
     )  # fmt: skip
     return rate, angle
@@ -378,4 +393,151 @@ def simulate_reference(
         angle_deg=np.interp(seen, steps, angle),
         true_rate_dps=rate[::per].copy(),
         true_angle_deg=angle[::per].copy(),
+    )
+
+
+#: A rate gyro as a loop reads it: ``read(rate, k, own)``, the reading of the roll rate
+#: ``rate`` (°/s) at logging sample ``k`` -- ``own`` False for the reading the log holds,
+#: True for the controller's own reading at another instant (with its own noise).
+GyroReader = Callable[[float, int, bool], float]
+
+
+@dataclass(frozen=True)
+class RateLoop:
+    """A flight computer's proportional roll-rate loop on the fins, run at the logging
+    rate: the command ``clip(e + gain·(0 − rate read delay_s before), ±stops_deg)``, held
+    until the next sample (``e`` the excitation); the fins' stops are the servo's range."""
+
+    gain: float
+    delay_s: float
+    stops_deg: float
+
+
+@dataclass(frozen=True)
+class LoopRun:
+    """A closed-loop run at the logging times: the saturated command, the fin, the roll
+    rate and angle as the sensors see them, the gyro's readings (None without a gyro), and
+    the loop's delay as flown (a whole number of the integrator's steps)."""
+
+    command: FloatArray
+    fin: FloatArray
+    rate: FloatArray
+    angle: FloatArray
+    gyro: FloatArray | None
+    delay_s: float
+
+
+def _reading(fine: FloatArray, position: float) -> float:
+    """The value of ``fine`` (one per fine step edge) at a fractional ``position``, from the
+    edges on either side (only the one below where it falls on an edge)."""
+    i = int(position)
+    fraction = position - i
+    if fraction == 0.0:
+        return float(fine[i])
+    return float(fine[i] + fraction * (fine[i + 1] - fine[i]))
+
+
+def loop_start(
+    params: RollParams, excitation_deg: float, u_mean_deg: float, gain: float, stops: float
+) -> float:
+    """The fin at which the loop holds the rocket steady for a held excitation and mean
+    turbulence: the root of ``θ = clip(e - K·v(θ), ±stops)``, ``v(θ)`` the steady rate
+    (one root where ``α·K`` > 0, the loop damping the roll; one of them where it drives it)."""
+
+    def excess(theta: float) -> float:
+        rate = float(params.steady_rate(theta, u_mean_deg))
+        return theta - min(max(excitation_deg - gain * rate, -stops), stops)
+
+    lo, hi = -stops, stops  # excess(lo) <= 0 <= excess(hi): a root lies between
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if excess(mid) > 0.0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+def fly_loop(
+    params: RollParams,
+    effects: Effects,
+    loop: RateLoop,
+    excitation_deg: FloatArray,
+    u_d_deg: FloatArray,
+    dt_s: float,
+    *,
+    rate_limit_dps: float,
+    u_start_deg: float,
+    gyro: GyroReader | None,
+    gain: ArrayLike | None = None,
+    damping: ArrayLike | None = None,
+) -> LoopRun:
+    """Fly the rocket under the rate ``loop``, one logging interval of ``dt_s`` at a time
+    through the reference integrator (:func:`advance`: RK4 on its fine grid, the servo's
+    rate limit and the stops as its range, the effects' lag and backlash).
+
+    At each logging time ``t_k`` (``k`` = 0 .. n, ``excitation_deg`` holding ``e_k``) the
+    controller reads the gyro as it read the rocket ``loop.delay_s`` earlier -- on the fine
+    grid, the delay rounded to a whole number of fine steps, the effects' sensor latency on
+    top as for the logged gyro -- and commands ``clip(e_k + K·(0 - reading), ±stops)``, held
+    until ``t_{k+1}`` through ``u_d_deg[k]``.  A reading the log holds (a delay of whole
+    logging intervals) is that logged reading, noise and all; a reading at another instant
+    is ``gyro``'s own (``gyro`` None: the true rate, noise-free).  ``gain`` and ``damping``
+    (shape ``(n·per,)``, per fine step: :func:`fine_steps`) scale ``α`` and ``a(θ)`` as in
+    flight; default ones.  Before the run the rocket was steady under the loop at the first
+    fine step's gain, through ``u_start_deg`` (:func:`loop_start`)."""
+    n = excitation_deg.size - 1
+    per, h = fine_steps(dt_s)
+    scales = [
+        None if x is None else np.broadcast_to(np.asarray(x, dtype=np.float64), (n * per,))
+        for x in (gain, damping)
+    ]
+    delay_steps = round(loop.delay_s / h)
+    logged, between = divmod(delay_steps, per)  # between == 0: a reading the log holds
+    lag = effects.latency_s / h  # the sensors' latency, in fine steps
+    # The steady start with the rocket's quadratic damping, the effects' where they add it.
+    steady = replace(
+        params, quadratic_damping=effects.quadratic_damping or params.quadratic_damping
+    )
+    if scales[0] is not None and n > 0:  # in flight: the rocket at the first fine step
+        steady = steady.scaled(float(scales[0][0]), 1.0)
+    stops = loop.stops_deg
+    fin0 = loop_start(steady, float(excitation_deg[0]), u_start_deg, loop.gain, stops)
+    rate0 = float(steady.steady_rate(fin0, u_start_deg))
+    state = np.array([fin0, fin0, fin0, rate0, 0.0])
+    rate_fine = np.empty(n * per + 1)
+    angle_fine = np.empty(n * per + 1)
+    rate_fine[0], angle_fine[0] = rate0, 0.0
+    fin, seen, reads, command = (np.empty(n + 1) for _ in range(4))
+    fin[0] = fin0
+
+    def read(rate: float, k: int, own: bool) -> float:
+        return rate if gyro is None else gyro(rate, k, own)
+
+    for k in range(n + 1):
+        seen[k] = _reading(rate_fine, max(float(per * k) - lag, 0.0))
+        reads[k] = read(seen[k], k, False)
+        if between == 0 and k >= logged:
+            reading = reads[k - logged]
+        else:
+            position = max(float(per * k - delay_steps) - lag, 0.0)
+            reading = read(_reading(rate_fine, position), k, True)
+        law = excitation_deg[k] + loop.gain * (0.0 - reading)
+        command[k] = min(max(law, -stops), stops)
+        if k == n:  # the last command is logged, never flown
+            break
+        span = slice(k * per, (k + 1) * per)
+        rate, angle = advance(
+            state, params, effects, command[k], np.full(per, u_d_deg[k]), h,
+            rate_limit_dps=rate_limit_dps, fin_range_deg=stops,
+            gain=None if scales[0] is None else scales[0][span],
+            damping=None if scales[1] is None else scales[1][span],
+        )  # fmt: skip
+        rate_fine[span.start : span.stop + 1] = rate
+        angle_fine[span.start : span.stop + 1] = angle
+        fin[k + 1] = state[2]
+    angle_seen = np.array([_reading(angle_fine, max(float(per * k) - lag, 0.0))
+                           for k in range(n + 1)])  # fmt: skip
+    return LoopRun(
+        command, fin, seen, angle_seen, None if gyro is None else reads, round(delay_steps * h, 9)
     )

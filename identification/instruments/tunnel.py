@@ -63,7 +63,7 @@ import functools
 import math
 import shlex
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -73,8 +73,10 @@ from scipy import signal, stats
 from identification import paper
 from identification.instruments.reference import (
     Effects,
-    advance,
-    fine_steps,
+    GyroReader,
+    LoopRun,
+    RateLoop,
+    fly_loop,
     gust_factor,
     gust_stream,
     simulate_reference,
@@ -100,6 +102,7 @@ __all__ = [
     "TunnelSpec",
     "Turbulence",
     "fin_schedule",
+    "loop_items",
     "run_tunnel",
     "synthetic_recording",
     "truth_items",
@@ -678,6 +681,10 @@ class TunnelSpec:
         """Whether a rate loop flies the fins (``loop_gain`` not 0)."""
         return self.loop_gain != 0.0
 
+    def rate_loop(self) -> RateLoop:
+        """The rate loop of this run (its gain 0 in open loop)."""
+        return RateLoop(float(self.loop_gain), float(self.loop_delay), float(self.stops))
+
     def turbulence_model(self) -> Turbulence:
         """Turbulence process of this run."""
         return Turbulence(
@@ -848,7 +855,8 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
         command, fin, rate, angle, gyro = (
             flown.command, flown.fin, flown.rate, flown.angle, flown.gyro
         )  # fmt: skip
-        loop = _loop_items(spec, flown.delay_s)
+        sensor = "roll_rate_dps" if spec.gyro_noise is not None else "the true roll rate"
+        loop = loop_items(spec.rate_loop(), flown.delay_s, sensor, "tunnel.schedule")
     else:
         command = _saturated(excitation, spec)
         # The rocket starts at its steady roll rate for the initial fin angle.
@@ -919,67 +927,24 @@ def run_tunnel(spec: TunnelSpec) -> Recording:
     return synthetic_recording(spec.default_name(), time, meta, columns)
 
 
-def _loop_items(spec: TunnelSpec, delay_s: float) -> list[tuple[str, object]]:
-    """The rate loop as the flight computer knows it, as a recording's ``loop.*`` metadata
+def loop_items(
+    loop: RateLoop, delay_s: float, sensor: str, excitation: str
+) -> list[tuple[str, object]]:
+    """A rate loop as the flight computer knows it, as a recording's ``loop.*`` metadata
     (free text to the recording format): its gain, its delay as flown, the fins' stops, the
-    rate it reads and its law."""
-    sensor = "roll_rate_dps" if spec.gyro_noise is not None else "the true roll rate"
+    rate it reads (``sensor``) and its law, the excitation the metadata line ``excitation``
+    names; the tunnel's and the flight recorder's."""
     return [
-        ("loop.gain", float(spec.loop_gain)),
+        ("loop.gain", float(loop.gain)),
         ("loop.delay_s", delay_s),
-        ("loop.stops_deg", float(spec.stops)),
+        ("loop.stops_deg", float(loop.stops_deg)),
         ("loop.rate_sensor", sensor),
         (
             "loop.law",
             "fin_cmd_deg(t) = clip(excitation(t) + gain * (0 - rate read at t - delay_s), "
-            "-stops_deg, stops_deg), held until the next sample; excitation: tunnel.schedule",
+            f"-stops_deg, stops_deg), held until the next sample; excitation: {excitation}",
         ),
     ]
-
-
-@dataclass(frozen=True)
-class _Flown:
-    """A closed-loop run at the logging times: the saturated command, the fin, the roll
-    rate and angle as the sensors see them, the gyro's readings (None without a gyro), and
-    the loop's delay as flown (a whole number of the integrator's steps)."""
-
-    command: FloatArray
-    fin: FloatArray
-    rate: FloatArray
-    angle: FloatArray
-    gyro: FloatArray | None
-    delay_s: float
-
-
-def _reading(fine: FloatArray, position: float) -> float:
-    """The value of ``fine`` (one per fine step edge) at a fractional ``position``, from the
-    edges on either side (only the one below where it falls on an edge)."""
-    i = int(position)
-    fraction = position - i
-    if fraction == 0.0:
-        return float(fine[i])
-    return float(fine[i] + fraction * (fine[i + 1] - fine[i]))
-
-
-def _loop_start(
-    params: RollParams, excitation_deg: float, u_mean_deg: float, gain: float, stops: float
-) -> float:
-    """The fin at which the loop holds the rocket steady for a held excitation and mean
-    turbulence: the root of ``θ = clip(e - K·v(θ), ±stops)``, ``v(θ)`` the steady rate
-    (one root where ``α·K`` > 0, the loop damping the roll; one of them where it drives it)."""
-
-    def excess(theta: float) -> float:
-        rate = float(params.steady_rate(theta, u_mean_deg))
-        return theta - min(max(excitation_deg - gain * rate, -stops), stops)
-
-    lo, hi = -stops, stops  # excess(lo) <= 0 <= excess(hi): a root lies between
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        if excess(mid) > 0.0:
-            hi = mid
-        else:
-            lo = mid
-    return 0.5 * (lo + hi)
 
 
 def _fly_loop(
@@ -988,71 +953,24 @@ def _fly_loop(
     u_d: FloatArray,
     params: RollParams,
     rng_sensor: np.random.Generator,
-) -> _Flown:
-    """Fly the rocket under the rate loop, one logging interval at a time through the
-    reference integrator (:func:`~identification.instruments.reference.advance`: RK4 on its
-    fine grid, the servo's rate limit and range, the effects' lag and backlash).
+) -> LoopRun:
+    """Fly the tunnel's rocket under its rate loop (:func:`~identification.instruments.
+    reference.fly_loop`), its gyro's eq. 52 noise drawn from the sensor stream: one value
+    per logged reading, then one per reading of the controller's own; steady before the
+    run for the mean turbulence."""
+    gyro: GyroReader | None = None
+    if spec.gyro_noise is not None:
+        sd = spec.gyro_noise / 100.0
+        eps_log = rng_sensor.standard_normal(excitation.size)
+        eps_own = rng_sensor.standard_normal(excitation.size)
 
-    At each logging time ``t_k`` the controller reads the gyro as it read the rocket
-    ``loop_delay`` earlier -- on the fine grid, the delay rounded to a whole number of fine
-    steps, the effects' sensor latency on top as for the logged gyro -- and commands
-    ``clip(e_k + K·(0 - reading), ±stops)``, held until ``t_{k+1}``.  A reading the log
-    holds (a delay of whole logging intervals) is that logged reading, noise and all; a
-    reading at another instant has its own eq. 52 noise.  Before the run the rocket was
-    steady under the loop (:func:`_loop_start`)."""
-    effects = spec.effects
-    servo = spec.servo()
-    n = excitation.size - 1
-    per, h = fine_steps(spec.log_dt)
-    delay_steps = round(spec.loop_delay / h)
-    logged, between = divmod(delay_steps, per)  # between == 0: a reading the log holds
-    lag = effects.latency_s / h  # the sensors' latency, in fine steps
-    # The steady start with the rocket's quadratic damping, the effects' where they add it.
-    steady = replace(
-        params, quadratic_damping=effects.quadratic_damping or params.quadratic_damping
-    )
-    fin0 = _loop_start(
-        steady, float(excitation[0]), spec.turbulence_mean, spec.loop_gain, spec.stops
-    )
-    rate0 = float(steady.steady_rate(fin0, spec.turbulence_mean))
-    state = np.array([fin0, fin0, fin0, rate0, 0.0])
-    rate_fine = np.empty(n * per + 1)
-    angle_fine = np.empty(n * per + 1)
-    rate_fine[0], angle_fine[0] = rate0, 0.0
-    noisy = spec.gyro_noise is not None
-    sd = (spec.gyro_noise or 0.0) / 100.0
-    eps_log = rng_sensor.standard_normal(n + 1) if noisy else np.zeros(n + 1)
-    eps_own = rng_sensor.standard_normal(n + 1) if noisy else np.zeros(n + 1)
-    fin, seen, gyro, command = (np.empty(n + 1) for _ in range(4))
-    fin[0] = fin0
+        def gyro(rate: float, k: int, own: bool) -> float:
+            return (1.0 + sd * (eps_own if own else eps_log)[k]) * rate  # eq. 52
 
-    def read(rate: float, eps: float) -> float:
-        return (1.0 + sd * eps) * rate if noisy else rate  # eq. 52
-
-    for k in range(n + 1):
-        seen[k] = _reading(rate_fine, max(float(per * k) - lag, 0.0))
-        gyro[k] = read(seen[k], eps_log[k])
-        if between == 0 and k >= logged:
-            reading = gyro[k - logged]
-        else:
-            position = max(float(per * k - delay_steps) - lag, 0.0)
-            reading = read(_reading(rate_fine, position), eps_own[k])
-        loop = excitation[k] + spec.loop_gain * (0.0 - reading)
-        command[k] = min(max(loop, -spec.stops), spec.stops)
-        if k == n:  # the last command is logged, never flown
-            break
-        rate, angle = advance(
-            state, params, effects, command[k], np.full(per, u_d[k]), h,
-            rate_limit_dps=servo.rate_limit_dps, fin_range_deg=servo.range_deg,
-        )  # fmt: skip
-        rate_fine[k * per : (k + 1) * per + 1] = rate
-        angle_fine[k * per : (k + 1) * per + 1] = angle
-        fin[k + 1] = state[2]
-    angle_seen = np.array([_reading(angle_fine, max(float(per * k) - lag, 0.0))
-                           for k in range(n + 1)])  # fmt: skip
-    return _Flown(
-        command, fin, seen, angle_seen, gyro if noisy else None, round(delay_steps * h, 9)
-    )
+    return fly_loop(
+        params, spec.effects, spec.rate_loop(), excitation, u_d, spec.log_dt,
+        rate_limit_dps=spec.servo_rate, u_start_deg=spec.turbulence_mean, gyro=gyro,
+    )  # fmt: skip
 
 
 def truth_items(model: str, params: RollParams) -> list[tuple[str, object]]:
