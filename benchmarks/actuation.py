@@ -25,15 +25,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import multiprocessing
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+from _pool import run_jobs
 from _records import emit
 from _truths import TRUTHS, spec_of
-from tqdm.auto import tqdm
 
 from identification.instruments.tunnel import run_tunnel
 from identification.methods.actuation import LEVEL, identify_actuation
@@ -103,14 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{'no measured fin' if ns.no_fin else 'measured fin'}; each term at p < {LEVEL:g}"
     )
     began = time.perf_counter()
-    if ns.jobs == 1:
-        results = [one(*job) for job in tqdm(jobs, desc="recordings", unit="rec")]
-    else:
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(ns.jobs, mp_context=context) as pool:
-            results = list(
-                tqdm(pool.map(one, *zip(*jobs, strict=True)), total=len(jobs), desc="recordings")
-            )
+    results = run_jobs(one, jobs, ns.jobs, "recordings", "rec")
     print(f"{time.perf_counter() - began:.0f} s\n")
     header = text_table(COLUMNS, [])[0]
     print(header)

@@ -184,6 +184,63 @@ def _emit_fit(
                 )
 
 
+def torque_regression(rec: Recording, window: Sequence[float]) -> dict[str, float]:
+    """An independent fit of a flight's fin torque per dynamic pressure, outside the
+    project's roll model: over ``window`` (s), the gyro's rate differentiated (a
+    Savitzky-Golay filter over 0.1 s) regressed by ordinary least squares on ``q·δ``,
+    ``ρV·p`` and ``q`` (ISA density at the logged altitude), with Newey-West standard
+    errors (statsmodels, lags over 0.25 s).  The coefficient of ``q·δ`` is the torque per
+    degree and pascal, (°/s²)/(°·Pa): the flight method's ``torque_per_q`` where the torque
+    grows as ``q``."""
+    import statsmodels.api as sm
+    from scipy.signal import savgol_filter
+
+    from identification.recordings.flight import site_elevation
+    from rocketroll_physics.atmosphere import isa
+
+    time_s = np.asarray(rec.time_s)
+    keep = (time_s >= window[0]) & (time_s <= window[1])
+    rate = np.asarray(rec.roll_rate_dps, dtype=float)
+    fin = np.asarray(rec.fin_deg if rec.fin_deg is not None else rec.fin_cmd_deg, dtype=float)
+    speed = np.asarray(rec.airspeed_mps, dtype=float)
+    height = (
+        np.asarray(rec.altitude_m, dtype=float) + site_elevation(rec)
+        if rec.altitude_m is not None
+        else np.zeros_like(speed)
+    )
+    rho = np.asarray(isa(height).density_kgm3, dtype=float)
+    q = 0.5 * rho * speed**2
+    span = max(5, round(0.1 / rec.dt_s) | 1)
+    accel = savgol_filter(rate, span, 2, deriv=1, delta=rec.dt_s)
+    design = np.column_stack([q * fin, rho * speed * rate, q])[keep]
+    lags = max(1, round(0.25 / rec.dt_s))
+    found = sm.OLS(accel[keep], design).fit(cov_type="HAC", cov_kwds={"maxlags": lags})
+    return {
+        "torque_per_q": float(found.params[0]),
+        "se": float(found.bse[0]),
+        "r2": float(found.rsquared),
+        "n": int(keep.sum()),
+    }
+
+
+def _torque_lines(rec: Recording, found: ModelFit) -> list[str]:
+    """The flight fit's fin torque per dynamic pressure (its interval) against the
+    independent regression's (:func:`torque_regression`) on the window it fitted."""
+    interval = (found.metrics.get("intervals") or {}).get("torque_per_q")
+    if not interval or rec.roll_rate_dps is None:
+        return []
+    ols = torque_regression(rec, found.metrics["fitted_s"])
+    low, high = ols["torque_per_q"] - 1.96 * ols["se"], ols["torque_per_q"] + 1.96 * ols["se"]
+    covers = interval["low"] <= low and high <= interval["high"]
+    return [
+        f"fin torque per q: {interval['estimate']:.4g} [{interval['low']:.4g}, "
+        f"{interval['high']:.4g}] ({interval['method']}); independent least squares on the "
+        f"same window {ols['torque_per_q']:.4g} ± {ols['se']:.2g} (R² {ols['r2']:.3f}, "
+        f"{ols['n']} samples): the fit's interval {'covers' if covers else 'does not cover'} "
+        "its 95 % interval"
+    ]
+
+
 def report(
     rec: Recording, methods: Sequence[str], given: dict[str, float] | None, where: str = ""
 ) -> None:
@@ -231,6 +288,11 @@ def report(
                 print(f"  {'':22}error: {_errors(p, model, truth)}")
             for reason in a["reasons"]:
                 print(f"  {'':22}{reason}")
+            for finding in (a.get("diagnosis") or {}).get("findings", ()):
+                print(f"  {'':22}why: {finding['text']}")
+            if rec.is_flight:
+                for line in _torque_lines(rec, found):
+                    print(f"  {'':22}{line}")
             _emit_fit(f"{where}, {method}" if where else method, model, found, truth, rec.is_flight)
         print(f"  {'':22}({seconds:.2f} s for both models)")
 

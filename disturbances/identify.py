@@ -25,6 +25,7 @@ from disturbances.cli import (
 )
 from identification.methods import default_methods, traits
 from identification.methods.pipeline import IdentifyOptions
+from identification.recordings.recording import fin_range_setting
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 
@@ -90,6 +91,11 @@ class IdentifyArgs:
         "fin column), a sensor latency and a damping growing with the roll rate (from the roll "
         "response), each admitted at p < 0.01 (a tunnel run; about 30 s a 100-Hz minute)",
     )
+    fin_range_deg: float | None = fin_range_setting(
+        "your fins' range, ± this (where the canards stop), over the recording's "
+        "rig.fin_range_deg: the fit adequacy measures u_d against it (unstated: the log's "
+        "largest |fin|)"
+    )
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
@@ -129,6 +135,7 @@ def identify(args: IdentifyArgs) -> int:
     from identification.reports.tables import (
         adequacy_table,
         flight_table,
+        interval_table,
         methods_table,
         parameter_table,
     )
@@ -139,7 +146,8 @@ def identify(args: IdentifyArgs) -> int:
 
         check_output(args.db, "--db", kind="sqlite")  # before the work, as every output
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
-    recording = load_recording(args.recording)
+    recording = load_recording(args.recording).stating_fin_range(args.fin_range_deg)
+    fin_range = recording.fin_range()
     together = [load_recording(path) for path in args.together]
     methods = args.method or list(default_methods(recording))
     if args.report is not None and "paper" in methods and recording.is_flight:
@@ -169,6 +177,7 @@ def identify(args: IdentifyArgs) -> int:
         }
         if found is not None:
             data["actuation"] = {t.name: asdict(t) for t in found.terms}
+        data.update(fin_range.as_dict())  # what |u_d|/range is against, and whence
         outputs[args.json] = json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n"
     tunnel_fits = {method: f for method, f in fits.items() if not is_flight_method(method)}
     if args.report is not None and tunnel_fits:
@@ -223,6 +232,14 @@ def identify(args: IdentifyArgs) -> int:
     if tunnel or flown:
         print("\nfit adequacy (the model without u_d against the raw rate, the fin in u_d)")
         print(adequacy_table({**tunnel, **flown}))
+        print(f"|u_d|/range: against the fins' {fin_range}{fin_range.hint}")
+        intervals = interval_table({**tunnel, **flown})
+        if intervals:
+            print(
+                "\n95 % intervals (hessian: ±1.96 SE; profile: the profile likelihood's, where "
+                "the Hessian says nothing, or for all with --intervals profile)"
+            )
+            print(intervals)
     rig = recording.rig_with(options.rig)
     if not rig.ideal:
         print(f"\nthe rig assumed (stated: the recording's rig.* lines or the flags): "

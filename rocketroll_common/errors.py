@@ -29,6 +29,10 @@ class SettingError(UsageError):
         self.setting = setting
         self.problem = problem
 
+    def __reduce__(self) -> tuple[type[SettingError], tuple[str, str]]:
+        """Pickled with its own arguments (an error raised in a worker process crosses back)."""
+        return type(self), (self.setting, self.problem)
+
 
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C, with what the interrupted work left behind (e.g. a resumable checkpoint).

@@ -42,3 +42,18 @@ def test_every_exception_is_in_the_hierarchy(name: str) -> None:
     ]
     for cls in defined:
         assert issubclass(cls, RocketrollError) or cls is Interrupted, cls
+
+
+def test_errors_with_their_own_arguments_cross_a_process_boundary() -> None:
+    """An error raised in a worker process is pickled back to the parent: one whose
+    ``__init__`` takes its own arguments must pickle with them (a benchmark's process pool
+    once died on a RecordingError it could not unpickle)."""
+    import pickle
+
+    from identification.recordings.recording import RecordingError
+    from rocketroll_common.errors import SettingError
+
+    for error in (RecordingError("a.csv", 3, "bad"), SettingError("stops", "too small")):
+        back = pickle.loads(pickle.dumps(error))
+        assert type(back) is type(error) and str(back) == str(error)
+        assert vars(back) == vars(error)

@@ -14,7 +14,8 @@ On those this module fits it once for all: the negative log-likelihood the
 optimiser reads (:func:`negloglike`, :data:`OUTSIDE` where it is not finite),
 L-BFGS-B from each start (:func:`maximise`), the Hessian
 (:func:`numerical_hessian`), the covariance of the estimates
-(:func:`covariance`) and their standard errors (:func:`standard_errors`), and
+(:func:`covariance`) and their standard errors (:func:`standard_errors`), profile-
+likelihood intervals where the Hessian says nothing (:func:`profile_interval`), and
 posterior draws of the states (:func:`posterior_states`).  What every fit of the
 roll model gives back is a :class:`StateSpaceFit`.
 
@@ -36,7 +37,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from identification.estimation.statespace import LinearGaussian, Smoothed, simulation_smoother
 from identification.model import Disturbance, RollParams
@@ -44,15 +45,20 @@ from rocketroll_common.arrays import FloatArray, readonly_array
 
 __all__ = [
     "OUTSIDE",
+    "PROFILE_ENDS",
     "Likelihood",
     "ParameterMap",
+    "ProfileInterval",
     "StateSpaceFit",
     "covariance",
+    "hessian_holds",
+    "hessian_interval",
     "maximise",
     "negloglike",
     "negloglike_at",
     "numerical_hessian",
     "posterior_states",
+    "profile_interval",
     "select_order",
     "standard_errors",
 ]
@@ -113,13 +119,18 @@ def _threads() -> ThreadPoolExecutor:
 
 
 def _value_and_gradient(model: Likelihood, x: FloatArray) -> tuple[float, FloatArray]:
-    """−log-likelihood and its forward-difference gradient, the ``k + 1`` evaluations
-    spread over threads (what scipy's ``approx_grad`` does, one after another)."""
+    """−log-likelihood and its forward-difference gradient (:func:`_fd_value_and_gradient`)."""
+    return _fd_value_and_gradient(functools.partial(negloglike, model), x)
+
+
+def _fd_value_and_gradient(
+    f: Callable[[FloatArray], float], x: FloatArray
+) -> tuple[float, FloatArray]:
+    """``f`` and its forward-difference gradient, the ``k + 1`` evaluations spread over
+    threads (what scipy's ``approx_grad`` does, one after another)."""
     steps = _FD_STEP * np.maximum(1.0, np.abs(x))
     points = [x] + [x + step * unit for step, unit in zip(steps, np.eye(x.size), strict=True)]
-    values = np.fromiter(
-        _threads().map(lambda point: negloglike(model, point), points), float, len(points)
-    )
+    values = np.fromiter(_threads().map(f, points), float, len(points))
     return float(values[0]), (values[1:] - values[0]) / steps
 
 
@@ -129,30 +140,38 @@ def maximise(model: Likelihood, starts: Sequence[dict[str, Any]]) -> optimize.Op
 
     The gradient is forward differences: on threads where the map is unbounded, scipy's
     where it has bounds (which steps back from a bound)."""
-    bounds = model.parameters.bounds
-    objective: Callable[[FloatArray], Any]
-    if bounds is None:
-        objective, jac = functools.partial(_value_and_gradient, model), True
-    else:
-        objective, jac = functools.partial(negloglike, model), None
-        low = [-np.inf if lo is None else lo for lo, _ in bounds]
-        high = [np.inf if hi is None else hi for _, hi in bounds]
     best: optimize.OptimizeResult | None = None
+    objective = functools.partial(negloglike, model)
     for start in starts:
-        x0 = model.parameters.vector(start)
-        result = optimize.minimize(
-            objective,
-            x0 if bounds is None else np.clip(x0, low, high),
-            jac=jac,
-            method="L-BFGS-B",
-            bounds=bounds,
-            options={"maxiter": MAX_ITERATIONS},
-        )
+        result = _minimise(objective, model.parameters.vector(start), model.parameters.bounds)
         if best is None or result.fun < best.fun:
             best = result
     if best is None:
         raise ValueError("maximise needs at least one start")
     return best
+
+
+def _minimise(
+    f: Callable[[FloatArray], float],
+    x0: FloatArray,
+    bounds: Sequence[tuple[float | None, float | None]] | None,
+) -> optimize.OptimizeResult:
+    """L-BFGS-B on ``f`` from ``x0`` (clipped into ``bounds``): the gradient on threads
+    (:func:`_fd_value_and_gradient`) where unbounded, scipy's where bounded."""
+    if bounds is None:
+        objective: Callable[[FloatArray], Any] = functools.partial(_fd_value_and_gradient, f)
+        return optimize.minimize(
+            objective, x0, jac=True, method="L-BFGS-B", options={"maxiter": MAX_ITERATIONS}
+        )
+    low = [-np.inf if lo is None else lo for lo, _ in bounds]
+    high = [np.inf if hi is None else hi for _, hi in bounds]
+    return optimize.minimize(
+        f,
+        np.clip(x0, low, high),
+        method="L-BFGS-B",
+        bounds=list(bounds),
+        options={"maxiter": MAX_ITERATIONS},
+    )
 
 
 def numerical_hessian(f: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
@@ -211,6 +230,184 @@ def standard_errors(
     return se, {
         f"{names[i]}~{names[j]}": float(corr[i, j]) for i in range(k) for j in range(i + 1, k)
     }
+
+
+#: How each end of a :class:`ProfileInterval` is set.
+PROFILE_ENDS = {
+    "likelihood": "the profile likelihood falls to the level there: the data determine this side",
+    "range": "the parameter's range (or the model's edge) ends first, within the level: "
+    "the data do not exclude the range's end",
+    "open": "the profile likelihood never falls to the level within the search: "
+    "the data do not bound this side",
+}
+
+
+@dataclass(frozen=True)
+class ProfileInterval:
+    """A profile-likelihood interval: the values of one parameter the data do not reject
+    at ``level`` (twice the log-likelihood within the χ²₁ quantile of the best, every other
+    parameter re-fitted at each value).
+
+    ``low_end`` / ``high_end`` say how each end is set (:data:`PROFILE_ENDS`);
+    ``low``/``high`` are the range's end there, or, where open, the farthest value tried.
+    ``gain`` is the most the log-likelihood rose along the profile above the fit's (a
+    positive ``gain`` beyond a few hundredths: the fit was not at the maximum).
+    ``evaluations``: the likelihood evaluations spent."""
+
+    estimate: float
+    low: float
+    high: float
+    low_end: str
+    high_end: str
+    level: float
+    gain: float
+    evaluations: int
+
+    @property
+    def determined(self) -> bool:
+        """Both ends set by the likelihood: the data bound the parameter on both sides."""
+        return self.low_end == "likelihood" and self.high_end == "likelihood"
+
+    def as_dict(self, to_natural: Callable[[float], float] | None = None) -> dict[str, Any]:
+        """The interval as the JSON reports it (``method: profile``), its values mapped by
+        ``to_natural`` (increasing: the coordinate profiled was, say, a log)."""
+        convert = to_natural or float
+        return {
+            "method": "profile",
+            "estimate": convert(self.estimate),
+            "low": convert(self.low),
+            "high": convert(self.high),
+            "low_end": self.low_end,
+            "high_end": self.high_end,
+            "level": self.level,
+            "determined": self.determined,
+        }
+
+
+def hessian_interval(
+    estimate: float, se: float, level: float = 0.95, *, log: bool = False
+) -> dict[str, Any]:
+    """The Hessian's interval ``estimate ± z·se`` in :meth:`ProfileInterval.as_dict`'s form
+    (``method: hessian``); ``log``: ``estimate`` and ``se`` are a positive parameter's log
+    and its SE, the interval ``exp(estimate ± z·se)``."""
+    z = float(stats.norm.ppf(0.5 + 0.5 * level))
+    convert = math.exp if log else float
+    return {
+        "method": "hessian",
+        "estimate": convert(estimate),
+        "low": convert(estimate - z * se),
+        "high": convert(estimate + z * se),
+        "low_end": "likelihood",
+        "high_end": "likelihood",
+        "level": level,
+        "determined": True,
+    }
+
+
+#: How precisely a profile interval's end is found, in ``step``\ s (standard errors).
+_PROFILE_XTOL = 0.01
+
+
+def hessian_holds(
+    interval: dict[str, Any], limits: tuple[float, float], *, signed: bool = False
+) -> bool:
+    """Whether the Hessian's interval can stand for the likelihood's: it stays within the
+    parameter's ``limits``, and, for a ``signed`` parameter (a gain, whose sign is the
+    finding), it does not reach zero.  Where it cannot, the quadratic that the Hessian reads
+    has left the region the data describe: the profile likelihood says instead."""
+    low, high = interval["low"], interval["high"]
+    inside = limits[0] <= low and high <= limits[1]
+    return bool(inside and not (signed and low <= 0.0 <= high))
+
+
+def profile_interval(
+    f: Callable[[FloatArray], float],
+    point: FloatArray,
+    index: int,
+    *,
+    step: float,
+    limits: tuple[float, float] = (-math.inf, math.inf),
+    level: float = 0.95,
+    bounds: Sequence[tuple[float | None, float | None]] | None = None,
+    max_doublings: int = 8,
+) -> ProfileInterval:
+    """The profile-likelihood interval of coordinate ``index`` of a fit at ``point``.
+
+    ``f`` is the −log-likelihood over the whole vector (:data:`OUTSIDE` where no model);
+    at each trial value of the coordinate every other one is re-fitted (L-BFGS-B from the
+    nearest profile point, under ``bounds``).  Each side is searched outwards from where a
+    quadratic profile of standard error ``step`` would cross the level, the stride growing
+    up to ``max_doublings`` times and stopping at ``limits`` (the parameter's physical
+    range); the crossing is then found by Brent's method, to 1 % of ``step``.  Unlike the
+    Hessian's ``±1.96·SE``, this needs no positive definite curvature at the optimum and is
+    not symmetric: it says where the data stop telling the parameter, on each side."""
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"step must be positive and finite, got {step!r}")
+    x_hat = np.asarray(point, dtype=float)
+    centre = float(x_hat[index])
+    crit = 0.5 * float(stats.chi2.ppf(level, 1))
+    nuisance = None if bounds is None else [b for i, b in enumerate(bounds) if i != index]
+    best = f(x_hat)
+    lowest = [best]
+    count = [1]
+
+    def profile(c: float, warm: FloatArray) -> tuple[float, FloatArray]:
+        def held(rest: FloatArray) -> float:
+            return f(np.insert(rest, index, c))
+
+        rest = np.delete(warm, index)
+        if rest.size == 0:
+            value, x = held(rest), np.array([c])
+            count[0] += 1
+        else:
+            result = _minimise(held, rest, nuisance)
+            value, x = float(result.fun), np.insert(result.x, index, c)
+            count[0] += int(result.nfev) * (rest.size + 1)
+        lowest.append(value)
+        return value, x
+
+    def side(sign: float) -> tuple[float, str]:
+        inside, warm = centre, x_hat
+        edge = limits[1] if sign > 0 else limits[0]
+        size = math.sqrt(2.0 * crit) * step  # where a quadratic profile crosses the level
+        for _ in range(max_doublings + 1):
+            c = centre + sign * size
+            at_edge = sign * (c - edge) >= 0.0
+            c = edge if at_edge else c
+            value, x = profile(c, warm)
+            if value - best > crit:
+                try:
+                    found = optimize.brentq(
+                        lambda v, start=warm: profile(v, start)[0] - best - crit,
+                        inside,
+                        c,
+                        xtol=_PROFILE_XTOL * step,
+                        maxiter=40,
+                    )
+                except ValueError:  # re-fitted at the inside point, the level is met there
+                    found = inside
+                # Where the far point is no model, the crossing may be the model's edge (a
+                # jump), not the likelihood's fall: the level must be met there.
+                met = value < OUTSIDE or abs(profile(found, warm)[0] - best - crit) < 0.1 * crit
+                return float(found), "likelihood" if met else "range"
+            inside, warm = c, x
+            if at_edge:
+                return c, "range"
+            size *= 1.5 if size < 4.0 * step else 2.0  # near the level: small strides
+        return inside, "open"
+
+    low, low_end = side(-1.0)
+    high, high_end = side(1.0)
+    return ProfileInterval(
+        estimate=centre,
+        low=low,
+        high=high,
+        low_end=low_end,
+        high_end=high_end,
+        level=level,
+        gain=max(0.0, best - min(lowest)),
+        evaluations=count[0],
+    )
 
 
 _Fit = TypeVar("_Fit")

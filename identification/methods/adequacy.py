@@ -60,12 +60,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
 from identification.compiled import interval_maps
+from identification.methods.diagnosis import diagnose
 from identification.methods.pipeline import Measurements
 from identification.methods.statistics import decorrelation_stride, ols_newey_west
 from identification.model import Disturbance, RollParams, Servo, damping, linear_recurrence
@@ -196,6 +197,7 @@ class Adequacy:
     fin_delay_z: float = math.nan
     intensity_ratio: float = math.nan
     suspected: tuple[str, ...] = ()
+    diagnosis: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-safe (NaN as None)."""
@@ -394,6 +396,10 @@ def _ahead(
     return k, r_squared(ahead, rate[k:])
 
 
+#: The methods that read the fin as independent of the turbulence (not consistent in a loop).
+_OPEN_LOOP_METHODS = ("paper", "output-error")
+
+
 def _method_findings(found: Findings, metrics: Mapping[str, Any], method: str) -> float:
     """What a method's own figures say against its fit (innovations that are not white; the
     paper's steps without a damping or a steady state); the innovations' largest |ACF|."""
@@ -448,7 +454,10 @@ def adequacy(
     method : str
         The method's name (``paper`` adds its assumptions).
     servo : Servo, optional
-        The fins' range (default: eq. 23's servo, ±40°).
+        A servo whose range the caller states as the fins' range ``u_d`` is measured against
+        (default: the recording's,
+        :meth:`~identification.recordings.recording.Recording.fin_range`: stated, else the
+        log's largest ``|fin|``); the reason names where it comes from.
     """
     rec = inputs.recording
     metrics = metrics or {}
@@ -473,7 +482,7 @@ def adequacy(
     lag = fin + params.theta_bar_deg - v / params.alpha
     share, share_p = _fin_share(u, fin, params.theta_bar_deg, lag)
     p99 = float(np.percentile(np.abs(u), 99.0))
-    fin_range = (servo or Servo()).range_deg
+    fins = rec.fin_range(None if servo is None else servo.range_deg)
     alpha_se = (metrics.get("std_errors") or {}).get("alpha")
     if alpha_se is None:
         rel_se = math.nan  # the method reports none
@@ -497,14 +506,28 @@ def adequacy(
             True,
         )
     check(
-        p99 / fin_range,
+        p99 / fins.deg,
         UD_RANGE,
         f"u_d reaches {p99:.3g}° (99th percentile), "
-        f"{p99 / fin_range:.2g} of the fins' ±{fin_range:g}°",
+        f"{p99 / fins.deg:.2g} of the fins' {fins}{fins.hint}",
         True,
     )
     check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
     innovation_acf = _method_findings(found, metrics, method)
+    # The fin as logged: the controller's command where there is one (a loop acts on it).
+    logged = rec.fin_cmd_deg if rec.fin_cmd_deg is not None else rec.fin_deg
+    why = diagnose(
+        np.asarray(logged if logged is not None else fin, dtype=float)[: fin.size],
+        rate[: fin.size],
+        dt,
+        fins,
+        turbulence_sd_deg=metrics.get("u_d_sd_deg") or float(np.std(u)),
+    )
+    if "feedback" in why.kinds and method in _OPEN_LOOP_METHODS:
+        found.bad.append(
+            f"the fin follows the roll rate (a closed loop): {method} is not consistent on "
+            "closed-loop data, for the fin carries the turbulence through the loop; use ml"
+        )
     # What the model lacks, named: the fin's delay, the turbulence's wandering intensity.
     ar = metrics.get("ar")
     if ar is None:  # an AR(1) of u_d itself where the method fits no turbulence model
@@ -525,7 +548,7 @@ def adequacy(
         fin_share_p=share_p,
         fin_error_ratio=fin_error,
         ud_p99_deg=p99,
-        ud_range_fraction=p99 / fin_range,
+        ud_range_fraction=p99 / fins.deg,
         alpha_rel_se=rel_se,
         innovation_acf=innovation_acf,
         verdict=verdict,
@@ -534,4 +557,5 @@ def adequacy(
         fin_delay_z=delay_z,
         intensity_ratio=ratio,
         suspected=tuple(suspected),
+        diagnosis=why.as_dict(),
     )

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.methods import ModelFit
+from identification.methods.diagnosis import Diagnosis, diagnose
 from identification.methods.flightfit import (
     EXPONENT_BOUNDS,
     LOG_BOUND,
@@ -38,9 +39,10 @@ from identification.methods.flightfit import (
     resimulated,
 )
 from identification.methods.steps import IdentificationError
-from identification.model import RollParams, Servo
+from identification.model import RollParams
 from identification.recordings.flight import mach_numbers, mean_airspeed
-from identification.recordings.recording import Recording, RecordingError
+from identification.recordings.recording import FinRange, Recording, RecordingError
+from rocketroll_common.arrays import FloatArray
 from rocketroll_physics.atmosphere import ISA_SEA_LEVEL_DENSITY_KGM3
 from rocketroll_physics.scaling import EQ_4_8, MACH_LIMIT, TUNNEL_AIRSPEED_MPS, AirspeedScaling
 
@@ -73,7 +75,7 @@ ON_BOUND_FACTOR = 2.0
 _SENSOR_NOISE = ("gyro_rel", "gyro_abs", "angle_sd")
 
 
-def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, Any]:
+def flight_adequacy(result: FlightFit, fin_range: FinRange | None = None) -> dict[str, Any]:
     """How far a flight fit can be trusted, with the tunnel's figures and limits
     (:mod:`identification.methods.adequacy`) where they apply, and the flight's own failures.
 
@@ -83,7 +85,10 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
     * **no standard errors** (the likelihood's Hessian not positive definite at the fit):
       unreliable;
     * the model **without** ``u_d`` against the measured rate (R², along the flight's
-      scales), ``u_d`` against the fins' range and α's relative standard error, with the
+      scales), ``u_d`` against the fins' range (``fin_range``; default the fitted
+      recording's, :meth:`~identification.recordings.recording.Recording.fin_range`: stated,
+      else the log's largest ``|fin|``, named in the reason) and α's relative standard
+      error, with the
       tunnel's weak and unreliable limits (:data:`~identification.methods.adequacy.RATE_R2`,
       :data:`~identification.methods.adequacy.UD_RANGE`,
       :data:`~identification.methods.adequacy.ALPHA_REL_SE`);
@@ -95,7 +100,8 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
       the airspeed by the model itself).
 
     Returns the figures the adequacy table prints (``rate_r2``, ``ud_range_fraction``,
-    ``alpha_rel_se``; the tunnel's ``ahead_r2`` and ``fin_share`` are None), ``on_bound``,
+    ``alpha_rel_se``; the tunnel's ``ahead_r2`` and ``fin_share`` are None), the fins' range
+    and where it comes from (``fin_range_deg``, ``fin_range_source``), ``on_bound``,
     ``fin_delay_s``, ``fin_delay_z``, ``suspected``, ``verdict`` and ``reasons``,
     JSON-safe.
     """
@@ -133,15 +139,15 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
     rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) and params.alpha else math.nan
     rate_r2 = model_only_r2(result)
     p99 = float(np.percentile(np.abs(result.u_d_deg), 99.0))
-    fin_range = (servo or Servo()).range_deg
+    fins = inputs.recording.fin_range() if fin_range is None else fin_range
 
     found.fin_unit(inputs.recording)
     found.rate_r2(rate_r2)
     found.check(
-        p99 / fin_range,
+        p99 / fins.deg,
         UD_RANGE,
-        f"u_d reaches {p99:.3g}° (99th percentile), {p99 / fin_range:.2g} of the fins' "
-        f"±{fin_range:g}°: model error, not turbulence",
+        f"u_d reaches {p99:.3g}° (99th percentile), {p99 / fins.deg:.2g} of the fins' "
+        f"{fins}: model error, not turbulence{fins.hint}",
         True,
     )
     if math.isfinite(rel_se):
@@ -154,6 +160,8 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         u, fin, inputs.dt_s, inputs.rate_limit_dps is None, None
     )
 
+    why = _diagnosis(inputs, fin, u, fins)
+
     def safe(value: float) -> float | None:
         return value if math.isfinite(value) else None
 
@@ -163,7 +171,8 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         "ahead_r2": None,
         "fin_share": None,
         "ud_p99_deg": p99,
-        "ud_range_fraction": p99 / fin_range,
+        "ud_range_fraction": p99 / fins.deg,
+        **fins.as_dict(),
         "alpha_rel_se": safe(rel_se),
         "on_bound": on_bound,
         "fin_delay_s": safe(delay_s),
@@ -171,7 +180,35 @@ def flight_adequacy(result: FlightFit, servo: Servo | None = None) -> dict[str, 
         "suspected": suspected,
         "verdict": found.verdict,
         "reasons": list(found.reasons),
+        "diagnosis": why.as_dict(),
     }
+
+
+def _diagnosis(inputs: FlightInputs, fin: FloatArray, u: FloatArray, fins: FinRange) -> Diagnosis:
+    """:func:`~identification.methods.diagnosis.diagnose` on a flight: the regressors of its
+    one-step equation are the fin's torque ``q·δ``, the damping's ``ρV·p`` and a constant
+    torque ``q`` (``q`` and ``ρV`` relative to the reference)."""
+    n = inputs.n
+    rec = inputs.recording
+    logged = rec.fin_cmd_deg if rec.fin_cmd_deg is not None else rec.fin_deg
+    if logged is not None:  # the fin as logged: a loop acts on the command
+        fin = np.asarray(logged, dtype=float)
+    speed = np.asarray(inputs.speed_ratio[::SUBSTEPS][:n], dtype=float)
+    density = np.asarray(inputs.density_ratio[::SUBSTEPS][:n], dtype=float)
+    q = density * speed**2
+    rate = np.asarray(measured_rate(inputs), dtype=float)[:n]
+    return diagnose(
+        fin[:n],
+        rate,
+        inputs.dt_s,
+        fins,
+        turbulence_sd_deg=float(np.std(u)),
+        regressors={
+            "q·δ (the fin's torque)": q * fin[:n],
+            "ρV·p (the damping)": density * speed * rate,
+            "q (a constant torque)": q,
+        },
+    )
 
 
 def longest_stretch(recording: Recording, keep: ArrayLike, why: str) -> Recording:
@@ -470,7 +507,12 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     # The constant model first: the θ-dependent one starts from its fit.
     for model in sorted(models, key=lambda m: m != "constant"):
         joint = identify_flights(
-            flights, model, constant=constant, scaling=scaling, gyro_bias=options.fit_gyro_bias
+            flights,
+            model,
+            constant=constant,
+            scaling=scaling,
+            gyro_bias=options.fit_gyro_bias,
+            intervals=options.intervals,
         )
         if model == "constant":
             constant = joint
@@ -486,9 +528,10 @@ def flight_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "turbulence_sd_deg": result.turbulence_sd_deg,
             "turbulence_tau_s": result.turbulence_tau_s,
             "std_errors": result.std_errors,
+            "intervals": result.intervals,
             "flights": len(flights),
             "fitted_with": [f.recording.name for f in flights[1:]],
-            "adequacy": flight_adequacy(result),
+            "adequacy": flight_adequacy(result, context.recording.fin_range()),
             "fitted_s": [float(inputs.recording.time_s[0]), float(inputs.recording.time_s[-1])],
             "supersonic_excluded_s": cut[0].supersonic_excluded_s,
             "descent_excluded_s": cut[0].descent_excluded_s,

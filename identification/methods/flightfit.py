@@ -53,7 +53,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -66,10 +66,13 @@ from identification.estimation import statespace
 from identification.estimation.likelihood import (
     StateSpaceFit,
     covariance,
+    hessian_holds,
+    hessian_interval,
     maximise,
     negloglike,
     numerical_hessian,
     posterior_states,
+    profile_interval,
     standard_errors,
 )
 from identification.estimation.statespace import LinearGaussian
@@ -600,6 +603,10 @@ class FlightFit(StateSpaceFit):
         (:func:`eq_4_8_test`), where they were measured.
     gyro_bias_dps : float or None
         The gyro's estimated constant bias, °/s.
+    intervals : dict
+        A 95 % interval of each reported parameter and of the fin torque per dynamic
+        pressure ``torque_per_q`` (:func:`flight_intervals`), each saying whether the
+        flight determines it.
     """
 
     turbulence_sd_deg: float
@@ -614,6 +621,7 @@ class FlightFit(StateSpaceFit):
     scaling_measured: bool = False
     eq_4_8_test: dict[str, Any] | None = None
     gyro_bias_dps: float | None = None
+    intervals: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def posterior_draws(self, size: int, seed: int = 0) -> FloatArray:
         """``size`` draws of ``u_d`` per sample interval from its posterior given the flight
@@ -834,6 +842,7 @@ def identify_flights(
     constant: Sequence[FlightFit] | None = None,
     scaling: AirspeedScaling | None = None,
     gyro_bias: bool = False,
+    intervals: str = "auto",
 ) -> list[FlightFit]:
     """One rocket from several flights: the joint maximum likelihood (the sum of each
     flight's Kalman-filter likelihood) of its parameters at the common reference, and of
@@ -849,6 +858,10 @@ def identify_flights(
 
     ``constant``: the constant model's fits to these flights (with the same
     ``scaling``), as the θ-dependent model's start (otherwise fitted first).
+
+    ``intervals``: ``auto`` (each parameter's 95 % interval the Hessian's where it is
+    positive definite, else the profile likelihood's) or ``profile`` (the profile
+    likelihood's for all): :func:`flight_intervals`.
 
     ``gyro_bias``: estimate a constant bias of the gyro (otherwise it is taken as 0).
     In flight alone it is weakly determined -- it trades against θ̄ where the airspeed
@@ -912,8 +925,11 @@ def identify_flights(
     nat = pmap.natural(best.x)
     params = _params(nat)
     assert params is not None
-    hess = numerical_hessian(functools.partial(negloglike, _Flights(flights, pmap)), best.x)
-    errors = _standard_errors(covariance(hess), pmap, params)
+    objective = functools.partial(negloglike, _Flights(flights, pmap))
+    cov = covariance(numerical_hessian(objective, best.x))
+    errors = _standard_errors(cov, pmap, params)
+    q_ref = 0.5 * flights[0].rho_ref_kgm3 * flights[0].v_ref_mps ** 2
+    found_intervals = flight_intervals(objective, pmap, best.x, cov, q_ref, intervals)
     fits = []
     for inputs in flights:
         loglike, rate, mean_w, sd_w, _ = _smoothed(inputs, nat)
@@ -940,6 +956,7 @@ def identify_flights(
                 scaling_measured=scaling is None,
                 eq_4_8_test=test,
                 gyro_bias_dps=nat["gyro_bias"] if held_map.gyro_bias else None,
+                intervals=found_intervals,
             )
         )
     return fits
@@ -972,6 +989,97 @@ def _standard_errors(
         shown: params.beta_bar_per_s * se[shown] if is_log else se[shown]
         for shown, is_log in reported
     }
+
+
+#: The physical range of the reported parameters' profiles (an asymmetry within a right
+#: angle of the fins' zero); the optimiser's bounds hold the others.
+_PROFILE_LIMITS = {"theta_bar": (-90.0, 90.0)}
+
+
+def flight_intervals(
+    objective: Callable[[FloatArray], float],
+    pmap: _FlightParameterMap,
+    x_hat: FloatArray,
+    cov: FloatArray | None,
+    q_ref: float,
+    mode: str = "auto",
+) -> dict[str, dict[str, Any]]:
+    """A 95 % interval of each reported parameter (:data:`_REPORTED`'s names) and of the
+    fin torque per dynamic pressure at the reference, ``torque_per_q = β̄₀·α₀/q``, the figure
+    that compares across windows and flights whatever their reference airspeed.
+
+    The Hessian's (``method: hessian``, the torque's by the delta method, a log-parameter's
+    on its log) where ``mode`` is ``auto``, its variance is positive and the interval holds
+    (:func:`~identification.estimation.likelihood.hessian_holds`: within the bounds, the
+    gain's and the torque's sign told); else the profile likelihood's
+    (:func:`~identification.estimation.likelihood.profile_interval`: in the optimiser's
+    coordinates, within their bounds; the torque profiled as a coordinate in place of α)."""
+    names = pmap.names
+    bounds = pmap.bounds
+    var = np.full(len(names), np.nan) if cov is None else np.diag(cov)
+    out: dict[str, dict[str, Any]] = {}
+    for name, (shown, is_log) in _REPORTED.items():
+        if name not in names:
+            continue
+        i = names.index(name)
+        estimate = float(x_hat[i])
+        se = math.sqrt(var[i]) if var[i] > 0 else math.nan
+        low, high = bounds[i]
+        limits = _PROFILE_LIMITS.get(
+            name, (-math.inf if low is None else low, math.inf if high is None else high)
+        )
+        convert = math.exp if is_log else float
+        if mode == "auto" and math.isfinite(se):
+            wald = hessian_interval(estimate, se, log=is_log)
+            natural = (convert(limits[0]), convert(limits[1])) if is_log else limits
+            if hessian_holds(wald, natural, signed=name == "alpha"):
+                out[shown] = wald
+                continue
+        step = se if math.isfinite(se) else 0.1 * max(abs(estimate), 0.1)
+        found = profile_interval(objective, x_hat, i, step=step, limits=limits, bounds=bounds)
+        out[shown] = found.as_dict(convert)
+    out["torque_per_q"] = _torque_interval(objective, pmap, x_hat, cov, q_ref, mode)
+    return out
+
+
+def _torque_interval(
+    objective: Callable[[FloatArray], float],
+    pmap: _FlightParameterMap,
+    x_hat: FloatArray,
+    cov: FloatArray | None,
+    q_ref: float,
+    mode: str,
+) -> dict[str, Any]:
+    """:func:`flight_intervals`' interval of ``β̄₀·α₀/q``: the coordinates with α replaced by
+    the torque ``T`` (``α = T·q/β̄₀``)."""
+    i_l, i_a = pmap.names.index("log_beta_bar"), pmap.names.index("alpha")
+    beta = math.exp(float(x_hat[i_l]))
+    torque = beta * float(x_hat[i_a]) / q_ref
+    gradient = np.zeros(x_hat.size)
+    gradient[i_l], gradient[i_a] = torque, beta / q_ref
+    var = math.nan if cov is None else float(gradient @ cov @ gradient)
+    if mode == "auto" and var > 0:
+        wald = hessian_interval(torque, math.sqrt(var))
+        if hessian_holds(wald, (-math.inf, math.inf), signed=True):
+            return wald
+
+    def to_x(y: FloatArray) -> FloatArray:
+        x = np.array(y, dtype=float)
+        x[i_a] = y[i_a] * q_ref / math.exp(y[i_l])
+        return x
+
+    y_hat = np.array(x_hat, dtype=float)
+    y_hat[i_a] = torque
+    step = math.sqrt(var) if var > 0 else 0.1 * abs(torque) or 1e-9
+    found = profile_interval(
+        lambda y: objective(to_x(y)),
+        y_hat,
+        i_a,
+        step=step,
+        bounds=pmap.bounds,
+        max_doublings=20,
+    )
+    return found.as_dict()
 
 
 def c_coefficients(

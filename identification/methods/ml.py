@@ -54,9 +54,12 @@ from identification.estimation.likelihood import (
     OUTSIDE,
     StateSpaceFit,
     covariance,
+    hessian_holds,
+    hessian_interval,
     maximise,
     numerical_hessian,
     posterior_states,
+    profile_interval,
     select_order,
     standard_errors,
 )
@@ -175,6 +178,44 @@ def _equation_error_start(data: RollData, inputs: Measurements) -> dict[str, Any
     return _starting_point(data, 1, c / (1.0 - e), d / c, damping, residual)
 
 
+#: Closed-loop starts: the loop's gain times the rocket's, α·K (a stabilising loop's is
+#: positive, and of order one), and the damping, 1/s.
+_LOOP_STARTS = ((0.5, 1.0), (1.5, 1.0), (1.5, 3.0), (4.0, 3.0))
+
+
+def _closed_loop_starts(data: RollData, inputs: Measurements) -> list[dict[str, Any]]:
+    """Starting points for a log flown under a rate loop (the fin follows the measured rate:
+    :func:`~identification.methods.diagnosis.feedback`), none otherwise.
+
+    There the line through rate against fin reads the loop, not the rocket: its slope is
+    ``−1/K`` (the wrong sign), and from it the optimiser stops where the fin does nothing
+    (α ≈ 0), a local optimum.  A loop that stabilises the rocket has ``α·K > 0`` of order
+    one: α is started at a few such products over the loop's gain ``K`` read off the log,
+    θ̄ from the mean rate and fin (``v̄ = α·(θ̄ + fin̄)``)."""
+    from identification.methods.diagnosis import feedback, looped
+
+    rec = inputs.recording
+    fin = np.asarray(inputs.theta_fine[:: data.per], dtype=float)
+    logged = rec.fin_cmd_deg if rec.fin_cmd_deg is not None else rec.fin_deg
+    rate = np.asarray(
+        rec.roll_rate_dps if rec.roll_rate_dps is not None else inputs.velocity_dps, dtype=float
+    )[: fin.size]
+    dt = float(np.median(np.diff(data.time_s)))
+    command = np.asarray(logged, dtype=float)[: fin.size] if logged is not None else fin
+    free = np.abs(command) < 0.995 * float(np.max(np.abs(command)))  # off the stops
+    loop = feedback(command, rate, dt, free)
+    gain = loop["gain"]
+    if not (looped(loop) and math.isfinite(gain) and abs(gain) > 1e-6):
+        return []
+    starts = []
+    for product, damping in _LOOP_STARTS:
+        alpha = product / gain
+        theta_bar = float(np.mean(rate)) / alpha - float(np.mean(fin))
+        residual = rate / alpha - fin - theta_bar
+        starts.append(_starting_point(data, 1, alpha, theta_bar, damping, residual))
+    return starts
+
+
 @dataclass(frozen=True, eq=False, kw_only=True)
 class MLFit(StateSpaceFit):
     """Result of :func:`maximum_likelihood` for one damping model: a
@@ -207,6 +248,10 @@ class MLFit(StateSpaceFit):
         (empty where the Hessian is not positive definite).
     orders : dict
         AIC of each AR order tried.
+    intervals : dict
+        A 95 % interval of each of the rocket's parameters (:func:`rocket_intervals`): the
+        Hessian's where it is positive definite, the profile likelihood's where it is not
+        (or for all, asked so), each saying whether the data determine it.
     nfev : int
         Likelihood evaluations (all orders).
     u_d_deg, u_d_sd_deg : ndarray, shape (n - 1,)
@@ -228,6 +273,7 @@ class MLFit(StateSpaceFit):
     correlations: dict[str, float]
     orders: dict[int, float]
     nfev: int
+    intervals: dict[str, dict[str, Any]] = field(default_factory=dict)
     _state_space: LinearGaussian = field(repr=False)
     _smoothed: Smoothed = field(repr=False)
 
@@ -292,6 +338,87 @@ def _rocket_estimates(info: _Information, model: str) -> tuple[dict[str, float],
     rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
     return standard_errors(info.cov, [rename.get(n, n) for n in info.rocket])
 
+
+#: The physical range of each rocket parameter its profile interval stops at: an
+#: asymmetry within a right angle of the fins' zero, a positive damping.
+_RANGES = {
+    "alpha": (-math.inf, math.inf),
+    "theta_bar": (-90.0, 90.0),
+    "alpha_bar": (-math.inf, math.inf),
+    "beta_bar": (0.0, math.inf),
+}
+
+
+def rocket_intervals(
+    data: RollData, model: str, nat: dict[str, Any], std_errors: dict[str, float], mode: str
+) -> dict[str, dict[str, Any]]:
+    """A 95 % interval for each of the rocket's parameters, by its reported name: the
+    Hessian's ``±1.96·SE`` (``method: hessian``) where ``mode`` is ``auto``, the SE is finite
+    and the interval holds (:func:`~identification.estimation.likelihood.hessian_holds`:
+    within the range, α's sign told), else the profile likelihood's
+    (:func:`~identification.estimation.likelihood.profile_interval`, ``method: profile``;
+    each end says whether the data, the parameter's range or nothing set it).
+
+    The profile is taken in the optimiser's coordinates (the θ model's damping as its
+    mid-range value and slope, where the re-fits converge), the parameter made one of them
+    by a linear change of basis."""
+    pmap = parameter_map(data, model, int(np.size(nat["ar"])), nat)
+    x_hat = pmap.vector(nat)
+    names = pmap.names
+    rocket = (
+        ("alpha", "theta_bar", "beta_bar")
+        if model == "constant"
+        else ("alpha", "theta_bar", "alpha_bar", "beta_bar")
+    )
+    rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
+    out: dict[str, dict[str, Any]] = {}
+    for name in rocket:
+        shown = rename.get(name, name)
+        estimate = float(nat[name])
+        se = std_errors.get(shown, math.nan)
+        if mode == "auto" and math.isfinite(se) and se > 0:
+            wald = hessian_interval(estimate, se)
+            if hessian_holds(wald, _RANGES[name], signed=name == "alpha"):
+                out[shown] = wald
+                continue
+        basis, index = _basis(names, name, pmap.pivot)
+        step = se if math.isfinite(se) and se > 0 else 0.1 * max(abs(estimate), 0.1)
+
+        def objective(y: FloatArray, m: FloatArray = basis) -> float:
+            return negloglike_natural(data, pmap.natural(m @ y))
+
+        found = profile_interval(
+            objective,
+            np.asarray(np.linalg.solve(basis, x_hat), dtype=np.float64),
+            index,
+            step=step,
+            limits=_RANGES[name],
+        )
+        out[shown] = found.as_dict()
+        if found.gain > _PROFILE_GAIN:
+            out[shown]["higher_likelihood_found"] = found.gain
+    return out
+
+
+def _basis(names: Sequence[str], name: str, pivot: float) -> tuple[FloatArray, int]:
+    """``(M, i)``: the optimiser's vector is ``M·y`` with ``y[i]`` the natural parameter
+    ``name`` (:class:`~identification.methods.rollspace.RollParameterMap`: ``ᾱ = slope/pivot``,
+    ``β̄ = a_mid − slope``)."""
+    basis = np.eye(len(names))
+    if name in names:  # alpha, theta_bar
+        return basis, names.index(name)
+    if name == "beta_bar" and "a" in names:
+        return basis, names.index("a")
+    mid, slope = names.index("a_mid"), names.index("slope")
+    if name == "alpha_bar":
+        basis[slope, slope] = pivot
+        return basis, slope
+    basis[mid, slope] = 1.0  # a_mid = β̄ + slope
+    return basis, mid
+
+
+#: Log-likelihood gain along a profile from which the fit is said not to be at the maximum.
+_PROFILE_GAIN = 0.05
 
 #: Step of the band's differences, in standard errors of each parameter.
 _BAND_STEP_SE = 0.1
@@ -385,10 +512,12 @@ class _Search:
 
         Where the first start's optimum disagrees with the one-step regression
         (:func:`_equation_error_start`), each is fitted from that second start too, and
-        its optimum kept where it is better by :data:`_START_GAIN`.
+        its optimum kept where it is better by :data:`_START_GAIN`; likewise from the
+        closed loop's starts where the fin follows the rate (:func:`_closed_loop_starts`).
         """
         start = _start(self.data, self.inputs, "constant", 1)
         second = _equation_error_start(self.data, self.inputs)
+        looped = _closed_loop_starts(self.data, self.inputs)
         floors = [0.0, _quiet_noise(self.data)] if self.data.has_gyro else [0.0]
         best = []
         for floor in floors:
@@ -398,9 +527,18 @@ class _Search:
                 if other[0] < found[0] - _START_GAIN:
                     found = other
             best.append(found)
-        if len(best) > 1 and best[0][0] - best[1][0] >= _FLOOR_GAIN * self.data.n:
-            return best[1]
-        return best[0]
+        chosen = (
+            best[1]
+            if len(best) > 1 and best[0][0] - best[1][0] >= _FLOOR_GAIN * self.data.n
+            else best[0]
+        )
+        for third in looped:  # with the gyro's noise the first fits chose
+            other = self._run(
+                "constant", 1, dict(third, gyro_floor=chosen[1].get("gyro_floor", 0.0))
+            )
+            if other[0] < chosen[0] - _START_GAIN:
+                chosen = other
+        return chosen
 
 
 def _disagree(data: RollData, found: dict[str, Any], other: dict[str, Any]) -> bool:
@@ -433,7 +571,7 @@ def _quiet_noise(data: RollData) -> float:
     return max(float(np.std(second[quiet])), 1e-3)
 
 
-def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
+def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str = "auto") -> MLFit:
     """The model's fit at the AR order of least AIC (orders tried upwards until AIC rises)."""
     check_model(model)
     data = search.data
@@ -457,6 +595,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER) -> MLFit:
         model,
         nat,
         parts,
+        intervals=rocket_intervals(data, model, nat, std_errors, intervals),
         loglike=-fun,
         aic=float(orders[best]),
         n_params=count_params(data, model, best, nat),
@@ -484,6 +623,7 @@ def _result(
     nfev: int,
     information: _Information | None = None,
     correlations: dict[str, float] | None = None,
+    intervals: dict[str, dict[str, Any]] | None = None,
 ) -> MLFit:
     """An :class:`MLFit` for parameters ``nat``: smoother, posterior ``u_d``; its band
     widened by the parameters' uncertainty where their ``information`` is given."""
@@ -512,6 +652,7 @@ def _result(
         orders=orders,
         converged=converged,
         nfev=nfev,
+        intervals=intervals or {},
         u_d_deg=readonly_array(u_mean),
         u_d_sd_deg=readonly_array(np.sqrt(u_var)),
         time_s=readonly_array(data.time_s),
@@ -616,7 +757,8 @@ def maximum_likelihood(
     MLFit
     """
     inputs = model_inputs(recording, model, options)
-    return _fit(_Search(prepare(inputs), inputs), model, max_order)
+    mode = (options or IdentifyOptions()).intervals
+    return _fit(_Search(prepare(inputs), inputs), model, max_order, mode)
 
 
 @dataclass(frozen=True)
@@ -853,7 +995,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     search = _Search(prepare(inputs), inputs)
     fits = []
     for model in models:
-        found = _fit(search, model)
+        found = _fit(search, model, intervals=context.options.intervals)
         beyond: dict[str, Any] = {}
         if context.options.fit_quadratic_damping:
             term = quadratic_search(inputs, model, search=search)
@@ -881,6 +1023,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "angle_noise_deg": found.angle_noise_deg,
             "std_errors": found.std_errors,
             "correlations": found.correlations,
+            "intervals": found.intervals,
             "aic_by_order": {str(k): v for k, v in found.orders.items()},
             "nfev": found.nfev,
             "converged": found.converged,

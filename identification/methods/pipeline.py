@@ -181,6 +181,13 @@ class IdentifyOptions:
         "a flight's airspeed scaling: measured (fin torque ∝ ρV^n, damping ∝ ρV^m, n and m "
         "estimated, eq. 4-8's n = 2, m = 1 tested) or eq-4-8 (held at the paper's)",
     )
+    intervals: Literal["auto", "profile"] = setting(
+        "auto",
+        "the ml and flight methods' 95 % parameter intervals: auto (the Hessian's ±1.96 SE "
+        "where it is positive definite, the profile likelihood's where it is not) or profile "
+        "(the profile likelihood's for every parameter: asymmetric, bounded by the "
+        "parameter's range; seconds more per model)",
+    )
     fit_gyro_bias: bool = setting(
         False,
         "a flight's identification estimates a constant gyro bias (weakly determined in "

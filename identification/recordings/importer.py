@@ -24,10 +24,12 @@ from typing import Any, Literal
 import numpy as np
 
 from identification.recordings.recording import (
+    FIN_RANGE_KEY,
     PLAUSIBLE_FIN_DEG,
     Recording,
     RecordingError,
     StatedRig,
+    fin_range_setting,
     parse_number,
     read_text,
     small_fins,
@@ -139,6 +141,10 @@ class ImportSettings:
     )
     notes: str | None = setting(None, "free-text notes stored in the metadata")
     rig: StatedRig = setting(default_factory=StatedRig, flatten=True)
+    fin_range_deg: float | None = fin_range_setting(
+        "your fins' range, ± this (where the canards stop), stored in the recording: "
+        "identification measures u_d against it (unstated: the log's largest |fin|)"
+    )
     split: Literal["train", "test"] | None = setting(
         None,
         "the database split the recording belongs to, stored in its metadata (default: "
@@ -359,6 +365,8 @@ def _import_metadata(
     if settings.notes:
         meta["notes"] = settings.notes
     meta.update(settings.rig.metadata())  # what the user states of the rig (format 1.2)
+    if settings.fin_range_deg is not None:
+        meta[FIN_RANGE_KEY] = repr(float(settings.fin_range_deg))
     if settings.split is not None:
         meta["split"] = settings.split
     return meta

@@ -31,7 +31,9 @@ A recording is a UTF-8 CSV file::
   ``rig.backlash_deg`` and ``rig.sensor_latency_s`` (what the user states of
   the fin's linkage and the roll sensors' latency, from bench tests or data
   sheets: :class:`identification.model.Rig`), used by identification and
-  replay.  A file with any of them says ``# format: rocketroll-recording/1.2``.
+  replay, and ``rig.fin_range_deg`` (the fins' range, ± this: what the
+  identification's adequacy measures ``u_d`` against, :meth:`Recording.fin_range`).
+  A file with any of them says ``# format: rocketroll-recording/1.2``.
 * Time strictly increasing and uniformly sampled within
   :data:`SAMPLING_RTOL` of the median interval; at least :data:`MIN_SAMPLES`
   samples; a fin angle that changes by at least :data:`MIN_FIN_CHANGE_DEG`.
@@ -53,7 +55,7 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.model import RIG_KEYS, RIG_LIMITS, Rig, RollParams
+from identification.model import RIG_KEYS, RIG_LIMITS, Rig, RollParams, Servo
 from rocketroll_common.arrays import FloatArray, readonly_array
 from rocketroll_common.errors import RocketrollError
 from rocketroll_common.files import write_atomic
@@ -62,12 +64,14 @@ from rocketroll_common.text import parse_number
 
 __all__ = [
     "COLUMNS",
+    "FIN_RANGE_KEY",
     "FLIGHT_COLUMNS",
     "FORMAT",
     "FORMATS",
     "FORMAT_V1",
     "FORMAT_V1_2",
     "MAX_ABS",
+    "MAX_FIN_RANGE_DEG",
     "MAX_RATE_DPS",
     "MIN_FIN_CHANGE_DEG",
     "MIN_SAMPLES",
@@ -76,9 +80,11 @@ __all__ = [
     "SAMPLING_RTOL",
     "SOURCES",
     "STEADY_AIRSPEED_RTOL",
+    "FinRange",
     "Recording",
     "RecordingError",
     "StatedRig",
+    "fin_range_setting",
     "load_recording",
     "quantum_of",
     "read_text",
@@ -97,10 +103,62 @@ FORMAT = "rocketroll-recording/1.1"
 FORMAT_V1_2 = "rocketroll-recording/1.2"
 #: Every format this package reads.
 FORMATS = (FORMAT_V1, FORMAT, FORMAT_V1_2)
+#: The ``rig.*`` line of the fins' range, ° (± this): what the user states of the rig
+#: (``import-csv``/``identify --fin-range``).  No :class:`identification.model.Rig` field:
+#: the identification's adequacy reads it (:meth:`Recording.fin_range`), the environments
+#: keep their own fin range.
+FIN_RANGE_KEY = "rig.fin_range_deg"
+#: The widest fins' range a recording states, °: its fin columns stay within ±90°.
+MAX_FIN_RANGE_DEG = 90.0
 #: The ``rig.*`` metadata keys format 1.2 adds, with their upper bounds.
 RIG_METADATA: Mapping[str, float] = MappingProxyType(
-    {key: RIG_LIMITS[f] for f, (_, key) in RIG_KEYS.items()}
+    {key: RIG_LIMITS[f] for f, (_, key) in RIG_KEYS.items()} | {FIN_RANGE_KEY: MAX_FIN_RANGE_DEG}
 )
+
+
+def fin_range_setting(help: str) -> float | None:
+    """The ``--fin-range DEG`` setting (``import-csv``, ``identify``) with ``help``: in
+    (0, :data:`MAX_FIN_RANGE_DEG`] °, None where not stated."""
+    result: float | None = setting(
+        None, help, flag="--fin-range", gt=0.0, le=MAX_FIN_RANGE_DEG, unit="°", metavar="DEG"
+    )
+    return result
+
+
+@dataclass(frozen=True)
+class FinRange:
+    """The fins' range, ±``deg`` °, and where it comes from (``source``: :attr:`STATED`,
+    :attr:`TRUTH` or :attr:`LARGEST`); ``str()`` gives both, e.g. ``±15° (stated)``."""
+
+    deg: float
+    source: str
+
+    #: Stated by the user: ``--fin-range``, or the recording's ``rig.fin_range_deg`` line.
+    STATED = "stated"
+    #: A virtual instrument's own servo (a synthetic recording's truth).
+    TRUTH = "the virtual instrument's truth"
+    #: Nothing states it: the largest ``|fin|`` the log holds (a lower bound of the range).
+    LARGEST = "the log's largest |fin|"
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.deg) and self.deg > 0.0):
+            raise ValueError(f"FinRange.deg must be > 0, got {self.deg!r}")
+        if self.source not in (self.STATED, self.TRUTH, self.LARGEST):
+            raise ValueError(f"FinRange.source must be one of the known, got {self.source!r}")
+
+    def __str__(self) -> str:
+        return f"±{self.deg:g}° ({self.source})"
+
+    @property
+    def hint(self) -> str:
+        """How to state it, where nothing does (else empty)."""
+        if self.source != self.LARGEST:
+            return ""
+        return "; state your fins' range with import-csv or identify --fin-range DEG"
+
+    def as_dict(self) -> dict[str, float | str]:
+        """``fin_range_deg`` and ``fin_range_source`` (JSON)."""
+        return {"fin_range_deg": self.deg, "fin_range_source": self.source}
 
 
 @dataclass(frozen=True)
@@ -229,6 +287,10 @@ class RecordingError(RocketrollError, ValueError):
         self.problem = problem
         where = f"{self.path}:{line}" if line is not None else self.path
         super().__init__(f"{where}: {problem}")
+
+    def __reduce__(self) -> tuple[type[RecordingError], tuple[str, int | None, str]]:
+        """Pickled with its own arguments (an error raised in a worker process crosses back)."""
+        return type(self), (self.path, self.line, self.problem)
 
 
 def _where(lines: NDArray[np.int64] | None, index: int) -> int | None:
@@ -538,6 +600,8 @@ def metadata_problem(key: str, value: str) -> str | None:
         if not math.isfinite(number):
             return f"metadata {key!r} must be finite, not {value!r}"
         most = RIG_METADATA.get(key)
+        if key == FIN_RANGE_KEY and not 0.0 < number <= MAX_FIN_RANGE_DEG:
+            return f"metadata {key!r} must be in (0, {MAX_FIN_RANGE_DEG:g}], not {value!r}"
         if most is not None and not 0.0 <= number <= most:
             return f"metadata {key!r} must be in [0, {most:g}], not {value!r}"
     return None
@@ -639,6 +703,37 @@ class Recording:
         """The rig with what ``stated`` gives, the recording's own lines for the rest."""
         return Rig.resolved(
             {f.name: getattr(stated, f.name) for f in fields(stated)}, self.metadata
+        )
+
+    def fin_range(self, stated: float | None = None) -> FinRange:
+        """The fins' range: ``stated`` (a flag), else the recording's ``rig.fin_range_deg``
+        line (both :attr:`FinRange.STATED`); else, for a synthetic recording, its virtual
+        instrument's servo (:attr:`FinRange.TRUTH`: the tunnel's ``truth.fin_range_deg``, the
+        flight recorder's eq. 23 servo, which its ``truth.servo_rate_dps`` line names); else
+        the log's largest ``|fin|``, of the measured fin column if there is one, else of the
+        command (:attr:`FinRange.LARGEST`).  Never a default the log does not show."""
+        if stated is None and FIN_RANGE_KEY in self.metadata:
+            stated = float(self.metadata[FIN_RANGE_KEY])
+        if stated is not None:
+            return FinRange(float(stated), FinRange.STATED)
+        if self.source == "synthetic":
+            if "truth.fin_range_deg" in self.metadata:
+                return FinRange(float(self.metadata["truth.fin_range_deg"]), FinRange.TRUTH)
+            if "truth.servo_rate_dps" in self.metadata:
+                return FinRange(Servo().range_deg, FinRange.TRUTH)
+        fin = self.fin_deg if self.fin_deg is not None else self.fin_cmd_deg
+        return FinRange(float(np.max(np.abs(np.asarray(fin)))), FinRange.LARGEST)
+
+    def stating_fin_range(self, deg: float | None) -> Recording:
+        """The recording with ``rig.fin_range_deg`` set to ``deg`` (itself where None)."""
+        if deg is None:
+            return self
+        columns = self.columns()
+        return Recording(
+            name=self.name,
+            source=self.source,
+            metadata={**self.metadata, FIN_RANGE_KEY: repr(float(deg))},
+            **columns,
         )
 
     @property

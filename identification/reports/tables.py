@@ -14,7 +14,14 @@ from identification.methods.adequacy import FIN_ERROR_MATERIAL
 from identification.methods.pipeline import Identification
 from rocketroll_common.tables import Column, text_table
 
-__all__ = ["adequacy_table", "flight_table", "methods_table", "parameter_table", "scaling_line"]
+__all__ = [
+    "adequacy_table",
+    "flight_table",
+    "interval_table",
+    "methods_table",
+    "parameter_table",
+    "scaling_line",
+]
 
 
 def parameter_table(result: Identification) -> str:
@@ -222,11 +229,14 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
     the fin explains, ``|u_d|`` against the fins' range, α's standard error, and the
     verdict with its reasons below the table.  Fits without figures are left out."""
     rows, reasons = [], []
+    why: dict[str, list[str]] = {}  # each finding on the log, with the fits that make it
     for method, by_model in fits.items():
         for model, f in by_model.items():
             a = f.metrics.get("adequacy")
             if not a:
                 continue
+            for finding in (a.get("diagnosis") or {}).get("findings", ()):
+                why.setdefault(finding["text"], []).append(f"{method} {model}")
             se = None if a["alpha_rel_se"] is None else 100 * a["alpha_rel_se"]
             rows.append(
                 [
@@ -242,7 +252,71 @@ def adequacy_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
             )
             reasons += [f"  {method} {model}: {reason}" for reason in a["reasons"]]
             reasons += [f"  {method} {model}: suspected: {s}" for s in a.get("suspected") or ()]
+    for text, where in why.items():
+        by = "" if len(where) == len(rows) else f" ({', '.join(where)})"
+        reasons.append(f"  why{by}: {text}")
     return "\n".join(text_table(_ADEQUACY_COLUMNS, rows) + reasons)
+
+
+_INTERVAL_COLUMNS = (
+    *_FIT,
+    Column("parameter", 20, "<"),
+    Column("estimate", 11, gap=" "),
+    Column("95 % low", 11, gap=" "),
+    Column("95 % high", 11, gap=" "),
+    Column("from", 8, "<", gap="  "),
+    Column("the log determines it"),
+)
+#: What each end of an interval says, in a few words (identification.estimation.likelihood).
+_END_WORDS = {"range": "the range ends first", "open": "not bounded"}
+
+
+def _determined(interval: Mapping[str, Any]) -> str:
+    """ "yes", or which side the log leaves open and why."""
+    if interval.get("determined"):
+        return "yes"
+    sides = [
+        f"{side}: {_END_WORDS.get(interval[f'{side}_end'], interval[f'{side}_end'])}"
+        for side in ("low", "high")
+        if interval[f"{side}_end"] != "likelihood"
+    ]
+    return "no (" + "; ".join(sides) + ")"
+
+
+def _with_error(value: float, metrics: Mapping[str, Any], name: str) -> str:
+    """``value ± SE`` where the Hessian gives an SE, else ``value [low, high]`` (its profile
+    interval, the sides the log leaves open said)."""
+    se = (metrics.get("std_errors") or {}).get(name, math.nan)
+    if math.isfinite(se):
+        return f"{value:.4f} ± {se:.4f}"
+    interval = (metrics.get("intervals") or {}).get(name)
+    if not interval:
+        return f"{value:.4f} (no interval)"
+    shown = f"{value:.4f} [{interval['low']:.4g}, {interval['high']:.4g}]"
+    return shown if interval["determined"] else f"{shown} {_determined(interval)}"
+
+
+def interval_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
+    """Each fit's 95 % intervals (the ml and flight methods': the Hessian's where it is
+    positive definite, the profile likelihood's where not or where asked) and whether the
+    log determines each parameter; empty where no fit has intervals."""
+    rows = []
+    for method, by_model in fits.items():
+        for model, f in by_model.items():
+            for name, interval in (f.metrics.get("intervals") or {}).items():
+                rows.append(
+                    [
+                        method,
+                        model,
+                        name,
+                        f"{interval['estimate']:.5g}",
+                        f"{interval['low']:.5g}",
+                        f"{interval['high']:.5g}",
+                        interval["method"],
+                        _determined(interval),
+                    ]
+                )
+    return "\n".join(text_table(_INTERVAL_COLUMNS, rows)) if rows else ""
 
 
 def scaling_line(metrics: Mapping[str, Any]) -> str:
@@ -283,15 +357,13 @@ def flight_table(fits: Mapping[str, Mapping[str, ModelFit]]) -> str:
     for by_model in fits.values():
         for model, f in by_model.items():
             m = f.metrics
-            errors = m.get("std_errors", {})
             verdict = (m.get("adequacy") or {}).get("verdict")
             judged = f" [{verdict}]" if verdict else ""
             lines.append(
                 f"{f.method} {model}{judged}: at V_ref {m['v_ref_mps']:.2f} m/s, ρ_ref "
                 f"{m['rho_ref_kgm3']:.4f} kg/m³ (in flight: {m['density']}): "
-                f"α₀ {f.params.alpha:.4f} ± {errors.get('alpha', float('nan')):.4f}, "
-                f"β̄₀ {f.params.beta_bar_per_s:.4f} ± "
-                f"{errors.get('beta_bar_per_s', float('nan')):.4f} 1/s; "
+                f"α₀ {_with_error(f.params.alpha, m, 'alpha')}, "
+                f"β̄₀ {_with_error(f.params.beta_bar_per_s, m, 'beta_bar_per_s')} 1/s; "
                 f"C_P-like β̄₀/(ρV) {m['damping_per_rho_v']:.5g} m²/kg, "
                 f"C_δ-like β̄₀α₀/q {m['torque_per_q']:.5g} (°/s²)/(°·Pa); "
                 f"re-simulated rate MAE {m['resim_rate_mae_pct']:.2f} % of mean |rate|"

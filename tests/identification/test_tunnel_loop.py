@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from rocketroll_common.errors import SettingError
 
 #: The loop most tests fly: a 50 Hz log, a gyro with 1 % noise, the measured fin, fins
 #: stopped at ±15°, a PRBS dither on top of the loop, strong turbulence (the stops are hit).
-LOOP = {
+LOOP: dict[str, Any] = {
     "seed": 3,
     "schedule": "prbs",
     "fin_range": 5.0,

@@ -1,0 +1,117 @@
+"""Profile-likelihood intervals (identification.estimation.likelihood.profile_interval)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from identification.estimation.likelihood import OUTSIDE, profile_interval
+from identification.instruments.tunnel import TunnelSpec, run_tunnel
+from identification.methods.ml import maximum_likelihood
+from identification.methods.pipeline import IdentifyOptions
+
+Z95 = float(stats.norm.ppf(0.975))
+
+
+def _regression() -> tuple[np.ndarray, np.ndarray, float]:
+    rng = np.random.default_rng(4)
+    x = np.linspace(-1.0, 1.0, 200)
+    y = 0.3 + 2.0 * x + 0.5 * rng.standard_normal(x.size)
+    return x, y, 0.5
+
+
+def test_on_a_gaussian_likelihood_the_profile_is_the_hessians_interval() -> None:
+    x, y, sigma = _regression()
+    design = np.column_stack([np.ones_like(x), x])
+    beta, *_ = np.linalg.lstsq(design, y, rcond=None)
+    cov = sigma**2 * np.linalg.inv(design.T @ design)
+
+    def f(b: np.ndarray) -> float:
+        r = y - design @ b
+        return float(r @ r) / (2 * sigma**2)
+
+    for i in range(2):
+        se = math.sqrt(cov[i, i])
+        found = profile_interval(f, beta, i, step=se)
+        assert found.determined
+        assert found.low == pytest.approx(beta[i] - Z95 * se, abs=0.01 * se)
+        assert found.high == pytest.approx(beta[i] + Z95 * se, abs=0.01 * se)
+        assert found.gain < 1e-6
+
+
+def test_a_parameter_the_data_do_not_bound_is_open_on_that_side() -> None:
+    def flat_in_second(b: np.ndarray) -> float:
+        return 0.5 * (b[0] - 1.0) ** 2
+
+    found = profile_interval(flat_in_second, np.array([1.0, 0.0]), 1, step=0.1, max_doublings=6)
+    assert (found.low_end, found.high_end) == ("open", "open")
+    assert not found.determined
+
+
+def test_a_range_that_ends_inside_the_level_closes_that_side() -> None:
+    def f(b: np.ndarray) -> float:
+        return 0.5 * (b[0] - 0.1) ** 2  # SE 1: the 95 % interval would reach -1.86
+
+    found = profile_interval(f, np.array([0.1]), 0, step=1.0, limits=(0.0, math.inf))
+    assert found.low_end == "range" and found.low == 0.0
+    assert found.high_end == "likelihood"
+    assert found.high == pytest.approx(0.1 + Z95, abs=0.01)
+
+
+def test_two_parameters_only_whose_sum_is_told_are_each_open() -> None:
+    def sum_only(b: np.ndarray) -> float:
+        return 50.0 * (b[0] + b[1] - 1.0) ** 2
+
+    found = profile_interval(sum_only, np.array([0.5, 0.5]), 0, step=0.1, max_doublings=6)
+    assert (found.low_end, found.high_end) == ("open", "open")
+
+
+def test_the_profile_is_not_symmetric_where_the_likelihood_is_not() -> None:
+    # A Poisson count's rate: the profile interval is the likelihood-ratio one, skewed up.
+    count = 4.0
+
+    def f(b: np.ndarray) -> float:
+        rate = b[0]
+        return OUTSIDE if rate <= 0 else rate - count * math.log(rate)
+
+    found = profile_interval(f, np.array([count]), 0, step=2.0, limits=(0.0, math.inf))
+    assert found.determined
+    assert count - found.low < found.high - count
+    # The likelihood-ratio interval of a count of 4: λ − 4 − 4·ln(λ/4) = χ²₁(0.95)/2, its
+    # ends found to 1 % of the step (0.02).
+    for end in (found.low, found.high):
+        assert end - count - count * math.log(end / count) == pytest.approx(1.9207, abs=0.05)
+    assert found.low == pytest.approx(1.24, abs=0.03)
+    assert found.high == pytest.approx(9.29, abs=0.03)
+
+
+def test_ml_profile_intervals_agree_with_the_hessian_on_a_well_identified_run() -> None:
+    rec = run_tunnel(
+        TunnelSpec(
+            seed=5, schedule="prbs", duration=40, lead=5, log_dt=0.02, gyro_noise=1.0,
+            model="constant",
+        )
+    )  # fmt: skip
+    auto = maximum_likelihood(rec, "constant")
+    profile = maximum_likelihood(rec, "constant", options=IdentifyOptions(intervals="profile"))
+    assert set(auto.intervals) == {"alpha", "theta_bar", "a_per_s"}
+    for name, wald in auto.intervals.items():
+        assert wald["method"] == "hessian"
+        found = profile.intervals[name]
+        assert found["method"] == "profile" and found["determined"]
+        width, hessian_width = found["high"] - found["low"], wald["high"] - wald["low"]
+        assert width == pytest.approx(hessian_width, rel=0.15), name
+        assert found["low"] < found["estimate"] < found["high"]
+
+
+def test_the_models_edge_inside_the_level_closes_that_side_as_the_range() -> None:
+    def f(b: np.ndarray) -> float:  # no model below -0.5 (an unstable rocket, say)
+        return OUTSIDE if b[0] < -0.5 else 0.5 * b[0] ** 2
+
+    found = profile_interval(f, np.array([0.0]), 0, step=1.0)
+    assert found.low_end == "range"
+    assert found.low == pytest.approx(-0.5, abs=1e-2)
+    assert found.high_end == "likelihood"
