@@ -256,13 +256,14 @@ def diagnose(
             "between them, and a stop that gives or sits elsewhere than the range biases it; "
             "keep the schedule inside the range"
         )
-        found.append(
-            Finding(
-                "saturation",
-                f"the fins sit at their stops ({fins}) {100 * stops:.0f} % of the time: "
-                + consequence,
-            )
+        where = (
+            f"the fin sits at its largest |fin|, {fins.deg:g}°, {100 * stops:.0f} % of the "
+            "time (the fins' range is not stated; if that is not their stops, say so with "
+            "--fin-range): "
+            if fins.source == FinRange.LARGEST
+            else f"the fins sit at their stops ({fins}) {100 * stops:.0f} % of the time: "
         )
+        found.append(Finding("saturation", where + consequence))
     if closed:
         instant = loop["delay_s"] == 0.0
         consistent = (
@@ -298,9 +299,10 @@ def diagnose(
             Finding(
                 "collinearity",
                 f"the model's regressors move together (each one's R² on the others: {detail}): "
-                f"the log cannot tell {' from '.join(pairs)}; an excitation of the fin that "
-                "the rate does not cause (a dither on top of the loop, steps at other speeds) "
-                "separates them",
+                f"only what {' and '.join(pairs)} do apart tells their coefficients apart, and "
+                "the intervals say how well that was; where they are wide, an excitation of "
+                "the fin that the rate does not cause (a dither on top of the loop, steps at "
+                "other speeds) separates them",
             )
         )
     if math.isfinite(ratio) and ratio < EXCITATION_RATIO:
