@@ -29,9 +29,10 @@ class SettingError(UsageError):
         self.setting = setting
         self.problem = problem
 
-    def __reduce__(self) -> tuple[type[SettingError], tuple[str, str]]:
-        """Pickled with its own arguments (an error raised in a worker process crosses back)."""
-        return type(self), (self.setting, self.problem)
+    def __reduce__(self) -> tuple[type[SettingError], tuple[str, str], dict[str, object]]:
+        """Pickled with its own arguments and its state, notes included (an error raised in a
+        worker process crosses back whole)."""
+        return type(self), (self.setting, self.problem), dict(vars(self))
 
 
 class Interrupted(KeyboardInterrupt):

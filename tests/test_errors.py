@@ -54,6 +54,7 @@ def test_errors_with_their_own_arguments_cross_a_process_boundary() -> None:
     from rocketroll_common.errors import SettingError
 
     for error in (RecordingError("a.csv", 3, "bad"), SettingError("stops", "too small")):
+        error.add_note("in the worker")
         back = pickle.loads(pickle.dumps(error))
         assert type(back) is type(error) and str(back) == str(error)
-        assert vars(back) == vars(error)
+        assert vars(back) == vars(error) and back.__notes__ == ["in the worker"]

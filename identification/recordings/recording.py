@@ -288,9 +288,12 @@ class RecordingError(RocketrollError, ValueError):
         where = f"{self.path}:{line}" if line is not None else self.path
         super().__init__(f"{where}: {problem}")
 
-    def __reduce__(self) -> tuple[type[RecordingError], tuple[str, int | None, str]]:
-        """Pickled with its own arguments (an error raised in a worker process crosses back)."""
-        return type(self), (self.path, self.line, self.problem)
+    def __reduce__(
+        self,
+    ) -> tuple[type[RecordingError], tuple[str, int | None, str], dict[str, object]]:
+        """Pickled with its own arguments and its state, notes included (an error raised in a
+        worker process crosses back whole)."""
+        return type(self), (self.path, self.line, self.problem), dict(vars(self))
 
 
 def _where(lines: NDArray[np.int64] | None, index: int) -> int | None:
