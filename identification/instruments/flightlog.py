@@ -59,7 +59,6 @@ from identification.instruments.reference import (
     Effects,
     GyroReader,
     LoopRun,
-    RateLoop,
     fine_steps,
     fly_loop,
     gust_factor,
@@ -68,10 +67,12 @@ from identification.instruments.reference import (
 )
 from identification.instruments.tunnel import (
     FinSchedule,
+    LoopFlown,
     Turbulence,
     check_dwells,
     check_rocket,
     loop_items,
+    loop_setting,
     rocket_params,
     rocket_setting,
     synthetic_recording,
@@ -106,7 +107,7 @@ LEAD_S = 0.5
 
 
 @dataclass(frozen=True)
-class FlightLogSpec:
+class FlightLogSpec(LoopFlown):
     """Everything that defines one virtual flight; each field is a ``rocketroll record-flight``
     flag.
 
@@ -164,33 +165,17 @@ class FlightLogSpec:
     )
     dwell_min: float = setting(0.1, "shortest staircase dwell", gt=0.0, le=60.0, unit="s")
     dwell_max: float = setting(0.5, "longest staircase dwell", gt=0.0, le=60.0, unit="s")
-    loop_gain: float = setting(
-        0.0,
-        "a proportional roll-rate loop on the fins (a flight computer's on its canards), run "
-        "at the logging rate: fin command = excitation + this × (0 - the gyro's rate read "
-        "--loop-delay earlier), saturated at --stops (0: open loop, the excitation alone; the "
-        "sign of --alpha damps the roll, the other drives it)",
-        ge=-10.0,
-        le=10.0,
-        unit="°/(°/s)",
+    loop_gain: float = loop_setting(
+        "loop_gain",
+        whose=" (a flight computer's on its canards)",
+        excitation="excitation",
+        rate="the gyro's rate",
     )
-    loop_delay: float = setting(
-        0.02,
-        "the loop's delay (sensor and computation): it reads the gyro (its noise, floor and "
-        "bias included; the true rate with --no-gyro) from this long before each command, to "
-        "the integrator's step (1 ms)",
-        ge=0.0,
-        le=0.5,
-        unit="s",
+    loop_delay: float = loop_setting(
+        "loop_delay",
+        reads="the gyro (its noise, floor and bias included; the true rate with --no-gyro)",
     )
-    stops: float = setting(
-        Servo().range_deg,
-        "the fins' mechanical stops: the command saturates at ±this (the logged command is "
-        "the saturated one)",
-        ge=2.0,
-        le=Servo().range_deg,
-        unit="°",
-    )
+    stops: float = loop_setting("stops")
     turbulence: Literal["tunnel", "dryden"] = setting(
         "tunnel",
         "turbulence: the tunnel's u_d process flown (Taylor, amplitude V_ref/V), or the "
@@ -255,11 +240,7 @@ class FlightLogSpec:
         if self.no_gyro and self.encoder_counts == 0:
             raise SettingError("no_gyro", "needs an angle (give --encoder-counts, e.g. 4096)")
         check_dwells(self.log_dt, self.dwell_min, self.dwell_max)
-        if self.schedule == "none" and not self.closed_loop:
-            raise SettingError(
-                "schedule",
-                "none leaves the fins at 0° without a loop: give --loop-gain, or a schedule",
-            )
+        self.check_loop()
         try:  # the name only: reading and simulating the ascent is the flight's work
             check_ascent_name(self.ascent, self.descent)
         except ValueError as exc:
@@ -270,19 +251,6 @@ class FlightLogSpec:
                 "needs --turbulence tunnel (a Dryden log ends where the airspeed falls back "
                 "below --v-ref)",
             )
-
-    @property
-    def closed_loop(self) -> bool:
-        """Whether a rate loop flies the fins (``loop_gain`` not 0)."""
-        return self.loop_gain != 0.0
-
-    def rate_loop(self) -> RateLoop:
-        """The rate loop of this flight (its gain 0 in open loop)."""
-        return RateLoop(float(self.loop_gain), float(self.loop_delay), float(self.stops))
-
-    def servo(self) -> Servo:
-        """The servo of this flight: its rate limit, the fins' stops its range."""
-        return Servo(rate_limit_dps=self.servo_rate, range_deg=float(self.stops))
 
     def scaling(self) -> AirspeedScaling:
         """The truth's airspeed scaling (``n``, ``m``)."""

@@ -437,6 +437,73 @@ _ROCKET_SETTINGS: dict[str, tuple[float | None, str, dict[str, Any]]] = {
 }
 
 
+#: The rate loop's settings: default, help (its words filled in by :func:`loop_setting`) and
+#: bounds; the tunnel's and the flight recorder's are these.
+_LOOP_SETTINGS: dict[str, tuple[float, str, dict[str, Any]]] = {
+    "loop_gain": (
+        0.0,
+        "a proportional roll-rate loop on the fins{whose}, run at the logging rate: fin "
+        "command = {excitation} + this × (0 - {rate} read --loop-delay earlier), saturated at "
+        "--stops (0: open loop, the {excitation} alone; the sign of --alpha damps the roll, the "
+        "other drives it)",
+        {"ge": -10.0, "le": 10.0, "unit": "°/(°/s)"},
+    ),
+    "loop_delay": (
+        0.02,
+        "the loop's delay (sensor and computation): it reads {reads} from this long before "
+        "each command, to the integrator's step (1 ms)",
+        {"ge": 0.0, "le": 0.5, "unit": "s"},
+    ),
+    "stops": (
+        Servo().range_deg,
+        "the fins' mechanical stops: the command saturates at ±this (the logged command is "
+        "the saturated one)",
+        {"ge": 2.0, "le": Servo().range_deg, "unit": "°"},
+    ),
+}
+
+
+def loop_setting(name: str, **words: str) -> Any:
+    """The setting of a virtual instrument's rate loop ``name`` (``loop_gain``,
+    ``loop_delay``, ``stops``), its help in the instrument's ``words`` (``whose``,
+    ``excitation``, ``rate``; ``reads``)."""
+    default, text, bounds = _LOOP_SETTINGS[name]
+    return setting(default, text.format(**words), **bounds)
+
+
+class LoopFlown:
+    """What a virtual instrument that may fly a rate loop (its settings from
+    :func:`loop_setting`) derives from them: whether it does, the loop, the servo whose
+    range is the stops, and the check that an excitation of ``none`` has a loop."""
+
+    loop_gain: float
+    loop_delay: float
+    stops: float
+    servo_rate: float
+    schedule: str
+
+    @property
+    def closed_loop(self) -> bool:
+        """Whether a rate loop flies the fins (``loop_gain`` not 0)."""
+        return self.loop_gain != 0.0
+
+    def rate_loop(self) -> RateLoop:
+        """The rate loop flown (its gain 0 in open loop)."""
+        return RateLoop(float(self.loop_gain), float(self.loop_delay), float(self.stops))
+
+    def servo(self) -> Servo:
+        """The servo flown: its rate limit, the fins' stops its range."""
+        return Servo(rate_limit_dps=self.servo_rate, range_deg=float(self.stops))
+
+    def check_loop(self) -> None:
+        """Refuse (``SettingError``) the excitation ``none`` without a loop."""
+        if self.schedule == "none" and not self.closed_loop:
+            raise SettingError(
+                "schedule",
+                "none leaves the fins at 0° without a loop: give --loop-gain, or a schedule",
+            )
+
+
 def rocket_setting(name: str, at: str = "") -> Any:
     """The setting (help, default, bounds) of a virtual rocket's truth ``name``
     (``alpha``, ``beta``, ``alpha_bar``, ``beta_bar``), given ``at`` an operating point
@@ -496,7 +563,7 @@ def check_dwells(log_dt: float, dwell_min: float, dwell_max: float) -> None:
 
 
 @dataclass(frozen=True)
-class TunnelSpec:
+class TunnelSpec(LoopFlown):
     """Everything that defines one virtual tunnel run; each field is a ``rocketroll tunnel`` flag.
 
     The defaults re-create the paper's experiment.  ``alpha_bar``/``beta_bar``
@@ -558,33 +625,13 @@ class TunnelSpec:
         le=10_000.0,
         unit="°/s",
     )
-    loop_gain: float = setting(
-        0.0,
-        "a proportional roll-rate loop on the fins, run at the logging rate: fin command = "
-        "schedule + this × (0 - the roll rate read --loop-delay earlier), saturated at "
-        "--stops (0: open loop, the schedule alone; the sign of --alpha damps the roll, the "
-        "other drives it)",
-        ge=-10.0,
-        le=10.0,
-        unit="°/(°/s)",
+    loop_gain: float = loop_setting(
+        "loop_gain", whose="", excitation="schedule", rate="the roll rate"
     )
-    loop_delay: float = setting(
-        0.02,
-        "the loop's delay (sensor and computation): it reads the gyro's rate (with its "
-        "--gyro-noise, else noise-free) from this long before each command, to the "
-        "integrator's step (1 ms)",
-        ge=0.0,
-        le=0.5,
-        unit="s",
+    loop_delay: float = loop_setting(
+        "loop_delay", reads="the gyro's rate (with its --gyro-noise, else noise-free)"
     )
-    stops: float = setting(
-        Servo().range_deg,
-        "the fins' mechanical stops: the command saturates at ±this (the logged command is "
-        "the saturated one)",
-        ge=2.0,
-        le=Servo().range_deg,
-        unit="°",
-    )
+    stops: float = loop_setting("stops")
     turbulence: Distribution = setting("gaussian", "marginal distribution of u_d")
     turbulence_sd: float = setting(
         Turbulence().sd_deg, "standard deviation of u_d", ge=0.0, le=45.0, unit="°"
@@ -638,11 +685,7 @@ class TunnelSpec:
         check_rocket(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
         if self.no_encoder and self.gyro_noise is None:
             raise SettingError("no_encoder", "needs a rate gyro (give --gyro-noise, e.g. 0)")
-        if self.schedule == "none" and not self.closed_loop:
-            raise SettingError(
-                "schedule",
-                "none leaves the fins at 0° without a loop: give --loop-gain, or a schedule",
-            )
+        self.check_loop()
         if self.schedule in ("doublets", "prbs") and self.pulse < self.log_dt:
             raise SettingError(
                 "pulse", f"{self.pulse:g} s is shorter than the logging interval {self.log_dt:g} s"
@@ -671,19 +714,6 @@ class TunnelSpec:
     def params(self) -> RollParams:
         """Ground-truth roll parameters of this run."""
         return rocket_params(self.model, self.alpha, self.beta, self.alpha_bar, self.beta_bar)
-
-    def servo(self) -> Servo:
-        """Servo model of this run: its rate limit, the fins' stops its range."""
-        return Servo(rate_limit_dps=self.servo_rate, range_deg=float(self.stops))
-
-    @property
-    def closed_loop(self) -> bool:
-        """Whether a rate loop flies the fins (``loop_gain`` not 0)."""
-        return self.loop_gain != 0.0
-
-    def rate_loop(self) -> RateLoop:
-        """The rate loop of this run (its gain 0 in open loop)."""
-        return RateLoop(float(self.loop_gain), float(self.loop_delay), float(self.stops))
 
     def turbulence_model(self) -> Turbulence:
         """Turbulence process of this run."""
