@@ -59,8 +59,10 @@ __all__ = [
     "numerical_hessian",
     "posterior_states",
     "profile_interval",
+    "profile_step",
     "select_order",
     "standard_errors",
+    "standing_interval",
 ]
 
 #: Negative log-likelihood where the parameters are outside the model (unstable, not finite).
@@ -318,6 +320,31 @@ def hessian_holds(
     low, high = interval["low"], interval["high"]
     inside = limits[0] <= low and high <= limits[1]
     return bool(inside and not (signed and low <= 0.0 <= high))
+
+
+def standing_interval(
+    estimate: float,
+    se: float,
+    limits: tuple[float, float],
+    *,
+    signed: bool = False,
+    log: bool = False,
+) -> dict[str, Any] | None:
+    """The Hessian's 95 % interval (:func:`hessian_interval`) where it can stand for the
+    likelihood's (:func:`hessian_holds`, ``limits`` on the coordinate's scale: a log's where
+    ``log``); None where it cannot, or ``se`` is not a positive number: the profile
+    likelihood's (:func:`profile_interval`, from :func:`profile_step`) is the interval then."""
+    if not (math.isfinite(se) and se > 0):
+        return None
+    wald = hessian_interval(estimate, se, log=log)
+    natural = (math.exp(limits[0]), math.exp(limits[1])) if log else limits
+    return wald if hessian_holds(wald, natural, signed=signed) else None
+
+
+def profile_step(estimate: float, se: float) -> float:
+    """Where a profile starts its search (:func:`profile_interval`'s ``step``): the standard
+    error where the Hessian gives one, else a tenth of the estimate (at least 0.01)."""
+    return se if math.isfinite(se) and se > 0 else 0.1 * max(abs(estimate), 0.1)
 
 
 def profile_interval(

@@ -66,14 +66,14 @@ from identification.estimation import statespace
 from identification.estimation.likelihood import (
     StateSpaceFit,
     covariance,
-    hessian_holds,
-    hessian_interval,
     maximise,
     negloglike,
     numerical_hessian,
     posterior_states,
     profile_interval,
+    profile_step,
     standard_errors,
+    standing_interval,
 )
 from identification.estimation.statespace import LinearGaussian
 from identification.methods.steps import IdentificationError
@@ -1010,7 +1010,7 @@ def flight_intervals(
 
     The Hessian's (``method: hessian``, the torque's by the delta method, a log-parameter's
     on its log) where ``mode`` is ``auto``, its variance is positive and the interval holds
-    (:func:`~identification.estimation.likelihood.hessian_holds`: within the bounds, the
+    (:func:`~identification.estimation.likelihood.standing_interval`: within the bounds, the
     gain's and the torque's sign told); else the profile likelihood's
     (:func:`~identification.estimation.likelihood.profile_interval`: in the optimiser's
     coordinates, within their bounds; the torque profiled as a coordinate in place of α)."""
@@ -1028,16 +1028,13 @@ def flight_intervals(
         limits = _PROFILE_LIMITS.get(
             name, (-math.inf if low is None else low, math.inf if high is None else high)
         )
-        convert = math.exp if is_log else float
-        if mode == "auto" and math.isfinite(se):
-            wald = hessian_interval(estimate, se, log=is_log)
-            natural = (convert(limits[0]), convert(limits[1])) if is_log else limits
-            if hessian_holds(wald, natural, signed=name == "alpha"):
-                out[shown] = wald
-                continue
-        step = se if math.isfinite(se) else 0.1 * max(abs(estimate), 0.1)
+        wald = standing_interval(estimate, se, limits, signed=name == "alpha", log=is_log)
+        if mode == "auto" and wald is not None:
+            out[shown] = wald
+            continue
+        step = profile_step(estimate, se)
         found = profile_interval(objective, x_hat, i, step=step, limits=limits, bounds=bounds)
-        out[shown] = found.as_dict(convert)
+        out[shown] = found.as_dict(math.exp if is_log else None)
     out["torque_per_q"] = _torque_interval(objective, pmap, x_hat, cov, q_ref, mode)
     return out
 
@@ -1058,10 +1055,10 @@ def _torque_interval(
     gradient = np.zeros(x_hat.size)
     gradient[i_l], gradient[i_a] = torque, beta / q_ref
     var = math.nan if cov is None else float(gradient @ cov @ gradient)
-    if mode == "auto" and var > 0:
-        wald = hessian_interval(torque, math.sqrt(var))
-        if hessian_holds(wald, (-math.inf, math.inf), signed=True):
-            return wald
+    se = math.sqrt(var) if var > 0 else math.nan
+    wald = standing_interval(torque, se, (-math.inf, math.inf), signed=True)
+    if mode == "auto" and wald is not None:
+        return wald
 
     def to_x(y: FloatArray) -> FloatArray:
         x = np.array(y, dtype=float)
@@ -1070,7 +1067,7 @@ def _torque_interval(
 
     y_hat = np.array(x_hat, dtype=float)
     y_hat[i_a] = torque
-    step = math.sqrt(var) if var > 0 else 0.1 * abs(torque) or 1e-9
+    step = se if var > 0 else 0.1 * abs(torque) or 1e-9
     found = profile_interval(
         lambda y: objective(to_x(y)),
         y_hat,

@@ -54,14 +54,14 @@ from identification.estimation.likelihood import (
     OUTSIDE,
     StateSpaceFit,
     covariance,
-    hessian_holds,
-    hessian_interval,
     maximise,
     numerical_hessian,
     posterior_states,
     profile_interval,
+    profile_step,
     select_order,
     standard_errors,
+    standing_interval,
 )
 from identification.estimation.statespace import (
     LinearGaussian,
@@ -354,7 +354,7 @@ def rocket_intervals(
 ) -> dict[str, dict[str, Any]]:
     """A 95 % interval for each of the rocket's parameters, by its reported name: the
     Hessian's ``±1.96·SE`` (``method: hessian``) where ``mode`` is ``auto``, the SE is finite
-    and the interval holds (:func:`~identification.estimation.likelihood.hessian_holds`:
+    and the interval holds (:func:`~identification.estimation.likelihood.standing_interval`:
     within the range, α's sign told), else the profile likelihood's
     (:func:`~identification.estimation.likelihood.profile_interval`, ``method: profile``;
     each end says whether the data, the parameter's range or nothing set it).
@@ -376,13 +376,11 @@ def rocket_intervals(
         shown = rename.get(name, name)
         estimate = float(nat[name])
         se = std_errors.get(shown, math.nan)
-        if mode == "auto" and math.isfinite(se) and se > 0:
-            wald = hessian_interval(estimate, se)
-            if hessian_holds(wald, _RANGES[name], signed=name == "alpha"):
-                out[shown] = wald
-                continue
+        wald = standing_interval(estimate, se, _RANGES[name], signed=name == "alpha")
+        if mode == "auto" and wald is not None:
+            out[shown] = wald
+            continue
         basis, index = _basis(names, name, pmap.pivot)
-        step = se if math.isfinite(se) and se > 0 else 0.1 * max(abs(estimate), 0.1)
 
         def objective(y: FloatArray, m: FloatArray = basis) -> float:
             return negloglike_natural(data, pmap.natural(m @ y))
@@ -391,7 +389,7 @@ def rocket_intervals(
             objective,
             np.asarray(np.linalg.solve(basis, x_hat), dtype=np.float64),
             index,
-            step=step,
+            step=profile_step(estimate, se),
             limits=_RANGES[name],
         )
         out[shown] = found.as_dict()
