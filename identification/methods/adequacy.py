@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from identification.compiled import interval_maps
-from identification.methods.diagnosis import diagnose
+from identification.methods.diagnosis import diagnose, logged_fin
 from identification.methods.pipeline import Measurements
 from identification.methods.statistics import decorrelation_stride, ols_newey_west
 from identification.model import Disturbance, RollParams, Servo, damping, linear_recurrence
@@ -514,10 +514,8 @@ def adequacy(
     )
     check(rel_se, ALPHA_REL_SE, f"α's standard error is {100 * rel_se:.3g} % of it", True)
     innovation_acf = _method_findings(found, metrics, method)
-    # The fin as logged: the controller's command where there is one (a loop acts on it).
-    logged = rec.fin_cmd_deg if rec.fin_cmd_deg is not None else rec.fin_deg
     why = diagnose(
-        np.asarray(logged if logged is not None else fin, dtype=float)[: fin.size],
+        logged_fin(rec)[: fin.size],
         rate[: fin.size],
         dt,
         fins,

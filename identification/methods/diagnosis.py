@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from identification.methods.statistics import decorrelation_stride
-from identification.recordings.recording import FinRange
+from identification.recordings.recording import FinRange, Recording
 from rocketroll_common.arrays import FloatArray
 
 __all__ = [
@@ -53,6 +53,7 @@ __all__ = [
     "collinearity",
     "diagnose",
     "feedback",
+    "logged_fin",
     "looped",
     "share_at_stops",
 ]
@@ -108,6 +109,14 @@ class Diagnosis:
             **self.figures,
             "findings": [{"kind": f.kind, "text": f.text} for f in self.findings],
         }
+
+
+def logged_fin(recording: Recording) -> FloatArray:
+    """The fin as the log holds it and a loop acts on it: the command where there is one,
+    else the measured fin (a recording has one or the other)."""
+    fin = recording.fin_cmd_deg if recording.fin_cmd_deg is not None else recording.fin_deg
+    assert fin is not None
+    return np.asarray(fin, dtype=float)
 
 
 def share_at_stops(fin: FloatArray, fins: FinRange) -> float:

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.methods import ModelFit
-from identification.methods.diagnosis import Diagnosis, diagnose
+from identification.methods.diagnosis import Diagnosis, diagnose, logged_fin
 from identification.methods.flightfit import (
     EXPONENT_BOUNDS,
     LOG_BOUND,
@@ -160,7 +160,7 @@ def flight_adequacy(result: FlightFit, fin_range: FinRange | None = None) -> dic
         u, fin, inputs.dt_s, inputs.rate_limit_dps is None, None
     )
 
-    why = _diagnosis(inputs, fin, u, fins)
+    why = _diagnosis(inputs, u, fins)
 
     def safe(value: float) -> float | None:
         return value if math.isfinite(value) else None
@@ -184,15 +184,12 @@ def flight_adequacy(result: FlightFit, fin_range: FinRange | None = None) -> dic
     }
 
 
-def _diagnosis(inputs: FlightInputs, fin: FloatArray, u: FloatArray, fins: FinRange) -> Diagnosis:
+def _diagnosis(inputs: FlightInputs, u: FloatArray, fins: FinRange) -> Diagnosis:
     """:func:`~identification.methods.diagnosis.diagnose` on a flight: the regressors of its
     one-step equation are the fin's torque ``q·δ``, the damping's ``ρV·p`` and a constant
     torque ``q`` (``q`` and ``ρV`` relative to the reference)."""
     n = inputs.n
-    rec = inputs.recording
-    logged = rec.fin_cmd_deg if rec.fin_cmd_deg is not None else rec.fin_deg
-    if logged is not None:  # the fin as logged: a loop acts on the command
-        fin = np.asarray(logged, dtype=float)
+    fin = logged_fin(inputs.recording)  # a loop acts on the command, not the modelled fin
     speed = np.asarray(inputs.speed_ratio[::SUBSTEPS][:n], dtype=float)
     density = np.asarray(inputs.density_ratio[::SUBSTEPS][:n], dtype=float)
     q = density * speed**2

@@ -192,16 +192,15 @@ def _closed_loop_starts(data: RollData, inputs: Measurements) -> list[dict[str, 
     (α ≈ 0), a local optimum.  A loop that stabilises the rocket has ``α·K > 0`` of order
     one: α is started at a few such products over the loop's gain ``K`` read off the log,
     θ̄ from the mean rate and fin (``v̄ = α·(θ̄ + fin̄)``)."""
-    from identification.methods.diagnosis import feedback, looped
+    from identification.methods.diagnosis import feedback, logged_fin, looped
 
     rec = inputs.recording
     fin = np.asarray(inputs.theta_fine[:: data.per], dtype=float)
-    logged = rec.fin_cmd_deg if rec.fin_cmd_deg is not None else rec.fin_deg
     rate = np.asarray(
         rec.roll_rate_dps if rec.roll_rate_dps is not None else inputs.velocity_dps, dtype=float
     )[: fin.size]
     dt = float(np.median(np.diff(data.time_s)))
-    command = np.asarray(logged, dtype=float)[: fin.size] if logged is not None else fin
+    command = logged_fin(rec)[: fin.size]
     free = np.abs(command) < 0.995 * float(np.max(np.abs(command)))  # off the stops
     loop = feedback(command, rate, dt, free)
     gain = loop["gain"]
