@@ -28,6 +28,7 @@ parameter map, its system, its starts and its searches.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -270,6 +271,24 @@ class ProfileInterval:
         """Both ends set by the likelihood: the data bound the parameter on both sides."""
         return self.low_end == "likelihood" and self.high_end == "likelihood"
 
+    def joined(self, others: Sequence[ProfileInterval]) -> ProfileInterval:
+        """This interval widened to hold ``others`` (the profiles from the likelihood's
+        other optima, each at the same level from the best): the values no basin's profile
+        rejects lie between the lowest low and the highest high.  The estimate stays this
+        one's; each end is labelled as the profile that set it."""
+        every = [self, *others]
+        low = min(every, key=lambda p: p.low)
+        high = max(every, key=lambda p: p.high)
+        return dataclasses.replace(
+            self,
+            low=low.low,
+            high=high.high,
+            low_end=low.low_end,
+            high_end=high.high_end,
+            gain=max(p.gain for p in every),
+            evaluations=sum(p.evaluations for p in every),
+        )
+
     def as_dict(self, to_natural: Callable[[float], float] | None = None) -> dict[str, Any]:
         """The interval as the JSON reports it (``method: profile``), its values mapped by
         ``to_natural`` (increasing: the coordinate profiled was, say, a log)."""
@@ -357,6 +376,7 @@ def profile_interval(
     level: float = 0.95,
     bounds: Sequence[tuple[float | None, float | None]] | None = None,
     max_doublings: int = 8,
+    reference: float | None = None,
 ) -> ProfileInterval:
     """The profile-likelihood interval of coordinate ``index`` of a fit at ``point``.
 
@@ -367,14 +387,19 @@ def profile_interval(
     up to ``max_doublings`` times and stopping at ``limits`` (the parameter's physical
     range); the crossing is then found by Brent's method, to 1 % of ``step``.  Unlike the
     Hessian's ``±1.96·SE``, this needs no positive definite curvature at the optimum and is
-    not symmetric: it says where the data stop telling the parameter, on each side."""
+    not symmetric: it says where the data stop telling the parameter, on each side.
+
+    ``reference``: the least ``f`` the fit knows of, where ``point`` is another optimum (a
+    second basin of a likelihood with several): the level is then measured from it, and the
+    interval is that basin's share of the values the data do not reject
+    (:meth:`ProfileInterval.joined` joins the basins')."""
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"step must be positive and finite, got {step!r}")
     x_hat = np.asarray(point, dtype=float)
     centre = float(x_hat[index])
     crit = 0.5 * float(stats.chi2.ppf(level, 1))
     nuisance = None if bounds is None else [b for i, b in enumerate(bounds) if i != index]
-    best = f(x_hat)
+    best = f(x_hat) if reference is None else float(reference)
     lowest = [best]
     count = [1]
 

@@ -349,7 +349,12 @@ _RANGES = {
 
 
 def rocket_intervals(
-    data: RollData, model: str, nat: dict[str, Any], std_errors: dict[str, float], mode: str
+    data: RollData,
+    model: str,
+    nat: dict[str, Any],
+    std_errors: dict[str, float],
+    mode: str,
+    rivals: Sequence[dict[str, Any]] = (),
 ) -> dict[str, dict[str, Any]]:
     """A 95 % interval for each of the rocket's parameters, by its reported name: the
     Hessian's ``±1.96·SE`` (``method: hessian``) where ``mode`` is ``auto``, the SE is finite
@@ -360,9 +365,18 @@ def rocket_intervals(
 
     The profile is taken in the optimiser's coordinates (the θ model's damping as its
     mid-range value and slope, where the re-fits converge), the parameter made one of them
-    by a linear change of basis."""
+    by a linear change of basis.
+
+    ``rivals``: the likelihood's other optima the data do not reject
+    (:meth:`_Search.rivals`).  With any, no interval is the Hessian's (the likelihood is not
+    one hill): each parameter's profile is traced from every optimum, its level measured
+    from the best, and the profiles joined (:meth:`ProfileInterval.joined`); ``optima``
+    lists each optimum's value of the parameter."""
     pmap = parameter_map(data, model, int(np.size(nat["ar"])), nat)
     x_hat = pmap.vector(nat)
+    others = [pmap.vector(r) for r in rivals]
+    lowest = min((negloglike_natural(data, r) for r in (nat, *rivals)), default=None)
+    reference = lowest if rivals else None
     names = pmap.names
     rocket = (
         ("alpha", "theta_bar", "beta_bar")
@@ -376,7 +390,7 @@ def rocket_intervals(
         estimate = float(nat[name])
         se = std_errors.get(shown, math.nan)
         wald = standing_interval(estimate, se, _RANGES[name], signed=name == "alpha")
-        if mode == "auto" and wald is not None:
+        if mode == "auto" and wald is not None and not rivals:
             out[shown] = wald
             continue
         basis, index = _basis(names, name, pmap.pivot)
@@ -384,14 +398,21 @@ def rocket_intervals(
         def objective(y: FloatArray, m: FloatArray = basis) -> float:
             return negloglike_natural(data, pmap.natural(m @ y))
 
-        found = profile_interval(
-            objective,
-            np.asarray(np.linalg.solve(basis, x_hat), dtype=np.float64),
-            index,
-            step=profile_step(estimate, se),
-            limits=_RANGES[name],
+        found, *around = (
+            profile_interval(
+                objective,
+                np.asarray(np.linalg.solve(basis, x), dtype=np.float64),
+                index,
+                step=profile_step(estimate, se),
+                limits=_RANGES[name],
+                reference=reference,
+            )
+            for x in (x_hat, *others)
         )
+        found = found.joined(around)
         out[shown] = found.as_dict()
+        if rivals:
+            out[shown]["optima"] = [estimate, *(float(r[name]) for r in rivals)]
         if found.gain > _PROFILE_GAIN:
             out[shown]["higher_likelihood_found"] = found.gain
     return out
@@ -472,6 +493,8 @@ class _Search:
     found: dict[tuple[str, int], tuple[float, dict[str, Any], bool, str]] = field(
         default_factory=dict
     )
+    #: Every optimum of the first fit's starts, (−log-likelihood, natural parameters).
+    optima: list[tuple[float, dict[str, Any]]] = field(default_factory=list)
 
     def order(self, model: str, order: int) -> tuple[float, dict[str, Any], bool, str]:
         """(−log-likelihood, natural parameters, converged, message) of one model and order."""
@@ -516,26 +539,57 @@ class _Search:
         second = _equation_error_start(self.data, self.inputs)
         looped = _closed_loop_starts(self.data, self.inputs)
         floors = [0.0, _quiet_noise(self.data)] if self.data.has_gyro else [0.0]
-        best = []
+        best, tried = [], []
         for floor in floors:
             found = self._run("constant", 1, dict(start, gyro_floor=floor))
+            optima = [(found[0], found[1])]
             if second is not None and _disagree(self.data, found[1], second):
                 other = self._run("constant", 1, dict(second, gyro_floor=floor))
+                optima.append((other[0], other[1]))
                 if other[0] < found[0] - _START_GAIN:
                     found = other
             best.append(found)
-        chosen = (
-            best[1]
-            if len(best) > 1 and best[0][0] - best[1][0] >= _FLOOR_GAIN * self.data.n
-            else best[0]
-        )
+            tried.append(optima)
+        pick = 1 if len(best) > 1 and best[0][0] - best[1][0] >= _FLOOR_GAIN * self.data.n else 0
+        chosen = best[pick]
+        self.optima = list(tried[pick])
         for third in looped:  # with the gyro's noise the first fits chose
             other = self._run(
                 "constant", 1, dict(third, gyro_floor=chosen[1].get("gyro_floor", 0.0))
             )
+            self.optima.append((other[0], other[1]))
             if other[0] < chosen[0] - _START_GAIN:
                 chosen = other
         return chosen
+
+    def rivals(
+        self, model: str, order: int, fun: float, nat: dict[str, Any]
+    ) -> list[tuple[float, dict[str, Any]]]:
+        """The other optima of ``model`` at ``order`` the data do not reject beside the
+        fit ``(fun, nat)``: each optimum of the first fit's starts that tells another rocket
+        (:func:`_disagree`) and lies within twice :data:`_RIVAL_LEVEL` of the first fit's
+        best, re-fitted at this model and order from there, kept where it still tells
+        another rocket and its −log-likelihood is within :data:`_RIVAL_LEVEL` of ``fun`` (or
+        below it).  A closed loop's likelihood has such a second basin: the fin doing
+        nothing (α ≈ 0) and the turbulence doing all, near the rocket's."""
+        first = self.order("constant", 1)
+        kept: list[tuple[float, dict[str, Any]]] = []
+        seen = [first[1]]
+        for value, other in sorted(self.optima, key=lambda o: o[0]):
+            if value > first[0] + 2.0 * _RIVAL_LEVEL:
+                continue
+            if any(not _disagree(self.data, known, other) for known in seen):
+                continue
+            seen.append(other)
+            if (model, order) == ("constant", 1):
+                refit = (value, other)
+            else:
+                warm = dict(other, ar=np.append(other["ar"], np.zeros(order - 1)))
+                found = self._run(model, order, warm)
+                refit = (found[0], found[1])
+            if refit[0] <= fun + _RIVAL_LEVEL and _disagree(self.data, nat, refit[1]):
+                kept.append(refit)
+        return kept
 
 
 def _disagree(data: RollData, found: dict[str, Any], other: dict[str, Any]) -> bool:
@@ -551,6 +605,9 @@ def _disagree(data: RollData, found: dict[str, Any], other: dict[str, Any]) -> b
 #: Log-likelihood by which the second start's optimum must beat the first's to be kept
 #: (the same optimum reached from two starts differs in its last digits).
 _START_GAIN = 1.0
+#: How far below the best another optimum's log-likelihood may lie and still be a basin
+#: the data do not reject: the 95 % profile level, half χ²₁'s quantile.
+_RIVAL_LEVEL = 0.5 * float(stats.chi2.ppf(0.95, 1))
 #: Log-likelihood gain per reading from which the gyro's additive floor is kept: an
 #: effect size, not AIC's 1 in total, which on a long record of eq. 52's gyro adopts a
 #: floor that only soaks up the model's small misfit (the virtual tunnel's gyros,
@@ -585,6 +642,14 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
         raise IdentificationError(
             f"{data.name}: maximum likelihood found no stable model ({message})"
         )
+    rivals = search.rivals(model, best, fun, nat)
+    better = min(rivals, key=lambda r: r[0], default=None)
+    if better is not None and better[0] < fun - _START_GAIN:  # a rival basin is the best
+        rivals = [r for r in rivals if r is not better] + [(fun, nat)]
+        fun, nat = better
+        parts = roll_parts(data, nat)
+        if parts is None:
+            raise IdentificationError(f"{data.name}: maximum likelihood found no stable model")
     info = _information(data, model, nat)
     std_errors, correlations = _rocket_estimates(info, model)
     return _result(
@@ -592,7 +657,9 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
         model,
         nat,
         parts,
-        intervals=rocket_intervals(data, model, nat, std_errors, intervals),
+        intervals=rocket_intervals(
+            data, model, nat, std_errors, intervals, rivals=[r[1] for r in rivals]
+        ),
         loglike=-fun,
         aic=float(orders[best]),
         n_params=count_params(data, model, best, nat),

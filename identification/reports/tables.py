@@ -272,15 +272,23 @@ _END_WORDS = {"range": "the range ends first", "open": "not bounded"}
 
 
 def _determined(interval: Mapping[str, Any]) -> str:
-    """ "yes", or which side the log leaves open and why."""
+    """ "yes", or which side the log leaves open and why; where the likelihood has more than
+    one optimum the data do not reject, each one's value too."""
+    optima = interval.get("optima") or []
+    basins = (
+        f"{len(optima)} optima the data cannot tell apart, at "
+        + ", ".join(f"{v:.3g}" for v in optima)
+        if len(optima) > 1
+        else ""
+    )
     if interval.get("determined"):
-        return "yes"
+        return f"yes ({basins})" if basins else "yes"
     sides = [
         f"{side}: {_END_WORDS.get(interval[f'{side}_end'], interval[f'{side}_end'])}"
         for side in ("low", "high")
         if interval[f"{side}_end"] != "likelihood"
     ]
-    return "no (" + "; ".join(sides) + ")"
+    return "no (" + "; ".join(sides + ([basins] if basins else [])) + ")"
 
 
 def _with_error(value: float, metrics: Mapping[str, Any], name: str) -> str:
