@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -115,3 +117,51 @@ def test_the_models_edge_inside_the_level_closes_that_side_as_the_range() -> Non
     assert found.low_end == "range"
     assert found.low == pytest.approx(-0.5, abs=1e-2)
     assert found.high_end == "likelihood"
+
+
+def _two_basins(b: np.ndarray) -> float:
+    """A likelihood with two optima 0.5 apart in log-likelihood: at 0 (the best) and at 6,
+    each a unit-SE hill, the second parameter told at 1 either way."""
+    return min(0.5 * b[0] ** 2, 0.5 * (b[0] - 6.0) ** 2 + 0.5) + 0.5 * (b[1] - 1.0) ** 2
+
+
+def test_a_profile_from_each_basin_measured_from_the_best_joins_both() -> None:
+    alone = profile_interval(_two_basins, np.array([0.0, 1.0]), 0, step=1.0)
+    assert alone.high == pytest.approx(Z95, abs=0.01)  # blind to the second basin
+    other = profile_interval(_two_basins, np.array([6.0, 1.0]), 0, step=1.0, reference=0.0)
+    # Its level is the best's: 1.92 − 0.5 above its own optimum, not 1.92.
+    half = math.sqrt(2.0 * (0.5 * stats.chi2.ppf(0.95, 1) - 0.5))
+    assert other.low == pytest.approx(6.0 - half, abs=0.01)
+    assert other.high == pytest.approx(6.0 + half, abs=0.01)
+    joined = alone.joined([other])
+    assert (joined.low, joined.high) == (alone.low, other.high)
+    assert joined.estimate == 0.0 and joined.determined
+    assert joined.evaluations == alone.evaluations + other.evaluations
+
+
+def test_ml_on_a_loop_alone_profiles_every_basin_and_covers_the_rocket() -> None:
+    # A rate loop with nothing on top: the fin doing nothing (α ≈ 0, the turbulence doing
+    # all) is an optimum within the 95 % level of the rocket's; each basin is profiled.
+    # (benchmarks/closed_loop_identification.py's loop-only log 4, whose truth the
+    # profile from the fit's basin alone missed.)
+    truth: dict[str, Any] = {
+        "alpha": 1.4434241117895774,
+        "beta": -2.9656234047409162,
+        "beta_bar": 2.8843145098421408,
+    }
+    rec = run_tunnel(
+        TunnelSpec(
+            seed=4, schedule="none", lead=2.0, duration=40.0, model="constant", **truth,
+            loop_gain=0.9612495297573481, loop_delay=0.02, stops=15.0,
+            turbulence_sd=7.724098628345878, log_dt=0.04, gyro_noise=1.0, measured_fin=True,
+        )
+    )  # fmt: skip
+    rec = dataclasses.replace(rec, fin_deg=None)  # the flight computer logs its command
+    found = maximum_likelihood(rec, "constant")
+    alpha = found.intervals["alpha"]
+    assert alpha["method"] == "profile"  # not the Hessian's: the likelihood is not one hill
+    assert len(alpha["optima"]) >= 2
+    assert all(alpha["low"] <= v <= alpha["high"] for v in alpha["optima"])
+    assert alpha["low"] <= truth["alpha"] <= alpha["high"]
+    a = found.intervals["a_per_s"]
+    assert a["low"] <= truth["beta_bar"] <= a["high"]
