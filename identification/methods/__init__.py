@@ -293,21 +293,39 @@ class Context:
     def smoothed_over(self, window_s: float | None) -> Measurements:
         """:attr:`measurements` with the velocity smoothed over ``window_s`` instead of the
         options' window (None: the options'); made once per window."""
-        if window_s is None:
-            return self.measurements
-        made: dict[float, Measurements] = self.__dict__.setdefault("_smoothed_over", {})
-        if window_s not in made:
-            from identification.methods.pipeline import measurements
+        return self.measured(window_s)
 
-            made[window_s] = measurements(
-                self.recording, replace(self.options, smoothing_window_s=window_s)
-            )
-        return made[window_s]
+    def measured(
+        self, window_s: float | None = None, latency_s: float | None = None
+    ) -> Measurements:
+        """:attr:`measurements` with the velocity smoothed over ``window_s`` (None: the
+        options' window) and the fin delayed by a sensors' latency ``latency_s`` a method
+        found (None: the stated one, if any); made once per pair."""
+        if window_s is None and latency_s is None:
+            return self.measurements
+        made: dict[tuple[float | None, float | None], Measurements] = self.__dict__.setdefault(
+            "_measured", {}
+        )
+        if (window_s, latency_s) not in made:
+            from identification.methods.pipeline import measurements, with_latency
+
+            options = self.options
+            if window_s is not None:
+                options = replace(options, smoothing_window_s=window_s)
+            if latency_s is not None:
+                options = with_latency(options, latency_s)
+            made[window_s, latency_s] = measurements(self.recording, options)
+        return made[window_s, latency_s]
 
     def measurements_of(self, found: ModelFit) -> Measurements:
-        """The measurements ``found`` was fitted to (its own smoothing window, where its
-        method chose one: ``metrics["smoothing_window_s"]``)."""
-        return self.smoothed_over(found.metrics.get("smoothing_window_s"))
+        """The measurements ``found`` was fitted to: its own smoothing window, where its
+        method chose one (``metrics["smoothing_window_s"]``), and the fin delayed by the
+        sensors' latency, where its method found one (``metrics["sensor_latency"]``)."""
+        latency = found.metrics.get("sensor_latency") or {}
+        return self.measured(
+            found.metrics.get("smoothing_window_s"),
+            float(latency["estimate_s"]) if latency.get("admitted") else None,
+        )
 
     def disturbance(self, params: RollParams, model: str) -> tuple[Disturbance, Resimulation]:
         """Steps 8-9 for any parameters: ``u_d`` by eq. 35-44, and its re-simulation (§3.5)."""

@@ -74,9 +74,11 @@ from identification.methods import Context, ModelFit, resimulation_metrics
 from identification.methods.pipeline import (
     IdentifyOptions,
     Measurements,
-    delayed,
+    delayed_fin,
+    latency_stated,
     measurements,
     model_inputs,
+    with_latency,
 )
 from identification.methods.rollspace import (
     MIN_DAMPING,
@@ -111,7 +113,6 @@ __all__ = [
     "MLFit",
     "QuadraticSearch",
     "delay_search",
-    "delayed_fin",
     "maximum_likelihood",
     "ml_method",
     "posterior_given",
@@ -251,6 +252,10 @@ class MLFit(StateSpaceFit):
         A 95 % interval of each of the rocket's parameters (:func:`rocket_intervals`): the
         Hessian's where it is positive definite, the profile likelihood's where it is not
         (or for all, asked so), each saying whether the data determine it.
+    latency : dict
+        The sensors' latency searched where none is stated (:func:`_latency_search`'s
+        figures: the estimate, s, its likelihood-ratio statistic and p, whether it is
+        admitted, in which case the fit is on the fin delayed by it); empty where stated.
     nfev : int
         Likelihood evaluations (all orders).
     u_d_deg, u_d_sd_deg : ndarray, shape (n - 1,)
@@ -273,6 +278,7 @@ class MLFit(StateSpaceFit):
     orders: dict[int, float]
     nfev: int
     intervals: dict[str, dict[str, Any]] = field(default_factory=dict)
+    latency: dict[str, Any] = field(default_factory=dict)
     _state_space: LinearGaussian = field(repr=False)
     _smoothed: Smoothed = field(repr=False)
 
@@ -822,7 +828,8 @@ def maximum_likelihood(
     """
     inputs = model_inputs(recording, model, options)
     mode = (options or IdentifyOptions()).intervals
-    return _fit(_Search(prepare(inputs), inputs), model, max_order, mode)
+    search, latency = _latency_search(_Search(prepare(inputs), inputs), options)
+    return dataclasses.replace(_fit(search, model, max_order, mode), latency=latency)
 
 
 @dataclass(frozen=True)
@@ -842,37 +849,71 @@ class DelaySearch:
         return max(2.0 * (self.loglike_delayed - self.loglike_undelayed), 0.0)
 
 
-def delayed_fin(inputs: Measurements, steps: int) -> Measurements:
-    """``inputs`` with the fin angle delayed by ``steps`` fine-grid steps (held at its first
-    value before): the rocket as late sensors read it is the rocket driven by that fin."""
-    if steps == 0:
-        return inputs
-    return dataclasses.replace(inputs, theta_fine=delayed(inputs.theta_fine, steps))
+def _latency_search(
+    search: _Search, options: IdentifyOptions | None
+) -> tuple[_Search, dict[str, Any]]:
+    """The sensors' latency where none is stated, as a term of the fit
+    (:func:`~identification.methods.actuation.latency_term`, on the constant model's AR(1)
+    fit: screened by the filter at its parameters, fitted where the screen rises).  Returns
+    the search to fit every model on (on the delayed fin where the term is admitted) and
+    the term's figures (empty where the latency is stated).  A late gyro, or a fin logged
+    ahead of the roll it drives (an aileron leading its roll by a sample), biases the gain
+    and the damping otherwise."""
+    from identification.methods.actuation import latency_term
+
+    inputs = search.inputs
+    recording = inputs.recording
+    if latency_stated(recording, options):
+        return search, {}
+    step = inputs.grid.step_s
+    fun, nat = search.order("constant", 1)[:2]
+    fitted: dict[int, _Search] = {}
+
+    def refit(d: int) -> float:
+        late = model_inputs(recording, "constant", with_latency(options, d * step))
+        fitted[d] = _Search(prepare(late), late)
+        return fitted[d].order("constant", 1)[0]
+
+    found = latency_term(
+        step,
+        fun,
+        lambda d: negloglike_natural(prepare(delayed_fin(inputs, d)), nat),
+        refit,
+    )
+    if not found["admitted"]:
+        return search, found
+    chosen = fitted[found["steps"]]
+    chosen.nfev += search.nfev + sum(f.nfev for d, f in fitted.items() if d != found["steps"])
+    return chosen, found
 
 
-def delay_search(inputs: Measurements, model: str, delays: Sequence[int]) -> DelaySearch:
-    """The fin's delay, in fine-grid steps among ``delays``, that best describes the roll:
-    each screened by the log-likelihood at the undelayed fit's parameters (one filter pass),
-    the screen's best and its two neighbours then fitted from there, the best fit kept (its
-    likelihood-ratio statistic against no delay is conservative: the screen may miss a
-    better delay, never invent one)."""
+def delay_search(inputs: Measurements, model: str, max_latency_s: float) -> DelaySearch:
+    """The fin's delay, in fine-grid steps up to ``max_latency_s``, that best describes the
+    roll under ``model`` at the AR order of its undelayed fit: the sensors' latency as a
+    term (:func:`~identification.methods.actuation.latency_term`), each delay screened by
+    the log-likelihood at the undelayed fit's parameters, re-fitted from there where the
+    screen rises (the statistic is conservative: the screen may miss a better delay, never
+    invent one)."""
+    from identification.methods.actuation import latency_term
+
     search = _Search(prepare(inputs), inputs)
     base = _fit(search, model)
     nat = search.order(model, base.ar.size)[1]
-    screened = {
-        int(d): -negloglike_natural(prepare(delayed_fin(inputs, int(d))), nat) for d in delays
-    }
-    top = max(screened, key=lambda d: screened[d])
-    if top == 0:
-        return DelaySearch(0, inputs.grid.step_s, base.loglike, base.loglike, screened)
-    fitted = {0: base.loglike}
-    for d in (top - 1, top, top + 1):  # the screen's peak leans towards none: its neighbours
-        if d in screened and d not in fitted:
-            data = prepare(delayed_fin(inputs, d))
-            result = _maximise(data, parameter_map(data, model, base.ar.size, nat), nat)
-            fitted[d] = max(-float(result.fun), screened[d])
-    best = max(fitted, key=lambda d: fitted[d])
-    return DelaySearch(best, inputs.grid.step_s, base.loglike, fitted[best], screened)
+    step = inputs.grid.step_s
+    screened = {0: base.loglike}
+
+    def screen(d: int) -> float:
+        screened[d] = -negloglike_natural(prepare(delayed_fin(inputs, d)), nat)
+        return -screened[d]
+
+    def refit(d: int) -> float:
+        data = prepare(delayed_fin(inputs, d))
+        result = _maximise(data, parameter_map(data, model, base.ar.size, nat), nat)
+        return min(float(result.fun), -screened[d])
+
+    term = latency_term(step, -base.loglike, screen, refit, max_latency_s=max_latency_s)
+    delayed_loglike = base.loglike + 0.5 * term["statistic"]
+    return DelaySearch(term["steps"], step, base.loglike, delayed_loglike, screened)
 
 
 @dataclass(frozen=True)
@@ -1055,8 +1096,10 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     the method's own estimate of it: the measured first velocity is a
     smoothed derivative whose error would stay in the angle for good.
     """
-    inputs = context.measurements
-    search = _Search(prepare(inputs), inputs)
+    search, latency = _latency_search(
+        _Search(prepare(context.measurements), context.measurements), context.options
+    )
+    inputs = search.inputs
     fits = []
     for model in models:
         found = _fit(search, model, intervals=context.options.intervals)
@@ -1088,6 +1131,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "std_errors": found.std_errors,
             "correlations": found.correlations,
             "intervals": found.intervals,
+            **({"sensor_latency": latency} if latency else {}),
             "aic_by_order": {str(k): v for k, v in found.orders.items()},
             "nfev": found.nfev,
             "converged": found.converged,

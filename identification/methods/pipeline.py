@@ -56,9 +56,12 @@ __all__ = [
     "IdentifyOptions",
     "Measurements",
     "delayed",
+    "delayed_fin",
     "identify",
+    "latency_stated",
     "measurements",
     "recover_disturbance",
+    "with_latency",
 ]
 
 
@@ -514,6 +517,27 @@ def delayed(values: FloatArray, steps: int) -> FloatArray:
         return values
     steps = min(steps, values.size)
     return np.concatenate([np.full(steps, values[0]), values[: values.size - steps]])
+
+
+def delayed_fin(inputs: Measurements, steps: int) -> Measurements:
+    """``inputs`` with the fin angle delayed by ``steps`` fine-grid steps (held at its first
+    value before): the rocket as late sensors read it is the rocket driven by that fin."""
+    if steps == 0:
+        return inputs
+    return dataclasses.replace(inputs, theta_fine=delayed(inputs.theta_fine, steps))
+
+
+def with_latency(options: IdentifyOptions | None, latency_s: float) -> IdentifyOptions:
+    """``options`` with the sensors' latency stated as ``latency_s``."""
+    opts = IdentifyOptions() if options is None else options
+    return dataclasses.replace(opts, rig=dataclasses.replace(opts.rig, sensor_latency_s=latency_s))
+
+
+def latency_stated(recording: Recording, options: IdentifyOptions | None) -> bool:
+    """Whether the sensors' latency is stated: by ``identify --sensor-latency`` or the
+    recording's ``rig.sensor_latency_s`` line (0 stated is a statement)."""
+    stated = (IdentifyOptions() if options is None else options).rig.sensor_latency_s
+    return stated is not None or "rig.sensor_latency_s" in recording.metadata
 
 
 def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:

@@ -307,3 +307,61 @@ def test_a_quadratic_damping_is_not_invented_on_the_papers_rocket() -> None:
     )
     assert plain.interval[0] < 0.0 < plain.interval[1] and plain.statistic < 6.63
     assert plain.p > 0.01 and not plain.summary()["admitted"]
+
+
+#: Logs of the kinds whose gain a late sensor biases: a pilot's smooth bank-to-bank
+#: aileron at 25 Hz (a negative gain, the roll read a sample late), and a rocket of the
+#: other sign on doublets at 50 Hz, each with a gyro only and its measured fin.
+_LATE_LOGS: dict[str, dict[str, Any]] = {
+    "pilot 25 Hz": {
+        "model": "constant", "alpha": -2.9, "beta": -1.45, "beta_bar": 2.4,
+        "schedule": "ramps", "steps": 12, "ramp": 0.6, "dwell_min": 1.0, "dwell_max": 2.0,
+        "lead": 1.0, "fin_range": 10.0, "log_dt": 0.04,
+    },
+    "doublets 50 Hz": {
+        "model": "constant", "alpha": 1.8, "beta": -5.4, "beta_bar": 1.5,
+        "schedule": "doublets", "lead": 1.0, "fin_range": 8.0, "log_dt": 0.02,
+        "duration": 30.0,
+    },
+}  # fmt: skip
+
+
+def _late_log(kind: str, seed: int, latency_s: float) -> Any:
+    return run_tunnel(
+        TunnelSpec(
+            seed=seed, gyro_noise=1.0, no_encoder=True, measured_fin=True, turbulence_sd=0.7,
+            correlation_time=1.0, effects=Effects(latency_s=latency_s), **_LATE_LOGS[kind],
+        )
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", sorted(_LATE_LOGS))
+def test_ml_finds_a_late_sensor_itself_and_fits_the_rocket_through_it(kind: str) -> None:
+    from identification.methods import Context, fit
+
+    truth = _LATE_LOGS[kind]
+    for seed in (0,):
+        rec = _late_log(kind, seed, 0.04)
+        found = fit(Context(rec), "ml", ["constant"])["constant"]
+        term = found.metrics["sensor_latency"]
+        assert term["admitted"] and term["p"] < 0.01, (kind, seed, term)
+        assert abs(term["estimate_s"] - 0.04) <= 0.02 + 1e-12, (kind, seed, term)
+        assert found.params.alpha == pytest.approx(truth["alpha"], rel=0.05), (kind, seed)
+        assert found.params.beta_bar_per_s == pytest.approx(truth["beta_bar"], rel=0.1)
+        # Everything after the fit reads the fin it was fitted on.
+        assert "delayed" in found.metrics["sources"]["fin_angle"]
+        # Stated, the latency is not searched: the user's word stands.
+        stated = IdentifyOptions(rig=StatedRig(sensor_latency_s=0.0))
+        said = fit(Context(rec, stated), "ml", ["constant"])["constant"]
+        assert "sensor_latency" not in said.metrics
+        assert abs(said.params.alpha - truth["alpha"]) > abs(found.params.alpha - truth["alpha"])
+
+
+@pytest.mark.parametrize("kind", sorted(_LATE_LOGS))
+def test_ml_does_not_invent_a_late_sensor(kind: str) -> None:
+    from identification.methods.ml import maximum_likelihood
+
+    for seed in (3, 4):
+        found = maximum_likelihood(_late_log(kind, seed, 0.0), "constant")
+        assert not found.latency["admitted"], (kind, seed, found.latency)
+        assert found.latency["searched_s"][1] == pytest.approx(0.1)
