@@ -521,7 +521,7 @@ def adequacy(
         fins,
         turbulence_sd_deg=metrics.get("u_d_sd_deg") or float(np.std(u)),
     )
-    if "feedback" in why.kinds and method in _OPEN_LOOP_METHODS:
+    if why.figures["closed_loop"] and method in _OPEN_LOOP_METHODS:
         found.bad.append(
             f"the fin follows the roll rate (a closed loop): {method} is not consistent on "
             "closed-loop data, for the fin carries the turbulence through the loop; use ml"

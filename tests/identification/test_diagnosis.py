@@ -13,7 +13,7 @@ import pytest
 
 from identification.instruments.tunnel import TunnelSpec, run_tunnel
 from identification.methods import Context, fit
-from identification.methods.diagnosis import diagnose, feedback, looped
+from identification.methods.diagnosis import diagnose, feedback, looped, partly_looped
 from identification.methods.ml import maximum_likelihood
 from identification.recordings.recording import FinRange, Recording
 
@@ -108,3 +108,44 @@ def test_output_error_on_a_closed_loop_is_unreliable_with_the_reason() -> None:
     kinds = [f["kind"] for f in ml["diagnosis"]["findings"]]
     assert "feedback" in kinds
     json.dumps(ml["diagnosis"], allow_nan=False)  # JSON-safe
+
+
+@pytest.mark.parametrize(("gain", "closed"), [(0.02, False), (0.05, False), (0.3, True)])
+def test_a_loop_beside_a_smooth_schedule_is_named_even_where_it_moves_little_of_the_fin(
+    gain: float, closed: bool
+) -> None:
+    # A chirp is smooth: the fin's own changes are not jumps the test leaves out, and a weak
+    # loop predicts only a few per cent of them.  It is named all the same, and only a
+    # loop that moves most of the fin makes output error unreliable for it.
+    rec = run_tunnel(
+        TunnelSpec(
+            seed=0, schedule="chirp", fin_range=8.0, loop_gain=gain, loop_delay=0.04,
+            measured_fin=False, **ROCKET, **LOG,
+        )
+    )  # fmt: skip
+    fin = np.asarray(rec.fin_cmd_deg, dtype=float)
+    loop = feedback(fin, np.asarray(rec.roll_rate_dps, dtype=float), rec.dt_s, np.abs(fin) < 14.9)
+    assert looped(loop) is closed
+    assert partly_looped(loop) is not closed
+    found = diagnose(fin, np.asarray(rec.roll_rate_dps), rec.dt_s, STOPS, turbulence_sd_deg=8.0)
+    assert "feedback" in found.kinds and found.figures["closed_loop"] is closed
+    text = next(f.text for f in found.findings if f.kind == "feedback")
+    assert ("partly" in text) is not closed
+
+
+@pytest.mark.parametrize("fin_range", [8.0, 20.0])
+@pytest.mark.parametrize("schedule", ["prbs", "ramps", "staircase", "doublets", "chirp"])
+def test_an_open_schedule_is_not_called_a_loop(schedule: Any, fin_range: float) -> None:
+    # At ±20° the schedule is clipped at the ±15° stops: the fin's own past no longer
+    # predicts its changes and the rate, which integrates the clipped fin, seems to (a
+    # chirp: the rate "predicts" up to 12 % of them); saturation is named instead.
+    rec = run_tunnel(
+        TunnelSpec(
+            seed=1, schedule=schedule, fin_range=fin_range, measured_fin=False, **ROCKET, **LOG
+        )
+    )
+    found = diagnose(
+        np.asarray(rec.fin_cmd_deg), np.asarray(rec.roll_rate_dps), rec.dt_s, STOPS,
+        turbulence_sd_deg=8.0,
+    )  # fmt: skip
+    assert "feedback" not in found.kinds and not found.figures["closed_loop"]
