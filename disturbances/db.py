@@ -741,7 +741,7 @@ class DisturbanceDB:
         "t.t0_s, t.n_samples, t.checksum, t.mean_deg, t.sd_deg, t.q05_deg, t.q95_deg, "
         "t.normality_p, i.package_version, i.verdict, t.created_at, t.validation, "
         "i.v_ref_mps, i.rho_ref_kgm3, i.torque_exponent, i.damping_exponent, "
-        "i.options, r.metadata AS recording_metadata "
+        "i.options, i.metrics AS fit_metrics, r.metadata AS recording_metadata "
         "FROM traces t JOIN identifications i ON i.id = t.identification_id "
         "JOIN recordings r ON r.id = i.recording_id LEFT JOIN traces s ON s.id = t.source_trace_id"
     )
@@ -780,7 +780,7 @@ class DisturbanceDB:
                 id=r["id"],
                 recording_id=r["recording_id"],
                 flight_reference=_reference(r),
-                rig=rig_from_json(r["options"], r["recording_metadata"]),
+                rig=rig_from_json(r["options"], r["recording_metadata"], r["fit_metrics"]),
             )
         except ChecksumError:
             raise self._corrupt(r["uid"]) from None

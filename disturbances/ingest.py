@@ -65,7 +65,7 @@ from identification.methods import (
     has_posterior,
     traits,
 )
-from identification.methods.pipeline import Identification, IdentifyOptions
+from identification.methods.pipeline import Identification, IdentifyOptions, fitted_rig
 from identification.methods.statistics import trace_statistics
 from identification.model import Rig
 from identification.recordings.recording import Recording
@@ -342,7 +342,7 @@ def identification_rows(
                     stamp,
                 )
             )
-            trace = _trace_row(recording, fitted, stamp, version, rig)
+            trace = _trace_row(recording, fitted, stamp, version, fitted_rig(rig, fitted.metrics))
             traces.append(trace)
             if fitted.sample_posterior is not None:
                 traces += posterior_rows(trace, fitted, posterior, posterior_seed)

@@ -599,6 +599,11 @@ def params_from_columns(columns: Any) -> RollParams:
     )
 
 
-def rig_from_json(options: str, recording_metadata: str) -> Rig:
-    """The rig of an identification's stored options and its recording's metadata (JSON)."""
-    return Rig.resolved(json.loads(options).get("rig") or {}, json.loads(recording_metadata))
+def rig_from_json(options: str, recording_metadata: str, metrics: str = "{}") -> Rig:
+    """The rig of an identification's stored options, its recording's metadata and the
+    fit's metrics (JSON): what was stated, with what the fit's method found
+    (:func:`~identification.methods.pipeline.fitted_rig`)."""
+    from identification.methods.pipeline import fitted_rig
+
+    rig = Rig.resolved(json.loads(options).get("rig") or {}, json.loads(recording_metadata))
+    return fitted_rig(rig, json.loads(metrics))

@@ -194,8 +194,9 @@ class RollConfig:
         Delay of the roll sensors (encoder and gyro): they read the rocket as it
         was this long ago, s; 0 is none.  For each of the three, None (the
         default) is each rocket's own: the rig its identification assumed (the
-        recording's ``rig.*`` or ``rocketroll identify``'s flags;
-        :class:`identification.model.Rig`), none for a rocket without one.
+        recording's ``rig.*`` or ``rocketroll identify``'s flags, and the latency an
+        ``ml`` fit found where none was stated; :class:`identification.model.Rig`), none
+        for a rocket without one.
     """
 
     task: str = setting("angle", choices=TASKS, cli=False)

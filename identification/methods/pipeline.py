@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -45,7 +46,7 @@ from identification.methods.steps import (
     resimulate,
     smoothing_spread_s,
 )
-from identification.model import Disturbance, RollParams, check_model, damping
+from identification.model import Disturbance, Rig, RollParams, check_model, damping
 from identification.recordings.recording import Recording, StatedRig
 from rocketroll_common.arrays import FloatArray
 from rocketroll_common.errors import SettingError
@@ -57,6 +58,7 @@ __all__ = [
     "Measurements",
     "delayed",
     "delayed_fin",
+    "fitted_rig",
     "identify",
     "latency_stated",
     "measurements",
@@ -538,6 +540,16 @@ def latency_stated(recording: Recording, options: IdentifyOptions | None) -> boo
     recording's ``rig.sensor_latency_s`` line (0 stated is a statement)."""
     stated = (IdentifyOptions() if options is None else options).rig.sensor_latency_s
     return stated is not None or "rig.sensor_latency_s" in recording.metadata
+
+
+def fitted_rig(rig: Rig, metrics: Mapping[str, Any]) -> Rig:
+    """The rig a fit assumed: ``rig`` (stated, or the recording's) with the sensors' latency
+    its method found where it admitted one (``metrics["sensor_latency"]``: ``ml`` searches
+    one where none is stated); the replay flies the same."""
+    found = metrics.get("sensor_latency") or {}
+    if not found.get("admitted"):
+        return rig
+    return dataclasses.replace(rig, latency_s=float(found["estimate_s"]))
 
 
 def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:

@@ -204,10 +204,19 @@ _ADEQUACY_COLUMNS = (
 
 
 def _beyond_lines(fits: Mapping[str, Mapping[str, ModelFit]]) -> list[str]:
-    """Below the parameters: each searched quadratic damping, kept in the fit or not."""
+    """Below the parameters: a sensors' latency a method found, and each searched quadratic
+    damping, kept in the fit or not."""
     lines = []
     for method, by_model in fits.items():
         for model, f in by_model.items():
+            late = f.metrics.get("sensor_latency") or {}
+            if late.get("admitted"):
+                lines.append(
+                    f"  {method} {model}: the roll sensors read {1000 * late['estimate_s']:.0f} ms "
+                    f"late (LR {late['statistic']:.1f}, p = {late['p']:.2g}; searched to "
+                    f"{late['searched_s'][1]:g} s): fitted on the fin delayed by it. The other "
+                    f"methods read it where stated: --sensor-latency {late['estimate_s']:g}"
+                )
             term = f.metrics.get("quadratic_damping")
             if not term:
                 continue

@@ -244,6 +244,46 @@ def test_a_stated_rig_goes_from_the_recording_through_the_database_into_the_repl
     assert overridden.core.link[0].tolist() == env.config.link_row(Rig(0.05, 0.5)).tolist()
 
 
+def test_a_latency_ml_found_goes_through_the_database_into_the_replay(tmp_path: Path) -> None:
+    """Unstated, a late sensor is found by ``ml`` (``metrics.sensor_latency``); the replay of
+    its rocket and ``u_d`` flies that latency, as if it had been stated, and an export
+    imported back keeps it."""
+    from disturbances.db import DisturbanceDB
+    from disturbances.exchange import import_export, write_export
+    from disturbances.ingest import add_recording
+    from identification.instruments.tunnel import TunnelSpec, run_tunnel
+    from identification.methods.pipeline import IdentifyOptions
+
+    rec = run_tunnel(
+        TunnelSpec(
+            seed=0, model="constant", alpha=1.8, beta=-5.4, beta_bar=1.5, schedule="doublets",
+            lead=1.0, fin_range=8.0, log_dt=0.02, duration=30.0, gyro_noise=1.0,
+            no_encoder=True, measured_fin=True, turbulence_sd=0.7, split="train",
+            effects=Effects(latency_s=0.04),
+        )
+    )  # fmt: skip
+    path = tmp_path / "late.sqlite"
+    with DisturbanceDB(path, create=True) as db, _ml_fitting_only("constant"):
+        add_recording(db, rec, IdentifyOptions(noise_runs=0), methods=["ml"])
+        (row,) = db.identifications(method="ml")
+    found = row.metrics["sensor_latency"]
+    assert found["admitted"]
+    late = Rig(latency_s=found["estimate_s"])
+    env = RocketRollEnv(db=path, recording=rec.name, model="constant", disturbance="replay")
+    assert set(env.bank.rigs) == {late}
+    env.reset(seed=0)
+    assert env.core.link[0].tolist() == env.config.link_row(late).tolist()
+    folder, again = tmp_path / "export", tmp_path / "imported.sqlite"
+    with DisturbanceDB(path, create=False) as db:
+        write_export(db, folder, "npz")
+    with DisturbanceDB(again, create=True) as db:
+        import_export(db, folder)
+    replayed = RocketRollEnv(
+        db=again, recording=rec.name, model="constant", disturbance="replay"
+    )
+    assert set(replayed.bank.rigs) == {late}
+
+
 def _quadratic_bank(q: float) -> Any:
     """:func:`array_bank` with every rocket's damping growing by ``q`` at 30 °/s."""
     from disturbances.bank import TraceBank
