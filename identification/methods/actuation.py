@@ -36,16 +36,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from identification.compiled import linkage_path
 from identification.instruments.reference import fine_steps
 from identification.methods.pipeline import IdentifyOptions
+from identification.methods.terms import MAX_LATENCY_S, boundary_p
 from identification.model import (
     QUADRATIC_RATE_DPS,
     RIG_KEYS,
@@ -64,13 +63,10 @@ __all__ = [
     "Term",
     "fit_linkage",
     "identify_actuation",
-    "latency_term",
 ]
 
 #: The level at which each term is admitted (:data:`identification.model.TERM_LEVEL`).
 LEVEL = TERM_LEVEL
-#: The longest sensor latency looked for, s.
-MAX_LATENCY_S = 0.1
 #: The largest lag and play looked for (a rig's range), s and °.
 MOST_LAG, MOST_PLAY = RIG_LIMITS["lag_s"], RIG_LIMITS["backlash_deg"]
 #: The fin sensor's resolution when the column does not show one, °.
@@ -127,69 +123,6 @@ class Actuation:
         return {setting: getattr(self.rig, f) for f, (setting, _) in RIG_KEYS.items()}
 
 
-def _boundary_p(statistic: float) -> float:
-    """p of a likelihood ratio for one parameter on its boundary (½χ²₀ + ½χ²₁)."""
-    return 0.5 * float(stats.chi2.sf(max(statistic, 0.0), 1)) if statistic > 0.0 else 1.0
-
-
-#: The rise of twice the log-likelihood at the screen's best delay from which a fit is
-#: repeated there (:func:`latency_term`; the screen, at the undelayed fit's parameters, is
-#: below the re-fit's).
-LATENCY_SCREEN = 1.0
-
-
-def latency_term(
-    step_s: float,
-    base: float,
-    screen: Callable[[int], float],
-    refit: Callable[[int], float],
-    level: float = LEVEL,
-    max_latency_s: float = MAX_LATENCY_S,
-) -> dict[str, Any]:
-    """The sensors' latency as a term of a fit that was made without one: each delay of
-    the fin by ``d`` grid steps of ``step_s`` up to ``max_latency_s`` screened
-    (``screen(d)``: the −log-likelihood at the undelayed fit's parameters, one pass each);
-    where the screen's best is :data:`LATENCY_SCREEN` better than ``base`` (the undelayed
-    fit's), the fit is repeated there (``refit(d)``) and at each delay on from it while it
-    improves (the screen's peak leans towards none), and the best kept where its
-    likelihood-ratio test against none (a parameter on its boundary: half a χ²₁ tail)
-    admits it at ``level``.  Returns the term's figures: ``steps`` and ``estimate_s`` (the
-    best delay, admitted or not), ``statistic``, ``p``, ``admitted``, ``level``,
-    ``resolution_s``, ``searched_s``."""
-    delays = range(1, round(max_latency_s / step_s) + 1)
-    screened = {d: screen(d) for d in delays}
-    top = min(screened, key=lambda d: screened[d])
-    found: dict[str, Any] = {
-        "steps": 0,
-        "estimate_s": 0.0,
-        "statistic": 0.0,
-        "p": 1.0,
-        "admitted": False,
-        "level": level,
-        "resolution_s": step_s,
-        "searched_s": [step_s, delays[-1] * step_s],
-    }
-    if 2.0 * (base - screened[top]) < LATENCY_SCREEN:
-        return found
-    fitted: dict[int, float] = {}
-
-    def value(d: int) -> float:
-        if d not in fitted:
-            fitted[d] = refit(d)
-        return fitted[d]
-
-    best = top
-    for direction in (1, -1):
-        d = best
-        while d + direction in screened and value(d + direction) < value(d):
-            d += direction
-        best = min((best, d), key=value)
-    statistic = max(2.0 * (base - value(best)), 0.0)
-    p = _boundary_p(statistic)
-    found.update(steps=best, estimate_s=best * step_s, statistic=statistic, p=p, admitted=p < level)
-    return found
-
-
 def _resolution(fin: np.ndarray) -> float:
     steps = np.abs(np.diff(fin))
     steps = steps[steps > 1e-9]
@@ -244,7 +177,7 @@ def fit_linkage(recording: Recording, servo: Servo, level: float = LEVEL) -> tup
         ("backlash", play, "°", min(lag_only, none)),
     ):
         statistic = n * math.log(without / both)
-        p = _boundary_p(statistic)
+        p = boundary_p(statistic)
         admitted = p < level
         terms.append(
             Term(name, value if admitted else 0.0, unit, statistic, p, admitted,
@@ -286,7 +219,7 @@ def identify_actuation(
     inputs = model_inputs(recording, model, opts)
     step = inputs.grid.step_s
     found = delay_search(inputs, model, max_latency_s)
-    p = _boundary_p(found.statistic)
+    p = boundary_p(found.statistic)
     latency = found.delay_steps * step
     dt = float(np.median(np.diff(recording.time_s)))
     note = f"resolution {step:g} s"

@@ -97,6 +97,7 @@ from identification.methods.rollspace import (
     stationary_cov,
 )
 from identification.methods.steps import IdentificationError
+from identification.methods.terms import latency_term
 from identification.model import (
     QUADRATIC_RATE_DPS,
     TERM_LEVEL,
@@ -853,14 +854,12 @@ def _latency_search(
     search: _Search, options: IdentifyOptions | None
 ) -> tuple[_Search, dict[str, Any]]:
     """The sensors' latency where none is stated, as a term of the fit
-    (:func:`~identification.methods.actuation.latency_term`, on the constant model's AR(1)
+    (:func:`~identification.methods.terms.latency_term`, on the constant model's AR(1)
     fit: screened by the filter at its parameters, fitted where the screen rises).  Returns
     the search to fit every model on (on the delayed fin where the term is admitted) and
     the term's figures (empty where the latency is stated).  A late gyro, or a fin logged
     ahead of the roll it drives (an aileron leading its roll by a sample), biases the gain
     and the damping otherwise."""
-    from identification.methods.actuation import latency_term
-
     inputs = search.inputs
     recording = inputs.recording
     if latency_stated(recording, options):
@@ -890,12 +889,10 @@ def _latency_search(
 def delay_search(inputs: Measurements, model: str, max_latency_s: float) -> DelaySearch:
     """The fin's delay, in fine-grid steps up to ``max_latency_s``, that best describes the
     roll under ``model`` at the AR order of its undelayed fit: the sensors' latency as a
-    term (:func:`~identification.methods.actuation.latency_term`), each delay screened by
+    term (:func:`~identification.methods.terms.latency_term`), each delay screened by
     the log-likelihood at the undelayed fit's parameters, re-fitted from there where the
     screen rises (the statistic is conservative: the screen may miss a better delay, never
     invent one)."""
-    from identification.methods.actuation import latency_term
-
     search = _Search(prepare(inputs), inputs)
     base = _fit(search, model)
     nat = search.order(model, base.ar.size)[1]
