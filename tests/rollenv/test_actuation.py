@@ -278,9 +278,7 @@ def test_a_latency_ml_found_goes_through_the_database_into_the_replay(tmp_path: 
         write_export(db, folder, "npz")
     with DisturbanceDB(again, create=True) as db:
         import_export(db, folder)
-    replayed = RocketRollEnv(
-        db=again, recording=rec.name, model="constant", disturbance="replay"
-    )
+    replayed = RocketRollEnv(db=again, recording=rec.name, model="constant", disturbance="replay")
     assert set(replayed.bank.rigs) == {late}
 
 
