@@ -315,14 +315,22 @@ class _Information:
     trial: Callable[[FloatArray], dict[str, Any]]
 
 
+def _rocket(model: str) -> tuple[str, ...]:
+    """The rocket's natural parameters of ``model``, in the order they are reported."""
+    if model == "constant":
+        return ("alpha", "theta_bar", "beta_bar")
+    return ("alpha", "theta_bar", "alpha_bar", "beta_bar")
+
+
+#: The name each model reports its ``beta_bar`` under: the constant damping ``a``, or eq.
+#: 48's β̄.
+_SHOWN = {"constant": {"beta_bar": "a_per_s"}, "theta": {"beta_bar": "beta_bar_per_s"}}
+
+
 def _information(data: RollData, model: str, nat: dict[str, Any]) -> _Information:
     """The Hessian of the log-likelihood over all free parameters, inverted."""
     pmap = parameter_map(data, model, int(np.size(nat["ar"])), nat)
-    rocket = (
-        ("alpha", "theta_bar", "beta_bar")
-        if model == "constant"
-        else ("alpha", "theta_bar", "alpha_bar", "beta_bar")
-    )
+    rocket = _rocket(model)
     x0 = pmap.vector(nat)
     k = len(rocket)
 
@@ -341,7 +349,7 @@ def _rocket_estimates(info: _Information, model: str) -> tuple[dict[str, float],
     """Standard errors and correlations of the rocket's parameters
     (:func:`~identification.estimation.likelihood.standard_errors`; ``a_per_s`` names the constant
     damping, ``beta_bar_per_s`` eq. 48's)."""
-    rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
+    rename = _SHOWN[model]
     return standard_errors(info.cov, [rename.get(n, n) for n in info.rocket])
 
 
@@ -382,15 +390,11 @@ def rocket_intervals(
     pmap = parameter_map(data, model, int(np.size(nat["ar"])), nat)
     x_hat = pmap.vector(nat)
     others = [pmap.vector(r) for r in rivals]
-    lowest = min((negloglike_natural(data, r) for r in (nat, *rivals)), default=None)
-    reference = lowest if rivals else None
+    # The level is the best's where there are several optima (else the profile's own start).
+    reference = min(negloglike_natural(data, r) for r in (nat, *rivals)) if rivals else None
     names = pmap.names
-    rocket = (
-        ("alpha", "theta_bar", "beta_bar")
-        if model == "constant"
-        else ("alpha", "theta_bar", "alpha_bar", "beta_bar")
-    )
-    rename = {"beta_bar": "a_per_s" if model == "constant" else "beta_bar_per_s"}
+    rocket = _rocket(model)
+    rename = _SHOWN[model]
     out: dict[str, dict[str, Any]] = {}
     for name in rocket:
         shown = rename.get(name, name)
