@@ -25,7 +25,7 @@ from disturbances.cli import (
 )
 from identification.methods import default_methods, traits
 from identification.methods.pipeline import IdentifyOptions
-from identification.recordings.recording import fin_range_setting
+from identification.recordings.recording import LoopFlags, fin_range_setting
 from rocketroll_common.errors import UsageError
 from rocketroll_common.settings import Command, check, setting
 
@@ -96,6 +96,7 @@ class IdentifyArgs:
         "rig.fin_range_deg: the fit adequacy measures u_d against it (unstated: the log's "
         "largest |fin|)"
     )
+    loop: LoopFlags = setting(default_factory=LoopFlags, flatten=True)
     options: IdentifyOptions = setting(default_factory=IdentifyOptions, flatten=True)
 
     def __post_init__(self) -> None:
@@ -147,6 +148,7 @@ def identify(args: IdentifyArgs) -> int:
         check_output(args.db, "--db", kind="sqlite")  # before the work, as every output
     options = dataclasses.replace(args.options, progress=sys.stderr.isatty())
     recording = load_recording(args.recording).stating_fin_range(args.fin_range_deg)
+    recording = recording.stating_loop(args.loop.stated(recording.loop, str(args.recording)))
     fin_range = recording.fin_range()
     together = [load_recording(path) for path in args.together]
     methods = args.method or list(default_methods(recording))
@@ -235,9 +237,14 @@ def identify(args: IdentifyArgs) -> int:
         print(f"|u_d|/range: against the fins' {fin_range}{fin_range.hint}")
         intervals = interval_table({**tunnel, **flown})
         if intervals:
+            instrumental = any(
+                "instruments" in f.metrics for by in tunnel.values() for f in by.values()
+            )
             print(
                 "\n95 % intervals (hessian: ±1.96 SE; profile: the profile likelihood's, where "
-                "the Hessian says nothing, or for all with --intervals profile)"
+                "the Hessian says nothing, or for all with --intervals profile"
+                + ("; fieller, wald: the instrumental fit's" if instrumental else "")
+                + ")"
             )
             print(intervals)
     rig = recording.rig_with(options.rig)

@@ -216,9 +216,14 @@ def default_methods(recording: Recording | None = None) -> tuple[str, ...]:
     )
 
 
-def tunnel_methods() -> tuple[str, ...]:
-    """Every registered method that identifies the tunnel's recordings (not flights)."""
-    return tuple(e.name for e in METHODS.entries() if not e.info["traits"].flight)
+def tunnel_methods(fitting: Sequence[str] = ()) -> tuple[str, ...]:
+    """Every registered method that identifies the tunnel's recordings (not flights), and
+    fits each damping model of ``fitting`` (any, where empty)."""
+    return tuple(
+        e.name
+        for e in METHODS.entries()
+        if not e.info["traits"].flight and set(fitting) <= set(e.info["traits"].models)
+    )
 
 
 def is_flight_method(method: str) -> bool:
@@ -502,6 +507,14 @@ register_method(
     "environment replays by default",
     posterior=True,
     database=True,
+)
+register_method(
+    "instrumental",
+    "identification.methods.instrumental:instrumental_method",
+    summary="instrumental variables on the model's sample map (the constant model): the "
+    "excitation on top of a stated rate loop (identify --loop-gain, or the recording's "
+    "loop.* lines) as the instrument, else the fin; consistent under the loop",
+    models=("constant",),
 )
 register_method(
     "flight",

@@ -34,6 +34,15 @@ These figures read the model without it, against the raw measurements:
 * for the paper's method, its assumptions: a steady state in each dwell
   (steady-state R²) and a positive damping ``a_i`` from each step.
 
+Under a rate loop the recording states (its ``loop.*`` lines,
+:class:`~identification.recordings.recording.StatedLoop`) the fin follows the rate and so
+the turbulence, and a right model's ``u_d`` is correlated with it: the model only is then
+the closed loop driven by the excitation on top of it (the loop's command from the
+excitation given back from the log and the model's own rate), ``u_d`` is tested against
+that excitation instead of the fin (it moves the fin, and the turbulence does not move
+it), and the ``ahead`` figure is not judged (the loop regulates the rate it would be
+scored against, so a right model predicts little of it).
+
 Two figures name an effect the model lacks (:attr:`Adequacy.suspected`; they do not
 change the verdict: the fit may still serve, and the remedy is another model):
 
@@ -69,8 +78,20 @@ from identification.compiled import interval_maps
 from identification.methods.diagnosis import diagnose, logged_fin
 from identification.methods.pipeline import Measurements
 from identification.methods.statistics import decorrelation_stride, ols_newey_west
-from identification.model import Disturbance, RollParams, Servo, damping, linear_recurrence
-from identification.recordings.recording import PLAUSIBLE_FIN_DEG, Recording, small_fins
+from identification.model import (
+    Disturbance,
+    RollParams,
+    Servo,
+    damping,
+    linear_recurrence,
+    roll_step,
+)
+from identification.recordings.recording import (
+    PLAUSIBLE_FIN_DEG,
+    Recording,
+    StatedLoop,
+    small_fins,
+)
 from rocketroll_common.arrays import FloatArray
 
 __all__ = [
@@ -231,12 +252,33 @@ def _fin_share(
     written out (:func:`identification.methods.statistics.ols_newey_west`): the results object's
     machinery and the kernel's loop over lags cost more than the regression (p-values
     equal to statsmodels' to 1e-9 relative, tested)."""
-    from scipy import stats
-
     size = np.abs(fin[:-1] + theta_bar)
     design = np.column_stack(
         [np.ones(u.size), fin[:-1], size, np.diff(fin), lag[:-1], lag[:-1] * size]
     )
+    return _explained(u, design)
+
+
+def _excitation_share(
+    u: FloatArray, excitation: FloatArray, saturated: FloatArray
+) -> tuple[float, float]:
+    """:func:`_fin_share` under a stated loop: the share of ``u`` a line in the loop's
+    excitation and its change explains (the samples where the command was off the stops),
+    and its p-value.  In a loop the fin follows the rate and so the turbulence, and explains
+    some of a right model's ``u_d``; the excitation, which the turbulence does not move,
+    explains none of it unless the model is wrong."""
+    off = ~np.asarray(saturated[:-1], dtype=bool) & ~np.asarray(saturated[1:], dtype=bool)
+    design = np.column_stack([np.ones(u.size), excitation[:-1], np.diff(excitation)])
+    if np.count_nonzero(off) < 8:
+        return 0.0, 1.0
+    return _explained(u[off], design[off])
+
+
+def _explained(u: FloatArray, design: FloatArray) -> tuple[float, float]:
+    """The share of ``u``'s variance a line in the columns of ``design`` (the constant
+    first) explains, and the Wald p-value of that line (Newey-West covariance)."""
+    from scipy import stats
+
     if not np.ptp(u) > 0.0:
         return 0.0, 1.0
     # Lags of the covariance: twice u's correlation length (first lag below 1/e), at most n/4.
@@ -372,11 +414,48 @@ def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
         rate, source = np.asarray(rec.roll_rate_dps, dtype=float), "gyro"
     else:
         rate, source = smoothed, "velocity from the angle"
+    loop = rec.loop
+    if loop is not None:  # the closed loop, driven by the excitation on top of it
+        v, phi = _closed_loop(inputs, params, loop, rate, float(smoothed[0]))
+        return ModelOnly(v, phi, rate, source, maps)
     v = linear_recurrence(e, f, float(smoothed[0]))
     phi = float(np.asarray(inputs.angle_deg)[0]) + np.concatenate(
         [[0.0], np.cumsum(a_phi * v[:-1] + g_phi)]
     )
     return ModelOnly(v, phi, rate, source, maps)
+
+
+def _closed_loop(
+    inputs: Measurements, params: RollParams, loop: StatedLoop, rate: FloatArray, v0: float
+) -> tuple[FloatArray, FloatArray]:
+    """``params``' model under the stated ``loop`` without ``u_d``: the loop's command from
+    the excitation given back from the log (:meth:`StatedLoop.excitation`) and the model's
+    own rate read ``loop.delay_s`` before (linearly between its samples), held over each
+    interval and followed by the fin at the servo's rate where the fin is modelled from
+    the commands (:func:`identification.model.roll_step`; the rig's linkage and the
+    sensors' latency left out); the rate and angle at the readings."""
+    rec = inputs.recording
+    time = np.asarray(rec.time_s, dtype=float)
+    stops = loop.stops_deg or rec.fin_range().deg
+    excitation, _ = loop.excitation(time, logged_fin(rec), rate, stops)
+    at = np.clip((time - loop.delay_s - time[0]) / rec.dt_s, 0.0, None)
+    below = np.floor(at + 1e-9).astype(int)
+    fraction = np.where(at - below > 1e-9, at - below, 0.0)
+    v = np.empty(time.size)
+    phi = np.empty(time.size)
+    v[0], phi[0] = v0, float(np.asarray(inputs.angle_deg)[0])
+    servo = inputs.servo_rate_dps
+    fin = float(logged_fin(rec)[0])
+    for k in range(time.size - 1):
+        i = min(int(below[k]), k)
+        reading = v[i] + (fraction[k] * (v[i + 1] - v[i]) if i < k else 0.0)
+        command = loop.command(float(excitation[k]), float(reading), stops)
+        h = float(time[k + 1] - time[k])
+        end = command if servo is None else fin + float(np.clip(command - fin, -servo * h,
+                                                                servo * h))  # fmt: skip
+        step = roll_step(params, v[k], phi[k], fin, end, 0.0, h, servo)
+        v[k + 1], phi[k + 1], fin = float(step[0]), float(step[1]), end
+    return v, phi
 
 
 def _ahead(
@@ -395,6 +474,12 @@ def _ahead(
         ahead = e[j : n - k + j] * ahead + f[j : n - k + j]
     return k, r_squared(ahead, rate[k:])
 
+
+#: How far (relative) the loop gain the log shows (the diagnosis's) may be from the stated
+#: one before the instrumental fit is judged unreliable for it: the diagnosis's estimate
+#: was within 8 % of the flown gain on delayed, instant, servo-lag and backlash loops
+#: (``benchmarks/instrumental.py``'s logs).
+LOOP_GAIN_TOLERANCE = 0.15
 
 #: The methods that read the fin as independent of the turbulence (not consistent in a loop).
 _OPEN_LOOP_METHODS = ("paper", "output-error")
@@ -428,6 +513,41 @@ def _method_findings(found: Findings, metrics: Mapping[str, Any], method: str) -
                 f"steady-state R² {ss:.2f}: the dwells did not settle to a steady rate"
             )
     return innovation_acf
+
+
+def _instrument_findings(
+    found: Findings, metrics: Mapping[str, Any], figures: Mapping[str, Any]
+) -> None:
+    """What an instrumental-variables fit's instruments say against it: weak (the first
+    stage's F under 10), the fin read as its own instrument in a closed loop, or a stated
+    loop's gain the log does not show (``figures``: the diagnosis's)."""
+    instruments = metrics.get("instruments")
+    if not instruments:
+        return
+    stated = (instruments.get("loop") or {}).get("gain")
+    shown = figures.get("loop_gain")
+    if stated and shown is not None and abs(shown / stated - 1.0) > LOOP_GAIN_TOLERANCE:
+        found.bad.append(
+            f"the stated loop's gain ({stated:.3g}) is not the one the log shows (fin ≈ trim "
+            f"− {shown:.3g}·rate {1000 * figures['loop_delay_s']:.0f} ms before): the "
+            "excitation given back with a wrong gain carries the rate, and with it the "
+            "turbulence, and biases the fit; check the flight computer's gain (and its "
+            "units: ° of fin per °/s)"
+        )
+    if instruments["source"] == "fin" and figures["closed_loop"]:
+        found.bad.append(
+            "the fin follows the roll rate (a closed loop) and no loop is stated, so the fin "
+            "is no instrument (it carries the turbulence); state the loop (--loop-gain, "
+            "--loop-delay) for the excitation on top of it to be the instrument"
+        )
+    if instruments["weak"]:
+        shown = ", ".join(f"{k} {v:.2g}" for k, v in instruments["first_stage_f"].items())
+        found.bad.append(
+            f"its instruments are weak (first-stage F {shown}, under 10): "
+            f"{instruments['described']} moves the fin and the rate too little beside the "
+            "turbulence to tell the rocket apart; a larger or longer excitation (a dither "
+            "of a few degrees, PRBS bits near the rocket's time constant) makes them strong"
+        )
 
 
 def adequacy(
@@ -480,9 +600,18 @@ def adequacy(
     u = disturbance.at(np.asarray(rec.time_s)[:-1])
     # The model's own distance from its steady state, in fin degrees: input-driven only.
     lag = fin + params.theta_bar_deg - v / params.alpha
-    share, share_p = _fin_share(u, fin, params.theta_bar_deg, lag)
-    p99 = float(np.percentile(np.abs(u), 99.0))
     fins = rec.fin_range(None if servo is None else servo.range_deg)
+    loop = rec.loop
+    if loop is None:
+        share, share_p = _fin_share(u, fin, params.theta_bar_deg, lag)
+        explains = "the fin explains"
+    else:
+        excitation, saturated = loop.excitation(
+            rec.time_s, logged_fin(rec), rate, loop.stops_deg or fins.deg
+        )
+        share, share_p = _excitation_share(u, excitation[: u.size + 1], saturated[: u.size + 1])
+        explains = "the excitation on top of the stated loop explains"
+    p99 = float(np.percentile(np.abs(u), 99.0))
     alpha_se = (metrics.get("std_errors") or {}).get("alpha")
     if alpha_se is None:
         rel_se = math.nan  # the method reports none
@@ -493,16 +622,20 @@ def adequacy(
     check = found.check
     found.fin_unit(rec)
     found.rate_r2(rate_r2)
-    check(
-        ahead_r2, AHEAD_R2, f"{k * dt:.2g} s ahead it predicts the rate to R² {ahead_r2:.2f}", False
-    )
+    if loop is None:  # under a stated loop the loop regulates the rate it would be scored on
+        check(
+            ahead_r2,
+            AHEAD_R2,
+            f"{k * dt:.2g} s ahead it predicts the rate to R² {ahead_r2:.2f}",
+            False,
+        )
     fin_sd = float(np.std(fin))
     fin_error = math.sqrt(share) * float(np.std(u)) / fin_sd if fin_sd > 0 else math.inf
     if share_p < FIN_SHARE_P and fin_error >= FIN_ERROR_MATERIAL:
         check(
             share,
             FIN_SHARE,
-            f"the fin explains {100 * share:.0f} % of u_d (p = {share_p:.2g}): model error",
+            f"{explains} {100 * share:.0f} % of u_d (p = {share_p:.2g}): model error",
             True,
         )
     check(
@@ -524,8 +657,10 @@ def adequacy(
     if why.figures["closed_loop"] and method in _OPEN_LOOP_METHODS:
         found.bad.append(
             f"the fin follows the roll rate (a closed loop): {method} is not consistent on "
-            "closed-loop data, for the fin carries the turbulence through the loop; use ml"
+            "closed-loop data, for the fin carries the turbulence through the loop; use ml, "
+            "or state the loop (--loop-gain, --loop-delay) and use instrumental"
         )
+    _instrument_findings(found, metrics, why.figures)
     # What the model lacks, named: the fin's delay, the turbulence's wandering intensity.
     ar = metrics.get("ar")
     if ar is None:  # an AR(1) of u_d itself where the method fits no turbulence model

@@ -300,7 +300,8 @@ def diagnose(
         fin_sd = float(np.std(fin[free])) if np.any(free) else 0.0
         excited = (
             f"The fin's own excitation on top of the loop ({own:.2g}° RMS) separates the "
-            "rocket from the loop"
+            "rocket from the loop; with the loop stated (--loop-gain, --loop-delay, or the "
+            "recording's loop.* lines) --method instrumental takes it as the instrument"
             if own >= OWN_EXCITATION * fin_sd
             else "Nothing moves the fin but the loop: the rocket is told from the loop only "
             "through the loop's delay (without one only a·(1 + α·K) is determined); an "

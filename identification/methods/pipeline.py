@@ -343,6 +343,9 @@ class Identification:
             angle_source=self.angle_source,
             velocity_fine=self.velocity_fine,
             recording=self.recording,
+            servo_rate_dps=None
+            if self.recording.fin_deg is not None
+            else (self.options.servo_rate_dps),
         )
 
     def parameters(self) -> dict[str, float]:
@@ -468,6 +471,9 @@ class Measurements:
         ``velocity_dps`` interpolated onto the grid.
     recording : Recording
         The recording.
+    servo_rate_dps : float or None
+        The servo's rate limit the fin angle was modelled with from the commands (step 5);
+        None where the fin is measured.
     """
 
     steps_found: Segments | IdentificationError
@@ -480,6 +486,7 @@ class Measurements:
     angle_source: str
     velocity_fine: FloatArray
     recording: Recording
+    servo_rate_dps: float | None = None
 
     @property
     def segments(self) -> Segments:
@@ -586,6 +593,7 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
         angle_source=angle_source,
         velocity_fine=velocity_fine,
         recording=recording,
+        servo_rate_dps=None if recording.fin_deg is not None else servo.rate_limit_dps,
     )
 
 

@@ -31,6 +31,7 @@ __all__ = [
     "DisturbanceStatistics",
     "TraceStatistics",
     "decorrelation_stride",
+    "iv_newey_west",
     "newey_west_meat",
     "ols_newey_west",
     "trace_statistics",
@@ -73,6 +74,24 @@ def ols_newey_west(x: FloatArray, y: FloatArray, lags: int) -> tuple[FloatArray,
     resid = y - x @ beta
     bread = r_inv @ r_inv.T  # (XᵀX)⁻¹
     return beta, resid, bread @ newey_west_meat(x * resid[:, None], lags) @ bread
+
+
+def iv_newey_west(
+    x: FloatArray, y: FloatArray, z: FloatArray, lags: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Two-stage least squares of ``y`` on the columns of ``x`` with instruments ``z`` (the
+    exogenous columns of ``x`` among them), with the Newey-West covariance of the
+    coefficients over ``lags`` (Bartlett weights, no small-sample factor: statsmodels'
+    ``IV2SLS`` with :func:`ols_newey_west`'s covariance): ``(beta, residuals, covariance)``,
+    the residuals those of ``x`` itself.  Raises ``numpy.linalg.LinAlgError`` where the
+    first stage is rank deficient."""
+    q, _ = np.linalg.qr(z)
+    fitted = q @ (q.T @ x)  # x projected on the instruments
+    bread = np.linalg.inv(fitted.T @ fitted)
+    beta = bread @ (fitted.T @ y)
+    resid = y - x @ beta
+    # The sandwich's scores: the projected regressors times the structural residuals.
+    return beta, resid, bread @ newey_west_meat(fitted * resid[:, None], lags) @ bread
 
 
 def decorrelation_stride(x: ArrayLike, threshold: float = DECORRELATION) -> int:

@@ -26,6 +26,7 @@ import numpy as np
 from identification.recordings.recording import (
     FIN_RANGE_KEY,
     PLAUSIBLE_FIN_DEG,
+    LoopFlags,
     Recording,
     RecordingError,
     StatedRig,
@@ -141,6 +142,7 @@ class ImportSettings:
     )
     notes: str | None = setting(None, "free-text notes stored in the metadata")
     rig: StatedRig = setting(default_factory=StatedRig, flatten=True)
+    loop: LoopFlags = setting(default_factory=LoopFlags, flatten=True)
     fin_range_deg: float | None = fin_range_setting(
         "your fins' range, ± this (where the canards stop), stored in the recording: "
         "identification measures u_d against it (unstated: the log's largest |fin|)"
@@ -163,6 +165,7 @@ class ImportSettings:
         check_order("time_from", self.time_from, self.time_to, "--to", "s")
         if self.site_elevation and "altitude" not in self.columns:
             raise SettingError("site_elevation", "is added to an altitude column; give one")
+        self.loop.stated(None, "an imported log")  # --loop-delay needs --loop-gain here
 
     def column_unit(self, role: str) -> float:
         """The factor that takes column ``role`` to the recording's unit: ``--unit ROLE=``,
@@ -365,6 +368,9 @@ def _import_metadata(
     if settings.notes:
         meta["notes"] = settings.notes
     meta.update(settings.rig.metadata())  # what the user states of the rig (format 1.2)
+    loop = settings.loop.stated(None, "an imported log")  # and of the flight computer's loop
+    if loop is not None:
+        meta.update(loop.metadata())
     if settings.fin_range_deg is not None:
         meta[FIN_RANGE_KEY] = repr(float(settings.fin_range_deg))
     if settings.split is not None:

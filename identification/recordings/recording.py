@@ -57,7 +57,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from identification.model import RIG_KEYS, RIG_LIMITS, Rig, RollParams, Servo
 from rocketroll_common.arrays import FloatArray, readonly_array
-from rocketroll_common.errors import RocketrollError
+from rocketroll_common.errors import RocketrollError, SettingError, UsageError
 from rocketroll_common.files import write_atomic
 from rocketroll_common.settings import check, setting
 from rocketroll_common.text import parse_number
@@ -81,8 +81,10 @@ __all__ = [
     "SOURCES",
     "STEADY_AIRSPEED_RTOL",
     "FinRange",
+    "LoopFlags",
     "Recording",
     "RecordingError",
+    "StatedLoop",
     "StatedRig",
     "fin_range_setting",
     "load_recording",
@@ -159,6 +161,110 @@ class FinRange:
     def as_dict(self) -> dict[str, float | str]:
         """``fin_range_deg`` and ``fin_range_source`` (JSON)."""
         return {"fin_range_deg": self.deg, "fin_range_source": self.source}
+
+
+#: How close to a stop (°) a logged command counts as saturated (:meth:`StatedLoop.excitation`).
+AT_STOP_DEG = 0.01
+#: The ``loop.*`` metadata lines that state a flight computer's proportional roll-rate loop on
+#: the fins (:class:`StatedLoop`), numbers with their bounds (``None``: any finite number);
+#: other ``loop.*`` lines (its law, the sensor it reads) are free text.
+LOOP_METADATA: Mapping[str, tuple[float, float] | None] = MappingProxyType(
+    {
+        "loop.gain": None,
+        "loop.delay_s": (0.0, RIG_METADATA["rig.sensor_latency_s"]),
+        "loop.stops_deg": (0.0, MAX_FIN_RANGE_DEG),
+    }
+)
+
+
+@dataclass(frozen=True)
+class StatedLoop:
+    """A flight computer's proportional roll-rate loop on the fins, as the user states it
+    (``identify --loop-gain/--loop-delay``) or the recording's ``loop.*`` lines do: the fin
+    command ``clip(e(t) + gain·(0 − rate read delay_s before), ±stops)``, ``e`` the
+    excitation on top of the loop (a dither, a schedule; 0 where there is none).
+
+    ``gain`` in ° of fin per °/s, ``delay_s`` from the gyro's reading to the command,
+    ``stops_deg`` where the command saturates (None: not stated; the fins' range is used)."""
+
+    gain: float
+    delay_s: float = 0.0
+    stops_deg: float | None = None
+
+    @classmethod
+    def of(cls, metadata: Mapping[str, str]) -> StatedLoop | None:
+        """The loop the ``loop.*`` lines of ``metadata`` state (None without ``loop.gain``)."""
+        if "loop.gain" not in metadata:
+            return None
+        stops = metadata.get("loop.stops_deg")
+        return cls(
+            parse_number(metadata["loop.gain"]),
+            parse_number(metadata.get("loop.delay_s", "0")),
+            None if stops is None else parse_number(stops),
+        )
+
+    def excitation(
+        self, time_s: ArrayLike, command_deg: ArrayLike, rate_dps: ArrayLike, stops_deg: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """The excitation ``e`` on top of the loop at each sample, given back from the logged
+        command and the logged rate read ``delay_s`` before (linearly between samples, the
+        first one before the log): ``e = command + gain·rate(t − delay)``; and where the
+        command sat at ``stops_deg`` (there ``e`` is not known, only that the loop asked for
+        more than the stops: flagged True)."""
+        time = np.asarray(time_s, dtype=float)
+        command = np.asarray(command_deg, dtype=float)
+        reading = np.interp(time - self.delay_s, time, np.asarray(rate_dps, dtype=float))
+        saturated = np.abs(command) >= stops_deg - AT_STOP_DEG
+        return command + self.gain * reading, saturated  # the inverse of :meth:`command`
+
+    def command(self, excitation_deg: float, reading_dps: float, stops_deg: float) -> float:
+        """The loop's law: the command for the excitation and the rate it read."""
+        return min(max(excitation_deg - self.gain * reading_dps, -stops_deg), stops_deg)
+
+    def metadata(self) -> dict[str, str]:
+        """The ``loop.*`` lines that state it."""
+        lines = {"loop.gain": repr(float(self.gain)), "loop.delay_s": repr(float(self.delay_s))}
+        if self.stops_deg is not None:
+            lines["loop.stops_deg"] = repr(float(self.stops_deg))
+        return lines
+
+
+@dataclass(frozen=True)
+class LoopFlags:
+    """The flags that state a flight computer's rate loop (``import-csv`` stores them in the
+    recording's ``loop.*`` lines, ``identify`` states them over the recording's own)."""
+
+    loop_gain: float | None = setting(
+        None,
+        "your flight computer's proportional roll-rate loop on the fins: fin command = "
+        "excitation + this × (0 - rate read --loop-delay earlier), saturated at the fins' "
+        "range; the instrumental method then takes the excitation as its instrument",
+        flag="--loop-gain", ge=-100.0, le=100.0, unit="°/(°/s)", metavar="K",
+    )  # fmt: skip
+    loop_delay_s: float | None = setting(
+        None,
+        "that loop's delay from the gyro's reading to the command (default with --loop-gain: 0)",
+        flag="--loop-delay", ge=0.0, le=RIG_METADATA["rig.sensor_latency_s"], unit="s",
+        metavar="S",
+    )  # fmt: skip
+
+    def __post_init__(self) -> None:
+        check(self)
+        if self.loop_gain == 0.0:
+            raise SettingError("loop_gain", "0 is no loop; leave it out for an open-loop test")
+
+    def stated(self, own: StatedLoop | None, where: str) -> StatedLoop | None:
+        """The loop the flags state over ``own`` (a recording's, at ``where``): None where
+        neither flag is given; ``--loop-delay`` alone needs a loop to delay."""
+        if self.loop_gain is None and self.loop_delay_s is None:
+            return None
+        gain = self.loop_gain if self.loop_gain is not None else own.gain if own else None
+        if gain is None:
+            raise UsageError(
+                f"--loop-delay: {where} states no loop (no loop.gain line); give --loop-gain too"
+            )
+        delay = self.loop_delay_s if self.loop_delay_s is not None else own.delay_s if own else 0.0
+        return StatedLoop(gain, delay, own.stops_deg if own else None)
 
 
 @dataclass(frozen=True)
@@ -595,6 +701,18 @@ def metadata_problem(key: str, value: str) -> str | None:
         return f"metadata 'seed' must be a non-negative integer, not {value!r}"
     if key.startswith("rig.") and key not in RIG_METADATA:
         return f"unknown rig metadata {key!r}; known: {', '.join(RIG_METADATA)}"
+    if key in LOOP_METADATA:
+        try:
+            number = parse_number(value)
+        except ValueError:
+            return f"metadata {key!r} must be a number, not {value!r}"
+        bounds = LOOP_METADATA[key]
+        if bounds is None:  # the gain: either sign, a loop only where it is not 0
+            if not math.isfinite(number) or number == 0.0:
+                return f"metadata {key!r} must be a finite number other than 0, not {value!r}"
+        elif not bounds[0] <= number <= bounds[1] or (key == "loop.stops_deg" and number == 0):
+            shown = f"({bounds[0]:g}" if key == "loop.stops_deg" else f"[{bounds[0]:g}"
+            return f"metadata {key!r} must be in {shown}, {bounds[1]:g}], not {value!r}"
     if key.startswith(("truth.", "sensor.", "rig.")) and key not in TEXT_KEYS:
         try:
             number = parse_number(value)
@@ -737,6 +855,22 @@ class Recording:
             source=self.source,
             metadata={**self.metadata, FIN_RANGE_KEY: repr(float(deg))},
             **columns,
+        )
+
+    @property
+    def loop(self) -> StatedLoop | None:
+        """The rate loop the recording's ``loop.*`` lines state (None where they state none)."""
+        return StatedLoop.of(self.metadata)
+
+    def stating_loop(self, loop: StatedLoop | None) -> Recording:
+        """The recording with ``loop``'s ``loop.*`` lines over its own (itself where None)."""
+        if loop is None:
+            return self
+        return Recording(
+            name=self.name,
+            source=self.source,
+            metadata={**self.metadata, **loop.metadata()},
+            **self.columns(),
         )
 
     @property
