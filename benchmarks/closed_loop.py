@@ -86,7 +86,7 @@ from agents.registry import make_controller
 from disturbances.bank import TraceBank
 from identification.instruments.reference import Effects
 from identification.instruments.tunnel import run_tunnel
-from identification.methods import METHODS, Context, fit, tunnel_methods
+from identification.methods import Context, fit, tunnel_methods
 from identification.methods.actuation import identify_actuation
 from identification.methods.pipeline import IdentifyOptions
 from identification.model import RIG_LIMITS, Rig, RollParams
@@ -432,7 +432,9 @@ def _parser() -> argparse.ArgumentParser:
         help=f"a named truth (repeat; default: {', '.join(DEFAULT_TRUTHS)})",
     )
     parser.add_argument(
-        "--methods", default=None, help="comma-separated methods (default: all registered)"
+        "--methods",
+        default=None,
+        help="comma-separated methods (default: every tunnel method that fits the θ model)",
     )
     parser.add_argument(
         "--policies",
@@ -521,10 +523,11 @@ def _parse(argv: Sequence[str] | None) -> tuple[argparse.Namespace, Plan]:
     truths = list(dict.fromkeys(ns.truth or DEFAULT_TRUTHS))
     if "all" in truths:
         truths = list(TRUTHS)
-    methods = tunnel_methods() if ns.methods is None else tuple(ns.methods.split(","))
+    replayed = tunnel_methods(["theta"])  # the replays fly each method's θ model
+    methods = replayed if ns.methods is None else tuple(ns.methods.split(","))
     for method in methods:
-        if method not in METHODS.names():
-            parser.error(f"--methods: unknown method {method!r}")
+        if method not in replayed:
+            parser.error(f"--methods: {method!r} is not one of {', '.join(replayed)}")
     policies = ns.policies.split(",")
     tasks = ns.tasks.split(",")
     for task in tasks:

@@ -43,10 +43,11 @@ from identification.methods import (
     default_methods,
     fit,
     is_flight_method,
+    traits,
     tunnel_methods,
 )
 from identification.methods.steps import IdentificationError
-from identification.model import MODEL_NAMES, RollParams
+from identification.model import RollParams
 from identification.recordings.recording import Recording, RecordingError, load_recording
 from identification.reports.tables import scaling_line
 from rocketroll_common.tables import Column, text_table
@@ -257,7 +258,7 @@ def report(
     for method in methods:
         started = time.perf_counter()
         try:
-            fits = fit(context, method, MODEL_NAMES)
+            fits = fit(context, method, traits(method).models)
         except (IdentificationError, ValueError) as exc:  # this method cannot: say why
             print(f"  {method:13}cannot fit it: {exc}")
             continue
