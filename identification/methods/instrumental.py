@@ -54,7 +54,7 @@ from scipy import stats
 
 from identification.methods import Context, ModelFit, resimulation_metrics, trace_settings
 from identification.methods.diagnosis import OWN_EXCITATION, logged_fin
-from identification.methods.pipeline import Measurements, recover_disturbance
+from identification.methods.pipeline import Measurements, recover_disturbance, smoothing_for
 from identification.methods.statistics import decorrelation_stride, iv_newey_west
 from identification.methods.steps import IdentificationError, measured_velocity
 from identification.model import RollParams
@@ -320,7 +320,8 @@ def _shown(fstats: dict[str, float]) -> str:
 def instrumental_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     """Instrumental variables as an identification method (``method="instrumental"``): the
     constant model only; ``u_d`` recovered by the paper's step 8 under its parameters, as
-    for output error."""
+    for output error (from the velocity smoothed over a shorter window where the rocket is
+    fast against the options' smoothing, ``metrics["smoothing_window_s"]``)."""
     inputs = context.measurements
     fits = []
     for model in models:
@@ -330,13 +331,18 @@ def instrumental_method(context: Context, models: Sequence[str]) -> list[ModelFi
                 f"only, not {model!r}"
             )
         found = instrumental(inputs, context.recording.fin_range().deg)
-        dist, resim = recover_disturbance(inputs, found.params, model, context.options)
+        # u_d from the velocity smoothed over a window short against the rocket's time
+        # constant, as for output error (the fit itself reads the raw rate).
+        window = smoothing_for(found.params, inputs, context.options)
+        used = inputs if window is None else context.smoothed_over(window)
+        dist, resim = recover_disturbance(used, found.params, model, context.options)
         metrics = {
             "sources": {"velocity": found.instruments["rate"], "fin_angle": inputs.theta_source},
             **resimulation_metrics(resim),
             "std_errors": found.std_errors,
             "intervals": found.intervals,
             "instruments": found.instruments,
+            **({} if window is None else {"smoothing_window_s": window}),
         }
         fits.append(
             ModelFit("instrumental", model, found.params, dist, metrics, trace_settings(dist))
