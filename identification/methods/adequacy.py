@@ -75,7 +75,7 @@ from typing import Any
 import numpy as np
 
 from identification.compiled import interval_maps
-from identification.methods.diagnosis import diagnose, logged_fin
+from identification.methods.diagnosis import diagnose, logged_fin, loop_law
 from identification.methods.pipeline import Measurements
 from identification.methods.statistics import decorrelation_stride, ols_newey_west
 from identification.model import (
@@ -528,8 +528,8 @@ def _instrument_findings(
     shown = figures.get("loop_gain")
     if stated and shown is not None and abs(shown / stated - 1.0) > LOOP_GAIN_TOLERANCE:
         found.bad.append(
-            f"the stated loop's gain ({stated:.3g}) is not the one the log shows (fin ≈ trim "
-            f"− {shown:.3g}·rate {1000 * figures['loop_delay_s']:.0f} ms before): the "
+            f"the stated loop's gain ({stated:.3g}) is not the one the log shows "
+            f"({loop_law(shown, figures['loop_delay_s'])}): the "
             "excitation given back with a wrong gain carries the rate, and with it the "
             "turbulence, and biases the fit; check the flight computer's gain (and its "
             "units: ° of fin per °/s)"

@@ -118,6 +118,13 @@ class Diagnosis:
         }
 
 
+def loop_law(gain: float, delay_s: float) -> str:
+    """A proportional rate loop as a line says it: ``fin ≈ trim − 0.6·rate 40 ms before``
+    (``+`` for a negative gain)."""
+    sign = "−" if gain >= 0 else "+"
+    return f"fin ≈ trim {sign} {abs(gain):.3g}·rate {1000 * delay_s:.0f} ms before"
+
+
 def logged_fin(recording: Recording) -> FloatArray:
     """The fin as the log holds it and a loop acts on it: the command where there is one,
     else the measured fin (a recording has one or the other)."""
@@ -311,8 +318,8 @@ def diagnose(
             Finding(
                 "feedback",
                 f"the fin follows the measured roll rate (the rate before it predicts "
-                f"{100 * loop['share']:.0f} % of the fin's changes; fin ≈ trim − "
-                f"{loop['gain']:.3g}·rate {1000 * loop['delay_s']:.0f} ms before): a closed "
+                f"{100 * loop['share']:.0f} % of the fin's changes; "
+                f"{loop_law(loop['gain'], loop['delay_s'])}): a closed "
                 "loop. Output error is not consistent on it (the fin carries the turbulence "
                 f"through the loop); {consistent}. {excited}",
             )
