@@ -38,9 +38,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,6 +54,7 @@ from identification.methods import Context, fit
 from identification.methods.pipeline import IdentifyOptions
 from identification.methods.steps import IdentificationError
 from identification.recordings.recording import RecordingError
+from rocketroll_common.files import write_atomic
 from rocketroll_common.tables import Column, text_table
 
 DESIGNS = ("open-prbs", "loop-dither", "loop-only", "loop-held", "loop-instant")
@@ -130,6 +133,8 @@ def one(design: str, seed: int) -> dict[str, Any]:
         row["error"] = str(exc)
         return row
     row["alpha"] = found.params.alpha
+    row["ar_order"] = found.metrics["ar_order"]
+    row["aic_by_order"] = found.metrics["aic_by_order"]
     row["intervals"] = found.metrics["intervals"]
     row["std_errors"] = found.metrics["std_errors"]
     adequacy = found.metrics["adequacy"]
@@ -265,6 +270,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )  # fmt: skip
     parser.add_argument("--design", action="append", choices=DESIGNS)
     parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument(
+        "--rows", type=Path, default=None,
+        help="also write each log's row (truth, intervals, the turbulence's AR order and "
+        "each order's AIC, the diagnosis) to this JSON-lines file",
+    )  # fmt: skip
     ns = parser.parse_args(argv)
     if ns.seeds < 1 or ns.check_seeds < 1 or ns.jobs < 1:
         parser.error("--seeds, --check-seeds and --jobs must be >= 1")
@@ -281,6 +291,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     began = time.perf_counter()
     rows = run_jobs(one, jobs, ns.jobs, "logs", "log")
     elapsed = time.perf_counter() - began
+    if ns.rows is not None:
+        write_atomic(ns.rows, "".join(json.dumps(r, allow_nan=True) + "\n" for r in rows))
     print(f"{elapsed:.0f} s on {ns.jobs} process(es)\n")
     table = [_summary([r for r in rows if r["design"] == d]) for d in designs]
     if len(designs) > 1:
