@@ -320,16 +320,14 @@ def _sandwich(
     reported standard errors in SD (1.15-1.50 with lags up to twice the correlation
     length), where 1 is exact."""
     from identification.estimation.likelihood import standard_errors
-    from identification.methods.statistics import decorrelation_stride, newey_west_meat
+    from identification.methods.statistics import newey_west_covariance, newey_west_lags
 
     n, k = jac.shape
     try:
-        bread = np.linalg.inv(jac.T @ jac)
+        cov = newey_west_covariance(jac, residuals, newey_west_lags(residuals))
     except np.linalg.LinAlgError:
         return standard_errors(None, names)
-    lags = min(4 * decorrelation_stride(residuals, math.exp(-1.0)), n // 4)
-    meat = newey_west_meat(jac * residuals[:, None], max(lags, 1))
-    return standard_errors(bread @ meat @ bread * n / (n - k), names)
+    return standard_errors(cov * n / (n - k), names)
 
 
 def output_error_method(context: Context, models: Sequence[str]) -> list[ModelFit]:

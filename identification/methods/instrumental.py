@@ -19,7 +19,7 @@ is fitted by two-stage least squares, ``∫v`` and ``∫θ`` instrumented by the
 integral over the window and its values at the window's start and the :data:`LAGS`
 samples before (statsmodels' ``IV2SLS``, written out to take the Newey-West covariance
 of the project's other regressions,
-:func:`identification.methods.statistics.iv_newey_west`): consistent whatever the
+:func:`identification.methods.statistics.two_stage_least_squares`): consistent whatever the
 turbulence's spectrum, because ``e`` is independent of it.  Windows that read a
 saturated command are left out (there ``e`` is not known: the command says only that the
 loop asked for more than the stops).  Without a stated loop the fin itself is the
@@ -55,7 +55,11 @@ from scipy import stats
 from identification.methods import Context, ModelFit, resimulation_metrics, trace_settings
 from identification.methods.diagnosis import OWN_EXCITATION, logged_fin
 from identification.methods.pipeline import Measurements, recover_disturbance, smoothing_for
-from identification.methods.statistics import decorrelation_stride, iv_newey_west
+from identification.methods.statistics import (
+    newey_west_covariance,
+    newey_west_lags,
+    two_stage_least_squares,
+)
 from identification.methods.steps import IdentificationError, measured_velocity
 from identification.model import RollParams
 from rocketroll_common.arrays import FloatArray
@@ -225,9 +229,9 @@ def instrumental(inputs: Measurements, fin_range_deg: float | None = None) -> In
     )
     fstats = _first_stage(x, z, exogenous=[2] if loop is not None else [1, 2])
     try:
-        beta, resid, cov = iv_newey_west(x, y, z, span)
-        lag = min(max(4 * decorrelation_stride(resid, math.exp(-1.0)), span), rows.size // 4)
-        beta, resid, cov = iv_newey_west(x, y, z, lag)
+        beta, resid, projected = two_stage_least_squares(x, y, z)
+        # The windows overlap: their errors are correlated over a window at least.
+        cov = newey_west_covariance(projected, resid, newey_west_lags(resid, at_least=span))
     except np.linalg.LinAlgError:
         raise IdentificationError(
             f"{name}: instrumental variables: the instruments do not tell the rate from the "

@@ -16,6 +16,7 @@ the sample autocorrelation falls below :data:`DECORRELATION`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,10 +32,12 @@ __all__ = [
     "DisturbanceStatistics",
     "TraceStatistics",
     "decorrelation_stride",
-    "iv_newey_west",
+    "newey_west_covariance",
+    "newey_west_lags",
     "newey_west_meat",
     "ols_newey_west",
     "trace_statistics",
+    "two_stage_least_squares",
 ]
 
 #: Autocorrelation below which two samples are treated as independent.
@@ -76,22 +79,36 @@ def ols_newey_west(x: FloatArray, y: FloatArray, lags: int) -> tuple[FloatArray,
     return beta, resid, bread @ newey_west_meat(x * resid[:, None], lags) @ bread
 
 
-def iv_newey_west(
-    x: FloatArray, y: FloatArray, z: FloatArray, lags: int
+def newey_west_lags(residuals: FloatArray, at_least: int = 1) -> int:
+    """The lags of a Newey-West covariance for a fit whose ``residuals`` are correlated in
+    time: four times their correlation length (the first lag whose autocorrelation is under
+    1/e), at least ``at_least`` and at most a quarter of their number (one for fewer than
+    eight)."""
+    stride = decorrelation_stride(residuals, math.exp(-1.0))
+    return min(max(4 * stride, at_least), max(residuals.size // 4, 1))
+
+
+def newey_west_covariance(design: FloatArray, residuals: FloatArray, lags: int) -> FloatArray:
+    """The sandwich ``(DᵀD)⁻¹ S (DᵀD)⁻¹`` of a least-squares fit with design (or Jacobian)
+    ``D`` and ``residuals``, ``S`` the Newey-West meat of their scores over ``lags``
+    (:func:`newey_west_meat`; no small-sample factor).  Raises
+    ``numpy.linalg.LinAlgError`` where ``DᵀD`` is singular."""
+    bread = np.linalg.inv(design.T @ design)
+    return bread @ newey_west_meat(design * residuals[:, None], lags) @ bread
+
+
+def two_stage_least_squares(
+    x: FloatArray, y: FloatArray, z: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Two-stage least squares of ``y`` on the columns of ``x`` with instruments ``z`` (the
-    exogenous columns of ``x`` among them), with the Newey-West covariance of the
-    coefficients over ``lags`` (Bartlett weights, no small-sample factor: statsmodels'
-    ``IV2SLS`` with :func:`ols_newey_west`'s covariance): ``(beta, residuals, covariance)``,
-    the residuals those of ``x`` itself.  Raises ``numpy.linalg.LinAlgError`` where the
-    first stage is rank deficient."""
+    exogenous columns of ``x`` among them; statsmodels' ``IV2SLS``): ``(beta, residuals,
+    projected)``, the residuals those of ``x`` itself and ``projected`` ``x`` projected on
+    the instruments, the design of the covariance (:func:`newey_west_covariance`).  Raises
+    ``numpy.linalg.LinAlgError`` where the first stage is rank deficient."""
     q, _ = np.linalg.qr(z)
-    fitted = q @ (q.T @ x)  # x projected on the instruments
-    bread = np.linalg.inv(fitted.T @ fitted)
-    beta = bread @ (fitted.T @ y)
-    resid = y - x @ beta
-    # The sandwich's scores: the projected regressors times the structural residuals.
-    return beta, resid, bread @ newey_west_meat(fitted * resid[:, None], lags) @ bread
+    projected = q @ (q.T @ x)
+    beta = np.linalg.inv(projected.T @ projected) @ (projected.T @ y)
+    return beta, y - x @ beta, projected
 
 
 def decorrelation_stride(x: ArrayLike, threshold: float = DECORRELATION) -> int:

@@ -17,7 +17,7 @@ from identification.instruments.tunnel import TunnelSpec, run_tunnel
 from identification.methods import Context, fit
 from identification.methods.adequacy import model_only, r_squared
 from identification.methods.instrumental import fieller_interval, instrumental
-from identification.methods.statistics import iv_newey_west
+from identification.methods.statistics import newey_west_covariance, two_stage_least_squares
 from identification.methods.steps import IdentificationError
 from identification.recordings.recording import (
     Recording,
@@ -154,7 +154,8 @@ def test_two_stage_least_squares_matches_statsmodels() -> None:
     x = np.column_stack([endogenous, np.ones(n)])
     y = 2.0 * endogenous + 1.0 + noise
     z = np.column_stack([z1, z2, np.ones(n)])
-    beta, resid, cov = iv_newey_west(x, y, z, 0)
+    beta, resid, projected = two_stage_least_squares(x, y, z)
+    cov = newey_west_covariance(projected, resid, 0)
     reference = gmm.IV2SLS(y, x, z).fit()
     np.testing.assert_allclose(beta, reference.params, rtol=1e-10)
     np.testing.assert_allclose(resid, y - x @ reference.params, atol=1e-10)
