@@ -88,6 +88,7 @@ from identification.model import (
 )
 from identification.recordings.recording import (
     PLAUSIBLE_FIN_DEG,
+    FinRange,
     Recording,
     StatedLoop,
     small_fins,
@@ -403,9 +404,10 @@ class ModelOnly:
     maps: FloatArray
 
 
-def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
+def model_only(inputs: Measurements, params: RollParams, fins: FinRange | None = None) -> ModelOnly:
     """``params``' model without ``u_d`` on the recording of ``inputs``: what the fit
-    predicts from the fin alone, the figure the adequacy judges first."""
+    predicts from the fin alone, the figure the adequacy judges first; under a stated loop,
+    the closed loop, saturated at its stops, else at ``fins`` (default: the recording's)."""
     rec, grid = inputs.recording, inputs.grid
     maps = interval_maps(params, np.asarray(inputs.theta_fine), grid.per_sample, grid.step_s)
     e, f, a_phi, g_phi = maps[:, 0], maps[:, 2], maps[:, 3], maps[:, 5]
@@ -416,7 +418,8 @@ def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
         rate, source = smoothed, "velocity from the angle"
     loop = rec.loop
     if loop is not None:  # the closed loop, driven by the excitation on top of it
-        v, phi = _closed_loop(inputs, params, loop, rate, float(smoothed[0]))
+        stops = loop.stops_within(fins or rec.fin_range())
+        v, phi = _closed_loop(inputs, params, loop, stops, rate, float(smoothed[0]))
         return ModelOnly(v, phi, rate, source, maps)
     v = linear_recurrence(e, f, float(smoothed[0]))
     phi = float(np.asarray(inputs.angle_deg)[0]) + np.concatenate(
@@ -426,7 +429,12 @@ def model_only(inputs: Measurements, params: RollParams) -> ModelOnly:
 
 
 def _closed_loop(
-    inputs: Measurements, params: RollParams, loop: StatedLoop, rate: FloatArray, v0: float
+    inputs: Measurements,
+    params: RollParams,
+    loop: StatedLoop,
+    stops: float,
+    rate: FloatArray,
+    v0: float,
 ) -> tuple[FloatArray, FloatArray]:
     """``params``' model under the stated ``loop`` without ``u_d``: the loop's command from
     the excitation given back from the log (:meth:`StatedLoop.excitation`) and the model's
@@ -436,7 +444,6 @@ def _closed_loop(
     sensors' latency left out); the rate and angle at the readings."""
     rec = inputs.recording
     time = np.asarray(rec.time_s, dtype=float)
-    stops = loop.stops_deg or rec.fin_range().deg
     excitation, _ = loop.excitation(time, logged_fin(rec), rate, stops)
     at = np.clip((time - loop.delay_s - time[0]) / rec.dt_s, 0.0, None)
     below = np.floor(at + 1e-9).astype(int)
@@ -582,7 +589,8 @@ def adequacy(
     rec = inputs.recording
     metrics = metrics or {}
     grid = inputs.grid
-    model = model_only(inputs, params)
+    fins = rec.fin_range(None if servo is None else servo.range_deg)
+    model = model_only(inputs, params, fins)
     smoothed = np.asarray(inputs.velocity_dps, dtype=float)
     rate, source = model.measured_rate_dps, model.rate_source
     v, phi = model.rate_dps, model.angle_deg
@@ -600,14 +608,13 @@ def adequacy(
     u = disturbance.at(np.asarray(rec.time_s)[:-1])
     # The model's own distance from its steady state, in fin degrees: input-driven only.
     lag = fin + params.theta_bar_deg - v / params.alpha
-    fins = rec.fin_range(None if servo is None else servo.range_deg)
     loop = rec.loop
     if loop is None:
         share, share_p = _fin_share(u, fin, params.theta_bar_deg, lag)
         explains = "the fin explains"
     else:
         excitation, saturated = loop.excitation(
-            rec.time_s, logged_fin(rec), rate, loop.stops_deg or fins.deg
+            rec.time_s, logged_fin(rec), rate, loop.stops_within(fins)
         )
         share, share_p = _excitation_share(u, excitation[: u.size + 1], saturated[: u.size + 1])
         explains = "the excitation on top of the stated loop explains"

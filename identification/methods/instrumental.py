@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from identification.estimation.likelihood import hessian_interval
 from identification.methods import Context, ModelFit, resimulation_metrics, trace_settings
 from identification.methods.diagnosis import OWN_EXCITATION, logged_fin
 from identification.methods.pipeline import Measurements, recover_disturbance, smoothing_for
@@ -145,17 +146,15 @@ def _interval(
     }
 
 
-def instrumental(inputs: Measurements, fin_range_deg: float | None = None) -> InstrumentalFit:
+def instrumental(inputs: Measurements) -> InstrumentalFit:
     """Fit the constant model by instrumental variables (module docstring).
 
     Parameters
     ----------
     inputs : Measurements
         The recording as the methods read it (its fin model: the servo, the sensors'
-        latency); the recording's ``loop.*`` lines, where it has them, state the loop.
-    fin_range_deg : float, optional
-        Where the command saturates, where the loop does not state its stops (default: the
-        recording's fins' range).
+        latency); the recording's ``loop.*`` lines, where it has them, state the loop, which
+        saturates at its stops, else at the fins' range.
 
     Raises
     ------
@@ -177,7 +176,7 @@ def instrumental(inputs: Measurements, fin_range_deg: float | None = None) -> In
     rate_integral = np.concatenate([[0.0], np.cumsum(0.5 * (rate[:-1] + rate[1:])) * dt])
     loop = rec.loop
     if loop is not None:
-        stops = loop.stops_deg or fin_range_deg or rec.fin_range().deg
+        stops = loop.stops_within(rec.fin_range())
         excitation, saturated = loop.excitation(rec.time_s, logged_fin(rec), rate, stops)
         excitation, saturated = excitation[: n - 1], saturated[: n - 1]
         # The excitation at the sample itself holds no noise of that sample's reading only
@@ -253,9 +252,8 @@ def instrumental(inputs: Measurements, fin_range_deg: float | None = None) -> In
         k: float(math.sqrt(v)) if v > 0 else math.nan
         for k, v in zip(("alpha", "theta_bar", "a_per_s"), var, strict=True)
     }
-    zq = float(stats.norm.ppf(0.5 + 0.5 * LEVEL))
-    se_a = math.sqrt(max(float(cov[0, 0]), 0.0))
-    a_interval = _interval(a, (a - zq * se_a, a + zq * se_a), se_a, "wald")
+    se_a = math.sqrt(max(float(cov[0, 0]), 0.0))  # a = −b0: linear in the coefficients
+    a_interval = {**hessian_interval(a, se_a, LEVEL), "method": "wald"}
     if a_interval["low"] <= 0.0:  # a damped rocket: the range ends at 0
         a_interval.update(low=0.0, low_end="range", determined=False)
     intervals = {
@@ -334,7 +332,7 @@ def instrumental_method(context: Context, models: Sequence[str]) -> list[ModelFi
                 f"{context.recording.name}: instrumental variables fit the constant model "
                 f"only, not {model!r}"
             )
-        found = instrumental(inputs, context.recording.fin_range().deg)
+        found = instrumental(inputs)
         # u_d from the velocity smoothed over a window short against the rocket's time
         # constant, as for output error (the fit itself reads the raw rate).
         window = smoothing_for(found.params, inputs, context.options)

@@ -217,6 +217,10 @@ class StatedLoop:
         saturated = np.abs(command) >= stops_deg - AT_STOP_DEG
         return command + self.gain * reading, saturated  # the inverse of :meth:`command`
 
+    def stops_within(self, fins: FinRange) -> float:
+        """Where the command saturates: the loop's stated stops, else the fins' range."""
+        return self.stops_deg or fins.deg
+
     def command(self, excitation_deg: float, reading_dps: float, stops_deg: float) -> float:
         """The loop's law: the command for the excitation and the rate it read."""
         return min(max(excitation_deg - self.gain * reading_dps, -stops_deg), stops_deg)
