@@ -343,9 +343,7 @@ class Identification:
             angle_source=self.angle_source,
             velocity_fine=self.velocity_fine,
             recording=self.recording,
-            servo_rate_dps=None
-            if self.recording.fin_deg is not None
-            else (self.options.servo_rate_dps),
+            servo_rate_dps=_modelled_servo_rate(self.recording, self.options),
         )
 
     def parameters(self) -> dict[str, float]:
@@ -559,6 +557,12 @@ def fitted_rig(rig: Rig, metrics: Mapping[str, Any]) -> Rig:
     return dataclasses.replace(rig, latency_s=float(found["estimate_s"]))
 
 
+def _modelled_servo_rate(recording: Recording, options: IdentifyOptions) -> float | None:
+    """The servo's rate limit step 5 models the fin with from the commands; None where the
+    recording measures the fin (:func:`~identification.methods.steps.fin_angle_model`)."""
+    return None if recording.fin_deg is not None else options.servo_rate_dps
+
+
 def measurements(recording: Recording, options: IdentifyOptions) -> Measurements:
     """Fin steps (step 1), smoothed velocity (§3.2), 100 Hz grid and fin angle (step 5)."""
     segments: Segments | IdentificationError
@@ -593,7 +597,7 @@ def measurements(recording: Recording, options: IdentifyOptions) -> Measurements
         angle_source=angle_source,
         velocity_fine=velocity_fine,
         recording=recording,
-        servo_rate_dps=None if recording.fin_deg is not None else servo.rate_limit_dps,
+        servo_rate_dps=_modelled_servo_rate(recording, options),
     )
 
 
