@@ -136,6 +136,10 @@ def one(design: str, seed: int) -> dict[str, Any]:
     row["ar_order"] = found.metrics["ar_order"]
     row["aic_by_order"] = found.metrics["aic_by_order"]
     row["intervals"] = found.metrics["intervals"]
+    # A loop alone answering within the log's sample: the rocket is not determined, the
+    # closed loop's damping a·(1 + α·K) is.
+    row["loop_alone"] = found.metrics.get("loop_alone")
+    row["true_loop_damping"] = truth.beta_bar_per_s * (1.0 + truth.alpha * (spec.loop_gain or 0.0))
     row["std_errors"] = found.metrics["std_errors"]
     adequacy = found.metrics["adequacy"]
     row["verdict"] = adequacy["verdict"]
@@ -228,6 +232,24 @@ def _targets(rows: list[dict[str, Any]]) -> bool:
         state(f"{p}: share of 95 % profile intervals covering the truth (delayed loops)",
               covered / max(len(delayed), 1), "", *COVERAGE,
               f"{covered}/{len(delayed)} logs, {unfitted} not fitted")  # fmt: skip
+    alone = [r for r in delayed if r.get("loop_alone")]
+    told = [r for r in delayed if not r.get("loop_alone")]
+    print(
+        f"  ....  the loop alone within the log's sample (rocket not determined): "
+        f"{len(alone)}/{len(delayed)} logs; the rest cover α/θ̄/a "
+        + "/".join(str(sum(_covers(r, p) for r in told)) for p in PARAMETERS)
+        + f" of {len(told)}"
+    )
+    if alone:
+        damped = [r["loop_alone"].get("damping_per_s", {}) for r in alone]
+        held = sum(
+            d.get("low", math.inf) <= r["true_loop_damping"] <= d.get("high", -math.inf)
+            for d, r in zip(damped, alone, strict=True)
+        )
+        print(
+            f"  ....  there the closed loop's damping a·(1 + α·K): its 95 % interval holds the "
+            f"truth on {held}/{len(alone)} logs"
+        )
     ratios = [_width_ratio(r, p) for r in delayed for p in PARAMETERS]
     finite = [x for x in ratios if math.isfinite(x)]
     if finite:

@@ -522,6 +522,31 @@ def _method_findings(found: Findings, metrics: Mapping[str, Any], method: str) -
     return innovation_acf
 
 
+def _loop_alone_finding(found: Findings, metrics: Mapping[str, Any]) -> None:
+    """Where a rate loop alone moves the fin within the log's sample (the ml fit's
+    ``loop_alone``): the rocket is not determined; what is, and what would tell it."""
+    loop = metrics.get("loop_alone")
+    if not loop:
+        return
+    damping = loop.get("damping_per_s") or {}
+    told = (
+        f"; it tells the closed loop's damping a·(1 + α·K) = {damping['estimate']:.3g}"
+        + (f" [{damping['low']:.3g}, {damping['high']:.3g}]" if "low" in damping else "")
+        + " 1/s"
+        if damping
+        else ""
+    )
+    found.bad.append(
+        f"a rate loop alone moves the fin and answers within the log's sample "
+        f"({loop_law(loop['gain'], loop['delay_s'])}, "
+        f"{'as stated' if loop['stated'] else 'as the log shows'}): the fin carries the "
+        "turbulence of the sample it is logged with, so ml is not consistent, and the log does "
+        f"not tell the rocket's gain, damping and asymmetry apart{told}. To identify the "
+        "rocket, put a dither or PRBS on the fin command and state the loop (--loop-gain, "
+        "--loop-delay, --method instrumental), or log faster than the loop answers"
+    )
+
+
 def _instrument_findings(
     found: Findings, metrics: Mapping[str, Any], figures: Mapping[str, Any]
 ) -> None:
@@ -620,8 +645,8 @@ def adequacy(
         explains = "the excitation on top of the stated loop explains"
     p99 = float(np.percentile(np.abs(u), 99.0))
     alpha_se = (metrics.get("std_errors") or {}).get("alpha")
-    if alpha_se is None:
-        rel_se = math.nan  # the method reports none
+    if alpha_se is None or metrics.get("loop_alone"):
+        rel_se = math.nan  # the method reports none, or says why the log determines no α
     else:  # NaN where the information matrix is not positive definite: no precision at all
         rel_se = abs(alpha_se / params.alpha) if math.isfinite(alpha_se) else math.inf
 
@@ -668,6 +693,7 @@ def adequacy(
             "or state the loop (--loop-gain, --loop-delay) and use instrumental"
         )
     _instrument_findings(found, metrics, why.figures)
+    _loop_alone_finding(found, metrics)
     # What the model lacks, named: the fin's delay, the turbulence's wandering intensity.
     ar = metrics.get("ar")
     if ar is None:  # an AR(1) of u_d itself where the method fits no turbulence model

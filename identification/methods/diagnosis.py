@@ -50,10 +50,12 @@ __all__ = [
     "COLLINEAR_R2",
     "Diagnosis",
     "Finding",
+    "LoopAlone",
     "collinearity",
     "diagnose",
     "feedback",
     "logged_fin",
+    "loop_alone",
     "looped",
     "partly_looped",
     "share_at_stops",
@@ -230,6 +232,61 @@ def partly_looped(loop: Mapping[str, Any]) -> bool:
     return bool(math.isfinite(share) and PARTLY_SHARE <= share < FEEDBACK_SHARE and p < FEEDBACK_P)
 
 
+@dataclass(frozen=True)
+class LoopAlone:
+    """A rate loop that alone moves the fin and answers the rate within the log's sample:
+    its ``gain`` (°/(°/s)) and ``delay_s``, as stated (``stated``) or read off the log
+    (:func:`feedback`: 0, the delay under a sample, on the log's grid).
+
+    There the fin between two samples answers the turbulence of that same interval, which
+    the log sees only at its end: the fin is not an input decided before the turbulence it
+    meets, and maximum likelihood with the fin read from the log is not consistent.  The
+    rate's own dynamics tell only the closed loop's damping ``a·(1 + α·K)``: the rocket's
+    damping and gain are not told apart (nor, with the gain, its asymmetry)."""
+
+    gain: float
+    delay_s: float
+    stated: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"gain": self.gain, "delay_s": self.delay_s, "stated": self.stated}
+
+
+def loop_alone(
+    recording: Recording, rate: FloatArray, dt_s: float, fins: FinRange
+) -> LoopAlone | None:
+    """The :class:`LoopAlone` of a log whose fin a rate loop moves with nothing on top and
+    whose loop answers the measured ``rate`` (°/s, at its samples ``dt_s`` apart) in under a
+    sample.
+
+    A stated loop (the recording's ``loop.*`` lines) says its delay; nothing is on top where
+    the excitation given back through it (:meth:`~identification.recordings.recording.
+    StatedLoop.excitation`) moves under :data:`OWN_EXCITATION` of the fin's SD off the
+    stops.  Without one, the loop is the one the log shows (:func:`looped`) at lag 0, with
+    the fin's own part under that share.  None otherwise."""
+    fin = logged_fin(recording)[: np.size(rate)]
+    rate = np.asarray(rate, dtype=float)[: fin.size]
+    stated = recording.loop
+    if stated is not None:
+        if stated.delay_s >= dt_s:
+            return None
+        time = np.asarray(recording.time_s, dtype=float)[: fin.size]
+        own, saturated = stated.excitation(time, fin, rate, stated.stops_within(fins))
+        free = ~saturated.astype(bool)
+        if np.any(free) and float(np.std(own[free])) >= OWN_EXCITATION * float(
+            np.std(fin[free])
+        ):
+            return None  # an excitation on top of the loop tells the rocket from it
+        return LoopAlone(stated.gain, stated.delay_s, True)
+    free = np.abs(fin) < fins.deg * (1.0 - STOP_TOLERANCE)
+    loop = feedback(fin, rate, dt_s, free)
+    if not looped(loop) or loop["delay_s"] != 0.0:
+        return None
+    if loop["own_sd_deg"] >= OWN_EXCITATION * float(np.std(fin[free])):
+        return None  # an excitation on top of the loop tells the rocket from it
+    return LoopAlone(loop["gain"], 0.0, False)
+
+
 def collinearity(columns: Mapping[str, FloatArray]) -> dict[str, float]:
     """Each regressor's uncentred R² on the others (1 − 1/VIF): near 1, the data cannot
     tell its coefficient from theirs."""
@@ -298,9 +355,11 @@ def diagnose(
     if closed:
         instant = loop["delay_s"] == 0.0
         consistent = (
-            "the loop reads the rate at the very sample it commands, so the gyro's noise is in "
-            "the fin and ml is not consistent either (direct identification needs a delay in "
-            "the loop: log the command with its own time, a sample after the reading)"
+            f"the loop answers the rate within the log's sample (its delay reads as 0 on the "
+            f"log's {1000 * dt_s:.3g}-ms grid), so the fin carries the turbulence and the "
+            "gyro's noise of the very sample it is logged with, and ml is not consistent "
+            "either (direct identification needs the loop's delay to be a sample or more: log "
+            "faster than the loop answers, or state the loop with --loop-delay)"
             if instant
             else "ml with the fin read from the log is (the loop has a delay)"
         )

@@ -44,7 +44,7 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import optimize, stats
@@ -107,6 +107,9 @@ from identification.model import (
 )
 from identification.recordings.recording import Recording
 from rocketroll_common.arrays import FloatArray, readonly_array
+
+if TYPE_CHECKING:
+    from identification.methods.diagnosis import LoopAlone
 
 __all__ = [
     "MAX_ORDER",
@@ -253,6 +256,11 @@ class MLFit(StateSpaceFit):
         A 95 % interval of each of the rocket's parameters (:func:`rocket_intervals`): the
         Hessian's where it is positive definite, the profile likelihood's where it is not
         (or for all, asked so), each saying whether the data determine it.
+    loop_alone : dict
+        Where a rate loop alone moves the fin and answers within the log's sample
+        (:func:`~identification.methods.diagnosis.loop_alone`): the loop, and the closed
+        loop's damping ``a·(1 + α·K)`` the log does tell (:func:`loop_bound`); empty
+        otherwise.
     latency : dict
         The sensors' latency searched where none is stated (:func:`_latency_search`'s
         figures: the estimate, s, its likelihood-ratio statistic and p, whether it is
@@ -280,6 +288,7 @@ class MLFit(StateSpaceFit):
     nfev: int
     intervals: dict[str, dict[str, Any]] = field(default_factory=dict)
     latency: dict[str, Any] = field(default_factory=dict)
+    loop_alone: dict[str, Any] = field(default_factory=dict)
     _state_space: LinearGaussian = field(repr=False)
     _smoothed: Smoothed = field(repr=False)
 
@@ -521,6 +530,16 @@ class _Search:
                 self.found[key] = self._first()
         return self.found[key]
 
+    def loop_alone(self) -> LoopAlone | None:
+        """The rate loop that alone moves the fin within the log's sample, if one does
+        (:func:`~identification.methods.diagnosis.loop_alone`)."""
+        from identification.methods.diagnosis import loop_alone
+
+        rec = self.inputs.recording
+        rate = rec.roll_rate_dps if rec.roll_rate_dps is not None else self.inputs.velocity_dps
+        dt = float(np.median(np.diff(self.data.time_s)))
+        return loop_alone(rec, np.asarray(rate, dtype=float), dt, rec.fin_range(None))
+
     def _run(
         self, model: str, order: int, warm: dict[str, Any]
     ) -> tuple[float, dict[str, Any], bool, str]:
@@ -663,14 +682,21 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
             raise IdentificationError(f"{data.name}: maximum likelihood found no stable model")
     info = _information(data, model, nat)
     std_errors, correlations = _rocket_estimates(info, model)
-    return _result(
+    alone = search.loop_alone()
+    if alone is None:
+        found = rocket_intervals(
+            data, model, nat, std_errors, intervals, rivals=[r[1] for r in rivals]
+        )
+        bound: dict[str, Any] = {}
+    else:  # the Hessian's precision is no precision where the rocket is not determined
+        found, bound = loop_bound(model, nat, info, alone)
+        std_errors = {name: math.nan for name in std_errors}
+    fitted = _result(
         data,
         model,
         nat,
         parts,
-        intervals=rocket_intervals(
-            data, model, nat, std_errors, intervals, rivals=[r[1] for r in rivals]
-        ),
+        intervals=found,
         loglike=-fun,
         aic=float(orders[best]),
         n_params=count_params(data, model, best, nat),
@@ -681,6 +707,55 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
         nfev=search.nfev,
         information=info,
     )
+    return dataclasses.replace(fitted, loop_alone=bound) if bound else fitted
+
+
+def loop_bound(
+    model: str, nat: dict[str, Any], info: _Information, alone: LoopAlone
+) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
+    """What a log flown under a rate loop alone, answering within the log's sample
+    (:class:`~identification.methods.diagnosis.LoopAlone`), tells: each of the rocket's
+    parameters not determined (``method: closed loop``), its interval the values the
+    closed loop leaves open -- α those for which the damping ``a = p/(1 + α·K)`` is
+    positive, the damping and asymmetry their physical range; and the closed loop's
+    damping ``p = a·(1 + α·K)`` (constant model), which the rate's own dynamics determine,
+    with the Hessian's 95 % interval (delta method).
+
+    Returns the intervals by reported name and the loop's figures
+    (:attr:`MLFit.loop_alone`)."""
+    gain = alone.gain
+    edge = -1.0 / gain  # where a = p/(1 + α·K) runs off to infinity
+    ranges = {**_RANGES, "alpha": (edge, math.inf) if gain > 0 else (-math.inf, edge)}
+    intervals = {}
+    for name in _rocket(model):
+        low, high = ranges[name]
+        intervals[_SHOWN[model].get(name, name)] = {
+            "method": "closed loop",
+            "estimate": float(nat[name]),
+            "low": float(low),
+            "high": float(high),
+            "low_end": "range" if math.isfinite(low) else "open",
+            "high_end": "range" if math.isfinite(high) else "open",
+            "level": _LEVEL,
+            "determined": False,
+        }
+    figures: dict[str, Any] = alone.as_dict()
+    if model == "constant":
+        alpha, a = float(nat["alpha"]), float(nat["beta_bar"])
+        damping: dict[str, Any] = {"estimate": a * (1.0 + alpha * gain)}
+        if info.cov is not None:
+            grad = np.array([a * gain, 0.0, 1.0 + alpha * gain])
+            var = float(grad @ np.asarray(info.cov)[:3, :3] @ grad)
+            if var > 0:
+                z = float(stats.norm.ppf(0.5 + 0.5 * _LEVEL)) * math.sqrt(var)
+                low = damping["estimate"] - z  # a damped closed loop: the range ends at 0
+                damping.update(low=max(low, 0.0), high=damping["estimate"] + z)
+        figures["damping_per_s"] = damping
+    return intervals, figures
+
+
+#: The level of :func:`loop_bound`'s interval (the rocket_intervals' own).
+_LEVEL = 0.95
 
 
 def _result(
@@ -1133,6 +1208,7 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
             "correlations": found.correlations,
             "intervals": found.intervals,
             **({"sensor_latency": latency} if latency else {}),
+            **({"loop_alone": found.loop_alone} if found.loop_alone else {}),
             "aic_by_order": {str(k): v for k, v in found.orders.items()},
             "nfev": found.nfev,
             "converged": found.converged,

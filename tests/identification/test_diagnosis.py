@@ -13,7 +13,14 @@ import pytest
 
 from identification.instruments.tunnel import TunnelSpec, run_tunnel
 from identification.methods import Context, fit
-from identification.methods.diagnosis import diagnose, feedback, looped, partly_looped
+from identification.methods.diagnosis import (
+    LoopAlone,
+    diagnose,
+    feedback,
+    loop_alone,
+    looped,
+    partly_looped,
+)
 from identification.methods.ml import maximum_likelihood
 from identification.recordings.recording import FinRange, Recording
 
@@ -77,6 +84,61 @@ def test_a_loop_without_delay_is_collinear_and_said_to_defeat_ml_too() -> None:
     (line,) = [f.text for f in found.findings if f.kind == "feedback"]
     assert "ml is not consistent either" in line
     assert "only a·(1 + α·K)" in line  # nothing on top of the loop
+
+
+def _unstated(rec: Recording) -> Recording:
+    """The log as a user without the flight computer's settings has it: no loop.* lines."""
+    kept = {k: v for k, v in rec.metadata.items() if not k.startswith("loop.")}
+    return dataclasses.replace(rec, metadata=kept)
+
+
+def _alone(rec: Recording) -> LoopAlone | None:
+    return loop_alone(rec, np.asarray(rec.roll_rate_dps), rec.dt_s, STOPS)
+
+
+@pytest.mark.parametrize(("delay", "log_dt"), [(0.0, 0.02), (0.02, 0.04), (0.005, 0.02)])
+def test_a_loop_alone_answering_within_a_sample_is_found_stated_or_not(
+    delay: float, log_dt: float
+) -> None:
+    spec = TunnelSpec(
+        seed=5, schedule="none", loop_gain=0.8, loop_delay=delay,
+        **ROCKET, **{**LOG, "log_dt": log_dt},
+    )  # fmt: skip
+    rec = run_tunnel(spec)
+    assert _alone(rec) == LoopAlone(0.8, delay, True)
+    read = _alone(_unstated(rec))
+    assert read is not None and not read.stated and read.delay_s == 0.0
+    # Read at lag 0, a loop half a sample late shows less gain (0.68 for 0.8 at 25 Hz).
+    assert read.gain == pytest.approx(0.8, rel=0.25)
+
+
+@pytest.mark.parametrize(("delay", "log_dt"), [(0.04, 0.02), (0.02, 0.02), (0.06, 0.04)])
+def test_a_loop_a_sample_late_or_more_is_not_alone_within_a_sample(
+    delay: float, log_dt: float
+) -> None:
+    spec = TunnelSpec(
+        seed=5, schedule="none", loop_gain=0.8, loop_delay=delay,
+        **ROCKET, **{**LOG, "log_dt": log_dt},
+    )  # fmt: skip
+    rec = run_tunnel(spec)
+    assert _alone(rec) is None
+    assert _alone(_unstated(rec)) is None
+
+
+def test_a_loop_with_a_dither_on_top_is_not_alone() -> None:
+    spec = TunnelSpec(
+        seed=5, schedule="prbs", fin_range=6.0, pulse=0.5, loop_gain=0.8, loop_delay=0.0,
+        **ROCKET, **LOG,
+    )  # fmt: skip
+    rec = run_tunnel(spec)
+    assert looped(
+        feedback(
+            np.asarray(rec.fin_cmd_deg), np.asarray(rec.roll_rate_dps), rec.dt_s,
+            np.abs(np.asarray(rec.fin_cmd_deg)) < 14.9,
+        )
+    )  # fmt: skip
+    assert _alone(rec) is None
+    assert _alone(_unstated(rec)) is None
 
 
 def test_ml_finds_the_rocket_not_the_loop_on_a_dithered_closed_loop() -> None:
