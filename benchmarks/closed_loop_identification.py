@@ -284,7 +284,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument(
         "--seeds", type=int, default=69,
-        help="logs per delayed-loop design, the coverage's population (default 69: at least 200 fitted over the three)",
+        help="logs per delayed-loop design, the coverage's population (default 69: at least "
+        "200 fitted over the three)",
     )  # fmt: skip
     parser.add_argument(
         "--check-seeds", type=int, default=20,
