@@ -273,9 +273,7 @@ def loop_alone(
         time = np.asarray(recording.time_s, dtype=float)[: fin.size]
         own, saturated = stated.excitation(time, fin, rate, stated.stops_within(fins))
         free = ~saturated.astype(bool)
-        if np.any(free) and float(np.std(own[free])) >= OWN_EXCITATION * float(
-            np.std(fin[free])
-        ):
+        if np.any(free) and float(np.std(own[free])) >= OWN_EXCITATION * float(np.std(fin[free])):
             return None  # an excitation on top of the loop tells the rocket from it
         return LoopAlone(stated.gain, stated.delay_s, True)
     free = np.abs(fin) < fins.deg * (1.0 - STOP_TOLERANCE)

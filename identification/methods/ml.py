@@ -715,7 +715,7 @@ def loop_bound(
 ) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
     """What a log flown under a rate loop alone, answering within the log's sample
     (:class:`~identification.methods.diagnosis.LoopAlone`), tells: each of the rocket's
-    parameters not determined (``method: closed loop``), its interval the values the
+    parameters not determined (``method: loop``), its interval the values the
     closed loop leaves open -- α those for which the damping ``a = p/(1 + α·K)`` is
     positive, the damping and asymmetry their physical range; and the closed loop's
     damping ``p = a·(1 + α·K)`` (constant model), which the rate's own dynamics determine,
@@ -730,7 +730,7 @@ def loop_bound(
     for name in _rocket(model):
         low, high = ranges[name]
         intervals[_SHOWN[model].get(name, name)] = {
-            "method": "closed loop",
+            "method": "loop",
             "estimate": float(nat[name]),
             "low": float(low),
             "high": float(high),

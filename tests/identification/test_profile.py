@@ -188,7 +188,7 @@ def test_ml_on_a_loop_alone_within_a_sample_says_the_rocket_is_not_determined() 
     found = fit(Context(_half_sample_loop()), "ml", ["constant"])["constant"]
     metrics = found.metrics
     intervals = metrics["intervals"]
-    assert {i["method"] for i in intervals.values()} == {"closed loop"}
+    assert {i["method"] for i in intervals.values()} == {"loop"}
     assert not any(i["determined"] for i in intervals.values())
     assert intervals["alpha"]["low"] == pytest.approx(-1.0 / HALF_SAMPLE_GAIN)
     assert intervals["alpha"]["high"] == math.inf
