@@ -259,7 +259,8 @@ def loop_alone(
     whose loop answers the measured ``rate`` (°/s, at its samples ``dt_s`` apart) in under a
     sample.
 
-    A stated loop (the recording's ``loop.*`` lines) says its delay; nothing is on top where
+    A stated loop (the recording's ``loop.*`` lines) says its delay, unless the log shows the
+    loop two samples late or more (a delay left at its default of 0); nothing is on top where
     the excitation given back through it (:meth:`~identification.recordings.recording.
     StatedLoop.excitation`) moves under :data:`OWN_EXCITATION` of the fin's SD off the
     stops.  Without one, the loop is the one the log shows (:func:`looped`) at lag 0, with
@@ -267,17 +268,17 @@ def loop_alone(
     fin = logged_fin(recording)[: np.size(rate)]
     rate = np.asarray(rate, dtype=float)[: fin.size]
     stated = recording.loop
+    free = np.abs(fin) < fins.deg * (1.0 - STOP_TOLERANCE)
+    loop = feedback(fin, rate, dt_s, free)
     if stated is not None:
-        if stated.delay_s >= dt_s:
-            return None
+        if stated.delay_s >= dt_s or (looped(loop) and loop["delay_s"] >= 2.0 * dt_s):
+            return None  # the log shows the loop two samples late or more: not under one
         time = np.asarray(recording.time_s, dtype=float)[: fin.size]
         own, saturated = stated.excitation(time, fin, rate, stated.stops_within(fins))
         free = ~saturated.astype(bool)
         if np.any(free) and float(np.std(own[free])) >= OWN_EXCITATION * float(np.std(fin[free])):
             return None  # an excitation on top of the loop tells the rocket from it
         return LoopAlone(stated.gain, stated.delay_s, True)
-    free = np.abs(fin) < fins.deg * (1.0 - STOP_TOLERANCE)
-    loop = feedback(fin, rate, dt_s, free)
     if not looped(loop) or loop["delay_s"] != 0.0:
         return None
     if loop["own_sd_deg"] >= OWN_EXCITATION * float(np.std(fin[free])):

@@ -125,6 +125,15 @@ def test_a_loop_a_sample_late_or_more_is_not_alone_within_a_sample(
     assert _alone(_unstated(rec)) is None
 
 
+def test_a_stated_delay_the_log_belies_is_not_taken_for_a_loop_within_a_sample() -> None:
+    # --loop-gain without --loop-delay states a delay of 0; the log shows 60 ms (3 samples).
+    spec = TunnelSpec(seed=5, schedule="none", loop_gain=0.8, loop_delay=0.06, **ROCKET, **LOG)
+    rec = run_tunnel(spec)
+    said = dataclasses.replace(rec, metadata={**rec.metadata, "loop.delay_s": "0"})
+    assert said.loop is not None and said.loop.delay_s == 0.0
+    assert _alone(said) is None
+
+
 def test_a_loop_with_a_dither_on_top_is_not_alone() -> None:
     spec = TunnelSpec(
         seed=5, schedule="prbs", fin_range=6.0, pulse=0.5, loop_gain=0.8, loop_delay=0.0,
