@@ -524,26 +524,19 @@ def _method_findings(found: Findings, metrics: Mapping[str, Any], method: str) -
 
 def _loop_alone_finding(found: Findings, metrics: Mapping[str, Any]) -> None:
     """Where a rate loop alone moves the fin within the log's sample (the ml fit's
-    ``loop_alone``): the rocket is not determined; what is, and what would tell it."""
+    ``loop_alone``): the rocket is not determined, and what would tell it."""
     loop = metrics.get("loop_alone")
     if not loop:
         return
-    damping = loop.get("damping_per_s") or {}
-    told = (
-        f"; it tells the closed loop's damping a·(1 + α·K) = {damping['estimate']:.3g}"
-        + (f" [{damping['low']:.3g}, {damping['high']:.3g}]" if "low" in damping else "")
-        + " 1/s"
-        if damping
-        else ""
-    )
     found.bad.append(
         f"a rate loop alone moves the fin and answers within the log's sample "
         f"({loop_law(loop['gain'], loop['delay_s'])}, "
         f"{'as stated' if loop['stated'] else 'as the log shows'}): the fin carries the "
         "turbulence of the sample it is logged with, so ml is not consistent, and the log does "
-        f"not tell the rocket's gain, damping and asymmetry apart{told}. To identify the "
-        "rocket, put a dither or PRBS on the fin command and state the loop (--loop-gain, "
-        "--loop-delay, --method instrumental), or log faster than the loop answers"
+        "not tell the rocket's gain, damping and asymmetry apart (nor the loop's damping from "
+        "the turbulence's correlation). To identify the rocket, put a dither or PRBS on the fin "
+        "command and state the loop (--loop-gain, --loop-delay, --method instrumental), or log "
+        "faster than the loop answers"
     )
 
 

@@ -258,9 +258,8 @@ class MLFit(StateSpaceFit):
         (or for all, asked so), each saying whether the data determine it.
     loop_alone : dict
         Where a rate loop alone moves the fin and answers within the log's sample
-        (:func:`~identification.methods.diagnosis.loop_alone`): the loop, and the closed
-        loop's damping ``a·(1 + α·K)`` the log does tell (:func:`loop_bound`); empty
-        otherwise.
+        (:func:`~identification.methods.diagnosis.loop_alone`): the loop
+        (:func:`loop_bound`); empty otherwise.
     latency : dict
         The sensors' latency searched where none is stated (:func:`_latency_search`'s
         figures: the estimate, s, its likelihood-ratio statistic and p, whether it is
@@ -689,7 +688,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
         )
         bound: dict[str, Any] = {}
     else:  # the Hessian's precision is no precision where the rocket is not determined
-        found, bound = loop_bound(model, nat, info, alone)
+        found, bound = loop_bound(model, nat, alone)
         std_errors = {name: math.nan for name in std_errors}
     fitted = _result(
         data,
@@ -711,15 +710,15 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
 
 
 def loop_bound(
-    model: str, nat: dict[str, Any], info: _Information, alone: LoopAlone
+    model: str, nat: dict[str, Any], alone: LoopAlone
 ) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
     """What a log flown under a rate loop alone, answering within the log's sample
-    (:class:`~identification.methods.diagnosis.LoopAlone`), tells: each of the rocket's
-    parameters not determined (``method: loop``), its interval the values the
-    closed loop leaves open -- α those for which the damping ``a = p/(1 + α·K)`` is
-    positive, the damping and asymmetry their physical range; and the closed loop's
-    damping ``p = a·(1 + α·K)`` (constant model), which the rate's own dynamics determine,
-    with the Hessian's 95 % interval (delta method).
+    (:class:`~identification.methods.diagnosis.LoopAlone`), tells of the rocket: none of
+    its parameters is determined (``method: loop``), each interval the values the closed
+    loop leaves open -- α those for which the damping ``a = p/(1 + α·K)`` of a closed loop
+    damping at ``p`` is positive, the damping and asymmetry their physical range.  Not
+    even ``p`` is given: with the turbulence the only input, the rate's two time constants
+    (the loop's and the turbulence's correlation) can trade places.
 
     Returns the intervals by reported name and the loop's figures
     (:attr:`MLFit.loop_alone`)."""
@@ -739,19 +738,7 @@ def loop_bound(
             "level": _LEVEL,
             "determined": False,
         }
-    figures: dict[str, Any] = alone.as_dict()
-    if model == "constant":
-        alpha, a = float(nat["alpha"]), float(nat["beta_bar"])
-        damping: dict[str, Any] = {"estimate": a * (1.0 + alpha * gain)}
-        if info.cov is not None:
-            grad = np.array([a * gain, 0.0, 1.0 + alpha * gain])
-            var = float(grad @ np.asarray(info.cov)[:3, :3] @ grad)
-            if var > 0:
-                z = float(stats.norm.ppf(0.5 + 0.5 * _LEVEL)) * math.sqrt(var)
-                low = damping["estimate"] - z  # a damped closed loop: the range ends at 0
-                damping.update(low=max(low, 0.0), high=damping["estimate"] + z)
-        figures["damping_per_s"] = damping
-    return intervals, figures
+    return intervals, alone.as_dict()
 
 
 #: The level of :func:`loop_bound`'s interval (the rocket_intervals' own).

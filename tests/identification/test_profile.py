@@ -184,7 +184,7 @@ def test_ml_profiles_every_basin_of_a_loop_alone_and_covers_the_rocket(
 def test_ml_on_a_loop_alone_within_a_sample_says_the_rocket_is_not_determined() -> None:
     # Half a sample late, the fin answers the turbulence of the sample it is logged with:
     # ml is not consistent, and the rocket's gain, damping and asymmetry are not told
-    # apart; the closed loop's damping a·(1 + α·K) is.
+    # apart.
     found = fit(Context(_half_sample_loop()), "ml", ["constant"])["constant"]
     metrics = found.metrics
     intervals = metrics["intervals"]
@@ -195,14 +195,11 @@ def test_ml_on_a_loop_alone_within_a_sample_says_the_rocket_is_not_determined() 
     assert (intervals["a_per_s"]["low"], intervals["theta_bar"]["low"]) == (0.0, -90.0)
     assert all(math.isnan(se) for se in metrics["std_errors"].values())
     loop = metrics["loop_alone"]
-    assert (loop["gain"], loop["delay_s"], loop["stated"]) == (HALF_SAMPLE_GAIN, 0.02, True)
-    damping = loop["damping_per_s"]
-    true_damping = HALF_SAMPLE_LOOP["beta_bar"] * (1 + HALF_SAMPLE_LOOP["alpha"] * HALF_SAMPLE_GAIN)
-    assert 0.0 < damping["low"] <= true_damping <= damping["high"]
+    assert loop == {"gain": HALF_SAMPLE_GAIN, "delay_s": 0.02, "stated": True}
     adequacy = metrics["adequacy"]
     assert adequacy["verdict"] == "unreliable"
     (reason,) = [r for r in adequacy["reasons"] if "answers within the log's sample" in r]
-    assert "a·(1 + α·K) = " in reason and "dither" in reason
+    assert "dither" in reason and "--method instrumental" in reason
     assert not any("standard error" in r for r in adequacy["reasons"])
 
 
