@@ -237,9 +237,9 @@ def identify(args: IdentifyArgs) -> int:
         print(f"|u_d|/range: against the fins' {fin_range}{fin_range.hint}")
         intervals = interval_table({**tunnel, **flown})
         if intervals:
-            tunnel_fits = [f for by in tunnel.values() for f in by.values()]
-            instrumental = any("instruments" in f.metrics for f in tunnel_fits)
-            loop = any("loop_alone" in f.metrics for f in tunnel_fits)
+            legend_fits = [f for by in tunnel.values() for f in by.values()]
+            instrumental = any("instruments" in f.metrics for f in legend_fits)
+            loop = any("loop_alone" in f.metrics for f in legend_fits)
             print(
                 "\n95 % intervals (hessian: ±1.96 SE; profile: the profile likelihood's, where "
                 "the Hessian says nothing, or for all with --intervals profile"
