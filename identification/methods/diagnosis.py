@@ -232,6 +232,14 @@ def partly_looped(loop: Mapping[str, Any]) -> bool:
     return bool(math.isfinite(share) and PARTLY_SHARE <= share < FEEDBACK_SHARE and p < FEEDBACK_P)
 
 
+def _excited(own_sd_deg: float, fin: FloatArray, free: NDArray[np.bool_]) -> bool:
+    """Whether the fin's own part (°, no rate explains it) is an excitation on top of a
+    loop: at least :data:`OWN_EXCITATION` of the fin's SD over the samples ``free`` of the
+    stops (of nothing where none is)."""
+    fin_sd = float(np.std(fin[free])) if np.any(free) else 0.0
+    return bool(own_sd_deg >= OWN_EXCITATION * fin_sd)
+
+
 @dataclass(frozen=True)
 class LoopAlone:
     """A rate loop that alone moves the fin and answers the rate within the log's sample:
@@ -241,8 +249,9 @@ class LoopAlone:
     There the fin between two samples answers the turbulence of that same interval, which
     the log sees only at its end: the fin is not an input decided before the turbulence it
     meets, and maximum likelihood with the fin read from the log is not consistent.  The
-    rate's own dynamics tell only the closed loop's damping ``a·(1 + α·K)``: the rocket's
-    damping and gain are not told apart (nor, with the gain, its asymmetry)."""
+    rocket's damping and gain are not told apart (nor, with the gain, its asymmetry), and
+    with the turbulence the only input not even the closed loop's damping ``a·(1 + α·K)``
+    is: the loop's time constant and the turbulence's correlation can trade places."""
 
     gain: float
     delay_s: float
@@ -276,12 +285,12 @@ def loop_alone(
         time = np.asarray(recording.time_s, dtype=float)[: fin.size]
         own, saturated = stated.excitation(time, fin, rate, stated.stops_within(fins))
         free = ~saturated.astype(bool)
-        if np.any(free) and float(np.std(own[free])) >= OWN_EXCITATION * float(np.std(fin[free])):
+        if np.any(free) and _excited(float(np.std(own[free])), fin, free):
             return None  # an excitation on top of the loop tells the rocket from it
         return LoopAlone(stated.gain, stated.delay_s, True)
     if not looped(loop) or loop["delay_s"] != 0.0:
         return None
-    if loop["own_sd_deg"] >= OWN_EXCITATION * float(np.std(fin[free])):
+    if _excited(loop["own_sd_deg"], fin, free):
         return None  # an excitation on top of the loop tells the rocket from it
     return LoopAlone(loop["gain"], 0.0, False)
 
@@ -362,12 +371,11 @@ def diagnose(
             if instant
             else "ml with the fin read from the log is (the loop has a delay)"
         )
-        fin_sd = float(np.std(fin[free])) if np.any(free) else 0.0
         excited = (
             f"The fin's own excitation on top of the loop ({own:.2g}° RMS) separates the "
             "rocket from the loop; with the loop stated (--loop-gain, --loop-delay, or the "
             "recording's loop.* lines) --method instrumental takes it as the instrument"
-            if own >= OWN_EXCITATION * fin_sd
+            if _excited(own, fin, free)
             else "Nothing moves the fin but the loop: the rocket is told from the loop only "
             "through the loop's delay (without one only a·(1 + α·K) is determined); an "
             "excitation on the fin command (a dither or PRBS) makes it robust"

@@ -41,6 +41,7 @@ alike, from the angle, the rate or both.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -529,6 +530,7 @@ class _Search:
                 self.found[key] = self._first()
         return self.found[key]
 
+    @functools.cached_property
     def loop_alone(self) -> LoopAlone | None:
         """The rate loop that alone moves the fin within the log's sample, if one does
         (:func:`~identification.methods.diagnosis.loop_alone`)."""
@@ -681,7 +683,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
             raise IdentificationError(f"{data.name}: maximum likelihood found no stable model")
     info = _information(data, model, nat)
     std_errors, correlations = _rocket_estimates(info, model)
-    alone = search.loop_alone()
+    alone = search.loop_alone  # once per recording, for every model fitted
     if alone is None:
         found = rocket_intervals(
             data, model, nat, std_errors, intervals, rivals=[r[1] for r in rivals]

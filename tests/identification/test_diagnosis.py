@@ -92,6 +92,16 @@ def _unstated(rec: Recording) -> Recording:
     return dataclasses.replace(rec, metadata=kept)
 
 
+def _loop_log(delay: float, log_dt: float) -> Recording:
+    """A rate loop alone (gain 0.8, nothing on top) read ``delay`` late, logged every
+    ``log_dt``."""
+    spec = TunnelSpec(
+        seed=5, schedule="none", loop_gain=0.8, loop_delay=delay,
+        **ROCKET, **{**LOG, "log_dt": log_dt},
+    )  # fmt: skip
+    return run_tunnel(spec)
+
+
 def _alone(rec: Recording) -> LoopAlone | None:
     return loop_alone(rec, np.asarray(rec.roll_rate_dps), rec.dt_s, STOPS)
 
@@ -100,11 +110,7 @@ def _alone(rec: Recording) -> LoopAlone | None:
 def test_a_loop_alone_answering_within_a_sample_is_found_stated_or_not(
     delay: float, log_dt: float
 ) -> None:
-    spec = TunnelSpec(
-        seed=5, schedule="none", loop_gain=0.8, loop_delay=delay,
-        **ROCKET, **{**LOG, "log_dt": log_dt},
-    )  # fmt: skip
-    rec = run_tunnel(spec)
+    rec = _loop_log(delay, log_dt)
     assert _alone(rec) == LoopAlone(0.8, delay, True)
     read = _alone(_unstated(rec))
     assert read is not None and not read.stated and read.delay_s == 0.0
@@ -116,19 +122,14 @@ def test_a_loop_alone_answering_within_a_sample_is_found_stated_or_not(
 def test_a_loop_a_sample_late_or_more_is_not_alone_within_a_sample(
     delay: float, log_dt: float
 ) -> None:
-    spec = TunnelSpec(
-        seed=5, schedule="none", loop_gain=0.8, loop_delay=delay,
-        **ROCKET, **{**LOG, "log_dt": log_dt},
-    )  # fmt: skip
-    rec = run_tunnel(spec)
+    rec = _loop_log(delay, log_dt)
     assert _alone(rec) is None
     assert _alone(_unstated(rec)) is None
 
 
 def test_a_stated_delay_the_log_belies_is_not_taken_for_a_loop_within_a_sample() -> None:
     # --loop-gain without --loop-delay states a delay of 0; the log shows 60 ms (3 samples).
-    spec = TunnelSpec(seed=5, schedule="none", loop_gain=0.8, loop_delay=0.06, **ROCKET, **LOG)
-    rec = run_tunnel(spec)
+    rec = _loop_log(0.06, LOG["log_dt"])
     said = dataclasses.replace(rec, metadata={**rec.metadata, "loop.delay_s": "0"})
     assert said.loop is not None and said.loop.delay_s == 0.0
     assert _alone(said) is None

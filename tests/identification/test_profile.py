@@ -169,7 +169,7 @@ def test_ml_profiles_every_basin_of_a_loop_alone_and_covers_the_rocket(
     # (The profile from the fit's basin alone missed the truth.)  The log's loop answers
     # within a sample, where ml reports the rocket undetermined instead: that is set aside
     # here to reach the basins.
-    monkeypatch.setattr(ml._Search, "loop_alone", lambda self: None)
+    monkeypatch.setattr(ml._Search, "loop_alone", None)
     truth = HALF_SAMPLE_LOOP
     found = maximum_likelihood(_half_sample_loop(), "constant")
     alpha = found.intervals["alpha"]
