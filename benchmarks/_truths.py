@@ -11,10 +11,23 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
+from scipy.integrate import solve_ivp
+
 from identification.instruments.reference import Effects
 from identification.instruments.tunnel import TunnelSpec
+from identification.recordings.recording import Recording
 
-__all__ = ["MISMATCH_TRUTHS", "SHAPES", "SHAPE_TRUTHS", "TRUTHS", "shape_command", "spec_of"]
+__all__ = [
+    "MISMATCH_TRUTHS",
+    "SHAPES",
+    "SHAPE_TRUTHS",
+    "STICK",
+    "TRUTHS",
+    "shape_command",
+    "spec_of",
+    "stick_log",
+]
 
 #: name -> (description, tunnel settings other than the seed)
 TRUTHS: dict[str, tuple[str, dict[str, object]]] = {
@@ -124,3 +137,75 @@ def shape_command(truth: str, shape: tuple[str, int], seed: int) -> str:
     """The ``rocketroll tunnel`` settings of ``truth`` on ``shape`` at 100 Hz with a 1 %
     gyro, turbulence seed ``seed``."""
     return f"--seed {seed} --log-dt 0.01 --gyro-noise 1 {SHAPE_TRUTHS[truth]} {SHAPES[shape]}"
+
+
+#: The rocket behind :func:`stick_log`: an aileron convention (α < 0), θ̄ 0.5°, a 2.4 1/s.
+STICK = {"alpha": -2.9, "theta_bar_deg": 0.5, "a_per_s": 2.4}
+
+
+def stick_log(
+    seed: int, latency_s: float = 0.0, turbulence_deg: float = 0.7, duration_s: float = 20.0
+) -> Recording:
+    """A pilot's log made outside the toolkit: 25 Hz, the aileron a stick moved by hand
+    (raised-cosine moves of 0.4-0.9 s between banks of 4-10° either way, dwells of 1-2 s;
+    continuous, not the tunnel's command held per sample behind a servo), the roll
+    ``v' = -a·v + a·α·(δ + θ̄ + u_d)`` (:data:`STICK`) integrated by scipy's ``solve_ivp``
+    with ``u_d`` an Ornstein-Uhlenbeck process (1 s, SD ``turbulence_deg``) held over 2-ms
+    steps, the gyro read ``latency_s`` late with 0.3 °/s of white noise, the aileron
+    logged on time."""
+    rng = np.random.default_rng(seed)
+    alpha, theta_bar, a = STICK["alpha"], STICK["theta_bar_deg"], STICK["a_per_s"]
+    moves: list[tuple[float, float, float, float]] = []
+    t, level = 1.0, 0.0
+    while t < duration_s:
+        size = rng.uniform(4.0, 10.0)
+        new = size * (rng.choice([-1.0, 1.0]) if level == 0.0 else -np.sign(level))
+        move = rng.uniform(0.4, 0.9)
+        moves.append((t, move, level, new))
+        t, level = t + move + rng.uniform(1.0, 2.0), new
+
+    def aileron(times: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(times)
+        for start, move, before, after in moves:
+            s = np.clip((times - start) / move, 0.0, 1.0)
+            shaped = before + (after - before) * 0.5 * (1.0 - np.cos(np.pi * s))
+            out = np.where(times >= start, shaped, out)
+        return out
+
+    h, tau = 0.002, 1.0
+    fine = np.arange(0.0, duration_s + 1.0, h)
+    phi = np.exp(-h / tau)
+    shocks = turbulence_deg * np.sqrt(1.0 - phi**2) * rng.standard_normal(fine.size)
+    ud = np.empty(fine.size)
+    ud[0] = turbulence_deg * rng.standard_normal()
+    for k in range(1, fine.size):
+        ud[k] = phi * ud[k - 1] + shocks[k]
+
+    stick = aileron(fine)
+
+    def roll(time: float, v: np.ndarray) -> list[float]:
+        k = min(int(time / h), fine.size - 2)
+        between = (time - fine[k]) / h
+        fin = stick[k] + between * (stick[k + 1] - stick[k])
+        return [-a * v[0] + a * alpha * (fin + theta_bar + ud[k])]
+
+    solved = solve_ivp(
+        roll, (0.0, duration_s + 0.5), [alpha * (theta_bar + ud[0])], max_step=h,
+        dense_output=True, rtol=1e-8, atol=1e-8,
+    )  # fmt: skip
+    times = np.arange(0.0, duration_s + 1e-9, 0.04)
+    rate = solved.sol(np.maximum(times - latency_s, 0.0))[0] + rng.normal(0.0, 0.3, times.size)
+    return Recording(
+        name=f"stick-seed{seed}",
+        source="synthetic",
+        time_s=times,
+        fin_deg=aileron(times),
+        roll_rate_dps=rate,
+        metadata={
+            "truth.model": "constant",
+            "truth.alpha": str(alpha),
+            "truth.theta_bar_deg": str(theta_bar),
+            "truth.beta_bar_per_s": str(a),
+            "truth.sensor_latency_s": str(latency_s),
+        },
+    )

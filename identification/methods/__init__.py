@@ -295,6 +295,14 @@ class Context:
 
         return measurements(self.recording, self.options)
 
+    def shared(self, key: str, make: Callable[[], Any]) -> Any:
+        """What the methods run on this recording share (a search one of them makes and
+        another takes, e.g. the sensors' latency), made once by ``make()`` under ``key``."""
+        made: dict[str, Any] = self.__dict__.setdefault("_shared", {})
+        if key not in made:
+            made[key] = make()
+        return made[key]
+
     def smoothed_over(self, window_s: float | None) -> Measurements:
         """:attr:`measurements` with the velocity smoothed over ``window_s`` instead of the
         options' window (None: the options'); made once per window."""

@@ -115,9 +115,12 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_ORDER",
     "DelaySearch",
+    "LatencySearch",
     "MLFit",
     "QuadraticSearch",
+    "context_latency",
     "delay_search",
+    "latency_search",
     "maximum_likelihood",
     "ml_method",
     "posterior_given",
@@ -262,7 +265,7 @@ class MLFit(StateSpaceFit):
         (:func:`~identification.methods.diagnosis.loop_alone`): the loop
         (:func:`loop_bound`); empty otherwise.
     latency : dict
-        The sensors' latency searched where none is stated (:func:`_latency_search`'s
+        The sensors' latency searched where none is stated (:func:`latency_search`'s
         figures: the estimate, s, its likelihood-ratio statistic and p, whether it is
         admitted, in which case the fit is on the fin delayed by it); empty where stated.
     nfev : int
@@ -897,8 +900,8 @@ def maximum_likelihood(
     """
     inputs = model_inputs(recording, model, options)
     mode = (options or IdentifyOptions()).intervals
-    search, latency = _latency_search(_Search(prepare(inputs), inputs), options)
-    return dataclasses.replace(_fit(search, model, max_order, mode), latency=latency)
+    found = latency_search(inputs, options)
+    return dataclasses.replace(_fit(found.search, model, max_order, mode), latency=found.term)
 
 
 @dataclass(frozen=True)
@@ -952,6 +955,36 @@ def _latency_search(
     chosen = fitted[found["steps"]]
     chosen.nfev += search.nfev + sum(f.nfev for d, f in fitted.items() if d != found["steps"])
     return chosen, found
+
+
+@dataclass(frozen=True)
+class LatencySearch:
+    """:func:`latency_search`'s answer: the fits to make every model on (on the fin
+    delayed by the latency where it is admitted) and the term's figures (empty where the
+    latency is stated)."""
+
+    search: _Search
+    term: dict[str, Any]
+
+    @property
+    def admitted_s(self) -> float | None:
+        """The latency admitted, s; None where none is (or it is stated)."""
+        return float(self.term["estimate_s"]) if self.term.get("admitted") else None
+
+
+def latency_search(inputs: Measurements, options: IdentifyOptions | None) -> LatencySearch:
+    """The sensors' latency where none is stated (:func:`_latency_search`), searched by the
+    likelihood with the turbulence modelled: in a rate error the turbulence's response
+    hides a latency of a sample, which a slower rocket then absorbs."""
+    return LatencySearch(*_latency_search(_Search(prepare(inputs), inputs), options))
+
+
+def context_latency(context: Context) -> LatencySearch:
+    """:func:`latency_search` on a context's measurements, made once for every method run
+    on the recording that takes it (``ml``, ``output-error``)."""
+    return context.shared(
+        "sensor latency", lambda: latency_search(context.measurements, context.options)
+    )
 
 
 def delay_search(inputs: Measurements, model: str, max_latency_s: float) -> DelaySearch:
@@ -1161,9 +1194,8 @@ def ml_method(context: Context, models: Sequence[str]) -> list[ModelFit]:
     the method's own estimate of it: the measured first velocity is a
     smoothed derivative whose error would stay in the angle for good.
     """
-    search, latency = _latency_search(
-        _Search(prepare(context.measurements), context.measurements), context.options
-    )
+    searched = context_latency(context)
+    search, latency = searched.search, searched.term
     inputs = search.inputs
     fits = []
     for model in models:

@@ -207,16 +207,23 @@ def _beyond_lines(fits: Mapping[str, Mapping[str, ModelFit]]) -> list[str]:
     """Below the parameters: a sensors' latency a method found, and each searched quadratic
     damping, kept in the fit or not."""
     lines = []
+    late_by: dict[float, tuple[dict[str, Any], list[str]]] = {}
     for method, by_model in fits.items():
-        for model, f in by_model.items():
+        for f in by_model.values():
             late = f.metrics.get("sensor_latency") or {}
             if late.get("admitted"):
-                lines.append(
-                    f"  {method} {model}: the roll sensors read {1000 * late['estimate_s']:.0f} ms "
-                    f"late (LR {late['statistic']:.1f}, p = {late['p']:.2g}; searched to "
-                    f"{late['searched_s'][1]:g} s): fitted on the fin delayed by it. The other "
-                    f"methods read it where stated: --sensor-latency {late['estimate_s']:g}"
-                )
+                found = late_by.setdefault(float(late["estimate_s"]), (late, []))[1]
+                if method not in found:
+                    found.append(method)
+    for seconds, (late, methods) in late_by.items():
+        lines.append(
+            f"  the roll sensors read {1000 * seconds:.0f} ms late (the likelihood's search: "
+            f"LR {late['statistic']:.1f}, p = {late['p']:.2g}; searched to "
+            f"{late['searched_s'][1]:g} s): {' and '.join(methods)} fitted on the fin delayed "
+            f"by it. The other methods read it where stated: --sensor-latency {seconds:g}"
+        )
+    for method, by_model in fits.items():
+        for model, f in by_model.items():
             term = f.metrics.get("quadratic_damping")
             if not term:
                 continue
