@@ -102,7 +102,7 @@ COLUMNS = (
     Column("admitted", 9),
     Column("est. ms", 8),
     *(
-        Column(f"{label} {which}", 12)
+        Column(f"{label} {which}", 14)
         for label in ("ml α %", "ml a %", "OE α %", "OE a %")
         for which in ("found", "none")
     ),
