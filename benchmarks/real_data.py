@@ -226,20 +226,36 @@ def torque_regression(rec: Recording, window: Sequence[float]) -> dict[str, floa
 
 def _torque_lines(rec: Recording, found: ModelFit) -> list[str]:
     """The flight fit's fin torque per dynamic pressure (its interval) against the
-    independent regression's (:func:`torque_regression`) on the window it fitted."""
+    independent regression's (:func:`torque_regression`) on the window it fitted, and
+    against a virtual flight's truth at the fit's reference, where the recording has one."""
     interval = (found.metrics.get("intervals") or {}).get("torque_per_q")
     if not interval or rec.roll_rate_dps is None:
         return []
     ols = torque_regression(rec, found.metrics["fitted_s"])
     low, high = ols["torque_per_q"] - 1.96 * ols["se"], ols["torque_per_q"] + 1.96 * ols["se"]
     covers = interval["low"] <= low and high <= interval["high"]
-    return [
+    line = (
         f"fin torque per q: {interval['estimate']:.4g} [{interval['low']:.4g}, "
         f"{interval['high']:.4g}] ({interval['method']}); independent least squares on the "
         f"same window {ols['torque_per_q']:.4g} ± {ols['se']:.2g} (R² {ols['r2']:.3f}, "
         f"{ols['n']} samples): the fit's interval {'covers' if covers else 'does not cover'} "
         "its 95 % interval"
-    ]
+    )
+    if rec.truth() is not None and "truth.v_ref_mps" in rec.metadata:
+        from identification.instruments.flightlog import truth_at
+        from identification.methods.flightfit import c_coefficients
+
+        reference = (found.metrics["v_ref_mps"], found.metrics["rho_ref_kgm3"])
+        true = c_coefficients(truth_at(rec, *reference), *reference)["torque_per_q"]
+
+        def holds(lo: float, hi: float) -> str:
+            return "holds" if lo <= true <= hi else "misses"
+
+        line += (
+            f"; the truth {true:.4g}: the fit's interval {holds(interval['low'], interval['high'])}"
+            f" it, the least squares' {holds(low, high)} it"
+        )
+    return [line]
 
 
 def report(

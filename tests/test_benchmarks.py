@@ -402,6 +402,10 @@ def test_real_data_fits_a_flight_with_its_scaling(runner: Runner, tmp_path: Path
     assert len(exponents) == 2 and all(abs(n - 1.5) < 0.1 for n in exponents), scaling
     errors = [line for line in out.splitlines() if "error: α" in line]
     assert len(errors) == 2 and all(abs(float(e.split("α")[1].split("%")[0])) < 5 for e in errors)
+    # The fin torque per q against the plain least squares and the truth at the fit's reference.
+    torque = [line for line in out.splitlines() if "fin torque per q" in line]
+    assert len(torque) == 2 and all("; the truth " in line for line in torque), torque
+    assert "the fit's interval holds it" in torque[0], torque[0]
 
 
 def test_flight_fidelity_scores_a_design_on_the_replay_and_on_the_truth(runner: Runner) -> None:
