@@ -693,7 +693,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
         )
         bound: dict[str, Any] = {}
     else:  # the Hessian's precision is no precision where the rocket is not determined
-        found, bound = loop_bound(model, nat, alone)
+        found, bound = loop_bound(model, nat, alone), alone.as_dict()
         std_errors = {name: math.nan for name in std_errors}
     fitted = _result(
         data,
@@ -714,9 +714,7 @@ def _fit(search: _Search, model: str, max_order: int = MAX_ORDER, intervals: str
     return dataclasses.replace(fitted, loop_alone=bound) if bound else fitted
 
 
-def loop_bound(
-    model: str, nat: dict[str, Any], alone: LoopAlone
-) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
+def loop_bound(model: str, nat: dict[str, Any], alone: LoopAlone) -> dict[str, dict[str, Any]]:
     """What a log flown under a rate loop alone, answering within the log's sample
     (:class:`~identification.methods.diagnosis.LoopAlone`), tells of the rocket: none of
     its parameters is determined (``method: loop``), each interval the values the closed
@@ -725,8 +723,7 @@ def loop_bound(
     even ``p`` is given: with the turbulence the only input, the rate's two time constants
     (the loop's and the turbulence's correlation) can trade places.
 
-    Returns the intervals by reported name and the loop's figures
-    (:attr:`MLFit.loop_alone`)."""
+    Returns the intervals by reported name."""
     gain = alone.gain
     edge = -1.0 / gain  # where a = p/(1 + α·K) runs off to infinity
     ranges = {**_RANGES, "alpha": (edge, math.inf) if gain > 0 else (-math.inf, edge)}
@@ -743,7 +740,7 @@ def loop_bound(
             "level": _LEVEL,
             "determined": False,
         }
-    return intervals, alone.as_dict()
+    return intervals
 
 
 #: The level of :func:`loop_bound`'s interval (the rocket_intervals' own).
@@ -921,42 +918,6 @@ class DelaySearch:
         return max(2.0 * (self.loglike_delayed - self.loglike_undelayed), 0.0)
 
 
-def _latency_search(
-    search: _Search, options: IdentifyOptions | None
-) -> tuple[_Search, dict[str, Any]]:
-    """The sensors' latency where none is stated, as a term of the fit
-    (:func:`~identification.methods.terms.latency_term`, on the constant model's AR(1)
-    fit: screened by the filter at its parameters, fitted where the screen rises).  Returns
-    the search to fit every model on (on the delayed fin where the term is admitted) and
-    the term's figures (empty where the latency is stated).  A late gyro, or a fin logged
-    ahead of the roll it drives (an aileron leading its roll by a sample), biases the gain
-    and the damping otherwise."""
-    inputs = search.inputs
-    recording = inputs.recording
-    if latency_stated(recording, options):
-        return search, {}
-    step = inputs.grid.step_s
-    fun, nat = search.order("constant", 1)[:2]
-    fitted: dict[int, _Search] = {}
-
-    def refit(d: int) -> float:
-        late = model_inputs(recording, "constant", with_latency(options, d * step))
-        fitted[d] = _Search(prepare(late), late)
-        return fitted[d].order("constant", 1)[0]
-
-    found = latency_term(
-        step,
-        fun,
-        lambda d: negloglike_natural(prepare(delayed_fin(inputs, d)), nat),
-        refit,
-    )
-    if not found["admitted"]:
-        return search, found
-    chosen = fitted[found["steps"]]
-    chosen.nfev += search.nfev + sum(f.nfev for d, f in fitted.items() if d != found["steps"])
-    return chosen, found
-
-
 @dataclass(frozen=True)
 class LatencySearch:
     """:func:`latency_search`'s answer: the fits to make every model on (on the fin
@@ -973,10 +934,37 @@ class LatencySearch:
 
 
 def latency_search(inputs: Measurements, options: IdentifyOptions | None) -> LatencySearch:
-    """The sensors' latency where none is stated (:func:`_latency_search`), searched by the
-    likelihood with the turbulence modelled: in a rate error the turbulence's response
-    hides a latency of a sample, which a slower rocket then absorbs."""
-    return LatencySearch(*_latency_search(_Search(prepare(inputs), inputs), options))
+    """The sensors' latency where none is stated, as a term of the fit
+    (:func:`~identification.methods.terms.latency_term`, on the constant model's AR(1)
+    fit: screened by the filter at its parameters, fitted where the screen rises), searched
+    by the likelihood with the turbulence modelled: in a rate error the turbulence's
+    response hides a latency of a sample, which a slower rocket then absorbs.  A late gyro,
+    or a fin logged ahead of the roll it drives (an aileron leading its roll by a sample),
+    biases the gain and the damping otherwise."""
+    search = _Search(prepare(inputs), inputs)
+    recording = inputs.recording
+    if latency_stated(recording, options):
+        return LatencySearch(search, {})
+    step = inputs.grid.step_s
+    fun, nat = search.order("constant", 1)[:2]
+    fitted: dict[int, _Search] = {}
+
+    def refit(d: int) -> float:
+        late = model_inputs(recording, "constant", with_latency(options, d * step))
+        fitted[d] = _Search(prepare(late), late)
+        return fitted[d].order("constant", 1)[0]
+
+    found = latency_term(
+        step,
+        fun,
+        lambda d: negloglike_natural(prepare(delayed_fin(inputs, d)), nat),
+        refit,
+    )
+    if not found["admitted"]:
+        return LatencySearch(search, found)
+    chosen = fitted[found["steps"]]
+    chosen.nfev += search.nfev + sum(f.nfev for d, f in fitted.items() if d != found["steps"])
+    return LatencySearch(chosen, found)
 
 
 def context_latency(context: Context) -> LatencySearch:
